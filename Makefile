@@ -1,0 +1,39 @@
+# Two entry points for a fresh clone: `make demo` and `make test`. Both create or reuse .venv, install the pinned
+# requirements and this package, and are safe to re-run.
+PYTHON ?= python3.11
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.crane_stiffness-installed
+SOURCES := $(shell find crane_stiffness config launch -type f \( -name '*.py' -o -name '*.yaml' \) 2>/dev/null) \
+           setup.py setup.cfg package.xml resource/crane_stiffness
+
+# DDS stays on this machine: loopback discovery only, and a domain id of its own for every run.
+export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
+export ROS_DOMAIN_ID ?= $(shell $(PYTHON) -c 'import random; print(random.randint(1, 100))')
+# The venv is the ament prefix that holds rclpy and the message packages.
+export AMENT_PREFIX_PATH := $(CURDIR)/$(VENV)
+export RMW_IMPLEMENTATION := rmw_fastrtps_cpp
+export MPLBACKEND := Agg
+export PYTHONDONTWRITEBYTECODE := 1
+
+.PHONY: demo test bench install clean
+
+install: $(STAMP)
+
+$(STAMP): requirements.txt requirements-test.txt $(SOURCES)
+	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --disable-pip-version-check -r requirements-test.txt
+	$(BIN)/python -m pip install --quiet --disable-pip-version-check --no-deps --force-reinstall .
+	@touch $(STAMP)
+
+demo: $(STAMP)
+	$(BIN)/python scripts/demo.py
+
+test: $(STAMP)
+	$(BIN)/python -m pytest -q -p no:cacheprovider test
+
+bench: $(STAMP)
+	$(BIN)/python benchmarks/run_all.py
+
+clean:
+	rm -rf build install log out
