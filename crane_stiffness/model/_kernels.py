@@ -32,6 +32,8 @@ CONVERGED = 0
 MAX_ITERATIONS = 1
 LINE_SEARCH_FAILED = 2
 SINGULAR = 3
+#: Largest rotation of one Newton iteration [rad]: keeps Newton on the branch it starts on.
+MAX_TURN = 0.2
 
 
 @njit(cache=True)
@@ -262,15 +264,25 @@ def _scaled_system(kmat, w, lc, ks, rhs):
 
 @njit(cache=True)
 def _newton_direction(kmat, w, lc, max_move, ks, rhs, dx):
-    """Newton step dx = K⁻¹ w in [m, rad], shortened so no platform point moves more than max_move [m].
-    Returns (ok, length of the unshortened step [m])."""
+    """Newton step dx = K⁻¹ w in [m, rad], shortened so the centre moves at most max_move [m] and the platform
+    turns at most MAX_TURN [rad]. Returns (ok, size of the unshortened step [m], rotations times lc)."""
     _scaled_system(kmat, w, lc, ks, rhs)
     if not _solve6(ks, rhs, dx):
         return False, 0.0
     size = 0.0
+    move = 0.0
+    turn = 0.0
     for j in range(6):
         size = max(size, abs(dx[j]))
-    scale = 1.0 if size <= max_move else max_move / size
+        if j < 3:
+            move = max(move, abs(dx[j]))
+        else:
+            turn = max(turn, abs(dx[j]) / lc)
+    scale = 1.0
+    if move > max_move:
+        scale = max_move / move
+    if turn * scale > MAX_TURN:
+        scale = MAX_TURN / turn
     for j in range(6):
         dx[j] *= scale
         if j >= 3:
@@ -279,7 +291,8 @@ def _newton_direction(kmat, w, lc, max_move, ks, rhs, dx):
 
 
 @njit(cache=True)
-def newton_solve(top, plat, l0, kw, weight, com, ploc, load, u, q, xtol, max_iter, lc, lengths, tensions, w):
+def newton_solve(top, plat, l0, kw, weight, com, ploc, load, u, q, xtol, max_iter, lc, max_move, lengths, tensions,
+                 w):
     """Damped Newton on (u, Q) for the static balance w = 0, in place on u (3,) and q (3,3).
 
     Step Δ = K⁻¹ w, limited in size, with a backtracking line search on the merit ½|w'|². A straight step along
@@ -287,7 +300,8 @@ def newton_solve(top, plat, l0, kw, weight, com, ploc, load, u, q, xtol, max_ite
     the step is good (the Maratos effect of SQP): each rejected trial gets a second-order correction, one more
     Newton step from the trial pose, before the step is shortened. Levenberg-Marquardt takes over when K is singular
     (all but a few wires slack) or no Newton step descends. Converged when a full Newton step moved every platform
-    point less than xtol [m]. Returns (status, iterations, size of the last step [m]).
+    point less than xtol [m]. One iteration moves the centre by at most max_move [m].
+    Returns (status, iterations, size of the last step [m]).
     """
     kmat = np.empty((6, 6))
     k_try = np.empty((6, 6))
@@ -302,8 +316,6 @@ def newton_solve(top, plat, l0, kw, weight, com, ploc, load, u, q, xtol, max_ite
     q_soc = np.empty((3, 3))
     w_soc = np.empty(6)
     dw = np.empty(3)
-    # No single iteration may move the platform by more than a tenth of its size: keeps Newton on the branch.
-    max_move = 0.1 * lc
     lengths0 = np.empty(6)
     assemble(top, plat, l0, kw, weight, com, ploc, load, u, q, w, kmat, lengths0, tensions, True)
     phi = _merit(w, lc)
@@ -415,7 +427,7 @@ def newton_solve(top, plat, l0, kw, weight, com, ploc, load, u, q, xtol, max_ite
 
 
 @njit(cache=True)
-def batch_solve(top, plat, l0, kw, weight, com, ploc, loads, u0, q0, xtol, max_iter, lc,
+def batch_solve(top, plat, l0, kw, weight, com, ploc, loads, u0, q0, xtol, max_iter, lc, max_move,
                 u_out, q_out, lengths_out, tensions_out, w_out, status_out, iters_out):
     """newton_solve for each row of loads (N, 6), every case started from the same pose (u0, q0)."""
     n = loads.shape[0]
@@ -430,7 +442,7 @@ def batch_solve(top, plat, l0, kw, weight, com, ploc, loads, u0, q0, xtol, max_i
             for j in range(3):
                 q[i, j] = q0[i, j]
         st, it, _ = newton_solve(top, plat, l0, kw, weight, com, ploc, loads[c], u, q, xtol, max_iter, lc,
-                                 lengths, tensions, w)
+                                 max_move, lengths, tensions, w)
         status_out[c] = st
         iters_out[c] = it
         for i in range(3):

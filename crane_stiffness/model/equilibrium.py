@@ -126,9 +126,18 @@ class _Arrays:
         # Characteristic length: scales moments to forces and rotations to displacements.
         self.lc = max(g.a, g.b)
         self.l0_nominal = g.l0
+        # One Newton iteration moves the centre by at most 5 % of the wire length.
+        self.max_move = 0.05 * g.l0
 
     def args(self):
         return self.top, self.plat, self.l0, self.kw, self.weight, self.com, self.ploc
+
+    def homotopy(self, lam: float):
+        """Kernel arguments with the offsets (centre of mass, wire lengths) scaled by lam: lam = 0 is the symmetric
+        crane, whose rest pose is a plain vertical sag, lam = 1 the real one."""
+        nominal = np.full(6, self.l0_nominal)
+        return (self.top, self.plat, nominal + lam * (self.l0 - nominal), self.kw, self.weight, lam * self.com,
+                self.ploc)
 
 
 @lru_cache(maxsize=64)
@@ -195,11 +204,13 @@ def check_load_admissible(geometry: CraneGeometry, load: np.ndarray) -> None:
         f'not positive, so the wires (which can only pull up) would all go slack')
 
 
-def _newton(arr: _Arrays, load: np.ndarray, u: np.ndarray, q: np.ndarray, xtol: float, max_iter: int):
+def _newton(arr: _Arrays, args: tuple, load: np.ndarray, u: np.ndarray, q: np.ndarray, xtol: float,
+            max_iter: int):
     lengths = np.empty(6)
     tensions = np.empty(6)
     w = np.empty(6)
-    status, iters, _ = kern.newton_solve(*arr.args(), load, u, q, xtol, max_iter, arr.lc, lengths, tensions, w)
+    status, iters, _ = kern.newton_solve(*args, load, u, q, xtol, max_iter, arr.lc, arr.max_move, lengths,
+                                         tensions, w)
     return status, iters, lengths, tensions, w
 
 
@@ -210,17 +221,64 @@ def _jump_ok(arr: _Arrays, u0, q0, u1, q1) -> bool:
     return angle <= MAX_STEP_ROTATION and np.linalg.norm(u1 - u0) <= MAX_STEP_TRANSLATION * arr.l0_nominal
 
 
+@dataclass
+class _PathEnd:
+    u: np.ndarray
+    q: np.ndarray
+    lengths: np.ndarray
+    tensions: np.ndarray
+    residual: np.ndarray
+    iterations: int
+    steps: int
+
+
+def _continuation(arr: _Arrays, args_at, load_at, u: np.ndarray, q: np.ndarray, xtol: float, max_iter: int,
+                  max_steps: int, what: str) -> _PathEnd:
+    """Follow equilibria from lam = 0 (pose u, q) to lam = 1 with adaptive steps.
+
+    args_at(lam) gives the kernel's geometry arguments and load_at(lam) the load. A step is taken when Newton
+    converges without jumping far (:func:`_jump_ok`); otherwise it is halved, down to MIN_LOAD_FRACTION.
+    """
+    lam, step = 0.0, 1.0
+    total_iters = steps = 0
+    while True:
+        target = min(1.0, lam + step)
+        u_try, q_try = u.copy(), q.copy()
+        status, iters, lengths, tensions, w = _newton(arr, args_at(target), load_at(target), u_try, q_try, xtol,
+                                                      max_iter)
+        total_iters += iters
+        steps += 1
+        if status == kern.CONVERGED and _jump_ok(arr, u, q, u_try, q_try):
+            u, q, lam = u_try, q_try, target
+            if lam >= 1.0:
+                return _PathEnd(u, q, lengths, tensions, w, total_iters, steps)
+            step = min(2.0 * step, 1.0 - lam)
+        else:
+            step *= 0.5
+            if step < MIN_LOAD_FRACTION:
+                raise NoEquilibriumError(
+                    f'no equilibrium found along the path to {what} beyond {lam:.6g} of the way (the platform '
+                    f'cannot hold it continuously: a limit point, where it would swing or flip away; solver '
+                    f'status {status})')
+        if steps >= max_steps:
+            raise ConvergenceError(f'gave up after {steps} continuation steps at {lam:.6g} of the way to {what}')
+
+
 @lru_cache(maxsize=64)
 def _rest(geometry: CraneGeometry, xtol: float) -> tuple[np.ndarray, np.ndarray]:
+    """Rest pose under the weight: the symmetric crane's vertical sag, then a homotopy to the real offsets."""
     arr = _arrays(geometry)
-    u = np.zeros(3)
-    q = np.eye(3)
     if geometry.weight == 0.0 and not any(geometry.length_offsets):
-        return u, q
-    status, _, _, _, _ = _newton(arr, np.zeros(6), u, q, xtol, DEFAULT_MAX_ITER)
-    if status != kern.CONVERGED:
-        raise ConvergenceError(f'rest pose under W = {geometry.weight} N not found (status {status})')
-    return u, q
+        return np.zeros(3), np.eye(3)
+    zero = np.zeros(6)
+    # Start below the sag, every wire stretched: at u = 0 all wires sit exactly on the slack threshold, where
+    # rounding decides which ones count and K can be singular.
+    g = geometry
+    sag = g.weight * g.l0 ** 2 / (6.0 * float(arr.kw.min()) * g.height ** 2)
+    u0 = np.array([0.0, 0.0, 2.0 * sag + 2.0 * float(np.abs(g.length_offsets).max()) * g.l0 / g.height])
+    end = _continuation(arr, arr.homotopy, lambda lam: zero, u0, np.eye(3), xtol, DEFAULT_MAX_ITER,
+                        2000, f'the rest pose under W = {geometry.weight} N')
+    return end.u, end.q
 
 
 def rest_pose(geometry: CraneGeometry, *, xtol: float = DEFAULT_XTOL) -> Equilibrium:
@@ -262,29 +320,11 @@ def solve_equilibrium(geometry: CraneGeometry, force=None, moment=None, *, load=
         u0, q0 = _rest(geometry, xtol)
         u, q = u0.copy(), q0.copy()
         start_load = np.zeros(6)
-    lam, step = 0.0, 1.0
-    total_iters = steps = 0
-    while True:
-        target = lam + step
-        trial_load = start_load + target * (load - start_load)
-        u_try, q_try = u.copy(), q.copy()
-        status, iters, lengths, tensions, w = _newton(arr, trial_load, u_try, q_try, xtol, max_iter)
-        total_iters += iters
-        steps += 1
-        if status == kern.CONVERGED and _jump_ok(arr, u, q, u_try, q_try):
-            u, q, lam = u_try, q_try, target
-            if lam >= 1.0:
-                break
-            step = min(2.0 * step, 1.0 - lam)
-        else:
-            step *= 0.5
-            if step < MIN_LOAD_FRACTION:
-                raise NoEquilibriumError(
-                    f'no equilibrium found along the load path beyond {lam:.6g} of the load '
-                    f'{load.tolist()} (the platform cannot hold it continuously; last solver status {status})')
-        if steps >= max_steps:
-            raise ConvergenceError(f'gave up after {steps} continuation steps at {lam:.6g} of the load '
-                                   f'{load.tolist()}')
+    args = arr.args()
+    end = _continuation(arr, lambda lam: args, lambda lam: start_load + lam * (load - start_load), u, q, xtol,
+                        max_iter, max_steps, f'the load {load.tolist()}')
+    u, q, lengths, tensions, w = end.u, end.q, end.lengths, end.tensions, end.residual
+    total_iters, steps = end.iterations, end.steps
     slack = lengths < arr.l0
     if np.all(slack) and (geometry.weight > 0.0 or np.any(load)):
         raise NoEquilibriumError(f'all six wires are slack under the load {load.tolist()}')
@@ -320,7 +360,7 @@ def solve_batch(geometry: CraneGeometry, loads, *, xtol: float = DEFAULT_XTOL,
     w = np.empty((n, 6))
     status = np.empty(n, dtype=np.int64)
     iters = np.empty(n, dtype=np.int64)
-    kern.batch_solve(*arr.args(), loads, u0, q0, xtol, max_iter, arr.lc, u, q, lengths, tensions, w, status, iters)
+    kern.batch_solve(*arr.args(), loads, u0, q0, xtol, max_iter, arr.lc, arr.max_move, u, q, lengths, tensions, w, status, iters)
     # Far from the rest pose Newton might converge to another branch: redo those with continuation.
     rel_trace = np.einsum('nij,ij->n', q, q0)
     angle = np.arccos(np.clip((rel_trace - 1.0) / 2.0, -1.0, 1.0))

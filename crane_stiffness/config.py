@@ -1,0 +1,138 @@
+"""Config files in the ROS 2 parameter YAML format, read the same way by the nodes and by the offline CLI.
+
+A file holds ``<node name or /**>: ros__parameters: {name: value}``; nested mappings flatten to dotted names the way
+rclpy does (``geometry: {a: 0.1}`` is the parameter ``geometry.a``). The crane's geometry parameters are defined here
+once (name, type, unit, description) so the nodes declare exactly what the CLI reads.
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Mapping
+
+import yaml
+
+from crane_stiffness.errors import CraneStiffnessError
+from crane_stiffness.model.geometry import LAB_A, LAB_B, LAB_WIRE_DIAMETER, LAB_YOUNGS_MODULUS, CraneGeometry
+
+PACKAGE = 'crane_stiffness'
+
+
+class ConfigError(CraneStiffnessError, ValueError):
+    """A config file that cannot be read or holds a bad value; the message names the file and the key."""
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One ROS parameter: name, default (its type is the parameter's type), description with the unit."""
+
+    name: str
+    default: Any
+    description: str
+
+
+#: Geometry parameters shared by crane_model, stiffness_estimator and the CLI. wire_stiffness = 0 means "derive k
+#: from wire_diameter and youngs_modulus" (ROS parameters cannot be null).
+GEOMETRY_PARAMS: tuple[ParamSpec, ...] = (
+    ParamSpec('geometry.a', LAB_A, 'half side of the platform triangle [m]'),
+    ParamSpec('geometry.b', LAB_B, 'half side of the overhead triangle [m]'),
+    ParamSpec('geometry.height', 0.5, 'height h between the triangles at the unloaded rest pose [m]'),
+    ParamSpec('geometry.weight', 50.0, 'total suspended weight W, acting along +z (down) [N]'),
+    ParamSpec('geometry.wire_stiffness', 0.0, 'wire stiffness k [N/m]; 0 = k = A*E/l0 from diameter and modulus'),
+    ParamSpec('geometry.wire_diameter', LAB_WIRE_DIAMETER, 'wire diameter d [m] (used when wire_stiffness is 0)'),
+    ParamSpec('geometry.youngs_modulus', LAB_YOUNGS_MODULUS, "wire Young's modulus E [Pa]"),
+    ParamSpec('geometry.com_offset', [0.0, 0.0, 0.0], 'centre of mass from the platform centre, body frame [m]'),
+    ParamSpec('geometry.load_point', [0.0, 0.0, 0.0], 'external force application point, body frame [m]'),
+    ParamSpec('geometry.length_offsets', [0.0] * 6, 'change of unstretched length of wires 1..6 [m]'),
+)
+
+
+def geometry_from_params(params: Mapping[str, Any], prefix: str = 'geometry.') -> CraneGeometry:
+    """Build a CraneGeometry from flat parameters (missing ones take the defaults above). Raises GeometryError."""
+    values = {spec.name[len('geometry.'):]: spec.default for spec in GEOMETRY_PARAMS}
+    for key, value in params.items():
+        if key.startswith(prefix):
+            values[key[len(prefix):]] = value
+    k = float(values.pop('wire_stiffness'))
+    if k != 0.0:
+        values['wire_stiffness'] = k
+        values.pop('wire_diameter')
+        values.pop('youngs_modulus')
+    return CraneGeometry.from_dict(values)
+
+
+def geometry_to_params(geometry: CraneGeometry, prefix: str = 'geometry.') -> dict[str, Any]:
+    """Inverse of :func:`geometry_from_params`."""
+    d = geometry.to_dict()
+    if d['wire_stiffness'] is None:
+        d['wire_stiffness'] = 0.0
+    else:
+        d['wire_diameter'] = LAB_WIRE_DIAMETER
+        d['youngs_modulus'] = LAB_YOUNGS_MODULUS
+    return {prefix + k: v for k, v in d.items()}
+
+
+def _flatten(prefix: str, value: Any, out: dict[str, Any]) -> None:
+    if isinstance(value, Mapping):
+        for k, v in value.items():
+            _flatten(f'{prefix}.{k}' if prefix else str(k), v, out)
+    else:
+        out[prefix] = value
+
+
+def load_params(path: str | os.PathLike, node_name: str | None = None) -> dict[str, Any]:
+    """Flat parameters of a ROS parameter YAML file.
+
+    Sections apply in the order ROS applies them: ``/**`` first, then the named node (with or without a leading
+    slash). Without ``node_name`` every section is merged in file order.
+    """
+    path = Path(path)
+    try:
+        doc = yaml.safe_load(path.read_text())
+    except FileNotFoundError:
+        raise ConfigError(f'{path}: no such config file') from None
+    except yaml.YAMLError as exc:
+        raise ConfigError(f'{path}: not valid YAML: {exc}') from None
+    if not isinstance(doc, Mapping):
+        raise ConfigError(f'{path}: expected "<node>: ros__parameters: ..." at the top level')
+    out: dict[str, Any] = {}
+    sections = list(doc.items())
+    if node_name is not None:
+        wanted = {'/**', node_name, '/' + node_name.lstrip('/')}
+        sections = sorted((s for s in sections if s[0] in wanted), key=lambda s: s[0] != '/**')
+    for name, body in sections:
+        if not isinstance(body, Mapping) or 'ros__parameters' not in body:
+            raise ConfigError(f'{path}: section {name!r} has no ros__parameters mapping')
+        _flatten('', body['ros__parameters'] or {}, out)
+    return out
+
+
+def share_dir() -> Path:
+    """The package's share directory: via the ament index when available, else next to the sources."""
+    try:
+        from ament_index_python.packages import PackageNotFoundError, get_package_share_directory
+        try:
+            share = Path(get_package_share_directory(PACKAGE))
+            if (share / 'config').is_dir():
+                return share
+        except PackageNotFoundError:
+            pass
+    except ImportError:  # offline analysis without ROS
+        pass
+    candidate = Path(os.sys.prefix) / 'share' / PACKAGE
+    if (candidate / 'config').is_dir():
+        return candidate
+    return Path(__file__).resolve().parent.parent
+
+
+def config_path(name: str) -> Path:
+    """A file of the installed config/ directory (``name`` with or without .yaml), or ``name`` itself if it exists."""
+    p = Path(name)
+    if p.exists():
+        return p
+    fname = name if name.endswith('.yaml') else name + '.yaml'
+    found = share_dir() / 'config' / fname
+    if not found.exists():
+        raise ConfigError(f'{name}: not a file, and no {fname} in {share_dir() / "config"}')
+    return found
