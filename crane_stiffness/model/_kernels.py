@@ -32,12 +32,20 @@ CONVERGED = 0
 MAX_ITERATIONS = 1
 LINE_SEARCH_FAILED = 2
 SINGULAR = 3
+JUMPED = 4  # converged, but so far from the start that it may be another branch: take smaller load steps
 #: Largest rotation of one Newton iteration [rad]: keeps Newton on the branch it starts on.
 MAX_TURN = 0.2
 
 
 @njit(cache=True)
 def assemble(top, plat, l0, kw, weight, com, ploc, load, u, q, w, kmat, lengths, tensions, want_k):
+    """Net wrench and Jacobian; see :func:`assemble_into` (this wrapper allocates its own scratch space)."""
+    assemble_into(top, plat, l0, kw, weight, com, ploc, load, u, q, w, kmat, lengths, tensions, want_k,
+                  np.empty((3, 3, 3)), np.empty((4, 3)))
+
+
+@njit(cache=True)
+def assemble_into(top, plat, l0, kw, weight, com, ploc, load, u, q, w, kmat, lengths, tensions, want_k, m33, v3):
     """Net wrench w (6,) on the platform and, if want_k, K = −∂w/∂x (6, 6). Fills lengths and tensions (6,).
 
     top (6,3) overhead points [m]; plat (6,3) platform points, body frame [m]; l0 (6,) unstretched lengths [m];
@@ -49,11 +57,12 @@ def assemble(top, plat, l0, kw, weight, com, ploc, load, u, q, w, kmat, lengths,
         if want_k:
             for j in range(6):
                 kmat[i, j] = 0.0
-    r = np.empty(3)
-    e = np.empty(3)
-    g = np.empty((3, 3))
-    rx = np.empty((3, 3))
-    gr = np.empty((3, 3))
+    # Scratch space comes from the caller: allocating it here would cost more than the arithmetic.
+    r = v3[0]
+    e = v3[1]
+    g = m33[0]
+    rx = m33[1]
+    gr = m33[2]
     for n in range(6):
         for i in range(3):
             r[i] = q[i, 0] * plat[n, 0] + q[i, 1] * plat[n, 1] + q[i, 2] * plat[n, 2]
@@ -108,8 +117,8 @@ def assemble(top, plat, l0, kw, weight, com, ploc, load, u, q, w, kmat, lengths,
                 kmat[3 + i, 3 + j] -= rx[i, 0] * gr[0, j] + rx[i, 1] * gr[1, j] + rx[i, 2] * gr[2, j]
         _add_point_force_term(kmat, f0, f1, f2, r)
     # Weight at the centre of mass and the external force at its application point (fixed in space).
-    rc = np.empty(3)
-    rp = np.empty(3)
+    rc = v3[2]
+    rp = v3[3]
     for i in range(3):
         rc[i] = q[i, 0] * com[0] + q[i, 1] * com[1] + q[i, 2] * com[2]
         rp[i] = q[i, 0] * ploc[0] + q[i, 1] * ploc[1] + q[i, 2] * ploc[2]
@@ -184,8 +193,8 @@ def _solve6(a, b, x):
 
 
 @njit(cache=True)
-def _rotate(q, dw, out):
-    """out = exp([dw]×) q (Rodrigues), a rotation update in the fixed frame."""
+def _rotate(q, dw, out, m33):
+    """out = exp([dw]×) q (Rodrigues), a rotation update in the fixed frame. m33: scratch (3, 3, 3)."""
     ang = math.sqrt(dw[0] * dw[0] + dw[1] * dw[1] + dw[2] * dw[2])
     if ang < 1e-12:
         s = 1.0
@@ -193,14 +202,18 @@ def _rotate(q, dw, out):
     else:
         s = math.sin(ang) / ang
         c1 = (1.0 - math.cos(ang)) / (ang * ang)
-    k = np.zeros((3, 3))
+    k = m33[0]
+    r = m33[1]
+    for i in range(3):
+        for j in range(3):
+            k[i, j] = 0.0
+            r[i, j] = 1.0 if i == j else 0.0
     k[0, 1] = -dw[2]
     k[0, 2] = dw[1]
     k[1, 0] = dw[2]
     k[1, 2] = -dw[0]
     k[2, 0] = -dw[1]
     k[2, 1] = dw[0]
-    r = np.eye(3)
     for i in range(3):
         for j in range(3):
             kk = k[i, 0] * k[0, j] + k[i, 1] * k[1, j] + k[i, 2] * k[2, j]
@@ -223,13 +236,14 @@ def _merit(w, lc):
 
 @njit(cache=True)
 def _trial(top, plat, l0, kw, weight, com, ploc, load, u, q, dx, alpha, u_try, q_try, w_try, kmat, lengths,
-           tensions, lc, dw):
+           tensions, lc, dw, m33, v3):
     """Evaluate the pose (u, q) moved by alpha·dx; fills u_try, q_try, w_try, kmat; returns the merit there."""
     for i in range(3):
         u_try[i] = u[i] + alpha * dx[i]
         dw[i] = alpha * dx[3 + i]
-    _rotate(q, dw, q_try)
-    assemble(top, plat, l0, kw, weight, com, ploc, load, u_try, q_try, w_try, kmat, lengths, tensions, True)
+    _rotate(q, dw, q_try, m33)
+    assemble_into(top, plat, l0, kw, weight, com, ploc, load, u_try, q_try, w_try, kmat, lengths, tensions, True,
+                  m33, v3)
     return _merit(w_try, lc)
 
 
@@ -317,7 +331,9 @@ def newton_solve(top, plat, l0, kw, weight, com, ploc, load, u, q, xtol, max_ite
     w_soc = np.empty(6)
     dw = np.empty(3)
     lengths0 = np.empty(6)
-    assemble(top, plat, l0, kw, weight, com, ploc, load, u, q, w, kmat, lengths0, tensions, True)
+    m33 = np.empty((3, 3, 3))
+    v3 = np.empty((4, 3))
+    assemble_into(top, plat, l0, kw, weight, com, ploc, load, u, q, w, kmat, lengths0, tensions, True, m33, v3)
     phi = _merit(w, lc)
     step = 0.0
     for it in range(1, max_iter + 1):
@@ -325,7 +341,7 @@ def newton_solve(top, plat, l0, kw, weight, com, ploc, load, u, q, xtol, max_ite
         if ok and full_step <= xtol:
             # Newton's own correction is below the tolerance: apply it and stop.
             _trial(top, plat, l0, kw, weight, com, ploc, load, u, q, dx, 1.0, u_try, q_try, w_try, kmat,
-                   lengths, tensions, lc, dw)
+                   lengths, tensions, lc, dw, m33, v3)
             for i in range(3):
                 u[i] = u_try[i]
                 for j in range(3):
@@ -345,7 +361,7 @@ def newton_solve(top, plat, l0, kw, weight, com, ploc, load, u, q, xtol, max_ite
                 e0 = _energy(l0, kw, weight, com, ploc, load, u, q, lengths0)
                 for _ in range(30):
                     phi_try = _trial(top, plat, l0, kw, weight, com, ploc, load, u, q, dx, alpha, u_try, q_try,
-                                     w_try, k_try, lengths, tensions, lc, dw)
+                                     w_try, k_try, lengths, tensions, lc, dw, m33, v3)
                     e1 = _energy(l0, kw, weight, com, ploc, load, u_try, q_try, lengths)
                     e1 -= alpha * (load[3] * dx[3] + load[4] * dx[4] + load[5] * dx[5])
                     if e1 - e0 <= 1e-4 * alpha * slope:
@@ -356,7 +372,7 @@ def newton_solve(top, plat, l0, kw, weight, com, ploc, load, u, q, xtol, max_ite
             alpha = 1.0
             for _ in range(30):
                 phi_try = _trial(top, plat, l0, kw, weight, com, ploc, load, u, q, dx, alpha, u_try, q_try,
-                                 w_try, k_try, lengths, tensions, lc, dw)
+                                 w_try, k_try, lengths, tensions, lc, dw, m33, v3)
                 if phi_try <= (1.0 - 1e-4 * alpha) * phi:
                     accepted = True
                     break
@@ -364,7 +380,7 @@ def newton_solve(top, plat, l0, kw, weight, com, ploc, load, u, q, xtol, max_ite
                 ok2, _ = _newton_direction(k_try, w_try, lc, max_move, ks, rhs, dc)
                 if ok2:
                     phi_soc = _trial(top, plat, l0, kw, weight, com, ploc, load, u_try, q_try, dc, 1.0, u_soc,
-                                     q_soc, w_soc, k_try, lengths, tensions, lc, dw)
+                                     q_soc, w_soc, k_try, lengths, tensions, lc, dw, m33, v3)
                     if phi_soc <= (1.0 - 1e-4 * alpha) * phi:
                         for i in range(3):
                             u_try[i] = u_soc[i]
@@ -402,7 +418,7 @@ def newton_solve(top, plat, l0, kw, weight, com, ploc, load, u, q, xtol, max_ite
                     for j in range(3, 6):
                         dx[j] /= lc
                     phi_try = _trial(top, plat, l0, kw, weight, com, ploc, load, u, q, dx, 1.0, u_try, q_try,
-                                     w_try, k_try, lengths, tensions, lc, dw)
+                                     w_try, k_try, lengths, tensions, lc, dw, m33, v3)
                     if phi_try < phi:
                         accepted = True
                         break
@@ -419,17 +435,46 @@ def newton_solve(top, plat, l0, kw, weight, com, ploc, load, u, q, xtol, max_ite
         for i in range(6):
             w[i] = w_try[i]
         phi = phi_try
-        # K at the accepted pose (the trial buffers may hold the second-order-correction's start).
-        assemble(top, plat, l0, kw, weight, com, ploc, load, u, q, w, kmat, lengths0, tensions, True)
+        # The last evaluation was at the accepted pose: keep its K and wire lengths.
+        for i in range(6):
+            lengths0[i] = lengths[i]
+            for j in range(6):
+                kmat[i, j] = k_try[i, j]
     for i in range(6):
         lengths[i] = lengths0[i]
     return MAX_ITERATIONS, max_iter, step
 
 
 @njit(cache=True)
-def batch_solve(top, plat, l0, kw, weight, com, ploc, loads, u0, q0, xtol, max_iter, lc, max_move,
-                u_out, q_out, lengths_out, tensions_out, w_out, status_out, iters_out):
-    """newton_solve for each row of loads (N, 6), every case started from the same pose (u0, q0)."""
+def solve_step(top, plat, l0, kw, weight, com, ploc, load, u, q, xtol, max_iter, lc, max_move, min_cos_turn,
+               max_shift, lengths, tensions, w):
+    """newton_solve from (u, q), accepted only if the result turned the platform by less than acos(min_cos_turn)
+    and moved its centre by less than max_shift [m]; u and q are updated only when accepted.
+    Returns (status, iterations): CONVERGED, JUMPED, or newton_solve's failure status."""
+    u1 = u.copy()
+    q1 = q.copy()
+    status, iters, _ = newton_solve(top, plat, l0, kw, weight, com, ploc, load, u1, q1, xtol, max_iter, lc,
+                                    max_move, lengths, tensions, w)
+    if status != CONVERGED:
+        return status, iters
+    tr = 0.0
+    for i in range(3):
+        for j in range(3):
+            tr += q1[i, j] * q[i, j]  # trace(q1 qᵀ) = 1 + 2 cos(angle between the poses)
+    shift = math.sqrt((u1[0] - u[0]) ** 2 + (u1[1] - u[1]) ** 2 + (u1[2] - u[2]) ** 2)
+    if 0.5 * (tr - 1.0) < min_cos_turn or shift > max_shift:
+        return JUMPED, iters
+    for i in range(3):
+        u[i] = u1[i]
+        for j in range(3):
+            q[i, j] = q1[i, j]
+    return CONVERGED, iters
+
+
+@njit(cache=True)
+def batch_solve(top, plat, l0, kw, weight, com, ploc, loads, u0, q0, xtol, max_iter, lc, max_move, min_cos_turn,
+                max_shift, u_out, q_out, lengths_out, tensions_out, w_out, status_out, iters_out):
+    """solve_step for each row of loads (N, 6), every case started from the same pose (u0, q0)."""
     n = loads.shape[0]
     u = np.empty(3)
     q = np.empty((3, 3))
@@ -441,8 +486,8 @@ def batch_solve(top, plat, l0, kw, weight, com, ploc, loads, u0, q0, xtol, max_i
             u[i] = u0[i]
             for j in range(3):
                 q[i, j] = q0[i, j]
-        st, it, _ = newton_solve(top, plat, l0, kw, weight, com, ploc, loads[c], u, q, xtol, max_iter, lc,
-                                 max_move, lengths, tensions, w)
+        st, it = solve_step(top, plat, l0, kw, weight, com, ploc, loads[c], u, q, xtol, max_iter, lc, max_move,
+                            min_cos_turn, max_shift, lengths, tensions, w)
         status_out[c] = st
         iters_out[c] = it
         for i in range(3):

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from functools import lru_cache
 
 import numpy as np
 
@@ -128,6 +127,9 @@ class _Arrays:
         self.l0_nominal = g.l0
         # One Newton iteration moves the centre by at most 5 % of the wire length.
         self.max_move = 0.05 * g.l0
+        # One continuation step may turn the platform by MAX_STEP_ROTATION and shift it by a share of l0.
+        self.min_cos_turn = math.cos(MAX_STEP_ROTATION)
+        self.max_shift = MAX_STEP_TRANSLATION * g.l0
 
     def args(self):
         return self.top, self.plat, self.l0, self.kw, self.weight, self.com, self.ploc
@@ -140,14 +142,19 @@ class _Arrays:
                 self.ploc)
 
 
-@lru_cache(maxsize=64)
 def _arrays(g: CraneGeometry) -> _Arrays:
-    return _Arrays(g)
+    # Cached on the (immutable) geometry itself: hashing a dataclass on every solve costs more than the solve.
+    arr = g._derived.get('arrays')
+    if arr is None:
+        arr = g._derived['arrays'] = _Arrays(g)
+    return arr
 
 
 def as_load(force=None, moment=None, load=None) -> np.ndarray:
     """A load vector [fx, fy, fz, mx, my, mz] from force [N] and moment [N·m] (fixed frame), validated."""
-    if load is not None:
+    if type(load) is np.ndarray and load.shape == (6,) and load.dtype == np.float64:
+        vec = load  # fast path for the solver's hot callers
+    elif load is not None:
         vec = np.asarray(load, dtype=float).reshape(-1)
         if vec.shape != (6,):
             raise ValueError(f'load = {load!r}: must have 6 components [fx, fy, fz, mx, my, mz]')
@@ -159,7 +166,7 @@ def as_load(force=None, moment=None, load=None) -> np.ndarray:
         if m.shape != (3,):
             raise ValueError(f'moment = {moment!r}: must have 3 components [mx, my, mz] in N·m')
         vec = np.concatenate([f, m])
-    if not np.all(np.isfinite(vec)):
+    if not math.isfinite(vec.sum()):  # a sum is NaN/Inf iff a component is (or it overflows: also invalid)
         raise ValueError(f'load = {vec.tolist()}: every component must be finite')
     return vec
 
@@ -204,21 +211,15 @@ def check_load_admissible(geometry: CraneGeometry, load: np.ndarray) -> None:
         f'not positive, so the wires (which can only pull up) would all go slack')
 
 
-def _newton(arr: _Arrays, args: tuple, load: np.ndarray, u: np.ndarray, q: np.ndarray, xtol: float,
-            max_iter: int):
+def _step(arr: _Arrays, args: tuple, load: np.ndarray, u: np.ndarray, q: np.ndarray, xtol: float,
+          max_iter: int):
+    """One continuation step in place on (u, q): Newton, accepted only near the start (else status JUMPED)."""
     lengths = np.empty(6)
     tensions = np.empty(6)
     w = np.empty(6)
-    status, iters, _ = kern.newton_solve(*args, load, u, q, xtol, max_iter, arr.lc, arr.max_move, lengths,
-                                         tensions, w)
+    status, iters = kern.solve_step(*args, load, u, q, xtol, max_iter, arr.lc, arr.max_move, arr.min_cos_turn,
+                                    arr.max_shift, lengths, tensions, w)
     return status, iters, lengths, tensions, w
-
-
-def _jump_ok(arr: _Arrays, u0, q0, u1, q1) -> bool:
-    """Whether a converged step stayed near the start: guards against Newton landing on a far branch."""
-    rel = q1 @ q0.T
-    angle = math.acos(max(-1.0, min(1.0, (np.trace(rel) - 1.0) / 2.0)))
-    return angle <= MAX_STEP_ROTATION and np.linalg.norm(u1 - u0) <= MAX_STEP_TRANSLATION * arr.l0_nominal
 
 
 @dataclass
@@ -233,23 +234,22 @@ class _PathEnd:
 
 
 def _continuation(arr: _Arrays, args_at, load_at, u: np.ndarray, q: np.ndarray, xtol: float, max_iter: int,
-                  max_steps: int, what: str) -> _PathEnd:
+                  max_steps: int, what) -> _PathEnd:
     """Follow equilibria from lam = 0 (pose u, q) to lam = 1 with adaptive steps.
 
-    args_at(lam) gives the kernel's geometry arguments and load_at(lam) the load. A step is taken when Newton
-    converges without jumping far (:func:`_jump_ok`); otherwise it is halved, down to MIN_LOAD_FRACTION.
+    args_at(lam) gives the kernel's geometry arguments, load_at(lam) the load and what() the goal, for errors.
+    A step is taken when Newton
+    converges without jumping far (kernel ``solve_step``); otherwise it is halved, down to MIN_LOAD_FRACTION.
     """
     lam, step = 0.0, 1.0
     total_iters = steps = 0
     while True:
         target = min(1.0, lam + step)
-        u_try, q_try = u.copy(), q.copy()
-        status, iters, lengths, tensions, w = _newton(arr, args_at(target), load_at(target), u_try, q_try, xtol,
-                                                      max_iter)
+        status, iters, lengths, tensions, w = _step(arr, args_at(target), load_at(target), u, q, xtol, max_iter)
         total_iters += iters
         steps += 1
-        if status == kern.CONVERGED and _jump_ok(arr, u, q, u_try, q_try):
-            u, q, lam = u_try, q_try, target
+        if status == kern.CONVERGED:
+            lam = target
             if lam >= 1.0:
                 return _PathEnd(u, q, lengths, tensions, w, total_iters, steps)
             step = min(2.0 * step, 1.0 - lam)
@@ -257,16 +257,23 @@ def _continuation(arr: _Arrays, args_at, load_at, u: np.ndarray, q: np.ndarray, 
             step *= 0.5
             if step < MIN_LOAD_FRACTION:
                 raise NoEquilibriumError(
-                    f'no equilibrium found along the path to {what} beyond {lam:.6g} of the way (the platform '
+                    f'no equilibrium found along the path to {what()} beyond {lam:.6g} of the way (the platform '
                     f'cannot hold it continuously: a limit point, where it would swing or flip away; solver '
                     f'status {status})')
         if steps >= max_steps:
-            raise ConvergenceError(f'gave up after {steps} continuation steps at {lam:.6g} of the way to {what}')
+            raise ConvergenceError(f'gave up after {steps} continuation steps at {lam:.6g} of the way to {what()}')
 
 
-@lru_cache(maxsize=64)
 def _rest(geometry: CraneGeometry, xtol: float) -> tuple[np.ndarray, np.ndarray]:
-    """Rest pose under the weight: the symmetric crane's vertical sag, then a homotopy to the real offsets."""
+    """Rest pose under the weight (cached per geometry and tolerance)."""
+    key = ('rest', xtol)
+    if key not in geometry._derived:
+        geometry._derived[key] = _solve_rest(geometry, xtol)
+    return geometry._derived[key]
+
+
+def _solve_rest(geometry: CraneGeometry, xtol: float) -> tuple[np.ndarray, np.ndarray]:
+    """The symmetric crane's vertical sag, then a homotopy to the real offsets (centre of mass, wire lengths)."""
     arr = _arrays(geometry)
     if geometry.weight == 0.0 and not any(geometry.length_offsets):
         return np.zeros(3), np.eye(3)
@@ -277,7 +284,7 @@ def _rest(geometry: CraneGeometry, xtol: float) -> tuple[np.ndarray, np.ndarray]
     sag = g.weight * g.l0 ** 2 / (6.0 * float(arr.kw.min()) * g.height ** 2)
     u0 = np.array([0.0, 0.0, 2.0 * sag + 2.0 * float(np.abs(g.length_offsets).max()) * g.l0 / g.height])
     end = _continuation(arr, arr.homotopy, lambda lam: zero, u0, np.eye(3), xtol, DEFAULT_MAX_ITER,
-                        2000, f'the rest pose under W = {geometry.weight} N')
+                        2000, lambda: f'the rest pose under W = {geometry.weight} N')
     return end.u, end.q
 
 
@@ -321,12 +328,16 @@ def solve_equilibrium(geometry: CraneGeometry, force=None, moment=None, *, load=
         u, q = u0.copy(), q0.copy()
         start_load = np.zeros(6)
     args = arr.args()
-    end = _continuation(arr, lambda lam: args, lambda lam: start_load + lam * (load - start_load), u, q, xtol,
-                        max_iter, max_steps, f'the load {load.tolist()}')
-    u, q, lengths, tensions, w = end.u, end.q, end.lengths, end.tensions, end.residual
-    total_iters, steps = end.iterations, end.steps
+    # Most loads are reached in one step; continuation only when that fails or lands far away.
+    status, total_iters, lengths, tensions, w = _step(arr, args, load, u, q, xtol, max_iter)
+    steps = 1
+    if status != kern.CONVERGED:
+        end = _continuation(arr, lambda lam: args, lambda lam: start_load + lam * (load - start_load), u, q,
+                            xtol, max_iter, max_steps, lambda: f'the load {load.tolist()}')
+        u, q, lengths, tensions, w = end.u, end.q, end.lengths, end.tensions, end.residual
+        total_iters, steps = total_iters + end.iterations, 1 + end.steps
     slack = lengths < arr.l0
-    if np.all(slack) and (geometry.weight > 0.0 or np.any(load)):
+    if slack.all() and (geometry.weight > 0.0 or load.any()):
         raise NoEquilibriumError(f'all six wires are slack under the load {load.tolist()}')
     return Equilibrium(u, q, lengths, tensions, slack, load, total_iters, w, steps)
 
@@ -360,12 +371,10 @@ def solve_batch(geometry: CraneGeometry, loads, *, xtol: float = DEFAULT_XTOL,
     w = np.empty((n, 6))
     status = np.empty(n, dtype=np.int64)
     iters = np.empty(n, dtype=np.int64)
-    kern.batch_solve(*arr.args(), loads, u0, q0, xtol, max_iter, arr.lc, arr.max_move, u, q, lengths, tensions, w, status, iters)
-    # Far from the rest pose Newton might converge to another branch: redo those with continuation.
-    rel_trace = np.einsum('nij,ij->n', q, q0)
-    angle = np.arccos(np.clip((rel_trace - 1.0) / 2.0, -1.0, 1.0))
-    far = (angle > MAX_STEP_ROTATION) | (np.linalg.norm(u - u0, axis=1) > MAX_STEP_TRANSLATION * arr.l0_nominal)
-    for c in np.flatnonzero((status != kern.CONVERGED) | far):
+    kern.batch_solve(*arr.args(), loads, u0, q0, xtol, max_iter, arr.lc, arr.max_move, arr.min_cos_turn,
+                     arr.max_shift, u, q, lengths, tensions, w, status, iters)
+    # Cases Newton could not reach directly, or reached far from the rest pose: load continuation.
+    for c in np.flatnonzero(status != kern.CONVERGED):
         eq = solve_equilibrium(geometry, load=loads[c], xtol=xtol, max_iter=max_iter)
         u[c], q[c], lengths[c], tensions[c], w[c] = (eq.displacement, eq.rotation, eq.wire_lengths,
                                                      eq.wire_tensions, eq.residual)
