@@ -1,0 +1,306 @@
+"""Approximate time pairing of the force and displacement streams by their header stamps.
+
+A small stand-in for ``message_filters.ApproximateTimeSynchronizer`` (not available here) for exactly two streams,
+``'force'`` and ``'displacement'``. Samples are ``(stamp_s, value)`` with the stamp in seconds (header time, not
+arrival time) and the value a float or an array of floats (e.g. a wrench [fx, fy, fz, mx, my, mz] in N and N·m),
+checked for NaN/Inf; any other object (a message, a label) is passed through unchecked.
+
+Pairing rule: two samples are paired when their stamps differ by at most ``slop`` and each is the other's nearest
+remaining sample (mutual nearest neighbours); each sample is used at most once and pairs come out in stamp order.
+Deciding "nearest" may need the next sample of a stream, so a pair is usually emitted one sample period late; a
+pair whose next sample never comes is emitted once the other stream is ``max_age`` ahead, or by :meth:`flush`.
+
+Bookkeeping per stream (see :class:`StreamCounters`):
+
+- out of order: a stamp older than the last accepted stamp of its stream (equal stamps are accepted); dropped.
+- non-finite: a NaN/Inf stamp or value; dropped (a NaN value still counts as a sample for dropout detection).
+- stale: a stamp older than the newest stamp of the other stream by more than ``max_age``; dropped. A queued sample
+  that falls that far behind its own stream can no longer be paired and is dropped as unmatched.
+- dropout: a gap between consecutive stamps larger than ``dropout_factor`` times the expected period (given, or
+  estimated online from the gaps); the sample itself is kept.
+- unmatched: a sample discarded because no partner within ``slop`` can exist.
+
+Every push is amortised O(1) (deques, each sample enters and leaves once).
+"""
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from crane_stiffness.estimation.errors import ParameterError, SyncError
+
+FORCE = 'force'
+DISPLACEMENT = 'displacement'
+STREAMS = (FORCE, DISPLACEMENT)
+
+# Weight of a new gap in the running estimate of a stream's period when none is given.
+_PERIOD_EMA_ALPHA = 0.01
+
+
+@dataclass(frozen=True, slots=True)
+class Pair:
+    """A force sample and a displacement sample whose stamps differ by at most ``slop``."""
+
+    force_stamp_s: float
+    force: Any
+    displacement_stamp_s: float
+    displacement: Any
+
+    @property
+    def stamp_s(self) -> float:
+        """Mean of the two stamps, s."""
+        return 0.5 * (self.force_stamp_s + self.displacement_stamp_s)
+
+
+@dataclass(slots=True)
+class StreamCounters:
+    """Counters of one stream (module docstring gives the definitions)."""
+
+    received: int = 0
+    paired: int = 0
+    out_of_order: int = 0
+    non_finite: int = 0
+    stale: int = 0
+    dropouts: int = 0
+    unmatched: int = 0
+
+
+@dataclass(slots=True)
+class SyncCounters:
+    """Counters of both streams and the number of pairs emitted."""
+
+    pairs: int = 0
+    force: StreamCounters = field(default_factory=StreamCounters)
+    displacement: StreamCounters = field(default_factory=StreamCounters)
+
+    def total(self, name: str) -> int:
+        """Sum of counter ``name`` (e.g. ``'stale'``) over both streams."""
+        return int(getattr(self.force, name) + getattr(self.displacement, name))
+
+
+def _is_finite(value: Any) -> bool:
+    """False for a number or numeric array holding NaN/Inf; other objects are not checked."""
+    if isinstance(value, (float, int)):
+        return math.isfinite(value)
+    try:
+        return bool(np.isfinite(np.asarray(value, dtype=float)).all())
+    except (TypeError, ValueError):
+        return True
+
+
+class _Stream:
+    """Queue and timing state of one stream."""
+
+    __slots__ = ('queue', 'last', 'period', 'period_fixed', 'counters')
+
+    def __init__(self, period: float | None, counters: StreamCounters) -> None:
+        self.queue: deque[tuple[float, Any]] = deque()
+        self.last = -math.inf  # newest in-order stamp: a lower bound of every future stamp
+        self.period = period
+        self.period_fixed = period is not None
+        self.counters = counters
+
+
+class ApproximateTimeSync:
+    """Pairs the ``'force'`` and ``'displacement'`` streams by approximate stamp (see the module docstring).
+
+    Example::
+
+        sync = ApproximateTimeSync(slop=1e-4, expected_period=2e-4)
+        for pair in sync.push('force', 0.0102, wrench):
+            estimator.add(pair.stamp_s, pair.force[1], pair.displacement)
+    """
+
+    def __init__(self, slop: float, *, max_age: float = 0.5,
+                 expected_period: float | Mapping[str, float] | None = None,
+                 dropout_factor: float | None = 3.0, max_queue: int = 100_000) -> None:
+        """Create the synchroniser.
+
+        Args:
+            slop: Largest stamp difference of a pair, s, ≥ 0.
+            max_age: Staleness limit and latency bound, s, ≥ slop.
+            expected_period: Sample period of the streams, s, > 0: one value for both or a mapping per stream
+                name. None: estimated online from the gaps.
+            dropout_factor: A gap larger than this many periods counts as a dropout, > 1; None disables.
+            max_queue: Cap on queued samples per stream (oldest discarded as unmatched), ≥ 1.
+        """
+        slop = float(slop)
+        if not (math.isfinite(slop) and slop >= 0.0):
+            raise ParameterError('slop', slop, 'must be finite and >= 0 (seconds)')
+        max_age = float(max_age)
+        if not (math.isfinite(max_age) and max_age >= slop):
+            raise ParameterError('max_age', max_age, f'must be finite and >= slop = {slop} (seconds)')
+        if dropout_factor is not None:
+            dropout_factor = float(dropout_factor)
+            if not (math.isfinite(dropout_factor) and dropout_factor > 1.0):
+                raise ParameterError('dropout_factor', dropout_factor, 'must be finite and > 1, or None')
+        if isinstance(max_queue, bool) or not isinstance(max_queue, int) or max_queue < 1:
+            raise ParameterError('max_queue', max_queue, 'must be an integer >= 1')
+        if expected_period is None or isinstance(expected_period, Mapping):
+            periods = dict(expected_period or {})
+            unknown = set(periods) - set(STREAMS)
+            if unknown:
+                raise ParameterError('expected_period', periods, f'keys must be among {", ".join(STREAMS)}')
+        else:
+            periods = {name: expected_period for name in STREAMS}
+        for name, period in periods.items():
+            if period is not None and not (math.isfinite(float(period)) and float(period) > 0.0):
+                raise ParameterError(f'expected_period[{name}]', period, 'must be finite and > 0 (seconds)')
+        self._slop = slop
+        self._max_age = max_age
+        self._dropout_factor = dropout_factor
+        self._max_queue = max_queue
+        self._periods = {name: (None if periods.get(name) is None else float(periods[name])) for name in STREAMS}
+        self.reset()
+
+    def reset(self) -> None:
+        """Empty the queues and zero the counters."""
+        self._counters = SyncCounters()
+        self._streams = (_Stream(self._periods[FORCE], self._counters.force),
+                         _Stream(self._periods[DISPLACEMENT], self._counters.displacement))
+        self._index = {FORCE: 0, DISPLACEMENT: 1}
+
+    @property
+    def counters(self) -> SyncCounters:
+        """A snapshot of the counters."""
+        c = self._counters
+        return SyncCounters(pairs=c.pairs, force=replace(c.force), displacement=replace(c.displacement))
+
+    def pending(self, stream: str) -> int:
+        """Samples of ``stream`` waiting for a partner."""
+        return len(self._streams[self._stream_index(stream)].queue)
+
+    def period(self, stream: str) -> float | None:
+        """Expected (given or estimated) sample period of ``stream``, s; None before two samples."""
+        return self._streams[self._stream_index(stream)].period
+
+    def _stream_index(self, stream: str) -> int:
+        try:
+            return self._index[stream]
+        except KeyError:
+            raise SyncError(f'stream = {stream!r}: must be one of {", ".join(STREAMS)}') from None
+
+    def push(self, stream: str, stamp_s: float, value: Any) -> list[Pair]:
+        """Add one sample; returns the pairs completed by it (often none, sometimes more than one)."""
+        i = self._stream_index(stream)
+        own = self._streams[i]
+        other = self._streams[1 - i]
+        counters = own.counters
+        counters.received += 1
+        stamp_s = float(stamp_s)
+        if not math.isfinite(stamp_s):
+            counters.non_finite += 1
+            return []
+        if stamp_s < own.last:
+            counters.out_of_order += 1
+            return []
+        if own.last != -math.inf:
+            gap = stamp_s - own.last
+            if own.period is None:
+                own.period = gap if gap > 0.0 else None
+            elif self._dropout_factor is not None and gap > self._dropout_factor * own.period:
+                counters.dropouts += 1
+            elif not own.period_fixed:
+                own.period += _PERIOD_EMA_ALPHA * (gap - own.period)
+        own.last = stamp_s
+        if not _is_finite(value):
+            counters.non_finite += 1
+            return []
+        if stamp_s < other.last - self._max_age:
+            counters.stale += 1
+            return []
+        own.queue.append((stamp_s, value))
+        if len(own.queue) > self._max_queue:
+            own.queue.popleft()
+            counters.unmatched += 1
+        return self._match(flush=False)
+
+    def flush(self) -> list[Pair]:
+        """Emit every pair still possible without waiting for more samples, then drop what cannot pair.
+
+        For the end of an offline run; the synchroniser can keep receiving afterwards.
+        """
+        pairs = self._match(flush=True)
+        for stream in self._streams:
+            stream.counters.unmatched += len(stream.queue)
+            stream.queue.clear()
+        return pairs
+
+    def _match(self, flush: bool) -> list[Pair]:
+        pairs: list[Pair] = []
+        fs, ds = self._streams
+        fq, dq = fs.queue, ds.queue
+        slop = self._slop
+        while fq and dq:
+            tf = fq[0][0]
+            td = dq[0][0]
+            if tf < td - slop:  # later displacements are later still: no partner can come
+                fq.popleft()
+                fs.counters.unmatched += 1
+                continue
+            if td < tf - slop:
+                dq.popleft()
+                ds.counters.unmatched += 1
+                continue
+            # Within slop. The later head's nearest partner is the earlier head (queues are sorted); pair if the
+            # earlier head is also the later head's nearest, i.e. the next sample on the earlier head's stream
+            # is not closer.
+            if tf <= td:
+                decision = self._earlier_is_nearest(fs, td, td - tf, flush)
+            else:
+                decision = self._earlier_is_nearest(ds, tf, tf - td, flush)
+            if decision is None:
+                break  # wait for the next sample on the earlier head's stream
+            if not decision:
+                continue  # the earlier head was dropped as dominated
+            f_stamp, f_value = fq.popleft()
+            d_stamp, d_value = dq.popleft()
+            pairs.append(Pair(f_stamp, f_value, d_stamp, d_value))
+        if pairs:
+            self._counters.pairs += len(pairs)
+            fs.counters.paired += len(pairs)
+            ds.counters.paired += len(pairs)
+        self._discard_unpairable(fs, ds)
+        self._discard_unpairable(ds, fs)
+        return pairs
+
+    def _earlier_is_nearest(self, earlier: _Stream, later_stamp: float, distance: float,
+                            flush: bool) -> bool | None:
+        """True: pair the heads. False: the earlier head was dominated and dropped. None: undecided yet."""
+        queue = earlier.queue
+        if len(queue) > 1:
+            if abs(queue[1][0] - later_stamp) < distance:
+                # The next sample is closer to the later head, and to every later sample too: drop this one.
+                queue.popleft()
+                earlier.counters.unmatched += 1
+                return False
+            return True
+        # No next sample yet; every future stamp is >= earlier.last.
+        if flush or earlier.last - later_stamp >= distance:
+            return True
+        if self._streams[0] is earlier:
+            newest_other = self._streams[1].last
+        else:
+            newest_other = self._streams[0].last
+        if newest_other - queue[0][0] > self._max_age:
+            return True  # waited long enough: bound the latency
+        return None
+
+    def _discard_unpairable(self, own: _Stream, other: _Stream) -> None:
+        """Drop queued samples of ``own`` that no current or future sample of ``other`` can pair with."""
+        queue = own.queue
+        if not queue:
+            return
+        # A partner would need a stamp >= head - slop; future stamps of other are >= other.last, and ones more
+        # than max_age behind own.last are stale on arrival.
+        limit = own.last - self._max_age - self._slop
+        if not other.queue:
+            limit = max(limit, other.last - self._slop)
+        while queue and queue[0][0] < limit:
+            queue.popleft()
+            own.counters.unmatched += 1

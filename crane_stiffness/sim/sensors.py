@@ -1,0 +1,296 @@
+"""Simulated sensors of the rig: a six-axis force/torque load cell and an LVDT.
+
+Frames and units: the paper's fixed frame (origin at the platform centre at rest, x and y horizontal, z down), SI.
+A wrench is ``[fx, fy, fz, mx, my, mz]`` in N and N·m; the load cell's axes are taken aligned with that frame.
+The platform pose is ``(u, Q)``: u the translation of the platform centre (m, fixed frame), Q the rotation matrix
+mapping body coordinates to the fixed frame, so a body point p sits at ``u + Q·p``.
+
+Randomness comes from one seeded :class:`numpy.random.Generator` per model, so a seed reproduces a run.
+``from_params`` builds a model from a flat, ROS-parameter-friendly dict and names the offending field on error.
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from crane_stiffness.sim.errors import ParameterError
+
+RngLike = np.random.Generator | int | None
+
+
+def _float_vector(field: str, value: Any, size: int, *, minimum: float | None = None, strict: bool = False,
+                  allow_inf: bool = False) -> NDArray[np.float64]:
+    """A float vector of ``size`` entries from a scalar (broadcast) or a sequence, checked element-wise."""
+    try:
+        array = np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ParameterError(field, value, f'must be a number or {size} numbers') from None
+    if array.ndim == 0:
+        array = np.full(size, float(array))
+    if array.shape != (size,):
+        raise ParameterError(field, value, f'must be a number or a list of {size} numbers')
+    if np.isnan(array).any() or (not allow_inf and np.isinf(array).any()):
+        raise ParameterError(field, value, 'must be finite' + (' or inf' if allow_inf else ''))
+    if minimum is not None:
+        bad = array <= minimum if strict else array < minimum
+        if bad.any():
+            raise ParameterError(field, value, f'every entry must be {">" if strict else ">="} {minimum}')
+    return array
+
+
+def _float(field: str, value: Any, *, minimum: float | None = None) -> float:
+    if isinstance(value, bool):
+        raise ParameterError(field, value, 'must be a number')
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise ParameterError(field, value, 'must be a number') from None
+    if not math.isfinite(number):
+        raise ParameterError(field, value, 'must be finite')
+    if minimum is not None and number < minimum:
+        raise ParameterError(field, value, f'must be >= {minimum}')
+    return number
+
+
+def _rng(field: str, value: RngLike) -> np.random.Generator:
+    if isinstance(value, np.random.Generator):
+        return value
+    if value is not None and (isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0):
+        raise ParameterError(field, value, 'must be a non-negative integer seed, a numpy Generator or None')
+    return np.random.default_rng(value)
+
+
+def _check_keys(params: Mapping[str, Any], known: tuple[str, ...], required: tuple[str, ...] = ()) -> None:
+    for key in params:
+        if key not in known:
+            raise ParameterError(str(key), params[key], f'unknown parameter; known: {", ".join(known)}')
+    for key in required:
+        if key not in params:
+            raise ParameterError(key, None, 'is required')
+
+
+def _quantize(values: NDArray[np.float64], resolution: NDArray[np.float64] | float) -> NDArray[np.float64]:
+    """Round to multiples of ``resolution`` where it is > 0 (an ADC count); unchanged where it is 0."""
+    resolution = np.asarray(resolution, dtype=float)
+    step = np.where(resolution > 0.0, resolution, 1.0)
+    return np.where(resolution > 0.0, np.round(values / step) * step, values)
+
+
+class LoadCellModel:
+    """Six-axis force/torque sensor.
+
+    One reading, per axis i (vectors over the six wrench components)::
+
+        raw = C·w_true + bias + drift_per_s·t + noise          (noise ~ N(0, noise_std²))
+        saturated_i = |raw_i| > full_scale_i ;  raw_i clipped to ±full_scale_i
+        reading = quantize(raw, resolution) − offset            (offset set by tare, on the same grid)
+
+    C is the 6×6 cross-talk matrix (identity plus small off-diagonal terms: load on axis j leaking into the
+    reading of axis i). The offset makes the sensor behave like a real F/T driver after a bias/tare command;
+    drift keeps running after a tare, as on a real gauge.
+    """
+
+    PARAM_NAMES = ('noise_std', 'bias', 'drift_per_s', 'crosstalk', 'resolution', 'full_scale', 'seed')
+
+    def __init__(self, noise_std: ArrayLike = 0.0, bias: ArrayLike = 0.0, drift_per_s: ArrayLike = 0.0,
+                 crosstalk: ArrayLike | None = None, resolution: ArrayLike = 0.0, full_scale: ArrayLike = math.inf,
+                 rng: RngLike = None) -> None:
+        """Create the model. Per-axis arguments take one number for all six axes or six numbers.
+
+        Args:
+            noise_std: Standard deviation of white noise, N / N·m, ≥ 0.
+            bias: Constant offset, N / N·m.
+            drift_per_s: Linear drift of the offset, N/s / N·m/s.
+            crosstalk: 6×6 matrix (or 36 numbers, row-major); None for the identity.
+            resolution: Quantization step, N / N·m, ≥ 0 (0: none).
+            full_scale: Overload limit, N / N·m, > 0 (inf: none); readings saturate at ±full_scale.
+            rng: Seed or Generator.
+        """
+        self._noise_std = _float_vector('noise_std', noise_std, 6, minimum=0.0)
+        self._bias = _float_vector('bias', bias, 6)
+        self._drift = _float_vector('drift_per_s', drift_per_s, 6)
+        if crosstalk is None:
+            self._crosstalk = np.eye(6)
+        else:
+            matrix = np.array(crosstalk, dtype=float)
+            if matrix.size != 36 or matrix.ndim not in (1, 2) or (matrix.ndim == 2 and matrix.shape != (6, 6)):
+                raise ParameterError('crosstalk', crosstalk, 'must be a 6x6 matrix or 36 numbers (row-major)')
+            if not np.isfinite(matrix).all():
+                raise ParameterError('crosstalk', crosstalk, 'must be finite')
+            self._crosstalk = matrix.reshape(6, 6)
+        self._resolution = _float_vector('resolution', resolution, 6, minimum=0.0)
+        self._full_scale = _float_vector('full_scale', full_scale, 6, minimum=0.0, strict=True, allow_inf=True)
+        self._rng = _rng('rng', rng)
+        self._offset = np.zeros(6)
+
+    @classmethod
+    def from_params(cls, params: Mapping[str, Any]) -> LoadCellModel:
+        """Build from a dict with keys from :attr:`PARAM_NAMES` (all optional; ``seed`` an int)."""
+        _check_keys(params, cls.PARAM_NAMES)
+        kwargs = {key: params[key] for key in cls.PARAM_NAMES if key in params and key != 'seed'}
+        return cls(**kwargs, rng=_rng('seed', params.get('seed')))
+
+    @property
+    def offset(self) -> NDArray[np.float64]:
+        """Current tare offset, N and N·m (a copy)."""
+        return self._offset.copy()
+
+    @property
+    def crosstalk(self) -> NDArray[np.float64]:
+        """The 6×6 cross-talk matrix (a copy)."""
+        return self._crosstalk.copy()
+
+    def measure(self, true_wrench: ArrayLike, t_s: ArrayLike = 0.0
+                ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+        """One reading (or a batch) of the true wrench at time ``t_s``.
+
+        Args:
+            true_wrench: ``[fx, fy, fz, mx, my, mz]`` in N and N·m, shape (6,) or (n, 6).
+            t_s: Time for the drift, s; a scalar or shape (n,).
+
+        Returns:
+            ``(wrench, saturated)``: the reading, same shape as ``true_wrench``, and per-axis overload flags (bool).
+        """
+        wrench = np.asarray(true_wrench, dtype=float)
+        if wrench.shape[-1:] != (6,) or wrench.ndim > 2:
+            raise ParameterError('true_wrench', true_wrench, 'must have shape (6,) or (n, 6)')
+        t = np.asarray(t_s, dtype=float)
+        if t.ndim == 1:
+            t = t[:, None]
+        raw = wrench @ self._crosstalk.T + self._bias + self._drift * t
+        raw = raw + self._rng.normal(0.0, 1.0, raw.shape) * self._noise_std
+        saturated = np.abs(raw) > self._full_scale
+        raw = np.clip(raw, -self._full_scale, self._full_scale)
+        return _quantize(raw, self._resolution) - self._offset, saturated
+
+    def tare(self, samples: ArrayLike) -> NDArray[np.float64]:
+        """Zero the sensor on the mean of N readings taken at no load, like an F/T driver's bias command.
+
+        Args:
+            samples: Readings returned by :meth:`measure`, shape (N, 6) or (6,), N ≥ 1.
+
+        Returns:
+            The new offset (cumulative: a second tare corrects what the first left).
+        """
+        samples = np.atleast_2d(np.asarray(samples, dtype=float))
+        if samples.ndim != 2 or samples.shape[1] != 6 or samples.shape[0] < 1:
+            raise ParameterError('samples', samples.shape, 'must have shape (N, 6) with N >= 1')
+        if not np.isfinite(samples).all():
+            raise ParameterError('samples', 'NaN/Inf', 'must be finite')
+        # Kept on the ADC grid so tared readings stay multiples of the resolution.
+        self._offset = _quantize(self._offset + samples.mean(axis=0), self._resolution)
+        return self._offset.copy()
+
+    def clear_tare(self) -> None:
+        """Forget the tare offset."""
+        self._offset = np.zeros(6)
+
+
+class LvdtModel:
+    """Linear variable differential transformer touching a point of the platform.
+
+    The reading is the displacement of the contact point along the sensor axis, relative to the point's position
+    when the sensor was zeroed::
+
+        d = axis · ((u + Q·p) − r_zero)
+        reading = clip(quantize(d + noise, resolution), range_m[0], range_m[1])
+        in_range = range_m[0] <= d <= range_m[1]        (the core is within its stroke)
+
+    with ``axis`` a unit vector in the fixed frame and ``p`` the contact point in the body frame. Until
+    :meth:`zero` is called, ``r_zero = p`` (the rest pose u = 0, Q = I). Lateral motion of the contact point
+    (across the axis) is not seen, as with a flat-tipped spring-loaded probe.
+    """
+
+    PARAM_NAMES = ('axis', 'contact_point', 'noise_std', 'resolution', 'range_m', 'seed')
+
+    def __init__(self, axis: ArrayLike, contact_point: ArrayLike = (0.0, 0.0, 0.0), noise_std: float = 0.0,
+                 resolution: float = 0.0, range_m: tuple[float, float] = (-math.inf, math.inf),
+                 rng: RngLike = None) -> None:
+        """Create the model.
+
+        Args:
+            axis: Measuring direction in the fixed frame; normalised, must be non-zero.
+            contact_point: Contact point in the platform (body) frame, m.
+            noise_std: Standard deviation of white noise, m, ≥ 0.
+            resolution: Quantization step, m, ≥ 0 (0: none).
+            range_m: Stroke (min, max) relative to the zero, m, min < max.
+            rng: Seed or Generator.
+        """
+        axis_vector = _float_vector('axis', axis, 3)
+        norm = float(np.linalg.norm(axis_vector))
+        if norm == 0.0:
+            raise ParameterError('axis', axis, 'must be a non-zero 3-vector')
+        self._axis = axis_vector / norm
+        self._point = _float_vector('contact_point', contact_point, 3)
+        self._noise_std = _float('noise_std', noise_std, minimum=0.0)
+        self._resolution = _float('resolution', resolution, minimum=0.0)
+        limits = np.array(range_m, dtype=float) if np.ndim(range_m) == 1 else np.array([])
+        if limits.shape != (2,) or np.isnan(limits).any() or not limits[0] < limits[1]:
+            raise ParameterError('range_m', range_m, 'must be two numbers [min, max] in metres with min < max')
+        self._range = (float(limits[0]), float(limits[1]))
+        self._rng = _rng('rng', rng)
+        self._reference = self._point.copy()
+
+    @classmethod
+    def from_params(cls, params: Mapping[str, Any]) -> LvdtModel:
+        """Build from a dict with keys from :attr:`PARAM_NAMES` (``axis`` required; ``seed`` an int)."""
+        _check_keys(params, cls.PARAM_NAMES, required=('axis',))
+        kwargs = {key: params[key] for key in cls.PARAM_NAMES if key in params and key != 'seed'}
+        if 'range_m' in kwargs and np.ndim(kwargs['range_m']) == 1:
+            kwargs['range_m'] = tuple(kwargs['range_m'])
+        return cls(**kwargs, rng=_rng('seed', params.get('seed')))
+
+    @property
+    def axis(self) -> NDArray[np.float64]:
+        """Unit measuring direction, fixed frame (a copy)."""
+        return self._axis.copy()
+
+    @property
+    def range_m(self) -> tuple[float, float]:
+        """Stroke (min, max), m."""
+        return self._range
+
+    def _contact(self, u: ArrayLike, q: ArrayLike) -> NDArray[np.float64]:
+        u = np.asarray(u, dtype=float)
+        q = np.asarray(q, dtype=float)
+        if u.shape[-1:] != (3,) or u.ndim > 2:
+            raise ParameterError('u', u, 'must have shape (3,) or (n, 3)')
+        if q.shape[-2:] != (3, 3) or q.ndim > 3:
+            raise ParameterError('Q', q, 'must have shape (3, 3) or (n, 3, 3)')
+        return u + np.einsum('...ij,j->...i', q, self._point)
+
+    def true_displacement(self, u: ArrayLike, q: ArrayLike) -> NDArray[np.float64] | float:
+        """Noise-free displacement d along the axis, m (scalar for one pose, shape (n,) for a batch)."""
+        d = (self._contact(u, q) - self._reference) @ self._axis
+        return float(d) if np.ndim(d) == 0 else d
+
+    def measure(self, u: ArrayLike, q: ArrayLike) -> tuple[Any, Any]:
+        """Reading for the pose ``(u, Q)``.
+
+        Args:
+            u: Platform translation, m, fixed frame; shape (3,) or (n, 3).
+            q: Rotation matrix body → fixed; shape (3, 3) or (n, 3, 3).
+
+        Returns:
+            ``(reading_m, in_range)``: floats/bools for one pose, arrays of shape (n,) for a batch.
+        """
+        d = np.asarray(self.true_displacement(u, q))
+        noisy = d + self._rng.normal(0.0, 1.0, d.shape) * self._noise_std
+        low, high = self._range
+        reading = np.clip(_quantize(noisy, self._resolution), low, high)
+        in_range = (d >= low) & (d <= high)
+        if reading.ndim == 0:
+            return float(reading), bool(in_range)
+        return reading, in_range
+
+    def zero(self, u: ArrayLike = (0.0, 0.0, 0.0), q: ArrayLike | None = None) -> None:
+        """Make the current contact-point position (pose ``(u, Q)``, default the rest pose) the zero."""
+        q = np.eye(3) if q is None else q
+        contact = self._contact(u, q)
+        if contact.shape != (3,):
+            raise ParameterError('u', u, 'zero() takes a single pose')
+        self._reference = contact

@@ -1,0 +1,167 @@
+"""Tests of crane_stiffness.estimation.sync: approximate stamp pairing and its counters."""
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+import pytest
+
+from crane_stiffness.estimation import ApproximateTimeSync, ParameterError, SyncError
+
+RATE_HZ = 5000.0
+PERIOD = 1.0 / RATE_HZ
+
+
+def _interleaved(n: int, jitter: float, offset: float, rng: np.random.Generator) -> list[tuple[str, float, float]]:
+    """Two 5 kHz streams with stamp jitter; the displacement stamps lag by ``offset``. Sorted by arrival."""
+    base = np.arange(n) * PERIOD
+    tf = base + rng.uniform(-jitter, jitter, n)
+    td = base + offset + rng.uniform(-jitter, jitter, n)
+    events = [('force', t, float(i)) for i, t in enumerate(tf)] + [('displacement', t, float(i)) for i, t in
+                                                                    enumerate(td)]
+    return sorted(events, key=lambda e: e[1])
+
+
+def _run(sync: ApproximateTimeSync, events: list[tuple[str, float, object]]) -> list:
+    pairs = []
+    for stream, stamp, value in events:
+        pairs.extend(sync.push(stream, stamp, value))
+    pairs.extend(sync.flush())
+    return pairs
+
+
+def test_pairs_jittered_streams() -> None:
+    rng = np.random.default_rng(1)
+    n = 2000
+    sync = ApproximateTimeSync(slop=0.4 * PERIOD, expected_period=PERIOD)
+    pairs = _run(sync, _interleaved(n, jitter=0.05 * PERIOD, offset=0.1 * PERIOD, rng=rng))
+    assert len(pairs) == n
+    assert all(p.force == p.displacement for p in pairs)  # each sample with its true partner
+    assert all(abs(p.force_stamp_s - p.displacement_stamp_s) <= 0.4 * PERIOD for p in pairs)
+    stamps = [p.stamp_s for p in pairs]
+    assert stamps == sorted(stamps)
+    assert pairs[0].stamp_s == pytest.approx(0.5 * (pairs[0].force_stamp_s + pairs[0].displacement_stamp_s))
+    counters = sync.counters
+    assert counters.pairs == n
+    assert counters.force.received == counters.displacement.received == n
+    assert counters.force.paired == n
+    assert counters.total('unmatched') == counters.total('dropouts') == counters.total('stale') == 0
+
+
+def test_pairs_emitted_with_one_sample_latency() -> None:
+    sync = ApproximateTimeSync(slop=1e-4)
+    assert sync.push('force', 0.0, 1.0) == []
+    assert sync.push('displacement', 0.00005, 2.0) == []  # a later force sample could still be nearer
+    pairs = sync.push('force', 0.0002, 3.0)
+    assert [(p.force, p.displacement) for p in pairs] == [(1.0, 2.0)]
+    assert sync.pending('force') == 1
+
+
+def test_each_sample_used_once_and_nearest_wins() -> None:
+    sync = ApproximateTimeSync(slop=0.005)
+    out = []
+    for stream, stamp, value in [('force', 0.0, 'a0'), ('displacement', 0.004, 'b0'), ('force', 0.0041, 'a1'),
+                                 ('displacement', 0.0046, 'b1'), ('force', 0.02, 'a2')]:
+        out.extend(sync.push(stream, stamp, value))
+    # a1 is nearer to b0 than a0 is: a0 is dropped, not paired; b1 finds no partner left within slop.
+    assert [(p.force, p.displacement) for p in out] == [('a1', 'b0')]
+    counters = sync.counters
+    assert counters.force.unmatched == 1
+    assert counters.displacement.unmatched == 1
+
+
+def test_slop_rejects_distant_stamps() -> None:
+    rng = np.random.default_rng(2)
+    sync = ApproximateTimeSync(slop=0.1 * PERIOD, expected_period=PERIOD)
+    pairs = _run(sync, _interleaved(500, jitter=0.0, offset=0.3 * PERIOD, rng=rng))
+    assert pairs == []
+    assert sync.counters.total('unmatched') == 1000
+
+
+def test_out_of_order_never_paired() -> None:
+    sync = ApproximateTimeSync(slop=1e-4)
+    sync.push('force', 1.0, 'f1')
+    assert sync.push('force', 0.5, 'old') == []
+    pairs = sync.push('displacement', 0.5, 'd-old') + sync.push('displacement', 1.0, 'd1') + sync.flush()
+    assert [(p.force, p.displacement) for p in pairs] == [('f1', 'd1')]
+    assert sync.counters.force.out_of_order == 1
+    assert sync.counters.displacement.out_of_order == 0
+
+
+def test_stale_samples_dropped() -> None:
+    sync = ApproximateTimeSync(slop=1e-3, max_age=0.05)
+    sync.push('displacement', 1.0, 0.0)
+    assert sync.push('force', 0.9, 1.0) == []  # 100 ms behind the displacement stream
+    assert sync.counters.force.stale == 1
+    sync.push('force', 0.96, 1.0)  # 40 ms behind: not stale, but too far to pair
+    assert sync.counters.force.stale == 1
+    pairs = sync.push('force', 1.0002, 2.0) + sync.flush()
+    assert [(p.force, p.displacement) for p in pairs] == [(2.0, 0.0)]
+
+
+def test_non_finite_dropped_and_counted() -> None:
+    sync = ApproximateTimeSync(slop=1e-4)
+    out = []
+    out += sync.push('force', 0.0, np.array([0.0, math.nan, 0.0, 0.0, 0.0, 0.0]))
+    out += sync.push('force', math.inf, 1.0)
+    out += sync.push('displacement', 0.0, 5e-3)
+    out += sync.push('displacement', 0.001, math.inf)
+    out += sync.push('force', 0.001, np.zeros(6))
+    out += sync.push('displacement', 0.0011, 6e-3)
+    out += sync.flush()
+    assert len(out) == 1
+    assert out[0].displacement == 6e-3
+    assert sync.counters.force.non_finite == 2
+    assert sync.counters.displacement.non_finite == 1
+
+
+def test_dropouts_counted_with_given_and_estimated_period() -> None:
+    for period in (PERIOD, None):
+        sync = ApproximateTimeSync(slop=0.3 * PERIOD, expected_period=period, dropout_factor=3.0)
+        stamps = [i * PERIOD for i in range(100)] + [(100 + 10 + i) * PERIOD for i in range(100)] \
+            + [(220 + i) * PERIOD for i in range(50)]  # gaps of 11 and 10 periods
+        for i, t in enumerate(stamps):
+            sync.push('force', t, 1.0)
+            if i != 150:  # one displacement sample missing: a 2-period gap, below the 3-period limit
+                sync.push('displacement', t, 1.0)
+        sync.flush()
+        assert sync.counters.force.dropouts == 2
+        assert sync.counters.displacement.dropouts == 2
+        assert sync.period('force') == pytest.approx(PERIOD, rel=1e-6)
+        assert sync.counters.pairs == len(stamps) - 1
+
+
+def test_latency_bounded_when_one_stream_stops() -> None:
+    sync = ApproximateTimeSync(slop=1e-3, max_age=0.01)
+    sync.push('force', 0.0, 'f0')
+    sync.push('displacement', 0.0005, 'd0')
+    pairs = []
+    for i in range(1, 30):  # force stream silent; displacement runs on
+        pairs += sync.push('displacement', 0.0005 + i * 1e-3, f'd{i}')
+    assert [(p.force, p.displacement) for p in pairs] == [('f0', 'd0')]
+    assert sync.pending('displacement') <= 12  # older ones can never pair: discarded
+
+
+def test_parameter_and_stream_errors() -> None:
+    with pytest.raises(ParameterError, match='slop'):
+        ApproximateTimeSync(slop=-1.0)
+    with pytest.raises(ParameterError, match='max_age'):
+        ApproximateTimeSync(slop=0.1, max_age=0.01)
+    with pytest.raises(ParameterError, match='dropout_factor'):
+        ApproximateTimeSync(slop=0.1, dropout_factor=0.5)
+    with pytest.raises(ParameterError, match=r'expected_period\[force\]'):
+        ApproximateTimeSync(slop=0.1, expected_period={'force': 0.0})
+    with pytest.raises(SyncError, match='torque'):
+        ApproximateTimeSync(slop=0.1).push('torque', 0.0, 1.0)
+
+
+def test_throughput_two_5khz_streams() -> None:
+    rng = np.random.default_rng(3)
+    events = _interleaved(10_000, jitter=0.05 * PERIOD, offset=0.0, rng=rng)  # 2 s of data
+    sync = ApproximateTimeSync(slop=0.4 * PERIOD, expected_period=PERIOD)
+    start = time.perf_counter()
+    pairs = _run(sync, events)
+    elapsed = time.perf_counter() - start
+    assert len(pairs) == 10_000
+    assert elapsed < 1.0  # real time is 2 s; typically ~0.1 s
