@@ -1,0 +1,142 @@
+"""Start nodes the way ``ros2 run`` does, with or without the ros2 CLI installed.
+
+``ros2 run PKG EXE`` finds PKG's prefix through the ament index (the first prefix in AMENT_PREFIX_PATH holding
+``share/ament_index/resource_index/packages/PKG``) and executes ``<prefix>/lib/PKG/EXE``. :func:`command` uses the
+real ``ros2`` when it is on PATH and otherwise performs exactly that look-up, so the demo and the tests start every
+node from the colcon install tree in the same way. ``python -m crane_stiffness.rosrun PKG EXE [args]`` is the
+command-line form. :class:`Processes` runs a set of such nodes and stops them cleanly.
+"""
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Mapping, Sequence
+
+from crane_stiffness.errors import CraneStiffnessError
+
+
+class RosRunError(CraneStiffnessError):
+    """A package or executable that ``ros2 run`` would not find either."""
+
+
+def package_prefix(package: str, ament_prefix_path: str | None = None) -> Path:
+    """The first prefix of AMENT_PREFIX_PATH that registers ``package`` in its ament index."""
+    paths = ament_prefix_path if ament_prefix_path is not None else os.environ.get('AMENT_PREFIX_PATH', '')
+    for prefix in filter(None, paths.split(os.pathsep)):
+        if (Path(prefix) / 'share' / 'ament_index' / 'resource_index' / 'packages' / package).is_file():
+            return Path(prefix)
+    raise RosRunError(f'Package {package!r} not found in AMENT_PREFIX_PATH={paths!r}')
+
+
+def executable_path(package: str, executable: str, ament_prefix_path: str | None = None) -> Path:
+    """``<prefix>/lib/<package>/<executable>`` as ``ros2 run`` resolves it."""
+    prefix = package_prefix(package, ament_prefix_path)
+    exe = prefix / 'lib' / package / executable
+    if not (exe.is_file() and os.access(exe, os.X_OK)):
+        raise RosRunError(f'No executable {executable!r} found in {prefix / "lib" / package}')
+    return exe
+
+
+def command(package: str, executable: str, args: Sequence[str] = (), env: Mapping[str, str] | None = None,
+            use_ros2_cli: bool | None = None) -> list[str]:
+    """argv that runs a node like ``ros2 run package executable args...``."""
+    if use_ros2_cli is None:
+        use_ros2_cli = shutil.which('ros2', path=(env or os.environ).get('PATH')) is not None
+    if use_ros2_cli:
+        return ['ros2', 'run', package, executable, *args]
+    apath = (env or os.environ).get('AMENT_PREFIX_PATH', '')
+    return [str(executable_path(package, executable, apath)), *args]
+
+
+def install_environment(install_base: str | os.PathLike, package: str = 'crane_stiffness',
+                        base: Mapping[str, str] | None = None) -> dict[str, str]:
+    """The environment ``source install/local_setup.sh`` would give for an isolated colcon install of package:
+    its prefix first in AMENT_PREFIX_PATH and its site-packages first on PYTHONPATH."""
+    env = dict(os.environ if base is None else base)
+    prefix = Path(install_base).resolve() / package
+    site = prefix / 'lib' / f'python{sys.version_info.major}.{sys.version_info.minor}' / 'site-packages'
+    env['AMENT_PREFIX_PATH'] = os.pathsep.join(filter(None, [str(prefix), env.get('AMENT_PREFIX_PATH', '')]))
+    env['PYTHONPATH'] = os.pathsep.join(filter(None, [str(site), env.get('PYTHONPATH', '')]))
+    return env
+
+
+def colcon_build(source: str | os.PathLike, build_base: str | os.PathLike, install_base: str | os.PathLike,
+                 log: str | os.PathLike) -> None:
+    """``colcon build`` of the package at ``source`` (raises CalledProcessError with colcon's output)."""
+    colcon = Path(sys.executable).parent / 'colcon'
+    env = dict(os.environ, COLCON_LOG_PATH=str(log))
+    subprocess.run([str(colcon if colcon.exists() else 'colcon'), 'build', '--paths', str(source),
+                    '--build-base', str(build_base), '--install-base', str(install_base)],
+                   cwd=str(source), env=env, check=True, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                   text=True)
+
+
+class Processes:
+    """Nodes started as separate processes; ``stop()`` (or leaving the ``with``) sends SIGINT like Ctrl-C, then
+    SIGTERM, then SIGKILL to what is still running. stdout and stderr go to ``<log_dir>/<name>.log``."""
+
+    def __init__(self, env: Mapping[str, str], log_dir: str | os.PathLike) -> None:
+        self.env = dict(env)
+        self.log_dir = Path(log_dir)
+        self.log_dir.mkdir(parents=True, exist_ok=True)
+        self.procs: dict[str, subprocess.Popen] = {}
+
+    def start(self, name: str, package: str, executable: str, args: Sequence[str] = ()) -> subprocess.Popen:
+        argv = command(package, executable, args, self.env)
+        log = open(self.log_dir / f'{name}.log', 'w')
+        proc = subprocess.Popen(argv, env=self.env, stdout=log, stderr=subprocess.STDOUT,
+                                stdin=subprocess.DEVNULL, start_new_session=True)
+        log.close()
+        self.procs[name] = proc
+        return proc
+
+    def log(self, name: str) -> str:
+        return (self.log_dir / f'{name}.log').read_text(errors='replace')
+
+    def check_alive(self) -> None:
+        """Raise with the log tail if any node has exited on its own."""
+        for name, p in self.procs.items():
+            if p.poll() is not None:
+                raise RosRunError(f'node {name} exited with status {p.returncode}:\n{self.log(name)[-2000:]}')
+
+    def stop(self, timeout_s: float = 10.0) -> dict[str, int]:
+        for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGKILL):
+            running = [p for p in self.procs.values() if p.poll() is None]
+            for p in running:
+                try:
+                    os.killpg(p.pid, sig)
+                except ProcessLookupError:
+                    pass
+            deadline = time.monotonic() + timeout_s
+            while any(p.poll() is None for p in running) and time.monotonic() < deadline:
+                time.sleep(0.05)
+        return {name: p.returncode for name, p in self.procs.items()}
+
+    def __enter__(self) -> 'Processes':
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if len(argv) < 2:
+        print('usage: python -m crane_stiffness.rosrun PACKAGE EXECUTABLE [args...]', file=sys.stderr)
+        return 2
+    try:
+        exe = executable_path(argv[0], argv[1])
+    except RosRunError as exc:
+        print(exc, file=sys.stderr)
+        return 1
+    os.execv(str(exe), [str(exe), *argv[2:]])
+    return 0  # not reached
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,60 @@
+"""Test set-up shared by every test: DDS stays on loopback, each session gets its own domain id.
+
+These variables are set before anything imports rclpy, so every in-process node and every subprocess the tests
+start inherits them.
+"""
+from __future__ import annotations
+
+import os
+import random
+import sys
+import time
+from typing import Callable
+
+import pytest
+
+os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'  # never multicast off this machine
+os.environ.setdefault('ROS_DOMAIN_ID', str(random.Random(os.getpid() ^ time.time_ns()).randint(1, 100)))
+os.environ.setdefault('AMENT_PREFIX_PATH', sys.prefix)  # the venv is the ament prefix with rclpy and the msgs
+os.environ.setdefault('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp')
+os.environ.setdefault('MPLBACKEND', 'Agg')
+
+
+@pytest.fixture
+def rclpy_context():
+    """A fresh rclpy context for one test; create nodes with ``context=rclpy_context``."""
+    import rclpy
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    yield ctx
+    rclpy.shutdown(context=ctx)
+
+
+def spin_until(executor, predicate: Callable[[], bool], timeout_s: float) -> bool:
+    """Spin ``executor`` until ``predicate()`` holds or the timeout passes; returns the predicate's last value."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        executor.spin_once(timeout_sec=0.01)
+    return predicate()
+
+
+REPO = __import__('pathlib').Path(__file__).resolve().parent.parent
+
+
+@pytest.fixture(scope='session')
+def install_tree(tmp_path_factory):
+    """A colcon build of this package (copied out of the work tree), as a real ROS workspace would have it.
+
+    Returns (install_base, env): env is what sourcing the install's local_setup gives.
+    """
+    import shutil
+
+    from crane_stiffness.rosrun import colcon_build, install_environment
+    ws = tmp_path_factory.mktemp('ws')
+    src = ws / 'src' / 'crane_stiffness'
+    shutil.copytree(REPO, src, ignore=shutil.ignore_patterns('.venv', '.git', 'build', 'install', 'log', 'out',
+                                                             '__pycache__', 'bags', '*.egg-info'))
+    colcon_build(src, ws / 'build', ws / 'install', ws / 'log')
+    return ws / 'install', install_environment(ws / 'install')

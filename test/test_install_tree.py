@@ -1,0 +1,97 @@
+"""The colcon install tree, checked the way `ros2 run` and `ros2 launch` use it."""
+from __future__ import annotations
+
+import ast
+import json
+import subprocess
+import sys
+
+import pytest
+from geometry_msgs.msg import PoseStamped, WrenchStamped
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+
+from conftest import REPO, spin_until
+from crane_stiffness import rosrun, topics
+from crane_stiffness.nodes.common import RELIABLE_QOS
+
+# The node executables setup.py declares (read, not imported: importing it would run setup()).
+NODES = next(ast.literal_eval(n.value) for n in ast.parse((REPO / 'setup.py').read_text()).body
+             if isinstance(n, ast.Assign) and getattr(n.targets[0], 'id', '') == 'NODES')
+
+EXECUTABLES = sorted(NODES) + ['crane-stiffness']
+
+
+def test_install_tree_has_index_marker_executables_config_and_launch(install_tree):
+    install, env = install_tree
+    prefix = install / 'crane_stiffness'
+    assert (prefix / 'share/ament_index/resource_index/packages/crane_stiffness').is_file()
+    assert (prefix / 'share/crane_stiffness/package.xml').is_file()
+    for exe in EXECUTABLES:
+        # Exactly what `ros2 run crane_stiffness <exe>` executes.
+        assert rosrun.executable_path('crane_stiffness', exe, env['AMENT_PREFIX_PATH']) == \
+            prefix / 'lib' / 'crane_stiffness' / exe
+    for name in ('crane_lab.yaml', 'program_side_force.yaml', 'program_moment_z.yaml', 'program_force_z.yaml',
+                 'program_side_force_slack.yaml', 'sensors.yaml'):
+        assert (prefix / 'share/crane_stiffness/config' / name).is_file(), name
+    assert (prefix / 'share/crane_stiffness/launch/rig.launch.py').is_file()
+    with pytest.raises(rosrun.RosRunError, match='No executable'):
+        rosrun.executable_path('crane_stiffness', 'no_such_node', env['AMENT_PREFIX_PATH'])
+    with pytest.raises(rosrun.RosRunError, match='not found'):
+        rosrun.executable_path('no_such_package', 'x', env['AMENT_PREFIX_PATH'])
+
+
+def test_cli_runs_from_the_install_tree_with_installed_config(install_tree):
+    _, env = install_tree
+    argv = rosrun.command('crane_stiffness', 'crane-stiffness',
+                          ['stiffness', '--config', 'crane_lab', '--json'], env, use_ros2_cli=False)
+    out = subprocess.run(argv, env=env, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    res = json.loads(out.stdout)
+    assert res['paper_coefficients']['Kj'] == pytest.approx(53793.509, rel=1e-6)  # lab model, h 0.5, W 50
+    assert len(res['tangent']) == 6
+    # And the module form of the stand-in for `ros2 run`.
+    out = subprocess.run([sys.executable, '-m', 'crane_stiffness.rosrun', 'crane_stiffness', 'crane-stiffness',
+                          'solve', '--config', 'crane_lab', '--force', '0', '1', '0', '--json'],
+                         env=env, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert json.loads(out.stdout)['displacement'][1] > 0
+
+
+def test_node_started_like_ros2_run_answers_over_dds(install_tree, rclpy_context, tmp_path):
+    _, env = install_tree
+    with rosrun.Processes(env, tmp_path) as procs:
+        procs.start('crane_model', 'crane_stiffness', 'crane_model',
+                    ['--ros-args', '--params-file', str(install_tree[0] / 'crane_stiffness/share/crane_stiffness'
+                                                        '/config/crane_lab.yaml')])
+        node = Node('probe_install', context=rclpy_context)
+        poses: list[PoseStamped] = []
+        node.create_subscription(PoseStamped, topics.PLATFORM_POSE, poses.append, RELIABLE_QOS)
+        pub = node.create_publisher(WrenchStamped, topics.WRENCH_COMMAND, RELIABLE_QOS)
+        ex = SingleThreadedExecutor(context=rclpy_context)
+        ex.add_node(node)
+        assert spin_until(ex, lambda: pub.get_subscription_count() >= 1, 30), procs.log('crane_model')
+        msg = WrenchStamped()
+        msg.wrench.force.y = 2.0
+        pub.publish(msg)
+        assert spin_until(ex, lambda: poses and poses[-1].pose.position.y > 0, 15), procs.log('crane_model')
+        assert poses[-1].pose.position.y == pytest.approx(2.0 / 53793.5, rel=2e-3)
+        procs.check_alive()
+        codes = procs.stop()
+    assert codes['crane_model'] == 0, procs.log('crane_model')  # Ctrl-C is a clean exit
+    ex.shutdown()
+
+
+def test_launch_file_starts_every_rig_node_with_existing_config():
+    """`launch` is not installable here, so check the file's structure: each Node() names a real executable."""
+    tree = ast.parse((REPO / 'launch/rig.launch.py').read_text())
+    executables = {kw.value.value for node in ast.walk(tree) if isinstance(node, ast.Call)
+                   and getattr(node.func, 'id', '') == 'Node'
+                   for kw in node.keywords if kw.arg == 'executable'}
+    assert executables == {'crane_model', 'load_cell', 'lvdt', 'stiffness_estimator', 'session_recorder',
+                           'load_program'}
+    assert executables <= set(NODES)
+    text = (REPO / 'launch/rig.launch.py').read_text()
+    for cfg in ('crane_lab.yaml', 'sensors.yaml'):
+        assert cfg in text and (REPO / 'config' / cfg).is_file()
+    compile(text, 'rig.launch.py', 'exec')
