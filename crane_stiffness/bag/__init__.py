@@ -1,0 +1,35 @@
+"""MCAP / rosbag2 bag reading and writing, pure Python; reading needs no ROS.
+
+- :class:`BagWriter` (``writer.py``): a rosbag2 bag directory of chunked MCAP files plus metadata.yaml (v9),
+  crash-safe chunk by chunk, split by size or duration, session metadata as MCAP Metadata records.
+- :class:`BagReader` (``reader.py``): topics, metadata records, raw messages, and a fast bulk decoder of the rig's
+  fixed-layout types into numpy structured arrays.
+- :func:`recover_bag` (``recover.py``): rewrite files left unfinished by a crash and (re)write metadata.yaml.
+- ``msgdef.py``: ros2msg schema text and type hashes from the installed .msg files.
+- ``errors.py``: the exceptions (all :class:`BagError`) and :class:`BagDamageWarning`.
+"""
+
+from .errors import (
+    BagCorruptError, BagDamageWarning, BagError, BagExistsError, BagFormatError, BagNotFoundError, BagWriterError,
+    MessageDefinitionError, TopicNotFoundError, UnsupportedTypeError,
+)
+from .reader import SUPPORTED_TYPES, BagReader, McapFile, RawMessage, TopicInfo
+from .writer import (
+    SESSION_METADATA, BagWriter, dump_qos_profiles, qos_profile, session_metadata,
+)
+
+
+def __getattr__(name: str) -> object:
+    # recover.py is also run as ``python -m crane_stiffness.bag.recover``: import it only when asked for, so that
+    # runpy does not find it already imported.
+    if name in ('recover_bag', 'RecoveryReport'):
+        from . import recover
+        return getattr(recover, name)
+    raise AttributeError(f'module {__name__!r} has no attribute {name!r}')
+
+__all__ = [
+    'BagCorruptError', 'BagDamageWarning', 'BagError', 'BagExistsError', 'BagFormatError', 'BagNotFoundError',
+    'BagReader', 'BagWriter', 'BagWriterError', 'McapFile', 'MessageDefinitionError', 'RawMessage',
+    'RecoveryReport', 'SESSION_METADATA', 'SUPPORTED_TYPES', 'TopicInfo', 'TopicNotFoundError',
+    'UnsupportedTypeError', 'dump_qos_profiles', 'qos_profile', 'recover_bag', 'session_metadata',
+]

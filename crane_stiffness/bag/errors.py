@@ -1,0 +1,53 @@
+"""Errors and warnings of :mod:`crane_stiffness.bag`.
+
+Every exception derives from :class:`BagError` (itself a :class:`~crane_stiffness.errors.CraneStiffnessError`), so a
+caller can catch all bag problems with one ``except``. Damage that the reader can work around (a truncated file, a
+chunk whose checksum does not match) is reported with a :class:`BagDamageWarning` and the readable part is used.
+"""
+
+from __future__ import annotations
+
+from crane_stiffness.errors import CraneStiffnessError
+
+
+class BagError(CraneStiffnessError):
+    """Base class of every error raised by the bag package."""
+
+
+class BagFormatError(BagError):
+    """A file is not an MCAP file, or its structure is too damaged to read anything."""
+
+
+class BagCorruptError(BagFormatError):
+    """A part of a file is damaged (bad checksum, impossible record); raised instead of warning when strict."""
+
+
+class BagNotFoundError(BagError, FileNotFoundError):
+    """The bag directory, metadata.yaml or .mcap file does not exist."""
+
+
+class BagExistsError(BagError, FileExistsError):
+    """The writer's target directory already holds files."""
+
+
+class BagWriterError(BagError):
+    """Misuse of the writer: unknown topic, write after close, bad option."""
+
+
+class TopicNotFoundError(BagError, KeyError):
+    """A requested topic is not in the bag; the message names the topics that are."""
+
+    def __str__(self) -> str:  # KeyError would quote the message
+        return str(self.args[0]) if self.args else ''
+
+
+class UnsupportedTypeError(BagError):
+    """The bulk decoder has no fixed-layout decoder for this message type."""
+
+
+class MessageDefinitionError(BagError):
+    """A .msg definition could not be found or parsed under the ament prefixes."""
+
+
+class BagDamageWarning(UserWarning):
+    """Part of a bag could not be read (truncated file, bad chunk); the readable part was used."""

@@ -1,0 +1,573 @@
+"""Writing rosbag2 bags: a directory of MCAP files (profile ``ros2``) and a ``metadata.yaml`` (rosbag2 version 9).
+
+Layout of ``BagWriter('<dir>/<session>')``::
+
+    <dir>/<session>/metadata.yaml        written by close() (and by recover_bag after a crash)
+    <dir>/<session>/<session>_0.mcap     then _1, _2, ... when splitting by size or duration
+
+Each MCAP file is chunked (zstd, lz4 or none) and written straight to the operating system, one chunk at a time,
+so that a process killed with SIGKILL leaves a file whose complete chunks are all readable (see ``recover.py``).
+Schemas are ``ros2msg`` definitions built from the installed .msg files (``msgdef.py``), channels carry
+``offered_qos_profiles`` (a YAML string) and ``topic_type_hash`` metadata as rosbag2 Jazzy writes them, and the
+session's own description goes into MCAP Metadata records (``add_metadata``).
+
+Times are integer nanoseconds since the Unix epoch (``*_ns``); durations in seconds where named ``*_s``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from functools import lru_cache
+from pathlib import Path
+from types import TracebackType
+from typing import Any
+
+import yaml
+from mcap.writer import CompressionType, Writer as McapWriter
+
+from crane_stiffness import __version__
+
+from .errors import BagExistsError, BagWriterError
+from .msgdef import message_definition, normalize_type, type_description_hash
+
+METADATA_FILENAME = 'metadata.yaml'
+METADATA_VERSION = 9
+ROS_DISTRO = 'jazzy'
+SESSION_METADATA = 'crane_stiffness/session'
+"""Name of the MCAP Metadata record that describes a test session (rig, program, software, notes)."""
+ROSBAG2_METADATA = 'rosbag2'
+"""Name of the MCAP Metadata record in which rosbag2 stores its serialized bag metadata."""
+LIBRARY = f'crane_stiffness/{__version__}'
+DEFAULT_CHUNK_SIZE = 1024 * 1024
+"""Default uncompressed chunk size in bytes: about 10,000 rig messages, i.e. ~5 s of a 2 kHz recording."""
+
+COMPRESSIONS = {'zstd': CompressionType.ZSTD, 'lz4': CompressionType.LZ4, 'none': CompressionType.NONE}
+
+DURATION_INFINITE = {'sec': 9223372036, 'nsec': 854775807}
+"""rmw's RMW_DURATION_INFINITE as rosbag2 writes it in QoS profiles."""
+
+_QOS_NAMES = {
+    'history': {0: 'system_default', 1: 'keep_last', 2: 'keep_all', 3: 'unknown'},
+    'reliability': {0: 'system_default', 1: 'reliable', 2: 'best_effort', 3: 'unknown', 4: 'best_available'},
+    'durability': {0: 'system_default', 1: 'transient_local', 2: 'volatile', 3: 'unknown', 4: 'best_available'},
+    'liveliness': {0: 'system_default', 1: 'automatic', 2: 'manual_by_node', 3: 'manual_by_topic', 4: 'unknown',
+                   5: 'best_available'},
+}
+_QOS_KEYS = ('history', 'depth', 'reliability', 'durability', 'deadline', 'lifespan', 'liveliness',
+             'liveliness_lease_duration', 'avoid_ros_namespace_conventions')
+
+
+# --------------------------------------------------------------------------------------------------------- YAML --
+@lru_cache(maxsize=4096)
+def _plain_ok(text: str) -> bool:
+    if not text or text != text.strip() or any(c in text for c in '\n\r\t\0') or text[0] in '-?:,[]{}#&*!|>\'"%@`':
+        return False
+    if ': ' in text or ' #' in text or text.endswith(':'):
+        return False
+    try:
+        return yaml.safe_load(text) == text
+    except yaml.YAMLError:
+        return False
+
+
+def _scalar(value: Any) -> str:
+    if value is None:
+        return '~'
+    if isinstance(value, bool):
+        return 'true' if value else 'false'
+    if isinstance(value, int):
+        return str(value)
+    if isinstance(value, float):
+        return repr(value)
+    if isinstance(value, dict):
+        return '{}'
+    if isinstance(value, (list, tuple)):
+        return '[]'
+    text = str(value)
+    return text if _plain_ok(text) else json.dumps(text)
+
+
+def _is_block(value: Any) -> bool:
+    return isinstance(value, (dict, list, tuple)) and len(value) > 0
+
+
+def _emit(value: Any, indent: int, out: list[str]) -> None:
+    pad = ' ' * indent
+    if isinstance(value, dict):
+        for key, item in value.items():
+            if _is_block(item):
+                out.append(f'{pad}{key}:')
+                _emit(item, indent + 2, out)
+            else:
+                out.append(f'{pad}{key}: {_scalar(item)}')
+        return
+    for item in value:
+        if _is_block(item):
+            sub: list[str] = []
+            _emit(item, indent + 2, sub)
+            sub[0] = f'{pad}- {sub[0][indent + 2:]}'
+            out.extend(sub)
+        else:
+            out.append(f'{pad}- {_scalar(item)}')
+
+
+def dump_yaml(value: Mapping[str, Any] | Sequence[Any]) -> str:
+    """Block-style YAML laid out like yaml-cpp (rosbag2's emitter): 2-space indent, sequences indented under keys.
+
+    Returns text without a trailing newline.
+    """
+    out: list[str] = []
+    if _is_block(value):
+        _emit(value, 0, out)
+    else:
+        out.append(_scalar(value))
+    return '\n'.join(out)
+
+
+# ---------------------------------------------------------------------------------------------------------- QoS --
+def qos_profile(*, history: str = 'keep_last', depth: int = 10, reliability: str = 'reliable',
+                durability: str = 'volatile', deadline: Mapping[str, int] | None = None,
+                lifespan: Mapping[str, int] | None = None, liveliness: str = 'automatic',
+                liveliness_lease_duration: Mapping[str, int] | None = None,
+                avoid_ros_namespace_conventions: bool = False) -> dict[str, Any]:
+    """One offered QoS profile as rosbag2 v9 writes it (policy names lower case; durations {sec, nsec})."""
+    return {
+        'history': history, 'depth': int(depth), 'reliability': reliability, 'durability': durability,
+        'deadline': dict(deadline or DURATION_INFINITE), 'lifespan': dict(lifespan or DURATION_INFINITE),
+        'liveliness': liveliness,
+        'liveliness_lease_duration': dict(liveliness_lease_duration or DURATION_INFINITE),
+        'avoid_ros_namespace_conventions': bool(avoid_ros_namespace_conventions),
+    }
+
+
+def normalize_qos_profiles(profiles: str | Sequence[Mapping[str, Any]] | None) -> list[dict[str, Any]]:
+    """Parse offered QoS profiles (a YAML string, or dicts) into rosbag2 v9 form (integer policies → names)."""
+    if profiles is None:
+        return []
+    if isinstance(profiles, str):
+        if not profiles.strip():
+            return []
+        try:
+            loaded = yaml.safe_load(profiles)
+        except yaml.YAMLError as exc:
+            raise BagWriterError(f'offered QoS profiles are not valid YAML: {exc}') from None
+        profiles = loaded if loaded is not None else []
+    if not isinstance(profiles, (list, tuple)):
+        raise BagWriterError('offered QoS profiles must be a YAML sequence of profiles')
+    result: list[dict[str, Any]] = []
+    for raw in profiles:
+        if not isinstance(raw, Mapping):
+            raise BagWriterError(f'offered QoS profile {raw!r} is not a mapping')
+        profile = qos_profile()
+        profile.update({k: v for k, v in raw.items() if k in _QOS_KEYS})
+        for key, names in _QOS_NAMES.items():
+            value = profile[key]
+            if isinstance(value, int) and not isinstance(value, bool):
+                profile[key] = names.get(value, 'unknown')
+        result.append(profile)
+    return result
+
+
+def dump_qos_profiles(profiles: str | Sequence[Mapping[str, Any]] | None) -> str:
+    """The YAML string rosbag2 Jazzy stores in the MCAP channel metadata ``offered_qos_profiles``.
+
+    yaml-cpp's dump of the profile list; ``[]`` when there are none (unknown), as rosbag2 writes it.
+    """
+    return dump_yaml(normalize_qos_profiles(profiles))
+
+
+# ------------------------------------------------------------------------------------------------ bag metadata --
+@dataclass
+class FileStats:
+    """Counts of one .mcap file of a bag, for metadata.yaml. Times in ns since the epoch."""
+
+    path: str
+    message_count: int = 0
+    start_ns: int | None = None
+    end_ns: int | None = None
+
+    def add(self, log_time_ns: int) -> None:
+        """Count one message logged at ``log_time_ns``."""
+        self.message_count += 1
+        if self.start_ns is None or log_time_ns < self.start_ns:
+            self.start_ns = log_time_ns
+        if self.end_ns is None or log_time_ns > self.end_ns:
+            self.end_ns = log_time_ns
+
+
+@dataclass
+class TopicStats:
+    """One topic of a bag, for metadata.yaml."""
+
+    name: str
+    msg_type: str
+    offered_qos_profiles: str = ''
+    type_description_hash: str = ''
+    message_count: int = 0
+    serialization_format: str = 'cdr'
+
+
+def build_bag_metadata(files: Sequence[FileStats], topics: Sequence[TopicStats], *,
+                       custom_data: Mapping[str, str] | None = None, ros_distro: str = ROS_DISTRO,
+                       compression_format: str = '', compression_mode: str = '') -> dict[str, Any]:
+    """The ``rosbag2_bagfile_information`` mapping (version 9), keys in rosbag2's order.
+
+    ``compression_format``/``compression_mode`` describe rosbag2's own file/message compression and stay empty:
+    MCAP chunk compression is internal to the storage files, as with rosbag2's MCAP storage options.
+    """
+    starts = [f.start_ns for f in files if f.start_ns is not None]
+    ends = [f.end_ns for f in files if f.end_ns is not None]
+    start = min(starts) if starts else 0
+    duration = (max(ends) - start) if ends else 0
+    return {
+        'version': METADATA_VERSION,
+        'storage_identifier': 'mcap',
+        'duration': {'nanoseconds': duration},
+        'starting_time': {'nanoseconds_since_epoch': start},
+        'message_count': sum(f.message_count for f in files),
+        'topics_with_message_count': [
+            {
+                'topic_metadata': {
+                    'name': t.name,
+                    'type': t.msg_type,
+                    'serialization_format': t.serialization_format,
+                    'offered_qos_profiles': normalize_qos_profiles(t.offered_qos_profiles),
+                    'type_description_hash': t.type_description_hash,
+                },
+                'message_count': t.message_count,
+            }
+            for t in topics
+        ],
+        'compression_format': compression_format,
+        'compression_mode': compression_mode,
+        'relative_file_paths': [f.path for f in files],
+        'files': [
+            {
+                'path': f.path,
+                'starting_time': {'nanoseconds_since_epoch': f.start_ns or 0},
+                'duration': {'nanoseconds': (f.end_ns - f.start_ns) if f.start_ns is not None else 0},
+                'message_count': f.message_count,
+            }
+            for f in files
+        ],
+        'custom_data': dict(custom_data) if custom_data else None,
+        'ros_distro': ros_distro,
+    }
+
+
+def write_metadata_yaml(bag_dir: Path, info: Mapping[str, Any]) -> Path:
+    """Write ``<bag_dir>/metadata.yaml`` atomically (temporary file, then rename); return its path."""
+    path = Path(bag_dir) / METADATA_FILENAME
+    tmp = path.with_name(METADATA_FILENAME + '.tmp')
+    tmp.write_text(dump_yaml({'rosbag2_bagfile_information': dict(info)}) + '\n', encoding='utf-8')
+    os.replace(tmp, path)
+    return path
+
+
+def encode_metadata(data: Mapping[str, Any]) -> dict[str, str]:
+    """MCAP metadata values must be strings: keep strings, JSON-encode everything else."""
+    out: dict[str, str] = {}
+    for key, value in data.items():
+        if not isinstance(key, str):
+            raise BagWriterError(f'metadata keys must be strings, got {key!r}')
+        out[key] = value if isinstance(value, str) else json.dumps(value, default=str)
+    return out
+
+
+def session_metadata(*, rig: Mapping[str, Any] | None = None, program: Any = None,
+                     software_version: str = __version__, start_time_ns: int | None = None, notes: str = '',
+                     **extra: Any) -> dict[str, str]:
+    """Record for :data:`SESSION_METADATA`: rig geometry/parameters and program as JSON, version, start, notes."""
+    data: dict[str, Any] = {'software_version': software_version, 'notes': notes}
+    if rig is not None:
+        data['rig'] = rig
+    if program is not None:
+        data['program'] = program
+    if start_time_ns is not None:
+        data['start_time_ns'] = str(int(start_time_ns))
+    data.update(extra)
+    return encode_metadata(data)
+
+
+# ------------------------------------------------------------------------------------------------------- writer --
+class _DirectFile:
+    """Unbuffered binary file for the MCAP writer: every write goes to the OS at once (survives SIGKILL)."""
+
+    def __init__(self, path: Path, fsync: bool) -> None:
+        self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
+        self._pos = 0
+        self._fsync = fsync
+
+    def write(self, data: bytes | bytearray | memoryview) -> int:
+        view = memoryview(data)
+        while view:
+            written = os.write(self._fd, view)
+            view = view[written:]
+        self._pos += len(data)
+        if self._fsync and len(data):
+            os.fsync(self._fd)
+        return len(data)
+
+    def tell(self) -> int:
+        return self._pos
+
+    def flush(self) -> None:
+        if self._fsync:
+            os.fsync(self._fd)
+
+    def close(self) -> None:
+        if self._fd >= 0:
+            os.close(self._fd)
+            self._fd = -1
+
+
+@dataclass
+class _Topic:
+    name: str
+    msg_type: str
+    definition: str
+    type_hash: str
+    qos_yaml: str
+    count: int = 0
+
+
+@dataclass
+class _OpenFile:
+    stats: FileStats
+    stream: _DirectFile
+    mcap: McapWriter
+    schemas: dict[str, int] = field(default_factory=dict)
+    channels: dict[str, int] = field(default_factory=dict)
+    sequences: dict[str, int] = field(default_factory=dict)
+    pending_since_ns: int | None = None
+
+
+class BagWriter:
+    """Write a rosbag2 bag directory of MCAP files. Use as a context manager; ``close()`` writes metadata.yaml.
+
+    Args:
+        path: bag directory ``<dir>/<session>``; created, and must not already hold files.
+        compression: chunk compression, ``'zstd'``, ``'lz4'`` or ``'none'``.
+        chunk_size: uncompressed chunk size in bytes; a chunk is written to disk when it grows past this.
+        split_max_bytes: start a new ``<session>_<n>.mcap`` once the current file holds this many bytes.
+        split_max_duration_s: start a new file once a message is this many seconds (log time) after the file's first.
+        metadata: MCAP Metadata records to write into every file, ``{name: {key: value}}``; non-string values are
+            JSON-encoded.
+        custom_data: rosbag2 ``custom_data`` for metadata.yaml (strings).
+        flush_interval_s: also finish the current chunk once it holds messages this many seconds (log time) old,
+            so a slow topic is on disk within that time; None flushes by size only.
+        fsync: fsync after every write (survives power loss, not only a killed process); slower.
+    """
+
+    def __init__(self, path: str | os.PathLike[str], *, compression: str = 'zstd',
+                 chunk_size: int = DEFAULT_CHUNK_SIZE, split_max_bytes: int | None = None,
+                 split_max_duration_s: float | None = None,
+                 metadata: Mapping[str, Mapping[str, Any]] | None = None,
+                 custom_data: Mapping[str, str] | None = None, flush_interval_s: float | None = None,
+                 fsync: bool = False) -> None:
+        if compression not in COMPRESSIONS:
+            raise BagWriterError(f'compression must be one of {sorted(COMPRESSIONS)}, got {compression!r}')
+        if chunk_size <= 0:
+            raise BagWriterError(f'chunk_size must be positive, got {chunk_size}')
+        if split_max_bytes is not None and split_max_bytes < 1024:
+            raise BagWriterError(f'split_max_bytes must be at least 1024 (rosbag2 MCAP minimum), got {split_max_bytes}')
+        if split_max_duration_s is not None and split_max_duration_s <= 0:
+            raise BagWriterError(f'split_max_duration_s must be positive, got {split_max_duration_s}')
+        self.path = Path(path)
+        if self.path.exists() and (not self.path.is_dir() or any(self.path.iterdir())):
+            raise BagExistsError(f'bag directory {self.path} already exists and is not empty')
+        self.path.mkdir(parents=True, exist_ok=True)
+        self.session = self.path.name
+        self.compression = compression
+        self.chunk_size = int(chunk_size)
+        self.split_max_bytes = split_max_bytes
+        self._split_ns = None if split_max_duration_s is None else int(round(split_max_duration_s * 1e9))
+        self._flush_ns = None if flush_interval_s is None else int(round(flush_interval_s * 1e9))
+        self._fsync = fsync
+        self.custom_data = dict(custom_data or {})
+        self._topics: dict[str, _Topic] = {}
+        self._metadata: list[tuple[str, dict[str, str]]] = []
+        self._files: list[FileStats] = []
+        self._file: _OpenFile | None = None
+        self._closed = False
+        self._open_file()
+        for name, data in (metadata or {}).items():
+            self.add_metadata(name, data)
+
+    # -- context manager --
+    def __enter__(self) -> BagWriter:
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.close()  # keep what was recorded even when the recording loop failed
+
+    # -- properties --
+    @property
+    def files(self) -> list[Path]:
+        """Paths of the .mcap files written so far (the last one may still be open)."""
+        return [self.path / f.path for f in self._files]
+
+    @property
+    def message_count(self) -> int:
+        """Messages written so far, all files."""
+        return sum(f.message_count for f in self._files)
+
+    @property
+    def topics(self) -> dict[str, str]:
+        """Topic name → message type of the topics added."""
+        return {t.name: t.msg_type for t in self._topics.values()}
+
+    # -- API --
+    def add_topic(self, name: str, msg_type: str, qos_profiles_yaml: str | None = None, *,
+                  message_definition_text: str | None = None, type_hash: str | None = None) -> None:
+        """Declare a topic before writing to it.
+
+        Args:
+            name: topic name, e.g. ``/load_cell/wrench``.
+            msg_type: ``pkg/msg/Type`` (``pkg/Type`` accepted).
+            qos_profiles_yaml: offered QoS profiles as a YAML string (rosbag2's form; integer policies accepted),
+                see :func:`qos_profile` / :func:`dump_qos_profiles`; None (stored as ``[]``) when unknown.
+            message_definition_text: ros2msg schema text; looked up from the installed .msg files when None.
+            type_hash: ``RIHS01_...`` type hash; looked up from the installed .json when None.
+        """
+        self._check_open()
+        msg_type = normalize_type(msg_type)
+        if name in self._topics:
+            if self._topics[name].msg_type != msg_type:
+                raise BagWriterError(f'topic {name} was added as {self._topics[name].msg_type}, not {msg_type}')
+            return
+        definition = message_definition(msg_type) if message_definition_text is None else message_definition_text
+        topic = _Topic(name=name, msg_type=msg_type, definition=definition,
+                       type_hash=type_description_hash(msg_type) if type_hash is None else type_hash,
+                       qos_yaml=dump_qos_profiles(qos_profiles_yaml))
+        self._topics[name] = topic
+        assert self._file is not None
+        self._register(self._file, topic)
+
+    def add_metadata(self, name: str, data: Mapping[str, Any]) -> None:
+        """Write an MCAP Metadata record ``name`` → ``{key: value}`` (non-strings JSON-encoded).
+
+        The record goes into the current file and is repeated in every later split file.
+        """
+        self._check_open()
+        encoded = encode_metadata(data)
+        self._metadata.append((name, encoded))
+        assert self._file is not None
+        self._file.mcap.add_metadata(name, encoded)
+
+    def write(self, topic: str, data: bytes | bytearray | memoryview, log_time_ns: int,
+              publish_time_ns: int | None = None) -> None:
+        """Append one serialized (CDR) message.
+
+        Args:
+            topic: a topic declared with :meth:`add_topic`.
+            data: the serialized message, e.g. from a ``raw=True`` subscription.
+            log_time_ns: receive time, ns since the epoch (rosbag2's recv_timestamp; MCAP log_time).
+            publish_time_ns: send time, ns since the epoch; defaults to ``log_time_ns``.
+        """
+        self._check_open()
+        try:
+            entry = self._topics[topic]
+        except KeyError:
+            raise BagWriterError(f'topic {topic} was not added; call add_topic first '
+                                 f'(topics: {", ".join(self._topics) or "none"})') from None
+        log_time_ns = int(log_time_ns)
+        if log_time_ns < 0:
+            raise BagWriterError(f'log_time_ns must not be negative, got {log_time_ns}')
+        current = self._file
+        assert current is not None
+        if current.stats.message_count and self._should_split(current, log_time_ns):
+            self._close_file()
+            current = self._open_file()
+        sequence = current.sequences[topic] = current.sequences[topic] + 1
+        position = current.stream.tell()
+        current.mcap.add_message(current.channels[topic], log_time_ns, bytes(data),
+                                 log_time_ns if publish_time_ns is None else int(publish_time_ns), sequence)
+        current.stats.add(log_time_ns)
+        entry.count += 1
+        if self._flush_ns is not None:
+            if current.stream.tell() != position:
+                current.pending_since_ns = None  # the chunk holding this message was just written
+            elif current.pending_since_ns is None:
+                current.pending_since_ns = log_time_ns  # first message of a new chunk
+            elif log_time_ns - current.pending_since_ns >= self._flush_ns:
+                current.mcap.flush()
+                current.pending_since_ns = None
+
+    def flush(self) -> None:
+        """Finish the chunk in progress and hand it to the OS, so everything written so far survives a crash."""
+        self._check_open()
+        assert self._file is not None
+        self._file.mcap.flush()
+        self._file.pending_since_ns = None
+
+    def close(self) -> dict[str, Any] | None:
+        """Finish the current file (summary, footer) and write metadata.yaml. Idempotent.
+
+        Returns:
+            the ``rosbag2_bagfile_information`` mapping written, or None if already closed.
+        """
+        if self._closed:
+            return None
+        self._close_file()
+        self._closed = True
+        info = self._bag_metadata()
+        write_metadata_yaml(self.path, info)
+        return info
+
+    # -- internals --
+    def _check_open(self) -> None:
+        if self._closed:
+            raise BagWriterError(f'bag {self.path} is closed')
+
+    def _should_split(self, current: _OpenFile, log_time_ns: int) -> bool:
+        if self.split_max_bytes is not None and current.stream.tell() >= self.split_max_bytes:
+            return True
+        start = current.stats.start_ns
+        return self._split_ns is not None and start is not None and log_time_ns - start >= self._split_ns
+
+    def _bag_metadata(self) -> dict[str, Any]:
+        topics = [TopicStats(name=t.name, msg_type=t.msg_type, offered_qos_profiles=t.qos_yaml,
+                             type_description_hash=t.type_hash, message_count=t.count)
+                  for t in self._topics.values()]
+        return build_bag_metadata(self._files, topics, custom_data=self.custom_data)
+
+    def _open_file(self) -> _OpenFile:
+        stats = FileStats(path=f'{self.session}_{len(self._files)}.mcap')
+        stream = _DirectFile(self.path / stats.path, self._fsync)
+        mcap = McapWriter(stream, chunk_size=self.chunk_size, compression=COMPRESSIONS[self.compression],
+                          enable_crcs=True)
+        mcap.start(profile='ros2', library=LIBRARY)
+        opened = _OpenFile(stats=stats, stream=stream, mcap=mcap)
+        self._files.append(stats)
+        self._file = opened
+        for topic in self._topics.values():
+            self._register(opened, topic)
+        for name, data in self._metadata:
+            mcap.add_metadata(name, data)
+        return opened
+
+    def _register(self, opened: _OpenFile, topic: _Topic) -> None:
+        schema_id = opened.schemas.get(topic.msg_type)
+        if schema_id is None:
+            schema_id = opened.mcap.register_schema(topic.msg_type, 'ros2msg', topic.definition.encode('utf-8'))
+            opened.schemas[topic.msg_type] = schema_id
+        opened.channels[topic.name] = opened.mcap.register_channel(
+            topic.name, 'cdr', schema_id,
+            {'offered_qos_profiles': topic.qos_yaml, 'topic_type_hash': topic.type_hash})
+        opened.sequences[topic.name] = 0
+
+    def _close_file(self) -> None:
+        opened, self._file = self._file, None
+        if opened is None:
+            return
+        try:
+            # rosbag2 Jazzy stores the bag metadata known so far in each file it closes.
+            opened.mcap.add_metadata(ROSBAG2_METADATA, {'serialized_metadata': dump_yaml(self._bag_metadata())})
+            opened.mcap.finish()
+        finally:
+            opened.stream.close()
