@@ -98,10 +98,10 @@ class Processes:
     def log(self, name: str) -> str:
         return (self.log_dir / f'{name}.log').read_text(errors='replace')
 
-    def check_alive(self) -> None:
-        """Raise with the log tail if any node has exited on its own."""
+    def check_alive(self, allow_exit: Sequence[str] = ()) -> None:
+        """Raise with the log tail if a node has exited on its own (nodes in allow_exit may exit with status 0)."""
         for name, p in self.procs.items():
-            if p.poll() is not None:
+            if p.poll() is not None and not (name in allow_exit and p.returncode == 0):
                 raise RosRunError(f'node {name} exited with status {p.returncode}:\n{self.log(name)[-2000:]}')
 
     def stop(self, timeout_s: float = 10.0) -> dict[str, int]:

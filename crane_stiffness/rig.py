@@ -1,0 +1,151 @@
+"""The simulated rig as separate node processes: start order, readiness, and the run's summary.
+
+Used by ``make demo`` (scripts/demo.py) and the rig benchmark. Every node is started the way ``ros2 run`` starts
+it (crane_stiffness.rosrun), with the ROS parameter files from the install tree's config/ directory.
+"""
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from rclpy.node import Node
+from std_msgs.msg import Float64, Float64MultiArray, String
+
+from crane_stiffness import __version__, topics
+from crane_stiffness.config import geometry_from_params, load_params
+from crane_stiffness.model import axis_stiffness, rest_pose, tangent_stiffness
+from crane_stiffness.nodes.common import LATCHED_QOS, RELIABLE_QOS
+from crane_stiffness.rosrun import Processes, RosRunError
+from crane_stiffness.sim.program import LoadProgram, load_program_file
+
+PACKAGE = 'crane_stiffness'
+
+
+class Observer(Node):
+    """Watches the rig: program progress and state, the estimator's numbers, the model's prediction."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__('rig_observer', **kwargs)
+        self.progress = 0.0
+        self.state: dict = {}
+        self.values: Float64MultiArray | None = None
+        self.values_count = 0
+        self.predicted: float | None = None
+        self.create_subscription(Float64, topics.PROGRAM_PROGRESS, self._on_progress, LATCHED_QOS)
+        self.create_subscription(String, topics.PROGRAM_STATE, self._on_state, LATCHED_QOS)
+        self.create_subscription(Float64MultiArray, topics.STIFFNESS_VALUES, self._on_values, RELIABLE_QOS)
+        self.create_subscription(Float64, topics.PREDICTED_AXIS_STIFFNESS, self._on_predicted, LATCHED_QOS)
+
+    def _on_progress(self, msg: Float64) -> None:
+        self.progress = msg.data
+
+    def _on_state(self, msg: String) -> None:
+        self.state = json.loads(msg.data)
+
+    def _on_values(self, msg: Float64MultiArray) -> None:
+        self.values = msg
+        self.values_count += 1
+
+    def _on_predicted(self, msg: Float64) -> None:
+        self.predicted = msg.data
+
+    @property
+    def done(self) -> bool:
+        return self.state.get('state') == 'done'
+
+    def spin_until(self, predicate, timeout_s: float, what: str, procs: Processes | None = None) -> None:
+        import rclpy
+        deadline = time.monotonic() + timeout_s
+        while not predicate():
+            if time.monotonic() > deadline:
+                raise RosRunError(f'timed out after {timeout_s:.0f} s waiting for {what}')
+            if procs is not None:
+                procs.check_alive()
+            rclpy.spin_once(self, timeout_sec=0.05)
+
+
+def config_files(share: Path, program: str) -> dict[str, Path]:
+    files = {'crane': share / 'crane_lab.yaml', 'sensors': share / 'sensors.yaml',
+             'program': share / f'program_{program}.yaml'}
+    for name, path in files.items():
+        if not path.is_file():
+            raise RosRunError(f'{name} config {path} not found')
+    return files
+
+
+def start_rig(procs: Processes, share: Path, program: str, session: str, bags: Path, observer: Observer,
+              record: bool = True, ready_timeout_s: float = 60.0) -> LoadProgram:
+    """Start crane_model, sensors, estimator and recorder; when all are connected, start load_program."""
+    cfg = config_files(share, program)
+    prog = load_program_file(cfg['program'])
+
+    def p(*names: str) -> list[str]:
+        return [a for n in names for a in ('--params-file', str(cfg[n]))]
+
+    procs.start('crane_model', PACKAGE, 'crane_model', ['--ros-args', *p('crane')])
+    procs.start('load_cell', PACKAGE, 'load_cell', ['--ros-args', *p('sensors')])
+    procs.start('lvdt', PACKAGE, 'lvdt', ['--ros-args', *p('sensors')])
+    procs.start('stiffness_estimator', PACKAGE, 'stiffness_estimator', ['--ros-args', *p('crane', 'sensors')])
+    readers = 1
+    if record:
+        bags.mkdir(parents=True, exist_ok=True)
+        procs.start('session_recorder', PACKAGE, 'session_recorder',
+                    ['--ros-args', *p('crane', 'sensors', 'program'), '-p', f'session:={session}',
+                     '-p', f'output_dir:={bags}'])
+        readers += 1
+    # Ready when the model has published its prediction and every sensor stream has all its readers.
+    observer.spin_until(
+        lambda: observer.predicted is not None
+        and observer.count_subscribers(topics.LOAD_CELL_WRENCH) >= readers
+        and observer.count_subscribers(topics.LVDT_DISPLACEMENT) >= readers
+        and observer.count_publishers(topics.STIFFNESS_VALUES) >= 1
+        and observer.count_subscribers(topics.WRENCH_COMMAND) >= 2 + (readers - 1),
+        ready_timeout_s, 'the rig nodes to connect', procs)
+    procs.start('load_program', PACKAGE, 'load_program',
+                ['--ros-args', *p('program'), '-p', 'start_delay_s:=1.0', '-p', 'exit_on_done:=true'])
+    return prog
+
+
+def estimate_fields() -> tuple[str, ...]:
+    from crane_stiffness.nodes.stiffness_estimator import VALUE_FIELDS
+    return tuple(VALUE_FIELDS)
+
+
+def decode_values(msg: Float64MultiArray) -> dict[str, dict[str, float]]:
+    """The estimator's Float64MultiArray as {branch: {field: value}}."""
+    fields = estimate_fields()
+    data = np.asarray(msg.data, dtype=float).reshape(2, len(fields))
+    return {branch: dict(zip(fields, row.tolist())) for branch, row in zip(('loading', 'unloading'), data)}
+
+
+def summarize(share: Path, program: str, session: str, bags: Path, observer: Observer,
+              exit_codes: dict[str, int]) -> dict[str, Any]:
+    """The run's summary: geometry, program, estimate with interval, prediction, relative error, files."""
+    cfg = config_files(share, program)
+    g = geometry_from_params(load_params(cfg['crane']))
+    prog = load_program_file(cfg['program'])
+    axis = prog.segments[-1].axis
+    if observer.values is None:
+        raise RosRunError('the estimator published no estimate')
+    est = decode_values(observer.values)
+    predicted = axis_stiffness(tangent_stiffness(g, rest_pose(g)), axis)
+    loading = est['loading']['stiffness']
+    bag = bags / session
+    levels = prog.levels(axis)
+    return {
+        'software_version': __version__,
+        'geometry': {**g.to_dict(), 'l0': g.l0, 'k': g.k},
+        'program': {'name': prog.name, 'axis': axis, 'peak': float(np.abs(levels).max()),
+                    'levels': levels.tolist(), 'duration_s': prog.duration_s, 'file': str(cfg['program'])},
+        'estimate': est,
+        'prediction': {'stiffness': predicted, 'from_node': observer.predicted,
+                       'what': f'exact tangent of the nonlinear model at the rest pose under W, along {axis} with '
+                               'the other DOFs free (equals eq. 19 K_j for fy)'},
+        'relative_error': (loading - predicted) / predicted,
+        'estimates_received': observer.values_count,
+        'bag': str(bag) if bag.exists() else None,
+        'node_exit_codes': exit_codes,
+    }

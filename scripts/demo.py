@@ -1,0 +1,98 @@
+"""`make demo`: the side-force series on the simulated rig, end to end.
+
+1. colcon-builds the package into build/ and install/ (as a ROS workspace would);
+2. starts every node as its own process the way `ros2 run crane_stiffness <node>` starts it, from that install
+   tree: crane_model, load_cell, lvdt, stiffness_estimator, session_recorder, then load_program;
+3. follows the program with a progress bar, then prints the estimated side stiffness beside the model's
+   prediction and writes out/demo/summary.json; the session is recorded to bags/<session>/.
+
+DDS stays on loopback (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST) in a domain id of its own.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import random
+import sys
+import time
+from datetime import datetime, timezone
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO))  # noqa: E402  (run as a script from the repo)
+
+os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+os.environ.setdefault('ROS_DOMAIN_ID', str(random.randint(1, 100)))
+os.environ.setdefault('AMENT_PREFIX_PATH', sys.prefix)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    ap.add_argument('--program', default='side_force', help='program name in config/ (program_<name>.yaml)')
+    ap.add_argument('--out', default=str(REPO / 'out' / 'demo'), help='summary and logs directory')
+    ap.add_argument('--bags', default=str(REPO / 'bags'), help='where the session is recorded')
+    ap.add_argument('--tolerance', type=float, default=0.02, help='allowed relative error of the estimate')
+    args = ap.parse_args(argv)
+
+    import rclpy
+    from tqdm import tqdm
+
+    from crane_stiffness import rosrun
+    from crane_stiffness.rig import Observer, start_rig, summarize
+
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    print(f'[1/3] colcon build into {REPO / "install"} ...', flush=True)
+    rosrun.colcon_build(REPO, REPO / 'build', REPO / 'install', REPO / 'log')
+    env = rosrun.install_environment(REPO / 'install')
+    share = REPO / 'install' / 'crane_stiffness' / 'share' / 'crane_stiffness' / 'config'
+    session = f'demo_{args.program}_{datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%SZ")}'
+    print(f'[2/3] starting the rig (ROS_DOMAIN_ID={env["ROS_DOMAIN_ID"]}, loopback only), '
+          f'program {args.program!r}, recording bags/{session}', flush=True)
+    rclpy.init()
+    observer = Observer()
+    with rosrun.Processes(env, out / 'logs') as procs:
+        program = start_rig(procs, share, args.program, session, Path(args.bags), observer)
+        bar = tqdm(total=100, desc='load program', unit='%', bar_format='{l_bar}{bar}| {n:.0f}/{total}% '
+                   '[{elapsed}<{remaining}]')
+        deadline = time.monotonic() + program.duration_s + 90
+        while not observer.done and time.monotonic() < deadline:
+            rclpy.spin_once(observer, timeout_sec=0.1)
+            bar.n = round(100 * observer.progress, 1)
+            bar.refresh()
+            procs.check_alive(allow_exit=('load_program',))
+        bar.close()
+        if not observer.done:
+            print('the load program did not finish in time; logs in', out / 'logs', file=sys.stderr)
+            return 1
+        end = time.monotonic() + 1.5  # let the last samples reach the estimator
+        while time.monotonic() < end:
+            rclpy.spin_once(observer, timeout_sec=0.05)
+        codes = procs.stop()
+    observer.destroy_node()
+    rclpy.shutdown()
+    print('[3/3] result', flush=True)
+    summary = summarize(share, args.program, session, Path(args.bags), observer, codes)
+    (out / 'summary.json').write_text(json.dumps(summary, indent=1))
+    est, pred = summary['estimate'], summary['prediction']
+    print(f"  geometry: lab model, h = {summary['geometry']['height']} m, W = {summary['geometry']['weight']} N, "
+          f"l0 = {summary['geometry']['l0']:.4f} m")
+    print(f"  program: {summary['program']['name']} ({summary['program']['axis']} up to "
+          f"{summary['program']['peak']} N), {summary['program']['duration_s']:.0f} s")
+    for branch in ('loading', 'unloading'):
+        e = est[branch]
+        print(f"  estimated {branch:9s} stiffness {e['stiffness']:10.1f} N/m  95 % CI [{e['ci95_low']:.1f}, "
+              f"{e['ci95_high']:.1f}]  R² {e['r2']:.5f}  n = {e['n']}")
+    print(f"  model prediction (eq. 19 = exact tangent at rest) {pred['stiffness']:10.1f} N/m")
+    print(f"  relative error (loading) {100 * summary['relative_error']:+.2f} %   -> {out / 'summary.json'}")
+    if summary.get('bag'):
+        print(f"  session recorded: {summary['bag']}")
+    if abs(summary['relative_error']) > args.tolerance:
+        print(f'estimate differs from the prediction by more than {100 * args.tolerance:.0f} %', file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
