@@ -1,0 +1,279 @@
+"""``crane-stiffness``: the offline command line, a thin layer over crane_stiffness.model and .analysis.
+
+Subcommands: solve, stiffness, sweep (and, with the bag module, analyze, compare, recover). Geometry comes from
+``--config FILE`` (a ROS parameter YAML, the same file the nodes read) and/or flags, flags winning; SI units.
+Exit codes: 0 ok, 2 bad input (named on stderr), 3 no equilibrium for the load, 4 solver gave up.
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import sys
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from crane_stiffness.config import ConfigError, config_path, geometry_from_params, load_params
+from crane_stiffness.errors import CraneStiffnessError
+from crane_stiffness.model import (AXES, WIRE_NAMES, ConvergenceError, CraneGeometry, GeometryError,
+                                   NoEquilibriumError, axis_stiffness, paper_coefficients,
+                                   paper_stiffness, solve_equilibrium, tangent_stiffness)
+from crane_stiffness.model.geometry import lab_model_fields
+
+EXIT_USAGE = 2
+EXIT_NO_EQUILIBRIUM = 3
+EXIT_SOLVER = 4
+
+
+class UsageError(CraneStiffnessError):
+    """Bad command-line input."""
+
+
+# --- argument groups -------------------------------------------------------------------------------------------
+
+def _add_geometry(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group('geometry (SI units; flags override --config)')
+    g.add_argument('--config', metavar='FILE', help='ROS parameter YAML with geometry.* parameters '
+                   '(a path, or a name in the installed config/, e.g. crane_lab)')
+    g.add_argument('--node', default=None, help='section of --config to read (default: all sections, /** first)')
+    g.add_argument('--lab-model', action='store_true',
+                   help="the paper's lab model: a = b = 0.1143 m, d = 1.08 mm, E = 206,831 MPa")
+    g.add_argument('--a', type=float, help='half side of the platform triangle [m]')
+    g.add_argument('--b', type=float, help='half side of the overhead triangle [m]')
+    g.add_argument('--height', type=float, help='unloaded height between the triangles [m]')
+    g.add_argument('--l0', type=float, help='unstretched wire length instead of --height [m]')
+    g.add_argument('--weight', type=float, help='suspended weight W [N]')
+    g.add_argument('--wire-stiffness', type=float, help='wire stiffness k [N/m]')
+    g.add_argument('--wire-diameter', type=float, help='wire diameter d [m] (with --youngs-modulus)')
+    g.add_argument('--youngs-modulus', type=float, help="wire Young's modulus E [Pa]")
+    g.add_argument('--com', type=float, nargs=3, metavar=('X', 'Y', 'Z'),
+                   help='centre of mass offset, body frame [m]')
+    g.add_argument('--load-point', type=float, nargs=3, metavar=('X', 'Y', 'Z'),
+                   help='external force application point, body frame [m]')
+    g.add_argument('--length-offsets', type=float, nargs=6, metavar='D',
+                   help='unstretched length change of wires 1..6 [m]')
+
+
+def _add_load(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group('external load (fixed frame, z down)')
+    g.add_argument('--force', type=float, nargs=3, default=[0.0, 0.0, 0.0], metavar=('FX', 'FY', 'FZ'),
+                   help='force [N] at the load point')
+    g.add_argument('--moment', type=float, nargs=3, default=[0.0, 0.0, 0.0], metavar=('MX', 'MY', 'MZ'),
+                   help='moment [N·m]')
+
+
+def geometry_from_args(args: argparse.Namespace) -> CraneGeometry:
+    """The geometry the flags and --config describe. Raises GeometryError / ConfigError naming the bad value."""
+    values: dict[str, Any] = {}
+    if args.config:
+        params = load_params(config_path(args.config), args.node)
+        values = geometry_from_params(params).to_dict()
+    if args.lab_model:
+        values.update(lab_model_fields())
+        values['wire_stiffness'] = None
+    flags = {'a': args.a, 'b': args.b, 'height': args.height, 'weight': args.weight,
+             'wire_stiffness': args.wire_stiffness, 'wire_diameter': args.wire_diameter,
+             'youngs_modulus': args.youngs_modulus, 'com_offset': args.com, 'load_point': args.load_point,
+             'length_offsets': args.length_offsets}
+    given = {k: v for k, v in flags.items() if v is not None}
+    if 'wire_stiffness' in given:
+        values.pop('wire_diameter', None)
+        values.pop('youngs_modulus', None)
+    elif 'wire_diameter' in given or 'youngs_modulus' in given:
+        values['wire_stiffness'] = None
+    values.update(given)
+    if args.l0 is not None:
+        if args.height is not None:
+            raise UsageError('give --height or --l0, not both')
+        values.pop('height', None)
+        values['l0'] = args.l0
+    values = {k: v for k, v in values.items() if v is not None}
+    for name in ('a', 'b', 'weight'):
+        if name not in values:
+            raise UsageError(f'--{name} is required (or --config FILE / --lab-model)')
+    if 'height' not in values and 'l0' not in values:
+        raise UsageError('--height (or --l0) is required, or --config FILE')
+    return CraneGeometry.from_dict(values)
+
+
+# --- output ----------------------------------------------------------------------------------------------------
+
+def _fmt_matrix(m: np.ndarray) -> str:
+    names = ['u_x', 'u_y', 'u_z', 'θ_x', 'θ_y', 'θ_z']
+    lines = ['        ' + ''.join(f'{n:>13}' for n in names)]
+    for n, row in zip(names, m):
+        lines.append(f'  {n:>5} ' + ''.join(f'{v:13.5g}' for v in row))
+    return '\n'.join(lines)
+
+
+def _print_geometry(g: CraneGeometry) -> None:
+    print(f'geometry: a = {g.a:.6g} m, b = {g.b:.6g} m, h = {g.height:.6g} m, l0 = {g.l0:.6g} m, '
+          f'W = {g.weight:.6g} N, k = {g.k:.6g} N/m')
+
+
+def cmd_solve(args: argparse.Namespace) -> int:
+    g = geometry_from_args(args)
+    eq = solve_equilibrium(g, args.force, args.moment)
+    if args.json:
+        json.dump(eq.to_dict(), sys.stdout, indent=1)
+        print()
+        return 0
+    _print_geometry(g)
+    print(f'load: F = {args.force} N, M = {args.moment} N·m (fixed frame, z down)')
+    u = eq.displacement
+    phi, theta, psi = eq.euler_zxy
+    print(f'displacement u = [{u[0]:.6e}, {u[1]:.6e}, {u[2]:.6e}] m (from the unloaded rest pose)')
+    print(f'rotation φ = {phi:.6e}, θ = {theta:.6e}, ψ = {psi:.6e} rad (Q = Rz(φ)Rx(θ)Ry(ψ))')
+    print(f'{"wire":>8} {"length [m]":>14} {"tension [N]":>14}  state')
+    for name, length, t, s in zip(WIRE_NAMES, eq.wire_lengths, eq.wire_tensions, eq.slack):
+        print(f'{name:>8} {length:14.8f} {t:14.6f}  {"SLACK" if s else "taut"}')
+    print(f'iterations {eq.iterations}, continuation steps {eq.continuation_steps}, '
+          f'residual {np.abs(eq.residual).max():.2e}')
+    return 0
+
+
+def cmd_stiffness(args: argparse.Namespace) -> int:
+    g = geometry_from_args(args)
+    eq = solve_equilibrium(g, args.force, args.moment)
+    kt = tangent_stiffness(g, eq)
+    kp = paper_stiffness(g)
+    coeff = paper_coefficients(g)
+    along = {ax: axis_stiffness(kt, ax) for ax in AXES}
+    if args.json:
+        json.dump({'tangent': kt.tolist(), 'paper': kp.tolist(),
+                   'paper_coefficients': {'K1': coeff.k1, 'K2': coeff.k2, 'K3': coeff.k3, 'K4': coeff.k4,
+                                          'K5': coeff.k5, 'Kj': coeff.side, 'h_w': coeff.h_w, 'l_w': coeff.l_w},
+                   'tangent_along_axis': along, 'slack': [bool(s) for s in eq.slack]}, sys.stdout, indent=1)
+        print()
+        return 0
+    _print_geometry(g)
+    print(f'\nexact tangent stiffness at the equilibrium under F = {args.force} N, M = {args.moment} N·m '
+          f'({int(eq.slack.sum())} slack wire(s)):')
+    print(_fmt_matrix(kt))
+    print(f'\npaper eq. (18) at the rest pose under W (h_w = {coeff.h_w:.6g} m, l_w = {coeff.l_w:.6g} m):')
+    print(_fmt_matrix(kp))
+    print(f'\nK1 = {coeff.k1:.6g} N/m, K2 = {coeff.k2:.6g} N/rad, K3 = {coeff.k3:.6g} N/m, '
+          f'K4 = {coeff.k4:.6g} N·m/rad, K5 = {coeff.k5:.6g} N·m/rad; side stiffness K_j (eq. 19) = '
+          f'{coeff.side:.6g} N/m')
+    print('tangent stiffness along each load axis, other DOFs free: ' +
+          ', '.join(f'{ax} {v:.6g}' for ax, v in along.items()))
+    return 0
+
+
+def cmd_sweep(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    from crane_stiffness.analysis.figures import plot_force_displacement, plot_stiffness_vs_weight
+    from crane_stiffness.analysis.sweep import force_displacement, slack_threshold, stiffness_vs_weight
+
+    # Height and weight are swept; the rest of the geometry defaults to the paper's lab model.
+    if not (args.config or args.a is not None):
+        args.lab_model = True
+    if args.height is None and args.l0 is None and not args.config:
+        args.height = args.heights[0]
+    if args.weight is None and not args.config:
+        args.weight = args.weights[1]
+    base = geometry_from_args(args)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    written: list[Path] = []
+
+    def bar(desc: str):
+        return lambda it: tqdm(list(it), desc=desc, unit='case', leave=False, disable=args.quiet)
+
+    for axis, fig in (('fy', 'fig10'), ('mz', 'fig13')):
+        rows = stiffness_vs_weight(base, axis, args.heights, np.linspace(args.weights[0], args.weights[1],
+                                                                         args.weight_points), bar(fig))
+        csv_path = out / f'{fig}_stiffness_{axis}_vs_weight.csv'
+        with csv_path.open('w', newline='') as fh:
+            wr = csv.writer(fh)
+            wr.writerow(['height_m', 'l0_m', 'weight_N', 'tangent', 'paper_eq18', 'elastic_W0'])
+            for r in rows:
+                wr.writerow([r.height, r.l0, r.weight, r.tangent, r.paper, r.elastic])
+        written += [csv_path, plot_stiffness_vs_weight(rows, axis, out / f'{fig}_stiffness_{axis}_vs_weight.png')]
+    # Force–displacement cases like Figs. 5–9: two weights at two wire lengths, then low W with long wires.
+    w_hi, w_lo = args.weights[1], max(args.weights[1] / 2.0, args.weights[0])
+    h_short, h_long = args.heights[0], args.heights[-1]
+    cases = [('fig5', h_short, w_hi), ('fig6', h_short, w_lo), ('fig7', h_long, w_hi), ('fig8', h_long, w_lo),
+             ('fig9', h_long, args.low_weight)]
+    for fig, h, w in tqdm(cases, desc='force-displacement', unit='curve', disable=args.quiet):
+        g = base.replace(height=h, weight=w)
+        # Figs. 5-8 stay in the linear range (60 % of the side force that slackens the first wire); Fig. 9 goes
+        # to 4x that force, where wires reach zero tension and the curve bends away.
+        threshold = slack_threshold(g, 'fy')
+        max_force = args.max_force if args.max_force else (4.0 if fig == 'fig9' else 0.6) * threshold
+        curves = force_displacement(g, 'fy', max_force, args.points)
+        csv_path = out / f'{fig}_force_displacement.csv'
+        cols = curves.columns()
+        with csv_path.open('w', newline='') as fh:
+            wr = csv.writer(fh)
+            wr.writerow(['force_N', 'u_nonlinear_m', 'u_linear_m', 'u_elastic_W0_m', 'u_pendulum_W6_m',
+                         'slack_wires'])
+            wr.writerows(zip(*cols.values()))
+        title = (f'{fig}: side force fy, W = {w:.4g} N, l0 = {g.l0:.3f} m\nfirst wire slack at '
+                 f'{threshold:.3g} N ({int((curves.slack_wires > 0).sum())}/{len(curves.load)} points slack)')
+        written += [csv_path, plot_force_displacement(curves, out / f'{fig}_force_displacement.png', title)]
+    for p in written:
+        print(p)
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog='crane-stiffness', description=__doc__.split('\n\n')[0])
+    sub = parser.add_subparsers(dest='command', required=True)
+    p = sub.add_parser('solve', help='nonlinear equilibrium under weight and an external load')
+    _add_geometry(p)
+    _add_load(p)
+    p.add_argument('--json', action='store_true', help='machine-readable output')
+    p.set_defaults(func=cmd_solve)
+    p = sub.add_parser('stiffness', help='exact tangent stiffness and the paper eq. (18)')
+    _add_geometry(p)
+    _add_load(p)
+    p.add_argument('--json', action='store_true', help='machine-readable output')
+    p.set_defaults(func=cmd_stiffness)
+    p = sub.add_parser('sweep', help="the paper's parametric studies (Figs. 5-10, 13) as CSV and PNG")
+    _add_geometry(p)
+    p.add_argument('--out', default='out/sweep', help='output directory (default out/sweep)')
+    p.add_argument('--heights', type=float, nargs='+', default=[0.5, 1.0, 1.5], help='unloaded heights [m]')
+    p.add_argument('--weights', type=float, nargs=2, default=[5.0, 100.0], metavar=('MIN', 'MAX'),
+                   help='weight range [N]')
+    p.add_argument('--weight-points', type=int, default=20)
+    p.add_argument('--low-weight', type=float, default=5.0, help='weight of the slack case, Fig. 9 [N]')
+    p.add_argument('--max-force', type=float, default=None,
+                   help='largest side force [N] (default: 0.6x the slack threshold, 4x for Fig. 9)')
+    p.add_argument('--points', type=int, default=41, help='points per force-displacement curve')
+    p.add_argument('--quiet', action='store_true', help='no progress bars')
+    p.set_defaults(func=cmd_sweep)
+    _add_bag_commands(sub)
+    return parser
+
+
+def _add_bag_commands(sub: Any) -> None:
+    """Bag subcommands (analyze, compare, recover) when the bag module is installed."""
+    try:
+        from crane_stiffness.analysis import session_cli
+    except ImportError:
+        return
+    session_cli.add_commands(sub)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except NoEquilibriumError as exc:
+        print(f'crane-stiffness: {exc}', file=sys.stderr)
+        return EXIT_NO_EQUILIBRIUM
+    except ConvergenceError as exc:
+        print(f'crane-stiffness: solver gave up: {exc}', file=sys.stderr)
+        return EXIT_SOLVER
+    except (GeometryError, ConfigError, UsageError, ValueError) as exc:
+        print(f'crane-stiffness: {exc}', file=sys.stderr)
+        return EXIT_USAGE
+
+
+if __name__ == '__main__':
+    sys.exit(main())
