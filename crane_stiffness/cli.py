@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import csv
 import json
+import re
 import sys
 from pathlib import Path
 from typing import Any, Sequence
@@ -220,9 +221,19 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     return 0
 
 
+# argparse takes "-1.5e-05" for an option (its negative-number pattern has no exponent): accept scientific notation.
+_NEGATIVE_NUMBER = re.compile(r'^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$')
+
+
+class _Parser(argparse.ArgumentParser):
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = _NEGATIVE_NUMBER
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog='crane-stiffness', description=__doc__.split('\n\n')[0])
-    sub = parser.add_subparsers(dest='command', required=True)
+    parser = _Parser(prog='crane-stiffness', description=__doc__.split('\n\n')[0])
+    sub = parser.add_subparsers(dest='command', required=True, parser_class=_Parser)
     p = sub.add_parser('solve', help='nonlinear equilibrium under weight and an external load')
     _add_geometry(p)
     _add_load(p)

@@ -45,6 +45,12 @@ def test_stiffness_json_and_table(capsys):
     assert 'K_j (eq. 19) = 53793.5 N/m' in out and 'u_x' in out
 
 
+def test_negative_numbers_in_scientific_notation_are_values_not_options(capsys):
+    a = run_json(capsys, 'solve', *LAB, '--force', '0', '-1.5e-01', '0', '--moment', '0', '0', '-2E-3')
+    b = run_json(capsys, 'solve', *LAB, '--force', '0', '-0.15', '0', '--moment', '0', '0', '-0.002')
+    assert a['displacement'] == b['displacement'] and a['displacement'][1] < 0
+
+
 def test_config_file_and_flag_override(capsys, tmp_path):
     a = run_json(capsys, 'solve', '--config', str(REPO / 'config/crane_lab.yaml'), '--force', '0', '1', '0')
     b = run_json(capsys, 'solve', *LAB, '--force', '0', '1', '0')

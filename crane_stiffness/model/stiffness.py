@@ -9,7 +9,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import brentq
 
 from crane_stiffness.model.equilibrium import Equilibrium, wrench_jacobian
 from crane_stiffness.model.errors import GeometryError
@@ -75,6 +74,8 @@ def loaded_height(geometry: CraneGeometry) -> tuple[float, float]:
     Solves the vertical balance 6·k·(l_w − l0)·h_w/l_w = W with l_w = sqrt(h_w² + 4(a² + b² − ab)/3) (eq. 32;
     the printed "h_w = W/(6k(l_w − l0))" is dimensionally wrong, see NOTES.md).
     """
+    from scipy.optimize import brentq  # deferred: importing scipy.optimize costs a quarter second at start-up
+
     g = geometry
     s2 = _horizontal2(g)
     k, l0, w = g.k, g.l0, g.weight
