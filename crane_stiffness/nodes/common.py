@@ -1,0 +1,159 @@
+"""What every node shares: parameters declared with descriptions and validated on start and on change, QoS
+profiles, a diagnostics publisher, message helpers and ``run`` (the ``main`` of every node).
+"""
+from __future__ import annotations
+
+import math
+import sys
+from dataclasses import dataclass
+from typing import Any, Callable, Iterable, Mapping, Sequence
+
+import rclpy
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy)
+
+from crane_stiffness import topics
+from crane_stiffness.config import ParamSpec
+
+#: Commands and model outputs: nothing may be lost.
+RELIABLE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100, reliability=ReliabilityPolicy.RELIABLE,
+                          durability=DurabilityPolicy.VOLATILE)
+#: Sensor data: best effort (matches best-effort and reliable publishers), deep queue for bursts.
+SENSOR_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=topics.SENSOR_QUEUE_DEPTH,
+                        reliability=ReliabilityPolicy.BEST_EFFORT, durability=DurabilityPolicy.VOLATILE)
+#: Latest-value topics a late joiner should still get (program state, predicted stiffness).
+LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+class Params:
+    """A node's parameters: declared with descriptions, validated as a whole on start and on every change.
+
+    ``validate(values) -> Any`` raises ValueError naming the bad value; its return value (e.g. a built geometry)
+    is handed to ``apply``. A rejected change leaves every value as it was and tells the caller why.
+    """
+
+    def __init__(self, node: Node, specs: Sequence[ParamSpec], validate: Callable[[dict[str, Any]], Any],
+                 apply: Callable[[Any, dict[str, Any]], None]) -> None:
+        self._node = node
+        self._names = [s.name for s in specs]
+        self._validate = validate
+        self._apply = apply
+        for spec in specs:
+            node.declare_parameter(spec.name, spec.default, ParameterDescriptor(description=spec.description))
+        self.values = {n: node.get_parameter(n).value for n in self._names}
+        # Invalid start-up values stop the node with the reason (raised to ``run``).
+        self._apply(self._validate(dict(self.values)), dict(self.values))
+        node.add_on_set_parameters_callback(self._on_set)
+
+    def __getitem__(self, name: str) -> Any:
+        return self.values[name]
+
+    def _on_set(self, params) -> SetParametersResult:
+        new = dict(self.values)
+        for p in params:
+            if p.name in new:
+                new[p.name] = p.value
+        try:
+            built = self._validate(new)
+        except (ValueError, TypeError) as exc:
+            self._node.get_logger().warning(f'parameter change rejected: {exc}')
+            return SetParametersResult(successful=False, reason=str(exc))
+        self.values = new
+        self._apply(built, new)
+        return SetParametersResult(successful=True)
+
+
+def check(condition: bool, name: str, value: Any, rule: str) -> None:
+    """Raise ValueError('name = value: rule') unless condition."""
+    if not condition:
+        raise ValueError(f'{name} = {value!r}: {rule}')
+
+
+def positive(values: Mapping[str, Any], *names: str) -> None:
+    for n in names:
+        v = values[n]
+        check(isinstance(v, (int, float)) and math.isfinite(v) and v > 0, n, v, 'must be a finite number > 0')
+
+
+def stamp_to_s(stamp: Time) -> float:
+    return stamp.sec + stamp.nanosec * 1e-9
+
+
+def s_to_stamp(t: float) -> Time:
+    sec = math.floor(t)
+    return Time(sec=int(sec), nanosec=min(999_999_999, int(round((t - sec) * 1e9))))
+
+
+def finite(values: Iterable[float]) -> bool:
+    return all(math.isfinite(v) for v in values)
+
+
+@dataclass
+class Counters:
+    """Message counters a node reports on /diagnostics."""
+
+    received: int = 0
+    dropped_non_finite: int = 0
+    dropped_absurd: int = 0
+    published: int = 0
+
+    def as_pairs(self) -> list[tuple[str, str]]:
+        return [(k, str(v)) for k, v in self.__dict__.items()]
+
+
+class Diagnostics:
+    """Publishes a DiagnosticStatus for the node on /diagnostics at a fixed rate, from a callback."""
+
+    def __init__(self, node: Node, report: Callable[[], tuple[int, str, list[tuple[str, str]]]],
+                 period_s: float = 1.0) -> None:
+        self._node = node
+        self._report = report
+        self._pub = node.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, 10)
+        self._timer = node.create_timer(period_s, self.publish)
+
+    def publish(self) -> None:
+        level, message, pairs = self._report()
+        msg = DiagnosticArray()
+        msg.header.stamp = self._node.get_clock().now().to_msg()
+        msg.status.append(DiagnosticStatus(level=bytes([level]), name=self._node.get_fully_qualified_name(),
+                                           message=message, hardware_id=self._node.get_name(),
+                                           values=[KeyValue(key=k, value=v) for k, v in pairs]))
+        self._pub.publish(msg)
+
+
+OK, WARN, ERROR = 0, 1, 2
+
+
+def run(node_factory: Callable[[], Node], args: Sequence[str] | None = None) -> int:
+    """The ``main`` of every node: init, build, spin until Ctrl-C or SIGTERM, clean up.
+
+    A node that cannot start (bad parameter) exits with status 2 and the reason on stderr.
+    """
+    rclpy.init(args=args)
+    try:
+        node = node_factory()
+    except (ValueError, TypeError) as exc:
+        print(f'[{getattr(node_factory, "__name__", "node")}] cannot start: {exc}', file=sys.stderr)
+        rclpy.try_shutdown()
+        return 2
+    except Exception as exc:  # e.g. rclpy's InvalidParameterTypeException from a params file
+        print(f'[{getattr(node_factory, "__name__", "node")}] cannot start: {type(exc).__name__}: {exc}',
+              file=sys.stderr)
+        rclpy.try_shutdown()
+        return 2
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        close = getattr(node, 'close', None)
+        if close is not None:
+            close()
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0

@@ -1,0 +1,158 @@
+"""crane_model and load_program nodes in-process: real rclpy, DDS on loopback, real numbers."""
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+from geometry_msgs.msg import PoseStamped, WrenchStamped
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64, String
+from std_srvs.srv import Trigger
+
+from conftest import spin_until
+from crane_stiffness import topics
+from crane_stiffness.model import lab_model, paper_coefficients, solve_equilibrium
+from crane_stiffness.nodes.common import LATCHED_QOS, RELIABLE_QOS
+from crane_stiffness.nodes.crane_model import MODEL_STATUS, CraneModel
+from crane_stiffness.nodes.load_program import LoadProgramNode
+
+
+class Probe:
+    """A test node that records what the rig publishes and can send wrench commands."""
+
+    def __init__(self, ctx):
+        self.node = Node('probe', context=ctx)
+        self.poses: list[PoseStamped] = []
+        self.wires: list[JointState] = []
+        self.axis: list[float] = []
+        self.status: list[str] = []
+        self.commands: list[WrenchStamped] = []
+        self.state: list[dict] = []
+        n = self.node
+        n.create_subscription(PoseStamped, topics.PLATFORM_POSE, self.poses.append, RELIABLE_QOS)
+        n.create_subscription(JointState, topics.WIRE_STATES, self.wires.append, RELIABLE_QOS)
+        n.create_subscription(Float64, topics.PREDICTED_AXIS_STIFFNESS, lambda m: self.axis.append(m.data),
+                              LATCHED_QOS)
+        n.create_subscription(String, MODEL_STATUS, lambda m: self.status.append(m.data), LATCHED_QOS)
+        n.create_subscription(WrenchStamped, topics.WRENCH_COMMAND, self.commands.append, RELIABLE_QOS)
+        n.create_subscription(String, topics.PROGRAM_STATE, lambda m: self.state.append(json.loads(m.data)),
+                              LATCHED_QOS)
+        self.pub = n.create_publisher(WrenchStamped, topics.WRENCH_COMMAND, RELIABLE_QOS)
+
+    def command(self, fx=0.0, fy=0.0, fz=0.0, mz=0.0):
+        m = WrenchStamped()
+        m.header.frame_id = topics.FRAME_BASE
+        m.header.stamp = self.node.get_clock().now().to_msg()
+        m.wrench.force.x, m.wrench.force.y, m.wrench.force.z, m.wrench.torque.z = fx, fy, fz, mz
+        self.pub.publish(m)
+
+
+def lab_overrides(height=0.5, weight=50.0):
+    return [Parameter('geometry.height', value=height), Parameter('geometry.weight', value=weight)]
+
+
+def test_crane_model_solves_commands_and_reports_no_equilibrium(rclpy_context):
+    ex = SingleThreadedExecutor(context=rclpy_context)
+    model = CraneModel(context=rclpy_context, parameter_overrides=lab_overrides())
+    probe = Probe(rclpy_context)
+    ex.add_node(model)
+    ex.add_node(probe.node)
+    g = lab_model(0.5, 50.0)
+    # The rest pose is published at start (latched status, predicted stiffness = eq. 19 for fy).
+    assert spin_until(ex, lambda: probe.axis and probe.status, 10)
+    assert probe.axis[-1] == pytest.approx(paper_coefficients(g).side, rel=1e-9)
+    assert spin_until(ex, lambda: probe.node.count_publishers(topics.WRENCH_COMMAND) >= 1
+                      and model.count_publishers(topics.WRENCH_COMMAND) >= 1, 5)
+    n0 = len(probe.poses)
+    probe.command(fy=3.0)
+    assert spin_until(ex, lambda: probe.poses and probe.poses[-1].pose.position.y > 1e-6
+                      and probe.wires and probe.wires[-1].effort[2] > probe.wires[-1].effort[3] + 1.0, 10)
+    expect = solve_equilibrium(g, force=[0, 3.0, 0])
+    p = probe.poses[-1]
+    assert p.header.frame_id == 'crane_base'
+    assert [p.pose.position.x, p.pose.position.y, p.pose.position.z] == pytest.approx(
+        expect.displacement.tolist(), abs=1e-12)
+    w = probe.wires[-1]
+    assert list(w.name) == [f'wire_{i}' for i in range(1, 7)]
+    assert list(w.effort) == pytest.approx(expect.wire_tensions.tolist(), rel=1e-9)
+    # An upward force larger than the weight: explicit status, node alive, last pose kept.
+    n1 = len(probe.poses)
+    probe.command(fz=-80.0)
+    assert spin_until(ex, lambda: any(s.startswith('no_equilibrium') for s in probe.status), 10)
+    assert len(probe.poses) == n1
+    probe.command(fy=1.0)
+    assert spin_until(ex, lambda: len(probe.poses) > n1 and probe.status[-1].startswith('ok'), 10)
+    # NaN and absurd commands are dropped and counted.
+    probe.command(fy=float('nan'))
+    probe.command(fy=1e9)
+    assert spin_until(ex, lambda: model.counters.dropped_non_finite == 1 and model.counters.dropped_absurd == 1, 5)
+    ex.shutdown()
+
+
+def test_crane_model_geometry_change_validated_and_applied(rclpy_context):
+    ex = SingleThreadedExecutor(context=rclpy_context)
+    model = CraneModel(context=rclpy_context, parameter_overrides=lab_overrides())
+    probe = Probe(rclpy_context)
+    ex.add_node(model)
+    ex.add_node(probe.node)
+    assert spin_until(ex, lambda: probe.axis, 10)
+    result = model.set_parameters([Parameter('geometry.a', value=-0.1)])[0]
+    assert not result.successful and 'a = -0.1: must be > 0' in result.reason
+    assert model.get_parameter('geometry.a').value == pytest.approx(0.1143)
+    result = model.set_parameters([Parameter('prediction_axis', value='sideways')])[0]
+    assert not result.successful and 'prediction_axis' in result.reason
+    before = probe.axis[-1]
+    assert model.set_parameters([Parameter('geometry.weight', value=90.0)])[0].successful
+    assert spin_until(ex, lambda: probe.axis[-1] != before, 10)
+    assert probe.axis[-1] == pytest.approx(paper_coefficients(lab_model(0.5, 90.0)).side, rel=1e-9)
+    ex.shutdown()
+
+
+def test_load_program_plays_pauses_and_stops(rclpy_context):
+    ex = SingleThreadedExecutor(context=rclpy_context)
+    params = [Parameter('segments.kind', value=['ramp', 'hold', 'ramp']),
+              Parameter('segments.axis', value=['fy', 'fy', 'fy']),
+              Parameter('segments.target', value=[2.0, 2.0, 0.0]),
+              Parameter('segments.duration', value=[0.5, 0.5, 0.5]),
+              Parameter('rate_hz', value=200.0), Parameter('name', value='tri'),
+              Parameter('start_delay_s', value=0.5)]
+    prog = LoadProgramNode(context=rclpy_context, parameter_overrides=params)
+    probe = Probe(rclpy_context)
+    ex.add_node(prog)
+    ex.add_node(probe.node)
+    assert spin_until(ex, lambda: probe.state and probe.state[-1]['state'] == 'done', 15)
+    fy = np.array([c.wrench.force.y for c in probe.commands])
+    assert fy.max() == pytest.approx(2.0, abs=0.03)
+    assert fy[-1] == pytest.approx(0.0, abs=1e-12)
+    assert len(fy) == pytest.approx(1.5 * 200, rel=0.25)
+    # Changing the program is validated: a bad axis is rejected, naming it.
+    bad = prog.set_parameters([Parameter('segments.axis', value=['fy', 'fq', 'fy'])])[0]
+    assert not bad.successful and 'fq' in bad.reason
+    # Start again, pause (the wrench holds), stop (zero commanded).
+    cli_start = probe.node.create_client(Trigger, '/load_program/start')
+    cli_pause = probe.node.create_client(Trigger, '/load_program/pause')
+    cli_stop = probe.node.create_client(Trigger, '/load_program/stop')
+
+    def call(cli):
+        assert cli.wait_for_service(timeout_sec=5)
+        fut = cli.call_async(Trigger.Request())
+        assert spin_until(ex, fut.done, 5)
+        return fut.result()
+
+    assert call(cli_start).success
+    assert spin_until(ex, lambda: probe.commands[-1].wrench.force.y > 1.0, 5)
+    assert call(cli_pause).success
+    n = len(probe.commands)
+    spin_until(ex, lambda: len(probe.commands) > n + 40, 2)
+    held = [c.wrench.force.y for c in probe.commands[n + 2:]]
+    assert max(held) - min(held) < 1e-9 and held[0] > 1.0
+    r = call(cli_stop)
+    assert r.success and 'zero' in r.message
+    assert spin_until(ex, lambda: probe.commands[-1].wrench.force.y == 0.0, 5)
+    assert math.isclose(probe.commands[-1].wrench.force.y, 0.0)
+    ex.shutdown()
