@@ -97,6 +97,8 @@ def start_rig(procs: Processes, share: Path, program: str, session: str, bags: P
                      '-p', f'output_dir:={bags}'])
         readers += 1
     # Ready when the model has published its prediction and every sensor stream has all its readers.
+    print(f'  waiting for {len(procs.procs)} nodes to connect ...', flush=True)
+    t0 = time.monotonic()
     observer.spin_until(
         lambda: observer.predicted is not None
         and observer.count_subscribers(topics.LOAD_CELL_WRENCH) >= readers
@@ -104,6 +106,7 @@ def start_rig(procs: Processes, share: Path, program: str, session: str, bags: P
         and observer.count_publishers(topics.STIFFNESS_VALUES) >= 1
         and observer.count_subscribers(topics.WRENCH_COMMAND) >= 2 + (readers - 1),
         ready_timeout_s, 'the rig nodes to connect', procs)
+    print(f'  connected in {time.monotonic() - t0:.1f} s; starting load_program', flush=True)
     procs.start('load_program', PACKAGE, 'load_program',
                 ['--ros-args', *p('program'), '-p', 'start_delay_s:=1.0', '-p', 'exit_on_done:=true'])
     return prog

@@ -54,16 +54,22 @@ def main(argv=None) -> int:
     observer = Observer()
     with rosrun.Processes(env, out / 'logs') as procs:
         program = start_rig(procs, share, args.program, session, Path(args.bags), observer)
-        bar = tqdm(total=100, desc='load program', unit='%', bar_format='{l_bar}{bar}| {n:.0f}/{total}% '
-                   '[{elapsed}<{remaining}]')
+        bar = tqdm(total=100, desc=f'program {program.name}', unit='%', mininterval=0.5,
+                   bar_format='{l_bar}{bar}| {n:.0f}/{total}% [{elapsed}<{remaining}]')
         deadline = time.monotonic() + program.duration_s + 90
-        while not observer.done and time.monotonic() < deadline:
+
+        def finished() -> bool:  # the final state message, or load_program's clean exit after it
+            return observer.done or procs.procs['load_program'].poll() == 0
+
+        while not finished() and time.monotonic() < deadline:
             rclpy.spin_once(observer, timeout_sec=0.1)
-            bar.n = round(100 * observer.progress, 1)
-            bar.refresh()
+            percent = int(100 * observer.progress)
+            if percent != bar.n:
+                bar.update(percent - bar.n)
             procs.check_alive(allow_exit=('load_program',))
+        bar.update(100 - bar.n if finished() else 0)
         bar.close()
-        if not observer.done:
+        if not finished():
             print('the load program did not finish in time; logs in', out / 'logs', file=sys.stderr)
             return 1
         end = time.monotonic() + 1.5  # let the last samples reach the estimator

@@ -3,6 +3,7 @@ profiles, a diagnostics publisher, message helpers and ``run`` (the ``main`` of 
 """
 from __future__ import annotations
 
+import json
 import math
 import sys
 from dataclasses import dataclass
@@ -117,6 +118,8 @@ class Diagnostics:
         self._timer = node.create_timer(period_s, self.publish)
 
     def publish(self) -> None:
+        if not self._node.context.ok():
+            return  # shutting down (Ctrl-C / SIGTERM): nothing to report to
         level, message, pairs = self._report()
         msg = DiagnosticArray()
         msg.header.stamp = self._node.get_clock().now().to_msg()
@@ -154,6 +157,21 @@ def run(node_factory: Callable[[], Node], args: Sequence[str] | None = None) -> 
         close = getattr(node, 'close', None)
         if close is not None:
             close()
+        final_counters(node)
         node.destroy_node()
         rclpy.try_shutdown()
     return 0
+
+
+def final_counters(node: Node) -> None:
+    """Print the node's message counters once at exit (``FINAL_COUNTERS <node> {json}``): the totals a benchmark or
+    an engineer reads after a run, when /diagnostics has stopped."""
+    counters = getattr(node, 'counters', None)
+    if counters is None:
+        return
+    values = counters.__dict__ if hasattr(counters, '__dict__') else counters
+    try:
+        text = json.dumps({k: v for k, v in dict(values).items() if isinstance(v, (int, float, str))})
+    except (TypeError, ValueError):
+        return
+    print(f'FINAL_COUNTERS {node.get_name()} {text}', flush=True)

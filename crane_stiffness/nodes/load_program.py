@@ -118,7 +118,11 @@ class LoadProgramNode(Node):
             self._publish_state()
             self.get_logger().info(f'program {self.program.name!r} finished')
             if self.params['exit_on_done']:
-                raise SystemExit(0)
+                # Linger a moment so the final state and command reach every subscriber before the exit.
+                self.create_timer(1.0, self._exit)
+
+    def _exit(self) -> None:
+        raise SystemExit(0)
 
     def _publish_state(self) -> None:
         st = self.last
