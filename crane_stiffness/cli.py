@@ -262,11 +262,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _add_bag_commands(sub: Any) -> None:
-    """Bag subcommands (analyze, compare, recover) when the bag module is installed."""
-    try:
-        from crane_stiffness.analysis import session_cli
-    except ImportError:
-        return
+    """Bag subcommands: analyze, compare, recover (crane_stiffness.analysis.session_cli)."""
+    from crane_stiffness.analysis import session_cli
     session_cli.add_commands(sub)
 
 

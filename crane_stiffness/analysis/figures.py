@@ -78,3 +78,151 @@ def plot_stiffness_vs_weight(rows: Sequence[StiffnessRow], axis: str, path: str 
     fig.savefig(path)
     plt.close(fig)
     return path
+
+
+# --- recorded sessions (crane_stiffness.analysis.session) ------------------------------------------------------
+
+_BRANCH_STYLE = {'loading': ('tab:blue', '^'), 'unloading': ('tab:red', 'v')}
+
+
+def _reading_label(axis: str, lvdt_scale: float) -> tuple[str, str, float]:
+    """Labels of a measured plot: the axis' own displacement label when the LVDT reads along it, else the reading."""
+    ylab, xlab, s = _labels(axis)
+    if lvdt_scale != 1.0:
+        xlab = 'LVDT reading [mm]'
+    return ylab, xlab, s
+
+
+def plot_session_force_displacement(path: str | Path, axis: str, *, curves: dict | None = None,
+                                    lvdt_scale: float = 1.0,
+                                    cloud: dict[str, tuple[np.ndarray, np.ndarray]] | None = None,
+                                    holds: dict[str, tuple[np.ndarray, np.ndarray]] | None = None,
+                                    fits: dict[str, tuple[float, float]] | None = None, title: str = '') -> Path:
+    """A recorded session against the paper's models (Figs. 5–9 styles).
+
+    ``cloud``: paired samples per branch (LVDT reading [m], load), drawn light; ``holds``: the settled mean of each
+    hold per approach, drawn as markers; ``fits``: (stiffness, intercept) of each branch, drawn as lines over the
+    measured range; ``curves``: ForceDisplacement.columns() of the model (displacement along the axis), scaled by
+    ``lvdt_scale`` to the LVDT reading.
+    """
+    ylab, xlab, s = _reading_label(axis, lvdt_scale)
+    fig, ax = plt.subplots(figsize=(6.8, 5.0), dpi=110)
+    extent: list[float] = []  # x range: model (nonlinear, linear) and measured, not the far softer pendulum
+    if curves:
+        load = np.asarray(curves['load'])
+        for key in ('nonlinear', 'linear'):
+            extent += [float(np.nanmin(curves[key])) * lvdt_scale * s, float(np.nanmax(curves[key])) * lvdt_scale * s]
+        styles = (('nonlinear', '-', 'k', 1.8, 'nonlinear model'), ('linear', '--', 'tab:blue', 1.2,
+                  'linearized, eq. (18)'), ('elastic', ':', 'tab:green', 1.4, 'W = 0, elastic only'),
+                  ('pendulum', '-.', 'tab:red', 1.2, 'single wire, W/6'))
+        for key, ls, color, lw, label in styles:
+            x = np.asarray(curves[key], dtype=float) * lvdt_scale
+            if np.any(np.isfinite(x)):
+                ax.plot(x * s, load, ls, color=color, lw=lw, label=label, alpha=0.8)
+    xs: list[np.ndarray] = []
+    for branch, (x, y) in (cloud or {}).items():
+        color, _ = _BRANCH_STYLE.get(branch, ('tab:gray', '.'))
+        if len(x):
+            ax.plot(np.asarray(x) * s, y, '.', ms=1.5, color=color, alpha=0.15, rasterized=True)
+            xs.append(np.asarray(x))
+    for branch, (x, y) in (holds or {}).items():
+        color, marker = _BRANCH_STYLE.get(branch, ('tab:gray', 'o'))
+        if len(x):
+            ax.plot(np.asarray(x) * s, y, marker, ms=6, color=color, mfc='none', mew=1.4,
+                    label=f'hold means, {branch}')
+            xs.append(np.asarray(x))
+    for x in xs:
+        if np.isfinite(x).any():
+            extent += [float(np.nanmin(x)) * s, float(np.nanmax(x)) * s]
+    if fits and xs:
+        allx = np.concatenate(xs)
+        grid = np.linspace(np.nanmin(allx), np.nanmax(allx), 2)
+        for branch, (k, c) in fits.items():
+            color, _ = _BRANCH_STYLE.get(branch, ('tab:gray', 'o'))
+            ax.plot(grid * s, k * grid + c, '-', color=color, lw=1.0, alpha=0.9, label=f'fit {branch}: {k:.5g}')
+    if extent:
+        lo, hi = min(extent + [0.0]), max(extent + [0.0])
+        pad = 0.08 * (hi - lo) if hi > lo else 1.0
+        ax.set_xlim(lo - pad, hi + pad)
+    ax.set_xlabel(xlab)
+    ax.set_ylabel(ylab)
+    ax.set_title(title, fontsize=9)
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=7, loc='best')
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
+def plot_session_timeseries(path: str | Path, axis: str, series: dict[str, tuple[np.ndarray, np.ndarray]],
+                            holds: Sequence[tuple[float, float, str]] = (), title: str = '') -> Path:
+    """Command and measured load, displacement and (if recorded) the live stiffness against time.
+
+    ``series``: name → (t [s from the program start], values) for 'command', 'force', 'displacement' [m] and
+    optionally 'live_stiffness'; ``holds``: (start, end, approach) spans shaded on every panel.
+    """
+    ylab, _, _ = _labels(axis)
+    panels = 3 if 'live_stiffness' in series else 2
+    fig, axes = plt.subplots(panels, 1, figsize=(8.0, 2.3 * panels + 0.6), dpi=110, sharex=True)
+    spans: dict[str, list[tuple[float, float]]] = {}
+    for start, end, approach in holds:
+        spans.setdefault(approach, []).append((start, end - start))
+    for a in axes:
+        for approach, ranges in spans.items():  # one collection per approach: fast with thousands of holds
+            a.broken_barh(ranges, (0, 1), transform=a.get_xaxis_transform(), lw=0, alpha=0.08,
+                          color=_BRANCH_STYLE.get(approach, ('tab:gray', ''))[0])
+        a.grid(True, alpha=0.3)
+    if 'force' in series:
+        axes[0].plot(*series['force'], '-', color='tab:purple', lw=0.6, label='load cell')
+    if 'command' in series:
+        axes[0].plot(*series['command'], '-', color='k', lw=1.0, label='command')
+    axes[0].set_ylabel(ylab, fontsize=8)
+    axes[0].legend(fontsize=7, loc='upper right')
+    if 'displacement' in series:
+        t, x = series['displacement']
+        axes[1].plot(t, np.asarray(x) * 1e6, '-', color='tab:orange', lw=0.6)
+    axes[1].set_ylabel('LVDT [µm]', fontsize=8)
+    if panels == 3:
+        t, k = series['live_stiffness']
+        axes[2].plot(t, k, '-', color='tab:green', lw=0.8)
+        axes[2].set_ylabel('live k (loading)', fontsize=8)
+    axes[-1].set_xlabel('time from the program start [s]')
+    axes[0].set_title(title, fontsize=9)
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
+def plot_sessions_overlay(path: str | Path, axis: str,
+                          sessions: Sequence[tuple[str, tuple[Sequence[float], Sequence[float], Sequence[str]],
+                                                   tuple[np.ndarray, np.ndarray] | None]],
+                          title: str = '') -> Path:
+    """Several sessions on one force–displacement plot: each session's hold means (▲ loading, ▼ unloading) and,
+    thin, its nonlinear model curve (already in LVDT reading units)."""
+    ylab, xlab, s = _labels(axis)
+    fig, ax = plt.subplots(figsize=(6.8, 5.0), dpi=110)
+    colors = plt.rcParams['axes.prop_cycle'].by_key()['color']
+    for i, (name, (x, y, approach), curve) in enumerate(sessions):
+        color = colors[i % len(colors)]
+        x, y, approach = np.asarray(x, float), np.asarray(y, float), np.asarray(approach)
+        for branch, marker in (('loading', '^'), ('unloading', 'v')):
+            sel = approach == branch
+            if sel.any():
+                ax.plot(x[sel] * s, y[sel], marker, color=color, mfc='none', ms=6,
+                        label=name if branch == 'loading' or not (approach == 'loading').any() else None)
+        if curve is not None:
+            ax.plot(np.asarray(curve[0]) * s, curve[1], '-', color=color, lw=1.0, alpha=0.6)
+    ax.set_xlabel(xlab)
+    ax.set_ylabel(ylab)
+    ax.set_title(title or 'sessions compared (lines: nonlinear model of each)', fontsize=9)
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=7, loc='best')
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path)
+    plt.close(fig)
+    return path

@@ -1,0 +1,114 @@
+"""Benchmark: ``analyze_session`` on one hour of a 1 kHz rig, beside decoding the same bag with mcap-ros2-support.
+
+Generates a synthetic session bag (crane_stiffness.analysis.synthetic) in a temporary directory: the side-force
+program (config/program_side_force.yaml, 21 s) repeated for ``--seconds`` (default 3600), load cell and LVDT at
+``--rate`` (default 1000 Hz) from the nonlinear model of the lab crane (h = 0.5 m, W = 50 N) with sensor noise,
+the commands at 100 Hz, program state, the model's prediction, and the live estimator's output over the last
+``--live-tail`` seconds; about 7.2 million messages. Then times
+
+- ``analyze_session`` (open + bulk decode + pairing + steps + fits + model + figures + report + JSON), and
+- mcap_ros2's ``DecoderFactory`` through ``mcap.reader.make_reader(...).iter_decoded_messages()`` on the first
+  ``--baseline-messages`` messages (default 200,000), extrapolated linearly to the whole bag: the cost of merely
+  decoding the bag message by message, before any analysis.
+
+Target: ≤ 20 s for the hour. Usage::
+
+    python benchmarks/bench_analyze.py [--seconds 3600] [--rate 1000] [--baseline-messages 200000] [--keep]
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+os.environ.setdefault('AMENT_PREFIX_PATH', sys.prefix)  # the .msg files for the writer's schemas
+os.environ.setdefault('MPLBACKEND', 'Agg')
+
+from crane_stiffness.analysis.session import analyze_session  # noqa: E402
+from crane_stiffness.analysis.synthetic import write_synthetic_session  # noqa: E402
+from crane_stiffness.model import lab_model  # noqa: E402
+from crane_stiffness.sim.program import LoadProgram, load_program_file  # noqa: E402
+
+
+def bench_baseline(files: list[Path], limit: int) -> tuple[float, int]:
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    start = time.perf_counter()
+    done = 0
+    for path in files:
+        with open(path, 'rb') as stream:
+            reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+            for _ in reader.iter_decoded_messages():
+                done += 1
+                if done >= limit:
+                    return time.perf_counter() - start, done
+    return time.perf_counter() - start, done
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('--seconds', type=float, default=3600.0, help='session length in s (default 3600)')
+    parser.add_argument('--rate', type=float, default=1000.0, help='sensor sample rate in Hz (default 1000)')
+    parser.add_argument('--live-tail', type=float, default=30.0, help='seconds of live estimator output (default 30)')
+    parser.add_argument('--baseline-messages', type=int, default=200_000,
+                        help='messages decoded by mcap_ros2 before extrapolating (default 200000)')
+    parser.add_argument('--keep', action='store_true', help='keep the generated bag and outputs')
+    args = parser.parse_args()
+
+    base = load_program_file(REPO / 'config' / 'program_side_force.yaml')
+    repeats = max(1, round(args.seconds / base.duration_s))
+    program = LoadProgram(base.segments, repeats=repeats, name=f'{base.name}_x{repeats}', rate_hz=base.rate_hz)
+    geometry = lab_model(0.5, 50.0)
+    tmp = Path(tempfile.mkdtemp(prefix='bench_analyze_'))
+    bag = tmp / 'hour_session'
+    try:
+        print(f'generating {program.duration_s:.0f} s ({repeats} x {base.name}) at {args.rate:g} Hz ...', flush=True)
+        start = time.perf_counter()
+        syn = write_synthetic_session(bag, program, geometry=geometry, sample_rate_hz=args.rate, live=True,
+                                      live_tail_s=args.live_tail)
+        gen_s = time.perf_counter() - start
+        size = sum(f.stat().st_size for f in bag.glob('*.mcap'))
+        sensor = syn.counts['/load_cell/wrench'] + syn.counts['/lvdt/displacement']
+        print(f'  wrote {syn.message_count:,} messages ({sensor:,} load-cell + LVDT samples), {size / 1e6:.1f} MB '
+              f'(zstd chunks) in {gen_s:.1f} s')
+
+        start = time.perf_counter()
+        analysis = analyze_session(bag, tmp / 'analysis', formats=('png',), reports=('md', 'html'),
+                                   write_json=True)
+        total = time.perf_counter() - start
+        print(f'analyze_session: {total:.2f} s for {syn.message_count:,} messages  [target <= 20 s for one hour]')
+        print('  stages: ' + ', '.join(f'{k} {v:.2f} s' for k, v in analysis.timings_s.items()))
+        print(f'  {analysis.pairing["pairs"]:,} pairs, {len(analysis.steps)} hold steps, '
+              f'{len(analysis.cycle_fits)} repeats')
+        fit = analysis.branch_fits['loading']
+        tangent = analysis.model.tangent_at_rest
+        print(f'  loading k = {fit.stiffness:.2f} N/m (95 % CI {fit.ci95_low:.2f} … {fit.ci95_high:.2f}) vs the '
+              f'model tangent {tangent:.2f} N/m ({100 * (fit.stiffness - tangent) / tangent:+.3f} %)')
+
+        files = sorted(bag.glob('*.mcap'))
+        limit = min(args.baseline_messages, syn.message_count)
+        base_s, done = bench_baseline(files, limit)
+        per_msg = base_s / done
+        extrapolated = per_msg * syn.message_count
+        print(f'baseline, mcap_ros2 DecoderFactory (decode only, no analysis): {base_s:.2f} s for the first '
+              f'{done:,} messages = {per_msg * 1e6:.2f} µs/message; EXTRAPOLATED to {syn.message_count:,} '
+              f'messages: {extrapolated:.1f} s')
+        print(f'analyze_session is {extrapolated / total:.1f}x faster than decoding alone with mcap_ros2 '
+              f'(baseline measured on {done:,} messages and extrapolated linearly)')
+    finally:
+        if args.keep:
+            print(f'kept {tmp}')
+        else:
+            shutil.rmtree(tmp, ignore_errors=True)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,155 @@
+"""``crane-stiffness analyze | compare | recover``: thin command-line layers over crane_stiffness.analysis.session and
+crane_stiffness.bag.recover_bag (added to the parser of crane_stiffness.cli by :func:`add_commands`).
+
+Exit codes as crane_stiffness.cli: 0 ok, 2 bad input (a missing or unreadable bag, a missing sensor topic, nothing to
+fit; the reason on stderr). Damage the reader works around (a truncated or corrupt part of a bag) is reported on
+stderr as a warning and in the report, and the readable part is analysed. ``recover`` exits 2 when a file could not
+be recovered.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import warnings
+from typing import Any, Callable
+
+EXIT_OK = 0
+EXIT_USAGE = 2  # crane_stiffness.cli.EXIT_USAGE
+AXES = ('fx', 'fy', 'fz', 'mx', 'my', 'mz')
+
+
+def _fail(exc: BaseException) -> int:
+    print(f'crane-stiffness: {exc}', file=sys.stderr)
+    return EXIT_USAGE
+
+
+def _guarded(run: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Namespace], int]:
+    """Run a command: bag, analysis and file errors become exit 2 with the message; warnings go to stderr."""
+    def wrapper(args: argparse.Namespace) -> int:
+        from crane_stiffness.errors import CraneStiffnessError
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter('always')
+            try:
+                code = run(args)
+            except (CraneStiffnessError, OSError, ValueError, KeyError) as exc:
+                code = _fail(exc)
+        seen = set()
+        for w in caught:
+            text = str(w.message)
+            if text not in seen and not issubclass(w.category, (DeprecationWarning, PendingDeprecationWarning)):
+                seen.add(text)
+                print(f'crane-stiffness: warning: {text}', file=sys.stderr)
+        return code
+    wrapper.__name__ = run.__name__
+    return wrapper
+
+
+def _fit_line(name: str, fit: Any, unit: str) -> str:
+    if fit is None:
+        return f'  {name:<10} no fit (too few pairs or no spread in displacement)'
+    return (f'  {name:<10} k = {fit.stiffness:.6g} {unit} (95 % CI {fit.ci95_low:.6g} … {fit.ci95_high:.6g}), '
+            f'R² {fit.r2:.6f}, n = {fit.n}, nonlinearity {fit.nonlinearity:+.3g}')
+
+
+def _print_summary(a: Any) -> None:
+    print(f'session {a.session} ({a.bag}): axis {a.axis}, {len(a.steps)} hold step(s), {a.pairing.get("pairs", 0)} '
+          f'pairs of {a.pairing.get("force_messages", 0)} load-cell and {a.pairing.get("displacement_messages", 0)} '
+          'LVDT samples')
+    print('stiffness, all pairs of each branch over the program:')
+    for branch in ('loading', 'unloading'):
+        print(_fit_line(branch, a.branch_fits.get(branch), a.unit))
+    print('stiffness, hold means (quasi-static):')
+    for branch in ('loading', 'unloading'):
+        print(_fit_line(branch, a.hold_fits.get(branch), a.unit))
+    if a.model is not None:
+        m = a.model
+        line = (f'model ({m.axis}): exact tangent at rest {m.tangent_at_rest:.6g} {m.unit}, eq. (18) {m.eq18:.6g}, '
+                f'W = 0 elastic {m.elastic_w0:.6g}')
+        fit = a.branch_fits.get('loading')
+        if fit is not None and m.lvdt_scale:
+            ref = m.tangent_at_rest * m.lvdt_scale
+            line += f'; loading fit {100 * (fit.stiffness - ref) / ref:+.3f} % from the tangent'
+        print(line)
+    if a.live is not None:
+        parts = [f'{b} live {a.live.live[b]["stiffness"]:.10g} vs offline {a.live.offline[b]["stiffness"]:.10g} '
+                 f'(largest relative difference {a.live.max_rel_diff[b]:.2g})' for b in ('loading', 'unloading')]
+        print('last live estimate reproduced: ' + '; '.join(parts))
+    for problem in a.problems:
+        print(f'  ! {problem}')
+
+
+def cmd_analyze(args: argparse.Namespace) -> int:
+    from crane_stiffness.analysis.session import analyze_session
+    analysis = analyze_session(args.bag, args.out, formats=(args.format,), reports=(args.report,),
+                               write_json=args.json, axis=args.axis, settle_fraction=args.settle,
+                               progress=not args.quiet and not args.json)
+    if args.json:
+        json.dump(analysis.to_dict(), sys.stdout, indent=1, allow_nan=False)
+        print()
+        return EXIT_OK
+    _print_summary(analysis)
+    print('wrote:')
+    for path in analysis.files:
+        print(f'  {path}')
+    return EXIT_OK
+
+
+def cmd_compare(args: argparse.Namespace) -> int:
+    from crane_stiffness.analysis.session import compare_sessions
+    comparison = compare_sessions(args.bags, args.out, formats=(args.format,), reports=(args.report,),
+                                  write_json=args.json, axis=args.axis, progress=not args.quiet and not args.json)
+    if args.json:
+        json.dump(comparison.to_dict(), sys.stdout, indent=1, allow_nan=False)
+        print()
+        return EXIT_OK
+    print(f'{"session":<28} {"axis":<4} {"loading k":>12} {"unloading k":>12} {"model k":>12} {"error":>9}')
+    for r in comparison.rows:
+        err = r['relative_error_loading']
+        print(f'{r["session"]:<28} {r["axis"]:<4} {r["loading_k"]:>12.6g} {r["unloading_k"]:>12.6g} '
+              f'{r["model_tangent_k"]:>12.6g} {100 * err:>+8.3f}%')
+    print('wrote:')
+    for path in comparison.files:
+        print(f'  {path}')
+    return EXIT_OK
+
+
+def cmd_recover(args: argparse.Namespace) -> int:
+    from crane_stiffness.bag import recover_bag
+    report = recover_bag(args.bag, backup=not args.no_backup)
+    print(report)
+    if not report.ok:
+        bad = ', '.join(f.path.name for f in report.files if f.status not in ('intact', 'recovered'))
+        print(f'crane-stiffness: could not recover {bad}', file=sys.stderr)
+        return EXIT_USAGE
+    return EXIT_OK
+
+
+def _add_output_options(p: argparse.ArgumentParser, default_out: str) -> None:
+    p.add_argument('--out', metavar='DIR', default=None, help=f'output directory (default {default_out})')
+    p.add_argument('--format', choices=('png', 'svg'), default='png', help='figure format (default png)')
+    p.add_argument('--report', choices=('md', 'html'), default='md', help='report format (default md)')
+    p.add_argument('--json', action='store_true', help='also write the results as JSON and print them on stdout')
+    p.add_argument('--axis', choices=AXES, default=None,
+                   help="load axis (default: the estimator's recorded force_axis, else the program's axis)")
+    p.add_argument('--quiet', action='store_true', help='no progress bar')
+
+
+def add_commands(subparsers: Any) -> None:
+    """Add ``analyze``, ``compare`` and ``recover`` to the ``crane-stiffness`` subparsers."""
+    p = subparsers.add_parser('analyze', help='stiffness, test steps, model curves, figures and report of a '
+                              'recorded session (bag)')
+    p.add_argument('bag', metavar='BAG', help='bag directory (or .mcap file) written by session_recorder')
+    _add_output_options(p, 'out/analysis/<bag name>')
+    p.add_argument('--settle', type=float, default=0.3, metavar='FRACTION',
+                   help='part of each hold skipped before averaging (default 0.3)')
+    p.set_defaults(func=_guarded(cmd_analyze))
+    p = subparsers.add_parser('compare', help='sessions side by side: table and overlay figure')
+    p.add_argument('bags', metavar='BAG', nargs='+', help='bag directories (or .mcap files)')
+    _add_output_options(p, 'out/compare')
+    p.set_defaults(func=_guarded(cmd_compare))
+    p = subparsers.add_parser('recover', help='repair a bag left unfinished by a crash (SIGKILL, power loss) and '
+                              'rewrite its metadata.yaml')
+    p.add_argument('bag', metavar='BAG', help='bag directory or .mcap file')
+    p.add_argument('--no-backup', action='store_true', help='delete damaged originals instead of keeping .bak')
+    p.set_defaults(func=_guarded(cmd_recover))

@@ -1,0 +1,594 @@
+"""session_recorder: records a test session of the rig to a rosbag2 bag (MCAP) with the session's description.
+
+Subscribes to ``topics`` (default: every rig topic of crane_stiffness.topics.RIG_TOPICS) as serialized messages (no
+deserialization), each with the QoS that matches its publishers (sensor streams best effort, latched topics transient
+local, the rest reliable; topics outside the contract adapt to the publishers in the graph), and writes them with
+crane_stiffness.bag.BagWriter to ``<output_dir>/<session>/`` (metadata.yaml + ``<session>_<n>.mcap``, chunked,
+zstd by default, optionally split). Per message: log time = receive time (node clock), publish time = the header
+stamp for stamped types, else the receive time. Each channel carries its publishers' offered QoS (YAML).
+
+The session is described in the MCAP metadata record ``crane_stiffness/session``: rig geometry (every geometry.*
+parameter, the same crane YAML the model reads) with the derived l0 and k, the test program (the recorder's own
+name/rate_hz/repeats/segments.* parameters, or else the load_program section of a ``--params-file`` it was started
+with), the sensor parameters of the other nodes' sections of those files (load_cell, lvdt, stiffness_estimator),
+the files' text, software version, start time and ``notes``. The parameters the rig's nodes actually run with
+(``record_node_parameters``: crane_model, load_program, load_cell, lvdt, stiffness_estimator) are read from them
+over ROS once they appear and stored in ``crane_stiffness/node_parameters``; ``crane_stiffness/session_end`` is
+added on close (stop reason, end time, counts). The offline analysis prefers the nodes' own values.
+
+Recording starts by itself (``autostart``) or with ~/start; ~/stop closes the bag and replies with its path and
+message count (both std_srvs/Trigger). With ``stop_on_program_done`` the recording stops ``stop_delay_s`` after
+/load_program/state reports 'done' following a run, so it covers the whole program. Ctrl-C (SIGINT) and SIGTERM
+close the bag cleanly (rclpy turns both into a context shutdown; see crane_stiffness.nodes.common.run). After
+SIGKILL every chunk written so far is readable (chunks go to the OS as they are finished, at most
+``flush_interval_s`` apart) and ``crane-stiffness recover BAG`` rewrites the files and metadata.yaml.
+"""
+from __future__ import annotations
+
+import array
+import json
+import os
+import signal
+import socket
+import struct
+import sys
+import threading
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any, Sequence
+
+import yaml
+from rcl_interfaces.srv import GetParameters, ListParameters
+from rclpy.event_handler import SubscriptionEventCallbacks
+from rclpy.node import Node
+from rclpy.parameter import parameter_value_to_python
+from rclpy.qos import QoSProfile
+from rclpy.serialization import deserialize_message
+from std_msgs.msg import String
+from std_srvs.srv import Trigger
+
+from crane_stiffness import __version__, topics
+from crane_stiffness.analysis.session import NODE_PARAMETERS_METADATA
+from crane_stiffness.bag import SESSION_METADATA, BagWriter, dump_qos_profiles, session_metadata
+from crane_stiffness.bag.errors import BagError
+from crane_stiffness.bag.writer import COMPRESSIONS
+from crane_stiffness.config import GEOMETRY_PARAMS, ParamSpec, geometry_from_params
+from crane_stiffness.nodes.common import ERROR, OK, Diagnostics, Params, check, run
+from crane_stiffness.nodes.load_program import PARAMS as PROGRAM_NODE_PARAMS
+from crane_stiffness.nodes.load_program import PROGRAM_KEYS
+from crane_stiffness.nodes.session_qos import (adapted_qos, contract_qos, has_header, message_class,
+                                               offered_profiles, publisher_types)
+from crane_stiffness.sim.program import LoadProgram
+
+SESSION_END_METADATA = 'crane_stiffness/session_end'
+"""MCAP metadata record written when the recording is closed: stop reason, end time, message counts."""
+
+PROGRAM_PARAMS = tuple(p for p in PROGRAM_NODE_PARAMS if p.name in PROGRAM_KEYS)
+PROGRAM_DEFAULTS = {p.name: p.default for p in PROGRAM_PARAMS}
+#: Sections of a parameter file that hold this node's own parameters (not recorded as another node's).
+OWN_SECTIONS = ('session_recorder', '/session_recorder', '/**')
+
+PARAMS = GEOMETRY_PARAMS + PROGRAM_PARAMS + (
+    ParamSpec('topics', list(topics.RIG_TOPICS), 'topics to record; rig topics use their contract type and QoS, '
+              'others are subscribed once a publisher appears [-]'),
+    ParamSpec('session', '', "bag name: the bag is <output_dir>/<session>/; '' = session_<UTC time> [-]"),
+    ParamSpec('output_dir', 'bags', 'directory the session bags are written to [-]'),
+    ParamSpec('compression', 'zstd', 'MCAP chunk compression: zstd, lz4 or none [-]'),
+    ParamSpec('chunk_size', 262144, 'uncompressed MCAP chunk size; a chunk is on disk once full [bytes]'),
+    ParamSpec('flush_interval_s', 0.5, 'also write the current chunk once it is this old, so a crash (SIGKILL) loses '
+              'at most this much; 0 = by size only [s]'),
+    ParamSpec('split_max_bytes', 0, 'start a new .mcap file at this size, 0 = never [bytes]'),
+    ParamSpec('split_max_duration_s', 0.0, 'start a new .mcap file after this much time, 0 = never [s]'),
+    ParamSpec('fsync', False, 'fsync every write (survives power loss too; slower) [-]'),
+    ParamSpec('autostart', True, 'start recording when the node starts (else call ~/start) [-]'),
+    ParamSpec('stop_on_program_done', True, "stop and close the bag when /load_program/state reports 'done' after "
+              'the program ran [-]'),
+    ParamSpec('stop_delay_s', 1.0, "keep recording this long after 'done' so the last samples and estimates "
+              'arrive [s]'),
+    ParamSpec('exit_on_program_done', False, 'shut the node down once the bag closed at the program end is '
+              'written [-]'),
+    ParamSpec('executor', 'events', "executor of the recorder process: 'events' (rclpy's EventsExecutor, in C++: "
+              "about a quarter of the CPU per message) or 'single' (SingleThreadedExecutor); read at start [-]"),
+    ParamSpec('notes', '', 'free text stored with the session (operator, specimen, remarks) [-]'),
+    ParamSpec('record_node_parameters', ['/crane_model', '/load_program', '/load_cell', '/lvdt',
+                                         '/stiffness_estimator'],
+              'nodes whose parameters are read over ROS (get_parameters) once they appear and stored with the '
+              "session; [''] = none [-]"),
+)
+
+#: Settings read when a recording starts; their change applies to the next recording.
+RECORDING_KEYS = ('topics', 'session', 'output_dir', 'compression', 'chunk_size', 'flush_interval_s',
+                  'split_max_bytes', 'split_max_duration_s', 'fsync')
+
+_STAMP = struct.Struct('<iI')
+# rclpy puts a QoS-event handler into every wait of the executor for each subscription with the default event
+# callbacks (~15 µs each per wait): with a dozen recorded topics at a few kHz that is a large share of a core.
+_NO_EVENTS = SubscriptionEventCallbacks(use_default_callbacks=False)
+
+
+def plain(value: Any) -> Any:
+    """JSON-friendly copy of a parameter value (rclpy returns array.array for numeric arrays)."""
+    if isinstance(value, (array.array, tuple, list)):
+        return [plain(v) for v in value]
+    if isinstance(value, dict):
+        return {str(k): plain(v) for k, v in value.items()}
+    return value
+
+
+def utc_session_name(now_ns: int) -> str:
+    return 'session_' + datetime.fromtimestamp(now_ns / 1e9, tz=timezone.utc).strftime('%Y%m%dT%H%M%SZ')
+
+
+def params_files_from_args(args: Sequence[str] | None) -> list[str]:
+    """The ``--params-file`` paths in the ROS arguments of a command line (sys.argv when None)."""
+    argv = list(sys.argv if args is None else args)
+    files: list[str] = []
+    in_ros = False
+    for i, arg in enumerate(argv):
+        if arg == '--ros-args':
+            in_ros = True
+        elif arg == '--':
+            in_ros = False
+        elif in_ros and arg == '--params-file' and i + 1 < len(argv):
+            files.append(argv[i + 1])
+    return files
+
+
+def _flatten(prefix: str, value: Any, out: dict[str, Any]) -> None:
+    if isinstance(value, dict):
+        for k, v in value.items():
+            _flatten(f'{prefix}.{k}' if prefix else str(k), v, out)
+    else:
+        out[prefix] = value
+
+
+def read_params_files(paths: Sequence[str]) -> tuple[list[dict[str, str]], dict[str, dict[str, Any]], list[str]]:
+    """(files as {path, text}, sections {node: flat params} merged in file order, problems) of parameter files."""
+    files: list[dict[str, str]] = []
+    sections: dict[str, dict[str, Any]] = {}
+    problems: list[str] = []
+    for path in paths:
+        try:
+            text = Path(path).read_text(encoding='utf-8')
+            doc = yaml.safe_load(text)
+        except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
+            problems.append(f'{path}: {exc}')
+            continue
+        files.append({'path': str(Path(path).resolve()), 'text': text})
+        if not isinstance(doc, dict):
+            continue
+        for name, body in doc.items():
+            if isinstance(body, dict) and isinstance(body.get('ros__parameters'), dict):
+                flat: dict[str, Any] = {}
+                _flatten('', body['ros__parameters'], flat)
+                sections.setdefault(str(name), {}).update(flat)
+    return files, sections, problems
+
+
+def header_stamp_ns(data: bytes) -> int | None:
+    """The header stamp of a serialized stamped message (little-endian CDR), ns; None when unset or unreadable."""
+    if len(data) < 12 or data[1] != 1:
+        return None
+    sec, nanosec = _STAMP.unpack_from(data, 4)
+    if sec < 0 or nanosec >= 1_000_000_000 or (sec == 0 and nanosec == 0):
+        return None
+    return sec * 1_000_000_000 + nanosec
+
+
+class _Channel:
+    """One subscribed topic: type, subscriber QoS, whether its messages carry a header stamp, count."""
+
+    __slots__ = ('topic', 'msg_type', 'msg_class', 'qos', 'stamped', 'subscription', 'added', 'count')
+
+    def __init__(self, topic: str, msg_type: str, qos: QoSProfile) -> None:
+        self.topic = topic
+        self.msg_type = msg_type
+        self.msg_class = message_class(msg_type)
+        self.qos = qos
+        self.stamped = has_header(self.msg_class)
+        self.subscription = None
+        self.added = False
+        self.count = 0
+
+
+def _validate(values: dict[str, Any]) -> dict[str, Any]:
+    check(values['compression'] in COMPRESSIONS, 'compression', values['compression'],
+          f'must be one of {", ".join(sorted(COMPRESSIONS))}')
+    check(values['chunk_size'] > 0, 'chunk_size', values['chunk_size'], 'must be > 0 bytes')
+    check(values['split_max_bytes'] == 0 or values['split_max_bytes'] >= 1024, 'split_max_bytes',
+          values['split_max_bytes'], 'must be 0 (no split) or >= 1024 bytes')
+    for name in ('flush_interval_s', 'split_max_duration_s', 'stop_delay_s'):
+        check(values[name] >= 0, name, values[name], 'must be >= 0 s')
+    session = values['session']
+    check(session == '' or (session not in ('.', '..') and '/' not in session), 'session', session,
+          "must be '' or a directory name without '/'")
+    check(values['output_dir'] != '', 'output_dir', values['output_dir'], 'must not be empty')
+    check(values['executor'] in ('events', 'single'), 'executor', values['executor'], "must be 'events' or 'single'")
+    names = list(values['topics'])
+    check(bool(names) and all(isinstance(t, str) and t for t in names), 'topics', names,
+          'must be a non-empty list of topic names')
+    geometry = geometry_from_params(values)  # GeometryError (a ValueError) names the field
+    program_values = {k: plain(values[k]) for k in PROGRAM_KEYS}
+    program = None
+    if program_values != PROGRAM_DEFAULTS:
+        program = LoadProgram.from_params(program_values)  # ParameterError (a ValueError) names the field
+    return {'geometry': geometry, 'program': program}
+
+
+class SessionRecorder(Node):
+    """Idle ⇄ recording; one BagWriter per recording. See the module docstring."""
+
+    def __init__(self, params_files: Sequence[str] = (), **kwargs: Any) -> None:
+        super().__init__('session_recorder', **kwargs)
+        self.writer: BagWriter | None = None
+        self.bag_path: Path | None = None
+        self.channels: dict[str, _Channel] = {}
+        self.pending: list[str] = []          # topics outside the contract not yet seen in the graph
+        self.last_bag: Path | None = None
+        self.last_count = 0
+        self.recordings = 0
+        self.errors = 0
+        self.status = 'idle'
+        self.state_subscription = None
+        self.program_ran = False
+        self.program_state: dict[str, Any] = {}
+        self.stop_timer = None
+        self.exit_requested = False
+        self.node_parameters: dict[str, dict[str, Any]] = {}
+        self._param_queries: dict[str, dict[str, Any]] = {}
+        self._flushed_at = 0
+        self._lock = threading.Lock()
+        self.params_files = list(params_files)
+        self.built: dict[str, Any] = {}
+        self.params = Params(self, PARAMS, _validate, self._apply)
+        self.create_service(Trigger, '~/start', self._srv_start)
+        self.create_service(Trigger, '~/stop', self._srv_stop)
+        self.diagnostics = Diagnostics(self, self._report)
+        self.discovery_timer = self.create_timer(0.2, self._discover)
+        self.flush_timer = None
+        if self.params['autostart']:
+            self.start()  # a bad output directory stops the node at start with the reason
+
+    # --- parameters ---
+    def _apply(self, built: dict[str, Any], values: dict[str, Any]) -> None:
+        self.built = built
+
+    # --- recording ---
+    @property
+    def recording(self) -> bool:
+        return self.writer is not None
+
+    def _session_dir(self) -> Path:
+        p = self.params
+        name = p['session'] or utc_session_name(self.get_clock().now().nanoseconds)
+        path = Path(p['output_dir']).expanduser() / name
+        if self.recordings and p['session']:
+            n = 2
+            while path.exists():  # a second recording of this node with a fixed session name: <session>_2, ...
+                path = Path(p['output_dir']).expanduser() / f'{name}_{n}'
+                n += 1
+        return path
+
+    def start(self) -> Path:
+        """Open a new bag and subscribe; returns its directory. Raises BagError/OSError if it cannot be created."""
+        if self.writer is not None:
+            return self.bag_path
+        p = self.params
+        path = self._session_dir()
+        start_ns = self.get_clock().now().nanoseconds
+        self.writer = BagWriter(
+            path, compression=p['compression'], chunk_size=int(p['chunk_size']),
+            split_max_bytes=int(p['split_max_bytes']) or None,
+            split_max_duration_s=float(p['split_max_duration_s']) or None,
+            flush_interval_s=float(p['flush_interval_s']) or None, fsync=bool(p['fsync']),
+            custom_data={'session': path.name, 'software_version': __version__})
+        self.bag_path = path
+        self.recordings += 1
+        self.program_ran = False
+        self.program_state = {}
+        self._flushed_at = 0
+        try:
+            self.writer.add_metadata(SESSION_METADATA, self._session_record(path.name, start_ns))
+            self.node_parameters = {}
+            self._start_parameter_queries()
+            self._subscribe_all()
+        except BaseException:
+            self.stop('failed to start')
+            raise
+        if p['flush_interval_s'] > 0:
+            self.flush_timer = self.create_timer(float(p['flush_interval_s']), self._flush)
+        self.status = f'recording to {path}'
+        self.get_logger().info(f'recording {len(self.channels)} topic(s) to {path}')
+        return path
+
+    def stop(self, reason: str = 'service') -> tuple[Path | None, int]:
+        """Close the bag (metadata.yaml written), unsubscribe; returns (bag directory, messages written)."""
+        with self._lock:
+            writer, self.writer = self.writer, None
+            if writer is None:
+                return self.last_bag, self.last_count
+            for timer_name in ('stop_timer', 'flush_timer'):
+                timer = getattr(self, timer_name)
+                if timer is not None:
+                    self.destroy_timer(timer)
+                    setattr(self, timer_name, None)
+            self._unsubscribe_all()
+            self._stop_parameter_queries()
+            count = writer.message_count
+            try:
+                writer.add_metadata(SESSION_END_METADATA, {
+                    'stop_reason': reason, 'end_time_ns': str(self.get_clock().now().nanoseconds),
+                    'message_count': count, 'topics': {c.topic: c.count for c in self.channels.values() if c.count},
+                    'program_state': self.program_state})
+            except BagError:
+                pass
+            writer.close()
+            self.last_bag, self.last_count = self.bag_path, count
+            self.bag_path = None
+            self.status = f'idle; last bag {self.last_bag} ({count} messages, {reason})'
+            self.get_logger().info(f'closed {self.last_bag}: {count} messages ({reason})')
+            return self.last_bag, count
+
+    def close(self) -> None:
+        """Called by ``run`` on shutdown (Ctrl-C, SIGTERM, end of spin): close the bag, writing metadata.yaml.
+
+        SIGINT/SIGTERM are ignored meanwhile (when called from the main thread), so that a second Ctrl-C cannot cut
+        the closing short.
+        """
+        previous = {}
+        if threading.current_thread() is threading.main_thread():
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                try:
+                    previous[sig] = signal.signal(sig, signal.SIG_IGN)
+                except (ValueError, OSError):
+                    pass
+        try:
+            self.stop('shutdown')
+        finally:
+            for sig, handler in previous.items():
+                try:
+                    signal.signal(sig, handler if handler is not None else signal.SIG_DFL)
+                except (ValueError, OSError, TypeError):
+                    pass
+
+    # --- session description ---
+    def _session_record(self, session: str, start_ns: int) -> dict[str, str]:
+        values = {k: plain(v) for k, v in self.params.values.items()}
+        geometry = self.built['geometry']
+        files, sections, problems = read_params_files(self.params_files)
+        for problem in problems:
+            self.get_logger().warning(f'parameter file not recorded: {problem}')
+        program, source = None, 'none'
+        if self.built.get('program') is not None:
+            program, source = self.built['program'], 'parameters'
+        else:
+            for name, section in sections.items():
+                if name in OWN_SECTIONS or 'segments.kind' not in section:
+                    continue
+                try:
+                    program = LoadProgram.from_params({k: v for k, v in section.items() if k in PROGRAM_KEYS})
+                    source = f'parameter file section {name}'
+                except ValueError as exc:
+                    self.get_logger().warning(f'program in parameter file section {name} is invalid: {exc}')
+                break
+        program_record = None
+        if program is not None:
+            program_record = {**program.to_params(), 'duration_s': program.duration_s, 'source': source}
+        sensors = {name: section for name, section in sections.items()
+                   if name not in OWN_SECTIONS and 'segments.kind' not in section}
+        rig = {'geometry': {k: values[k] for k in values if k.startswith('geometry.')},
+               'l0': geometry.l0, 'k': geometry.k}
+        return session_metadata(
+            rig=rig, program=program_record, start_time_ns=start_ns, notes=values['notes'], session=session,
+            sensors=sensors, config_files=files,
+            recorder={k: values[k] for k in RECORDING_KEYS} | {'node': self.get_fully_qualified_name()},
+            ros_distro=os.environ.get('ROS_DISTRO', 'jazzy'), host=socket.gethostname())
+
+    # --- subscriptions ---
+    def _subscribe_all(self) -> None:
+        self.channels = {}
+        self.pending = []
+        for name in self.params['topics']:
+            topic = self.resolve_topic_name(name)
+            if topic in self.channels or topic in self.pending:
+                continue
+            graph = publisher_types(self, topic)
+            msg_type = next(iter(graph)) if len(graph) == 1 else topics.RIG_TOPICS.get(topic)
+            if msg_type is None:
+                self.pending.append(topic)  # subscribed once a publisher shows its type
+                continue
+            self._subscribe(topic, msg_type)
+        if self.params['stop_on_program_done'] and topics.PROGRAM_STATE not in self.channels:
+            self.state_subscription = self.create_subscription(
+                String, topics.PROGRAM_STATE, lambda m: self._on_program_state(m.data), contract_qos(
+                    topics.PROGRAM_STATE))
+
+    def _subscribe(self, topic: str, msg_type: str) -> None:
+        qos = contract_qos(topic)
+        if qos is None:
+            qos = adapted_qos([i.qos_profile for i in self.get_publishers_info_by_topic(topic)])
+        try:
+            channel = _Channel(topic, msg_type, qos)
+        except ValueError as exc:
+            self.get_logger().error(f'cannot record {topic}: {exc}')
+            self.errors += 1
+            return
+        channel.subscription = self.create_subscription(
+            channel.msg_class, topic, lambda data, c=channel: self._on_message(c, data), qos, raw=True,
+            event_callbacks=_NO_EVENTS)
+        self.channels[topic] = channel
+
+    def _unsubscribe_all(self) -> None:
+        for channel in self.channels.values():
+            if channel.subscription is not None:
+                self.destroy_subscription(channel.subscription)
+                channel.subscription = None
+        if self.state_subscription is not None:
+            self.destroy_subscription(self.state_subscription)
+            self.state_subscription = None
+
+    # --- the nodes' own parameters ---
+    def _start_parameter_queries(self) -> None:
+        self._param_queries = {}
+        for name in self.params['record_node_parameters']:
+            if not name:
+                continue
+            node = '/' + name.strip('/')
+            self._param_queries[node] = {
+                'list': self.create_client(ListParameters, f'{node}/list_parameters'),
+                'get': self.create_client(GetParameters, f'{node}/get_parameters'),
+                'future': None, 'names': None}
+
+    def _stop_parameter_queries(self) -> None:
+        for query in self._param_queries.values():
+            for key in ('list', 'get'):
+                self.destroy_client(query[key])
+        self._param_queries = {}
+
+    def _query_parameters(self) -> None:
+        """Advance the parameter reads: list the names once the node's service is up, then get the values."""
+        for node, q in list(self._param_queries.items()):
+            future = q['future']
+            if future is None:
+                if q['list'].service_is_ready():
+                    request = ListParameters.Request(depth=ListParameters.Request.DEPTH_RECURSIVE)
+                    q['future'] = q['list'].call_async(request)
+                continue
+            if not future.done():
+                continue
+            result = future.result()
+            if result is None:
+                q['future'] = None  # failed: ask again
+                continue
+            if q['names'] is None:
+                q['names'] = sorted(result.result.names)
+                q['future'] = q['get'].call_async(GetParameters.Request(names=q['names']))
+                continue
+            self.node_parameters[node.lstrip('/')] = {
+                n: plain(parameter_value_to_python(v)) for n, v in zip(q['names'], result.values)}
+            for key in ('list', 'get'):
+                self.destroy_client(q[key])
+            del self._param_queries[node]
+            if self.writer is not None:
+                self.writer.add_metadata(NODE_PARAMETERS_METADATA, self.node_parameters)
+
+    def _discover(self) -> None:
+        """Subscribe topics outside the contract once they appear; follow a publisher whose type differs from the
+        contract's (e.g. a real LVDT driver publishing std_msgs/Float64) while nothing was received yet; read the
+        rig nodes' parameters."""
+        if self.writer is None:
+            return
+        self._query_parameters()
+        for topic in list(self.pending):
+            graph = publisher_types(self, topic)
+            if len(graph) == 1:
+                self.pending.remove(topic)
+                self._subscribe(topic, next(iter(graph)))
+        for topic, channel in list(self.channels.items()):
+            if channel.count or channel.added:
+                continue
+            graph = publisher_types(self, topic)
+            if len(graph) == 1 and channel.msg_type not in graph:
+                self.get_logger().warning(f'{topic} is published as {next(iter(graph))}, not {channel.msg_type}: '
+                                          'recording that type')
+                self.destroy_subscription(channel.subscription)
+                del self.channels[topic]
+                self._subscribe(topic, next(iter(graph)))
+
+    # --- messages ---
+    def _on_message(self, channel: _Channel, data: bytes) -> None:
+        writer = self.writer
+        if writer is None:
+            return
+        now_ns = self.get_clock().now().nanoseconds
+        if not channel.added:
+            offered = offered_profiles(self, channel.topic, fallback=channel.qos)
+            writer.add_topic(channel.topic, channel.msg_type, dump_qos_profiles(offered))
+            channel.added = True
+        stamp = header_stamp_ns(data) if channel.stamped else None
+        try:
+            writer.write(channel.topic, data, now_ns, stamp if stamp is not None else now_ns)
+        except (BagError, OSError) as exc:
+            self.errors += 1
+            self.get_logger().error(f'writing {channel.topic} failed: {exc}', throttle_duration_sec=2.0)
+            return
+        channel.count += 1
+        if channel.topic == topics.PROGRAM_STATE:
+            try:
+                self._on_program_state(deserialize_message(data, String).data)
+            except Exception as exc:  # a malformed state must not stop the recording
+                self.get_logger().warning(f'unreadable program state: {exc}', throttle_duration_sec=5.0)
+
+    def _on_program_state(self, text: str) -> None:
+        try:
+            state = json.loads(text)
+        except ValueError:
+            return
+        if not isinstance(state, dict):
+            return
+        self.program_state = state
+        if state.get('state') in ('running', 'paused'):
+            self.program_ran = True
+        elif (state.get('state') == 'done' and self.program_ran and self.params['stop_on_program_done']
+              and self.writer is not None and self.stop_timer is None):
+            delay = float(self.params['stop_delay_s'])
+            self.get_logger().info(f'program {state.get("program")!r} done: closing the bag in {delay:g} s')
+            self.stop_timer = self.create_timer(max(delay, 1e-3), self._stop_after_program)
+
+    def _stop_after_program(self) -> None:
+        self.stop('program done')
+        if self.params['exit_on_program_done']:
+            self.exit_requested = True  # the spin loop of main() ends (in-process executors are not disturbed)
+
+    def _flush(self) -> None:
+        writer = self.writer
+        if writer is not None and writer.message_count != self._flushed_at:
+            writer.flush()
+            self._flushed_at = writer.message_count
+
+    # --- services ---
+    def _srv_start(self, request, response):
+        if self.writer is not None:
+            response.success, response.message = False, f'already recording to {self.bag_path}'
+            return response
+        try:
+            path = self.start()
+        except (BagError, OSError, ValueError) as exc:
+            response.success, response.message = False, f'cannot start recording: {exc}'
+            return response
+        response.success, response.message = True, f'recording to {path}'
+        return response
+
+    def _srv_stop(self, request, response):
+        if self.writer is None:
+            response.success = False
+            response.message = 'not recording' + (f' (last bag {self.last_bag})' if self.last_bag else '')
+            return response
+        path, count = self.stop('service')
+        response.success, response.message = True, f'closed {path}: {count} messages'
+        return response
+
+    def _report(self):
+        writer = self.writer
+        pairs = [('bag', str(self.bag_path or self.last_bag or '')), ('recordings', str(self.recordings)),
+                 ('errors', str(self.errors))]
+        if writer is not None:
+            pairs.append(('messages', str(writer.message_count)))
+            pairs += [(c.topic, str(c.count)) for c in self.channels.values()]
+            if self.pending:
+                pairs.append(('waiting_for', ', '.join(self.pending)))
+        level = ERROR if self.errors else OK
+        return level, self.status, pairs
+
+
+def main(args=None) -> int:
+    files = params_files_from_args(args)
+
+    def session_recorder() -> SessionRecorder:
+        return SessionRecorder(params_files=files)
+
+    return run(session_recorder, args, executor=lambda node: node.params['executor'])
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
