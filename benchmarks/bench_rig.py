@@ -28,6 +28,14 @@ os.environ.setdefault('AMENT_PREFIX_PATH', sys.prefix)
 import numpy as np  # noqa: E402
 
 
+def final_counters(log: str) -> dict:
+    """The FINAL_COUNTERS line a node prints at exit (crane_stiffness.nodes.common.final_counters)."""
+    for line in reversed(log.splitlines()):
+        if line.startswith('FINAL_COUNTERS '):
+            return json.loads(line.split(' ', 2)[2])
+    return {}
+
+
 def run_rate(rate: float, seconds: float, env: dict, share: Path, log_dir: Path) -> dict:
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
@@ -45,31 +53,28 @@ def run_rate(rate: float, seconds: float, env: dict, share: Path, log_dir: Path)
     counts = {topics.LOAD_CELL_WRENCH: 0, topics.LVDT_DISPLACEMENT: 0}
     sensor_lag: list[float] = []
     est_lag: list[float] = []
-    diags: dict[str, dict[str, str]] = {}
-
-    def now() -> float:
-        return time.time()
+    est_input: dict[str, str] = {}
 
     def on_sensor(topic):
         def cb(msg):
             counts[topic] += 1
-            if topic == topics.LVDT_DISPLACEMENT:
-                sensor_lag.append(now() - stamp_to_s(msg.header.stamp))
+            sensor_lag.append(time.time() - stamp_to_s(msg.header.stamp))
         return cb
 
     def on_values(msg: Float64MultiArray):
-        stamp = max(msg.data[i_stamp], msg.data[len(fields) + i_stamp])
+        stamp = np.nanmax([msg.data[i_stamp], msg.data[len(fields) + i_stamp]])
         if np.isfinite(stamp) and stamp > 0:
-            est_lag.append(now() - stamp)
+            est_lag.append(time.time() - stamp)
 
-    def on_diag(msg: DiagnosticArray):
+    def on_estimate(msg: DiagnosticArray):
         for st in msg.status:
-            diags[st.name] = {kv.key: kv.value for kv in st.values}
+            if st.name.endswith(': input'):
+                est_input.update({kv.key: kv.value for kv in st.values})
 
     node.create_subscription(WrenchStamped, topics.LOAD_CELL_WRENCH, on_sensor(topics.LOAD_CELL_WRENCH), SENSOR_QOS)
     node.create_subscription(PointStamped, topics.LVDT_DISPLACEMENT, on_sensor(topics.LVDT_DISPLACEMENT), SENSOR_QOS)
     node.create_subscription(Float64MultiArray, topics.STIFFNESS_VALUES, on_values, RELIABLE_QOS)
-    node.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, on_diag, 100)
+    node.create_subscription(DiagnosticArray, topics.STIFFNESS_ESTIMATE, on_estimate, RELIABLE_QOS)
     cfg = lambda n: ['--params-file', str(share / n)]  # noqa: E731
     rate_args = ['-p', f'sample_rate_hz:={rate}']
     repeats = int(np.ceil(seconds / 21.0))
@@ -79,8 +84,9 @@ def run_rate(rate: float, seconds: float, env: dict, share: Path, log_dir: Path)
         procs.start('lvdt', 'crane_stiffness', 'lvdt', ['--ros-args', *cfg('sensors.yaml'), *rate_args])
         procs.start('stiffness_estimator', 'crane_stiffness', 'stiffness_estimator',
                     ['--ros-args', *cfg('crane_lab.yaml'), *cfg('sensors.yaml')])
-        deadline = time.monotonic() + 60
+        deadline = time.monotonic() + 90
         while not (node.count_subscribers(topics.LOAD_CELL_WRENCH) >= 2
+                   and node.count_subscribers(topics.LVDT_DISPLACEMENT) >= 2
                    and node.count_publishers(topics.STIFFNESS_VALUES) >= 1):
             procs.check_alive()
             if time.monotonic() > deadline:
@@ -89,35 +95,32 @@ def run_rate(rate: float, seconds: float, env: dict, share: Path, log_dir: Path)
         procs.start('load_program', 'crane_stiffness', 'load_program',
                     ['--ros-args', *cfg('program_side_force.yaml'), '-p', f'repeats:={repeats}',
                      '-p', 'start_delay_s:=0.5'])
-        # Measure a window of `seconds` once data flows; counts are compared over the whole run.
-        t_end = time.monotonic() + seconds + 1.0
+        t_end = time.monotonic() + seconds
         while time.monotonic() < t_end:
             rclpy.spin_once(node, timeout_sec=0.01)
-        procs.stop_nodes = None
-        # Stop the sensors first, then let the last messages and diagnostics arrive.
-        for name in ('load_program', 'load_cell', 'lvdt'):
-            pass
+        procs.check_alive()
+        # Stop the program and the sensors; everything they sent must still arrive.
+        procs.stop(names=('load_program', 'load_cell', 'lvdt'))
         t_drain = time.monotonic() + 3.0
         while time.monotonic() < t_drain:
             rclpy.spin_once(node, timeout_sec=0.01)
-        procs.check_alive(allow_exit=('load_program',))
+        sent = {topics.LOAD_CELL_WRENCH: final_counters(procs.log('load_cell')).get('published'),
+                topics.LVDT_DISPLACEMENT: final_counters(procs.log('lvdt')).get('published')}
     node.destroy_node()
     rclpy.shutdown()
 
-    def counter(name_part: str, key: str) -> int | None:
-        for name, values in diags.items():
-            if name_part in name and key in values:
-                return int(float(values[key]))
-        return None
-
     def pct(xs, q):
-        return float(np.percentile(np.asarray(xs) * 1e3, q)) if xs else float('nan')
+        return round(float(np.percentile(np.asarray(xs) * 1e3, q)), 3) if xs else float('nan')
 
+    received = {topics.LOAD_CELL_WRENCH: int(est_input.get('force_received', -1)),
+                topics.LVDT_DISPLACEMENT: int(est_input.get('displacement_received', -1))}
     return {
-        'rate_hz': rate, 'seconds': seconds, 'diagnostics': diags,
-        'observer_received': counts,
+        'rate_hz': rate, 'seconds': seconds,
+        'topics': {t: {'sent': sent[t], 'estimator_received': received[t], 'observer_received': counts[t],
+                       'lost_by_estimator': None if sent[t] is None else sent[t] - received[t]} for t in sent},
         'estimate_lag_ms': {'p50': pct(est_lag, 50), 'p99': pct(est_lag, 99), 'n': len(est_lag)},
-        'sensor_transport_lag_ms': {'p50': pct(sensor_lag, 50), 'p99': pct(sensor_lag, 99), 'n': len(sensor_lag)},
+        'baseline_sensor_transport_lag_ms': {'p50': pct(sensor_lag, 50), 'p99': pct(sensor_lag, 99),
+                                             'n': len(sensor_lag)},
     }
 
 
@@ -134,7 +137,13 @@ def main(argv=None) -> int:
     share = ws / 'install' / 'crane_stiffness' / 'share' / 'crane_stiffness' / 'config'
     results = [run_rate(r, args.seconds, env, share, ws / 'logs') for r in args.rates]
     for res in results:
-        print(json.dumps({k: v for k, v in res.items() if k != 'diagnostics'}, indent=1))
+        print(f"--- {res['rate_hz']:.0f} Hz load cell and LVDT, {res['seconds']:.0f} s")
+        for topic, c in res['topics'].items():
+            print(f"  {topic:22s} sent {c['sent']}, estimator received {c['estimator_received']} "
+                  f"(lost {c['lost_by_estimator']}), observer received {c['observer_received']}")
+        e, b = res['estimate_lag_ms'], res['baseline_sensor_transport_lag_ms']
+        print(f"  estimate lag from sample stamp: p50 {e['p50']} ms, p99 {e['p99']} ms (n = {e['n']}); "
+              f"baseline raw sensor lag p50 {b['p50']} ms, p99 {b['p99']} ms")
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=1))
     return 0

@@ -107,8 +107,10 @@ def start_rig(procs: Processes, share: Path, program: str, session: str, bags: P
         and observer.count_subscribers(topics.WRENCH_COMMAND) >= 2 + (readers - 1),
         ready_timeout_s, 'the rig nodes to connect', procs)
     print(f'  connected in {time.monotonic() - t0:.1f} s; starting load_program', flush=True)
+    n_cmd = observer.count_subscribers(topics.WRENCH_COMMAND)
     procs.start('load_program', PACKAGE, 'load_program',
-                ['--ros-args', *p('program'), '-p', 'start_delay_s:=1.0', '-p', 'exit_on_done:=true'])
+                ['--ros-args', *p('program'), '-p', 'start_delay_s:=0.5', '-p', f'min_subscribers:={n_cmd}',
+                 '-p', 'exit_on_done:=true'])
     return prog
 
 

@@ -104,9 +104,11 @@ class Processes:
             if p.poll() is not None and not (name in allow_exit and p.returncode == 0):
                 raise RosRunError(f'node {name} exited with status {p.returncode}:\n{self.log(name)[-2000:]}')
 
-    def stop(self, timeout_s: float = 10.0) -> dict[str, int]:
+    def stop(self, timeout_s: float = 10.0, names: Sequence[str] | None = None) -> dict[str, int]:
+        """Stop the named nodes (default all); returns every node's exit status so far (None if running)."""
+        chosen = [p for n, p in self.procs.items() if names is None or n in names]
         for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGKILL):
-            running = [p for p in self.procs.values() if p.poll() is None]
+            running = [p for p in chosen if p.poll() is None]
             for p in running:
                 try:
                     os.killpg(p.pid, sig)

@@ -68,7 +68,6 @@ def test_crane_model_solves_commands_and_reports_no_equilibrium(rclpy_context):
     assert probe.axis[-1] == pytest.approx(paper_coefficients(g).side, rel=1e-9)
     assert spin_until(ex, lambda: probe.node.count_publishers(topics.WRENCH_COMMAND) >= 1
                       and model.count_publishers(topics.WRENCH_COMMAND) >= 1, 5)
-    n0 = len(probe.poses)
     probe.command(fy=3.0)
     assert spin_until(ex, lambda: probe.poses and probe.poses[-1].pose.position.y > 1e-6
                       and probe.wires and probe.wires[-1].effort[2] > probe.wires[-1].effort[3] + 1.0, 10)

@@ -13,7 +13,7 @@ import rclpy
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
-from rclpy.executors import ExternalShutdownException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy)
 
@@ -132,25 +132,42 @@ class Diagnostics:
 OK, WARN, ERROR = 0, 1, 2
 
 
-def run(node_factory: Callable[[], Node], args: Sequence[str] | None = None) -> int:
-    """The ``main`` of every node: init, build, spin until Ctrl-C or SIGTERM, clean up.
+def make_executor(kind: str, context: Any):
+    """'events': rclpy's EventsExecutor (in C++, about a quarter of the CPU per message of the standard one, which
+    matters at 1 kHz on two cores); 'single': SingleThreadedExecutor."""
+    if kind == 'events':
+        try:
+            from rclpy.experimental import EventsExecutor
+            return EventsExecutor(context=context)
+        except ImportError:  # an rclpy without it
+            pass
+    return SingleThreadedExecutor(context=context)
 
-    A node that cannot start (bad parameter) exits with status 2 and the reason on stderr.
+
+def run(node_factory: Callable[[], Node], args: Sequence[str] | None = None,
+        executor: str | Callable[[Node], str] = 'events') -> int:
+    """The ``main`` of every node: init, build, spin until Ctrl-C, SIGTERM or ``node.exit_requested``, clean up.
+
+    A node that cannot start (bad parameter) exits with status 2 and the reason on stderr. ``close()`` (if the node
+    has one) runs on every exit, then the node's final counters are printed.
     """
+    name = getattr(node_factory, '__name__', 'node')
     rclpy.init(args=args)
     try:
         node = node_factory()
     except (ValueError, TypeError) as exc:
-        print(f'[{getattr(node_factory, "__name__", "node")}] cannot start: {exc}', file=sys.stderr)
+        print(f'[{name}] cannot start: {exc}', file=sys.stderr)
         rclpy.try_shutdown()
         return 2
     except Exception as exc:  # e.g. rclpy's InvalidParameterTypeException from a params file
-        print(f'[{getattr(node_factory, "__name__", "node")}] cannot start: {type(exc).__name__}: {exc}',
-              file=sys.stderr)
+        print(f'[{name}] cannot start: {type(exc).__name__}: {exc}', file=sys.stderr)
         rclpy.try_shutdown()
         return 2
+    ex = make_executor(executor(node) if callable(executor) else executor, node.context)
+    ex.add_node(node)
     try:
-        rclpy.spin(node)
+        while rclpy.ok(context=node.context) and not getattr(node, 'exit_requested', False):
+            ex.spin_once(timeout_sec=0.1)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
@@ -158,6 +175,7 @@ def run(node_factory: Callable[[], Node], args: Sequence[str] | None = None) -> 
         if close is not None:
             close()
         final_counters(node)
+        ex.remove_node(node)
         node.destroy_node()
         rclpy.try_shutdown()
     return 0

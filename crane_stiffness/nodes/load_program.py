@@ -30,7 +30,9 @@ PARAMS = (
     ParamSpec('segments.target', [0.0], 'segment end values [N or N·m]'),
     ParamSpec('segments.duration', [1.0], 'segment durations [s]'),
     ParamSpec('autostart', True, 'start the program by itself (after start_delay_s)'),
-    ParamSpec('start_delay_s', 1.0, 'wait before an automatic start, so subscribers can connect [s]'),
+    ParamSpec('start_delay_s', 1.0, 'wait before an automatic start [s]'),
+    ParamSpec('min_subscribers', 1, 'an automatic start also waits until /crane/wrench_command has this many '
+              'subscribers, so no command is lost while DDS discovery runs [-]'),
     ParamSpec('exit_on_done', False, 'shut the node down when the program has finished'),
 )
 PROGRAM_KEYS = ('name', 'rate_hz', 'repeats', 'segments.kind', 'segments.axis', 'segments.target',
@@ -56,12 +58,15 @@ class LoadProgramNode(Node):
         self.create_service(Trigger, '~/pause', self._srv_pause)
         self.create_service(Trigger, '~/stop', self._srv_stop)
         self.diagnostics = Diagnostics(self, self._report)
+        self._autostart = None
         if self.params['autostart']:
-            self._autostart = self.create_timer(max(self.params['start_delay_s'], 1e-3), self._auto)
+            self._not_before = self._now() + self.params['start_delay_s']
+            self._autostart = self.create_timer(0.05, self._auto)
 
     # --- parameters ---
     def _validate(self, values: dict[str, Any]) -> LoadProgram:
         check(values['start_delay_s'] >= 0, 'start_delay_s', values['start_delay_s'], 'must be >= 0')
+        check(values['min_subscribers'] >= 0, 'min_subscribers', values['min_subscribers'], 'must be >= 0')
         if self.state in ('running', 'paused') and self.program is not None:
             if any(values[k] != self.params[k] for k in PROGRAM_KEYS):
                 raise ValueError('the program cannot change while it runs: call ~/stop first')
@@ -85,6 +90,12 @@ class LoadProgramNode(Node):
         return self.elapsed
 
     def _auto(self) -> None:
+        if self._now() < self._not_before:
+            return
+        if self.count_subscribers(topics.WRENCH_COMMAND) < self.params['min_subscribers']:
+            self.get_logger().info(f'waiting for {self.params["min_subscribers"]} subscriber(s) of '
+                                   f'{topics.WRENCH_COMMAND}', throttle_duration_sec=5.0)
+            return
         self.destroy_timer(self._autostart)
         if self.state == 'idle':
             self._start()
@@ -122,7 +133,7 @@ class LoadProgramNode(Node):
                 self.create_timer(1.0, self._exit)
 
     def _exit(self) -> None:
-        raise SystemExit(0)
+        self.exit_requested = True  # common.run ends the spin and exits with status 0
 
     def _publish_state(self) -> None:
         st = self.last
