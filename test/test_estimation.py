@@ -269,3 +269,12 @@ def test_estimator_skips_non_finite_and_from_params() -> None:
         StiffnessEstimator.from_params({'hysteresis': 0.1, 'windw': 10})
     with pytest.raises(ParameterError, match='forgetting'):
         StiffnessEstimator(0.1, forgetting=1.5)
+
+
+def test_t_quantile_matches_scipy_beyond_the_exact_range() -> None:
+    from scipy import stats
+
+    from crane_stiffness.estimation.fit import t_quantile
+    for dof in (1, 2, 30, 1000, 1001, 2500, 30_000, 10 ** 6):
+        for conf in (0.9, 0.95, 0.99):
+            assert t_quantile(dof, conf) == pytest.approx(stats.t.ppf(0.5 + conf / 2, dof), rel=1e-9, abs=0)

@@ -43,10 +43,28 @@ FloatOrArray = Union[float, NDArray[np.float64]]
 _ZERO_SPREAD_REL = 1e-12
 
 
-@lru_cache(maxsize=1024)
 def t_quantile(dof: int, confidence: float = 0.95) -> float:
-    """Two-sided Student-t quantile for ``dof`` degrees of freedom, e.g. 4.303 for dof=2 at 95 %. Cached."""
+    """Two-sided Student-t quantile for ``dof`` degrees of freedom, e.g. 4.303 for dof=2 at 95 %.
+
+    Exact (scipy, cached) up to 1000 degrees of freedom; above that the Cornish–Fisher expansion in 1/dof, whose
+    error there is below 1e-9: a live fit over a growing window would otherwise call scipy once per new pair.
+    """
+    if dof <= 1000:
+        return _t_quantile_exact(int(dof), confidence)
+    z = _normal_quantile(confidence)
+    v = float(dof)
+    return z + (z ** 3 + z) / (4 * v) + (5 * z ** 5 + 16 * z ** 3 + 3 * z) / (96 * v * v) \
+        + (3 * z ** 7 + 19 * z ** 5 + 17 * z ** 3 - 15 * z) / (384 * v ** 3)
+
+
+@lru_cache(maxsize=2048)
+def _t_quantile_exact(dof: int, confidence: float) -> float:
     return float(stats.t.ppf(0.5 + confidence / 2.0, dof))
+
+
+@lru_cache(maxsize=16)
+def _normal_quantile(confidence: float) -> float:
+    return float(stats.norm.ppf(0.5 + confidence / 2.0))
 
 
 @dataclass(frozen=True, slots=True)

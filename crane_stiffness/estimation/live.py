@@ -1,0 +1,442 @@
+"""The live stiffness estimate of the rig: input checks, stamp pairing, branch fits, outputs. Pure Python, no ROS.
+
+:class:`LiveStiffness` is everything the ``stiffness_estimator`` node does between decoding a message and
+publishing one:
+
+1. Input checks. A force sample is the selected component (``force_axis``, N or N·m) of a wrench; a displacement
+   sample is a reading in m (or rad), or a voltage converted by ``x = displacement_gain · V + displacement_offset``.
+   Dropped and counted (:class:`InputCounters`): a NaN/Inf anywhere in the sample, a zero (or negative) stamp, a
+   selected force above ``max_abs_force`` or a displacement above ``max_abs_displacement`` in magnitude.
+2. Pairing by header stamp with :class:`~crane_stiffness.estimation.sync.ApproximateTimeSync` (``slop_s``,
+   ``max_age_s``, ``expected_period_s``, ``dropout_factor``): out-of-order and stale samples are counted there and
+   never fitted; dropouts are counted.
+3. Fitting each pair with :class:`~crane_stiffness.estimation.fit.StiffnessEstimator` (windowed least squares and
+   RLS with forgetting, loading and unloading branches apart). The branch follows the commanded load (the
+   ``force_axis`` component of the wrench command in effect at the pair's stamp) once a command has been seen and
+   ``branch_source`` is ``'auto'``, else the measured force.
+4. Outputs. :meth:`LiveStiffness.values` is the cheap O(1) numeric estimate (rows ``BRANCHES`` × ``VALUE_FIELDS``)
+   for publishing after every batch of new pairs; its ``nonlinearity`` is the value of the last
+   :meth:`LiveStiffness.refresh`, which sorts the windows and is meant for a slow timer together with
+   :meth:`LiveStiffness.report` (per-branch text for people, with a level).
+
+The model prediction (``set_prediction``) gives ``relative_error = (estimate − prediction) / prediction``.
+"""
+from __future__ import annotations
+
+import bisect
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, fields
+from typing import Any
+
+from crane_stiffness.estimation.errors import ParameterError
+from crane_stiffness.estimation.fit import BRANCHES, LOADING, Branch, Estimate, StiffnessEstimator, \
+    WindowedLeastSquares, t_quantile
+from crane_stiffness.estimation.sync import DISPLACEMENT, FORCE, ApproximateTimeSync, Pair, SyncCounters
+
+#: Load axes, in the order of a wrench [fx, fy, fz, mx, my, mz].
+AXES = ('fx', 'fy', 'fz', 'mx', 'my', 'mz')
+BRANCH_SOURCES = ('auto', 'force')
+
+#: Columns of one row of :meth:`LiveStiffness.values` (one row per branch, in the order of ``BRANCHES``).
+#: Units: stiffness, ci95_*, stderr, rls_* and prediction in N/m (N·m/rad for a moment axis); intercept and
+#: residual_rms in N (N·m); r2, nonlinearity, relative_error without unit; n in pairs; current is 1.0 for the branch
+#: of the newest pair, else 0.0; sample_stamp is the newest paired sample's stamp, s (the same in both rows).
+VALUE_FIELDS = ('stiffness', 'intercept', 'stderr', 'ci95_low', 'ci95_high', 'r2', 'n', 'residual_rms',
+                'nonlinearity', 'rls_stiffness', 'rls_stderr', 'prediction', 'relative_error', 'current',
+                'sample_stamp')
+
+# Student-t quantiles computed ahead when a fit starts (t_quantile's cache holds 1024).
+_T_CACHE = 1000
+
+# Diagnostic levels (the values of diagnostic_msgs/DiagnosticStatus).
+OK, WARN, ERROR, STALE = 0, 1, 2, 3
+
+
+def _number(values: Mapping[str, Any], name: str, *, minimum: float | None = None, above: float | None = None,
+            maximum: float | None = None) -> float:
+    value = values[name]
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ParameterError(name, value, 'must be a finite number')
+    if minimum is not None and value < minimum:
+        raise ParameterError(name, value, f'must be >= {minimum}')
+    if above is not None and value <= above:
+        raise ParameterError(name, value, f'must be > {above}')
+    if maximum is not None and value > maximum:
+        raise ParameterError(name, value, f'must be <= {maximum}')
+    return float(value)
+
+
+@dataclass(frozen=True)
+class LiveSettings:
+    """Settings of :class:`LiveStiffness` (the node's parameters of the same names; units in the field comments)."""
+
+    force_axis: str = 'fy'               # wrench component fitted: fx fy fz [N] or mx my mz [N·m]
+    slop_s: float = 0.0006               # largest stamp difference of a pair [s]
+    max_age_s: float = 0.1               # staleness limit and pairing latency bound [s]
+    expected_period_s: float = 0.0       # sample period of both streams [s]; 0 = estimated online
+    dropout_factor: float = 3.0          # a gap above this many periods is a dropout [-]; 0 = not detected
+    window: int = 500                    # pairs per windowed fit [pairs]
+    forgetting: float = 0.999            # RLS forgetting factor λ in (0, 1] [-]
+    hysteresis: float = 0.2              # branch dead band [N or N·m]
+    branch_source: str = 'auto'          # 'auto': commanded load once seen, else force; 'force': measured force
+    max_abs_force: float = 1.0e4         # larger |force| samples are absurd and dropped [N or N·m]
+    max_abs_displacement: float = 0.1    # larger |displacement| samples are absurd and dropped [m or rad]
+    displacement_gain: float = 1.0       # volts channel: metres per volt [m/V]
+    displacement_offset: float = 0.0     # volts channel: metres at 0 V [m]
+    nonlinearity_warn: float = 0.2       # WARN when a branch's nonlinearity exceeds this [-]
+
+    @classmethod
+    def from_params(cls, values: Mapping[str, Any]) -> LiveSettings:
+        """Validated settings from a parameter dict (keys not named here are ignored, missing ones default).
+
+        Raises:
+            ParameterError (a ValueError) naming the parameter and its value.
+        """
+        v = {f.name: values.get(f.name, f.default) for f in fields(cls)}
+        if v['force_axis'] not in AXES:
+            raise ParameterError('force_axis', v['force_axis'], f'must be one of {", ".join(AXES)}')
+        if v['branch_source'] not in BRANCH_SOURCES:
+            raise ParameterError('branch_source', v['branch_source'], f'must be one of {", ".join(BRANCH_SOURCES)}')
+        window = v['window']
+        if isinstance(window, bool) or not isinstance(window, int) or window < 3:
+            raise ParameterError('window', window, 'must be an integer >= 3 (pairs)')
+        slop = _number(v, 'slop_s', minimum=0.0)
+        max_age = _number(v, 'max_age_s', above=0.0)
+        if max_age < slop:
+            raise ParameterError('max_age_s', max_age, f'must be >= slop_s = {slop} (seconds)')
+        period = _number(v, 'expected_period_s', minimum=0.0)
+        dropout = _number(v, 'dropout_factor', minimum=0.0)
+        if 0.0 < dropout <= 1.0:
+            raise ParameterError('dropout_factor', dropout, 'must be > 1, or 0 to disable dropout detection')
+        forgetting = _number(v, 'forgetting', above=0.0, maximum=1.0)
+        gain = _number(v, 'displacement_gain')
+        if gain == 0.0:
+            raise ParameterError('displacement_gain', gain, 'must be non-zero (m/V)')
+        return cls(force_axis=v['force_axis'], slop_s=slop, max_age_s=max_age, expected_period_s=period,
+                   dropout_factor=dropout, window=window, forgetting=forgetting,
+                   hysteresis=_number(v, 'hysteresis', minimum=0.0), branch_source=v['branch_source'],
+                   max_abs_force=_number(v, 'max_abs_force', above=0.0),
+                   max_abs_displacement=_number(v, 'max_abs_displacement', above=0.0),
+                   displacement_gain=gain, displacement_offset=_number(v, 'displacement_offset'),
+                   nonlinearity_warn=_number(v, 'nonlinearity_warn', above=0.0))
+
+    @property
+    def axis_index(self) -> int:
+        return AXES.index(self.force_axis)
+
+    @property
+    def stiffness_unit(self) -> str:
+        return 'N/m' if self.force_axis.startswith('f') else 'N·m/rad'
+
+    def make_sync(self) -> ApproximateTimeSync:
+        return ApproximateTimeSync(self.slop_s, max_age=self.max_age_s,
+                                   expected_period=self.expected_period_s or None,
+                                   dropout_factor=self.dropout_factor or None)
+
+    def make_estimator(self) -> StiffnessEstimator:
+        return StiffnessEstimator(self.hysteresis, self.window, self.forgetting, nonlinearity=False)
+
+    def fit_key(self) -> tuple:
+        """The settings whose change restarts pairing and fitting (the others are thresholds)."""
+        return (self.force_axis, self.slop_s, self.max_age_s, self.expected_period_s, self.dropout_factor,
+                self.window, self.forgetting, self.hysteresis, self.branch_source, self.displacement_gain,
+                self.displacement_offset)
+
+
+@dataclass
+class InputCounters:
+    """Counters of the inputs, before pairing (the pairing's own counters are in :class:`SyncCounters`)."""
+
+    force_received: int = 0
+    displacement_received: int = 0
+    command_received: int = 0
+    dropped_non_finite: int = 0
+    dropped_absurd: int = 0
+    dropped_zero_stamp: int = 0
+    command_dropped: int = 0
+    pairs_fitted: int = 0
+    fit_restarts: int = 0
+
+    @property
+    def dropped(self) -> int:
+        return self.dropped_non_finite + self.dropped_absurd + self.dropped_zero_stamp
+
+
+@dataclass(frozen=True)
+class BranchReport:
+    """One branch's status for people: level (OK/WARN/STALE), a one-line message and key/value strings."""
+
+    branch: Branch
+    level: int
+    message: str
+    values: list[tuple[str, str]] = field(default_factory=list)
+
+
+class _CommandHold:
+    """The commanded load in effect at a stamp: updates kept in stamp order, read at increasing stamps."""
+
+    def __init__(self) -> None:
+        self._stamps: list[float] = []
+        self._loads: list[float] = []
+
+    def __bool__(self) -> bool:
+        return bool(self._stamps)
+
+    MAX_HELD = 10_000  # commands kept while no pair reads them (100 s at 100 Hz)
+
+    def add(self, stamp_s: float, load: float) -> None:
+        i = bisect.bisect_right(self._stamps, stamp_s)
+        self._stamps.insert(i, stamp_s)
+        self._loads.insert(i, load)
+        if len(self._stamps) > self.MAX_HELD:
+            del self._stamps[0]
+            del self._loads[0]
+
+    def at(self, stamp_s: float) -> float | None:
+        """Load of the newest update stamped at or before ``stamp_s``; None before the first one."""
+        i = bisect.bisect_right(self._stamps, stamp_s) - 1
+        if i < 0:
+            return None
+        if i > 0:  # reads come at increasing stamps: drop what can no longer be in effect
+            del self._stamps[:i]
+            del self._loads[:i]
+        return self._loads[0]
+
+
+def _fmt(value: float) -> str:
+    return f'{value:.6g}'
+
+
+class LiveStiffness:
+    """Streams in, live stiffness estimate out (see the module docstring)."""
+
+    def __init__(self, settings: LiveSettings | None = None) -> None:
+        self.counters = InputCounters()
+        self.prediction = math.nan
+        self._settings = settings or LiveSettings()
+        self._build()
+
+    def _build(self) -> None:
+        s = self._settings
+        self._axis = s.axis_index
+        self._sync = s.make_sync()
+        self._estimator = s.make_estimator()
+        self._slow = {b: WindowedLeastSquares(s.window) for b in BRANCHES}
+        self._commands = _CommandHold()
+        for dof in range(1, min(s.window - 1, _T_CACHE)):  # fill scipy's t quantiles now, not one per pair later
+            t_quantile(dof)
+        self._last_report: dict[str, tuple[int, ...]] = {}  # input_report's previous problem counts per consumer
+        self._clear_outputs()
+
+    def _clear_outputs(self) -> None:
+        self._nonlinearity = {b: math.nan for b in BRANCHES}
+        self._rows: dict[Branch, list[float]] = {b: self._row(None) for b in BRANCHES}
+        self._dirty: set[Branch] = set()
+        self._current: Branch | None = None
+        self._newest_stamp = math.nan
+
+    @property
+    def settings(self) -> LiveSettings:
+        return self._settings
+
+    @property
+    def sync_counters(self) -> SyncCounters:
+        return self._sync.counters
+
+    def configure(self, settings: LiveSettings) -> bool:
+        """Take new settings; returns True if the change restarted pairing and fitting (counters are kept)."""
+        restart = settings.fit_key() != self._settings.fit_key()
+        self._settings = settings
+        if restart:
+            self.counters.fit_restarts += 1
+            self._build()
+        return restart
+
+    def reset(self) -> None:
+        """Clear the fits of both branches (pairing and counters go on)."""
+        self._estimator.reset()
+        for window in self._slow.values():
+            window.reset()
+        self._clear_outputs()
+        self.counters.fit_restarts += 1
+
+    # --- inputs ---
+    def set_prediction(self, value: float) -> bool:
+        """The model's predicted stiffness along the axis (N/m or N·m/rad); non-finite values are ignored."""
+        value = float(value)
+        if not math.isfinite(value):
+            return False
+        self.prediction = value
+        for b in BRANCHES:
+            self._dirty.add(b)
+        return True
+
+    def add_command(self, stamp_s: float, wrench: Sequence[float], arrival_s: float) -> bool:
+        """A wrench command [N, N·m]; a zero stamp counts from ``arrival_s``. Returns False if dropped (NaN/Inf)."""
+        self.counters.command_received += 1
+        load = float(wrench[self._axis])
+        if not (math.isfinite(load) and math.isfinite(stamp_s) and math.isfinite(arrival_s)):
+            self.counters.command_dropped += 1
+            return False
+        self._commands.add(stamp_s if stamp_s > 0.0 else arrival_s, load)
+        return True
+
+    def add_force(self, stamp_s: float, wrench: Sequence[float]) -> int:
+        """A wrench sample [N, N·m] stamped ``stamp_s``; returns the number of pairs it completed and fitted."""
+        self.counters.force_received += 1
+        c = self.counters
+        if not all(math.isfinite(v) for v in wrench) or not math.isfinite(stamp_s):
+            c.dropped_non_finite += 1
+            return 0
+        if stamp_s <= 0.0:
+            c.dropped_zero_stamp += 1
+            return 0
+        value = float(wrench[self._axis])
+        if abs(value) > self._settings.max_abs_force:
+            c.dropped_absurd += 1
+            return 0
+        return self._fit(self._sync.push(FORCE, stamp_s, value))
+
+    def add_displacement(self, stamp_s: float, value_m: float) -> int:
+        """A displacement sample, m (or rad); returns the number of pairs it completed and fitted."""
+        self.counters.displacement_received += 1
+        return self._displacement(stamp_s, float(value_m))
+
+    def add_volts(self, stamp_s: float, volts: float) -> int:
+        """A displacement sample in volts, converted with displacement_gain and displacement_offset."""
+        self.counters.displacement_received += 1
+        s = self._settings
+        return self._displacement(stamp_s, s.displacement_gain * float(volts) + s.displacement_offset)
+
+    def _displacement(self, stamp_s: float, value: float) -> int:
+        c = self.counters
+        if not (math.isfinite(value) and math.isfinite(stamp_s)):
+            c.dropped_non_finite += 1
+            return 0
+        if stamp_s <= 0.0:
+            c.dropped_zero_stamp += 1
+            return 0
+        if abs(value) > self._settings.max_abs_displacement:
+            c.dropped_absurd += 1
+            return 0
+        return self._fit(self._sync.push(DISPLACEMENT, stamp_s, value))
+
+    def _fit(self, pairs: list[Pair]) -> int:
+        fitted = 0
+        use_command = self._settings.branch_source == 'auto' and bool(self._commands)
+        for pair in pairs:
+            stamp = pair.stamp_s
+            load = self._commands.at(stamp) if use_command else None
+            branch = self._estimator.add(stamp, pair.force, pair.displacement, load)
+            if branch is None:
+                continue
+            self._slow[branch].add(pair.displacement, pair.force)
+            self._dirty.add(branch)
+            self._current = branch
+            self._newest_stamp = stamp
+            fitted += 1
+        self.counters.pairs_fitted += fitted
+        return fitted
+
+    # --- outputs ---
+    def _row(self, est: Estimate | None) -> list[float]:
+        nan = math.nan
+        pred = self.prediction
+        if est is None:
+            row = [nan] * len(VALUE_FIELDS)
+            row[VALUE_FIELDS.index('prediction')] = pred
+            return row
+        rel = (est.stiffness - pred) / pred if math.isfinite(pred) and pred != 0.0 else nan
+        return [est.stiffness, est.intercept, est.stderr, est.ci95_low, est.ci95_high, est.r2, float(est.n),
+                est.residual_rms, nan, est.rls_stiffness, est.rls_stderr, pred, rel, 0.0, nan]
+
+    def estimate(self, branch: Branch) -> Estimate | None:
+        """The cheap windowed estimate of ``branch`` (its nonlinearity is NaN; see :meth:`refresh`)."""
+        return self._estimator.estimate(branch)
+
+    def values(self) -> list[float]:
+        """Rows ``BRANCHES`` × ``VALUE_FIELDS``, row-major; O(1) (only branches with new pairs are recomputed)."""
+        i_nl = VALUE_FIELDS.index('nonlinearity')
+        self._update_rows()
+        out: list[float] = []
+        for branch in BRANCHES:
+            row = self._rows[branch]
+            row[i_nl] = self._nonlinearity[branch]
+            row[-2] = 1.0 if branch == self._current else 0.0
+            row[-1] = self._newest_stamp
+            out.extend(row)
+        return out
+
+    def _update_rows(self) -> None:
+        for branch in self._dirty:
+            self._rows[branch] = self._row(self._estimator.estimate(branch))
+        self._dirty.clear()
+
+    @property
+    def newest_stamp(self) -> float:
+        """Stamp of the newest fitted pair, s (NaN before the first)."""
+        return self._newest_stamp
+
+    def loading_stiffness(self) -> float:
+        """Windowed stiffness of the loading branch, N/m or N·m/rad (NaN while there is none)."""
+        self._update_rows()
+        return self._rows[LOADING][0]
+
+    def refresh(self) -> dict[Branch, float]:
+        """Recompute the nonlinearity indicator of each branch's window (sorts the window: call it slowly)."""
+        for branch in BRANCHES:
+            fit = self._slow[branch].result()
+            self._nonlinearity[branch] = math.nan if fit is None else float(fit.nonlinearity)
+        return dict(self._nonlinearity)
+
+    def report(self) -> list[BranchReport]:
+        """Per-branch status for people; call after :meth:`refresh` and :meth:`values`."""
+        self._update_rows()
+        s = self._settings
+        unit = s.stiffness_unit
+        names = ('stiffness', 'intercept', 'stderr', 'ci95_low', 'ci95_high', 'r2', 'n', 'nonlinearity',
+                 'rls_stiffness', 'prediction', 'relative_error')
+        out = []
+        for branch in BRANCHES:
+            row = dict(zip(VALUE_FIELDS, self._rows[branch]))
+            row['nonlinearity'] = nl = self._nonlinearity[branch]
+            pairs = [(k, _fmt(row[k])) for k in names]
+            if math.isnan(row['stiffness']):
+                level, message = STALE, 'no estimate yet (needs 3 pairs with spread in displacement)'
+                pairs = [(k, 'nan') for k in names]
+                pairs[names.index('prediction')] = ('prediction', _fmt(self.prediction))
+            else:
+                message = (f'k = {row["stiffness"]:.6g} {unit} (95 %: {row["ci95_low"]:.6g} .. '
+                           f'{row["ci95_high"]:.6g}), n = {int(row["n"])}')
+                level = OK
+                if nl > s.nonlinearity_warn:
+                    level = WARN
+                    message = f'nonlinear (slack wire?): nonlinearity {nl:.3g} > {s.nonlinearity_warn:g}; ' + message
+            pairs += [('unit', unit), ('axis', s.force_axis), ('current', str(branch == self._current).lower())]
+            out.append(BranchReport(branch, level, message, pairs))
+        return out
+
+    def input_report(self, consumer: str = '') -> tuple[int, str, list[tuple[str, str]]]:
+        """Input health: (level, message, key/values); WARN if samples were dropped, out of order, stale or lost
+        in a dropout since this ``consumer``'s previous call."""
+        c = self.counters
+        sc = self._sync.counters
+        problems = {
+            'dropped': c.dropped,
+            'out_of_order': sc.total('out_of_order'),
+            'stale': sc.total('stale'),
+            'dropouts': sc.total('dropouts'),
+        }
+        snapshot = tuple(problems.values())
+        previous = self._last_report.get(consumer, (0,) * len(snapshot))
+        self._last_report[consumer] = snapshot
+        new = {k: now - before for (k, now), before in zip(problems.items(), previous) if now > before}
+        pairs = [(f.name, str(getattr(c, f.name))) for f in fields(c)]
+        pairs += [('pairs', str(sc.pairs))]
+        for stream, counters in ((FORCE, sc.force), (DISPLACEMENT, sc.displacement)):
+            pairs += [(f'{stream}.{f.name}', str(getattr(counters, f.name))) for f in fields(counters)]
+        pairs += [('newest_pair_stamp', _fmt(self._newest_stamp))]
+        if new:
+            return WARN, 'since last report: ' + ', '.join(f'{v} {k}' for k, v in new.items()), pairs
+        return OK, f'{sc.pairs} pairs, {c.pairs_fitted} fitted', pairs

@@ -1,0 +1,158 @@
+"""load_cell: a simulated six-axis force/torque sensor (a thin adapter around sim.sensors.LoadCellModel).
+
+Subscribes /crane/wrench_command (WrenchStamped, reliable) = the wrench the actuator applies, held from its header
+stamp on. Publishes /load_cell/wrench (WrenchStamped [N, N·m], sensor QoS, frame ``frame_id``) sampled at
+``sample_rate_hz`` with noise, bias, drift, cross-talk, quantization and overload saturation; a timer at
+``publish_rate_hz`` publishes the samples taken since its last tick, each stamped with its own sample instant on the
+grid k/sample_rate_hz of the node clock (like a DAQ delivering buffers). Service ~/tare (std_srvs/Trigger) zeroes
+the sensor on the mean of ``tare_samples`` readings at the current load; the reply states the offsets. Overload is
+reported on /diagnostics (WARN).
+"""
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from geometry_msgs.msg import WrenchStamped
+from rclpy.node import Node
+from std_srvs.srv import Trigger
+
+from crane_stiffness import topics
+from crane_stiffness.config import ParamSpec
+from crane_stiffness.nodes.common import (OK, RELIABLE_QOS, SENSOR_QOS, WARN, Counters, Diagnostics, Params, check,
+                                          finite, positive, run)
+from crane_stiffness.sim.sampling import NS_PER_S, SampleClock, StampedHold
+from crane_stiffness.sim.sensors import LoadCellModel
+
+AXES = ('fx', 'fy', 'fz', 'mx', 'my', 'mz')
+IDENTITY_6X6 = [1.0 if i == j else 0.0 for i in range(6) for j in range(6)]
+
+PARAMS = (
+    ParamSpec('sample_rate_hz', 1000.0, 'sample rate; stamps are 1/sample_rate_hz apart on a grid of the node '
+              'clock [Hz]'),
+    ParamSpec('publish_rate_hz', 200.0, 'rate of the timer that publishes the samples taken since its last tick; '
+              'smaller bursts keep the latency of a consumer low [Hz]'),
+    ParamSpec('frame_id', 'load_cell', 'header.frame_id of the published wrench; axes aligned with crane_base [-]'),
+    ParamSpec('noise_std', [0.01, 0.01, 0.01, 0.0005, 0.0005, 0.0005],
+              'white-noise standard deviation per axis fx fy fz mx my mz [N, N, N, N·m, N·m, N·m]'),
+    ParamSpec('bias', [0.05, -0.03, 0.08, 0.001, -0.001, 0.0005],
+              'constant offset per axis before a tare [N, N, N, N·m, N·m, N·m]'),
+    ParamSpec('drift_per_s', [0.0] * 6, 'linear drift of the offset per axis [N/s, N/s, N/s, N·m/s, N·m/s, N·m/s]'),
+    ParamSpec('crosstalk', IDENTITY_6X6, '6x6 cross-talk matrix C, 36 numbers row-major: reading_i = '
+              'sum_j C_ij w_j [-]'),
+    ParamSpec('resolution', [0.002, 0.002, 0.002, 0.0001, 0.0001, 0.0001],
+              'quantization step per axis, 0 = none [N, N, N, N·m, N·m, N·m]'),
+    ParamSpec('full_scale', [40.0, 40.0, 120.0, 2.0, 2.0, 2.0],
+              'overload limit per axis; readings saturate at +-full_scale [N, N, N, N·m, N·m, N·m]'),
+    ParamSpec('tare_samples', 100, 'readings averaged by the ~/tare service [samples]'),
+    ParamSpec('seed', -1, 'seed of the noise generator, -1 = random [-]'),
+)
+MODEL_KEYS = ('noise_std', 'bias', 'drift_per_s', 'crosstalk', 'resolution', 'full_scale')
+
+
+def _validate(values: dict[str, Any]) -> LoadCellModel:
+    positive(values, 'sample_rate_hz', 'publish_rate_hz')
+    check(isinstance(values['frame_id'], str) and values['frame_id'] != '', 'frame_id', values['frame_id'],
+          'must be a non-empty string')
+    check(values['tare_samples'] >= 1, 'tare_samples', values['tare_samples'], 'must be >= 1')
+    check(values['seed'] >= -1, 'seed', values['seed'], 'must be -1 (random) or a seed >= 0')
+    SampleClock(values['sample_rate_hz'])  # raises for a rate it cannot represent
+    seed = None if values['seed'] < 0 else values['seed']
+    return LoadCellModel.from_params({**{k: values[k] for k in MODEL_KEYS}, 'seed': seed})  # names a bad field
+
+
+class LoadCell(Node):
+    """Holds the applied wrench; each timer tick measures and publishes the samples due since the last one."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__('load_cell', **kwargs)
+        self.counters = Counters()
+        self.saturated = np.zeros(6, dtype=np.int64)    # saturated samples per axis, since start
+        self._saturated_reported = np.zeros(6, dtype=np.int64)
+        self.applied = StampedHold(6, initial=np.zeros(6))
+        self.model: LoadCellModel | None = None
+        self.clock: SampleClock | None = None
+        self.timer = None
+        self.settings: dict[str, Any] = {}
+        self.t0_ns = self.get_clock().now().nanoseconds  # drift time origin
+        self.pub = self.create_publisher(WrenchStamped, topics.LOAD_CELL_WRENCH, SENSOR_QOS)
+        self.params = Params(self, PARAMS, _validate, self._apply)
+        self.create_subscription(WrenchStamped, topics.WRENCH_COMMAND, self._on_command, RELIABLE_QOS)
+        self.create_service(Trigger, '~/tare', self._srv_tare)
+        self.diagnostics = Diagnostics(self, self._report)
+
+    def _apply(self, model: LoadCellModel, values: dict[str, Any]) -> None:
+        if self.model is not None and self.model.offset.any():
+            model.tare(self.model.offset)  # keep the tare across a parameter change
+        self.model = model
+        if self.clock is None or values['sample_rate_hz'] != self.settings.get('sample_rate_hz'):
+            self.clock = SampleClock(values['sample_rate_hz'], start_after_ns=None if self.clock is None
+                                     else self.clock.last_ns)
+        if self.timer is None or values['publish_rate_hz'] != self.settings.get('publish_rate_hz'):
+            if self.timer is not None:
+                self.destroy_timer(self.timer)
+            self.timer = self.create_timer(1.0 / values['publish_rate_hz'], self._tick)
+        self.settings = values
+
+    def _on_command(self, msg: WrenchStamped) -> None:
+        self.counters.received += 1
+        f, m = msg.wrench.force, msg.wrench.torque
+        wrench = (f.x, f.y, f.z, m.x, m.y, m.z)
+        if not finite(wrench):
+            self.counters.dropped_non_finite += 1
+            return
+        stamp_ns = msg.header.stamp.sec * NS_PER_S + msg.header.stamp.nanosec
+        self.applied.update(wrench, stamp_ns, self.get_clock().now().nanoseconds)
+
+    def _tick(self) -> None:
+        times = self.clock.due(self.get_clock().now().nanoseconds)
+        if times.size == 0:
+            return
+        true_wrench, _ = self.applied.read(times)
+        readings, saturated = self.model.measure(true_wrench, (times - self.t0_ns) * 1e-9)
+        if saturated.any():
+            self.saturated += saturated.sum(axis=0)
+            self.get_logger().warning(
+                f'overload: {", ".join(a for a, s in zip(AXES, saturated.any(axis=0)) if s)} saturated at '
+                f'full scale {self.settings["full_scale"]}', throttle_duration_sec=2.0)
+        frame = self.settings['frame_id']
+        for t_ns, r in zip(times.tolist(), readings.tolist()):
+            msg = WrenchStamped()
+            msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(t_ns, NS_PER_S)
+            msg.header.frame_id = frame
+            f, m = msg.wrench.force, msg.wrench.torque
+            f.x, f.y, f.z, m.x, m.y, m.z = r
+            self.pub.publish(msg)
+        self.counters.published += times.size
+
+    def _srv_tare(self, request, response):
+        n = self.params['tare_samples']
+        now_ns = self.get_clock().now().nanoseconds
+        load = self.applied.latest
+        readings, _ = self.model.measure(np.tile(load, (n, 1)), np.full(n, (now_ns - self.t0_ns) * 1e-9))
+        offset = self.model.tare(readings)
+        response.success = True
+        response.message = (f'tared on {n} samples: offset [fx fy fz] = {[round(v, 6) for v in offset[:3].tolist()]} '
+                            f'N, [mx my mz] = {[round(v, 7) for v in offset[3:].tolist()]} N·m')
+        self.get_logger().info(response.message)
+        return response
+
+    def _report(self):
+        new = self.saturated - self._saturated_reported
+        self._saturated_reported = self.saturated.copy()
+        pairs = self.counters.as_pairs() + [
+            ('skipped_samples', str(self.clock.skipped)),
+            ('offset', str([round(v, 7) for v in self.model.offset.tolist()])),
+        ] + [(f'saturated_{a}', str(int(n))) for a, n in zip(AXES, self.saturated)]
+        if new.any():
+            axes = ', '.join(f'{a} ({int(n)} samples)' for a, n in zip(AXES, new) if n)
+            return WARN, f'overload: {axes} saturated at full scale since the last report', pairs
+        return OK, f'{self.counters.published} samples published', pairs
+
+
+def main(args=None) -> int:
+    return run(LoadCell, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

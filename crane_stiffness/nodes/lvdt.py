@@ -1,0 +1,169 @@
+"""lvdt: a simulated LVDT touching the platform (a thin adapter around sim.sensors.LvdtModel).
+
+Subscribes /crane/platform_pose (PoseStamped, frame crane_base), held from its header stamp on. Publishes
+/lvdt/displacement (PointStamped, sensor QoS, frame ``frame_id``): point.x = the reading [m] along ``axis`` of the
+contact point ``contact_point`` (body frame) relative to the zero, with noise, resolution and a stroke
+``range_m`` outside which the reading saturates (throttled warning, WARN on /diagnostics). Samples at
+``sample_rate_hz`` on the grid k/sample_rate_hz of the node clock, published in bursts at ``publish_rate_hz``.
+Nothing is published before the first pose. Service ~/zero (std_srvs/Trigger) zeroes at the current pose;
+``zero_on_first_pose`` zeroes at the first pose received (the loaded rest pose).
+"""
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from geometry_msgs.msg import PointStamped, PoseStamped
+from rclpy.node import Node
+from std_srvs.srv import Trigger
+
+from crane_stiffness import topics
+from crane_stiffness.config import ParamSpec
+from crane_stiffness.model.rotation import quaternion_to_matrix
+from crane_stiffness.nodes.common import (OK, RELIABLE_QOS, SENSOR_QOS, WARN, Counters, Diagnostics, Params, check,
+                                          finite, positive, run)
+from crane_stiffness.sim.sampling import NS_PER_S, SampleClock, StampedHold
+from crane_stiffness.sim.sensors import LvdtModel
+
+PARAMS = (
+    ParamSpec('sample_rate_hz', 1000.0, 'sample rate; stamps are 1/sample_rate_hz apart on a grid of the node '
+              'clock [Hz]'),
+    ParamSpec('publish_rate_hz', 200.0, 'rate of the timer that publishes the samples taken since its last tick; '
+              'smaller bursts keep the latency of a consumer low [Hz]'),
+    ParamSpec('frame_id', 'lvdt', 'header.frame_id of the published reading [-]'),
+    ParamSpec('axis', [0.0, 1.0, 0.0], 'measuring direction in crane_base (normalised; default along y) [-]'),
+    ParamSpec('contact_point', [0.0, 0.0, 0.0], 'contact point on the platform, body frame (default: its centre) '
+              '[m]'),
+    ParamSpec('noise_std', 2.0e-7, 'white-noise standard deviation of the reading [m]'),
+    ParamSpec('resolution', 1.0e-7, 'quantization step of the reading, 0 = none [m]'),
+    ParamSpec('range_m', [-2.5e-3, 2.5e-3], 'stroke [min, max] relative to the zero; the reading saturates '
+              'outside [m]'),
+    ParamSpec('zero_on_first_pose', True, 'zero at the first pose received, so the reading is the displacement '
+              'from the loaded rest pose [-]'),
+    ParamSpec('seed', -1, 'seed of the noise generator, -1 = random [-]'),
+)
+MODEL_KEYS = ('axis', 'contact_point', 'noise_std', 'resolution', 'range_m')
+
+
+def _validate(values: dict[str, Any]) -> LvdtModel:
+    positive(values, 'sample_rate_hz', 'publish_rate_hz')
+    check(isinstance(values['frame_id'], str) and values['frame_id'] != '', 'frame_id', values['frame_id'],
+          'must be a non-empty string')
+    check(values['seed'] >= -1, 'seed', values['seed'], 'must be -1 (random) or a seed >= 0')
+    SampleClock(values['sample_rate_hz'])  # raises for a rate it cannot represent
+    seed = None if values['seed'] < 0 else values['seed']
+    return LvdtModel.from_params({**{k: values[k] for k in MODEL_KEYS}, 'seed': seed})  # names a bad field
+
+
+def _pose_vector(msg: PoseStamped) -> np.ndarray | None:
+    """[u (3), Q row-major (9)] of a pose message, or None for NaN/Inf or a zero quaternion."""
+    p, o = msg.pose.position, msg.pose.orientation
+    values = (p.x, p.y, p.z, o.x, o.y, o.z, o.w)
+    if not finite(values) or math.hypot(o.x, o.y, o.z, o.w) < 1e-9:
+        return None
+    return np.concatenate([values[:3], quaternion_to_matrix(np.array(values[3:])).ravel()])
+
+
+class Lvdt(Node):
+    """Holds the platform pose; each timer tick measures and publishes the samples due since the last one."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__('lvdt', **kwargs)
+        self.counters = Counters()
+        self.out_of_range = 0       # saturated samples since start
+        self._out_of_range_reported = 0
+        self.zero_pose: np.ndarray | None = None  # [u, Q] of the pose the sensor was zeroed at
+        self.pose = StampedHold(12)
+        self.model: LvdtModel | None = None
+        self.clock: SampleClock | None = None
+        self.timer = None
+        self.settings: dict[str, Any] = {}
+        self.pub = self.create_publisher(PointStamped, topics.LVDT_DISPLACEMENT, SENSOR_QOS)
+        self.params = Params(self, PARAMS, _validate, self._apply)
+        self.create_subscription(PoseStamped, topics.PLATFORM_POSE, self._on_pose, RELIABLE_QOS)
+        self.create_service(Trigger, '~/zero', self._srv_zero)
+        self.diagnostics = Diagnostics(self, self._report)
+
+    def _apply(self, model: LvdtModel, values: dict[str, Any]) -> None:
+        self.model = model
+        if self.zero_pose is not None:
+            self._zero(self.zero_pose)  # the new sensor set-up keeps the zero
+        if self.clock is None or values['sample_rate_hz'] != self.settings.get('sample_rate_hz'):
+            self.clock = SampleClock(values['sample_rate_hz'], start_after_ns=None if self.clock is None
+                                     else self.clock.last_ns)
+        if self.timer is None or values['publish_rate_hz'] != self.settings.get('publish_rate_hz'):
+            if self.timer is not None:
+                self.destroy_timer(self.timer)
+            self.timer = self.create_timer(1.0 / values['publish_rate_hz'], self._tick)
+        self.settings = values
+
+    def _zero(self, pose: np.ndarray) -> None:
+        self.model.zero(pose[:3], pose[3:].reshape(3, 3))
+        self.zero_pose = pose
+
+    def _on_pose(self, msg: PoseStamped) -> None:
+        self.counters.received += 1
+        pose = _pose_vector(msg)
+        if pose is None:
+            self.counters.dropped_non_finite += 1
+            return
+        first = not self.pose.has_value
+        stamp_ns = msg.header.stamp.sec * NS_PER_S + msg.header.stamp.nanosec
+        self.pose.update(pose, stamp_ns, self.get_clock().now().nanoseconds)
+        if first and self.settings['zero_on_first_pose']:
+            self._zero(pose)
+            self.get_logger().info(f'zeroed at the first pose: u = {pose[:3].tolist()} m')
+
+    def _tick(self) -> None:
+        times = self.clock.due(self.get_clock().now().nanoseconds)
+        if times.size == 0:
+            return
+        poses, valid = self.pose.read(times)
+        if not valid.any():
+            return
+        times, poses = times[valid], poses[valid]
+        readings, in_range = self.model.measure(poses[:, :3], poses[:, 3:].reshape(-1, 3, 3))
+        if not in_range.all():
+            self.out_of_range += int((~in_range).sum())
+            self.get_logger().warning(f'displacement outside the stroke {self.model.range_m} m: reading saturated',
+                                      throttle_duration_sec=2.0)
+        frame = self.settings['frame_id']
+        for t_ns, x in zip(times.tolist(), readings.tolist()):
+            msg = PointStamped()
+            msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(t_ns, NS_PER_S)
+            msg.header.frame_id = frame
+            msg.point.x = x
+            self.pub.publish(msg)
+        self.counters.published += times.size
+
+    def _srv_zero(self, request, response):
+        pose = self.pose.latest
+        if pose is None:
+            response.success, response.message = False, f'no pose received yet on {topics.PLATFORM_POSE}'
+            return response
+        self._zero(pose)
+        response.success = True
+        response.message = f'zeroed at u = {[round(v, 9) for v in pose[:3].tolist()]} m'
+        self.get_logger().info(response.message)
+        return response
+
+    def _report(self):
+        new = self.out_of_range - self._out_of_range_reported
+        self._out_of_range_reported = self.out_of_range
+        pairs = self.counters.as_pairs() + [('out_of_range', str(self.out_of_range)),
+                                            ('skipped_samples', str(self.clock.skipped)),
+                                            ('zeroed', str(self.zero_pose is not None).lower())]
+        if new:
+            return WARN, f'out of range: {new} samples saturated at the stroke {self.model.range_m} m', pairs
+        if not self.pose.has_value:
+            return OK, f'waiting for {topics.PLATFORM_POSE}', pairs
+        return OK, f'{self.counters.published} samples published', pairs
+
+
+def main(args=None) -> int:
+    return run(Lvdt, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

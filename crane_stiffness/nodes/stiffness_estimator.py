@@ -1,0 +1,248 @@
+"""stiffness_estimator: live stiffness from load and displacement (a thin adapter around estimation.live).
+
+Subscribes (sensor QoS: best effort, so reliable and best-effort publishers both match)
+  /load_cell/wrench (WrenchStamped; the ``force_axis`` component is fitted, N or N·m),
+  /lvdt/displacement (PointStamped, point.x in m) or, with ``displacement_type: float64``, a std_msgs/Float64
+  channel in volts converted by ``displacement_gain`` [m/V] and ``displacement_offset`` [m] and stamped with its
+  reception time;
+and (reliable) /crane/wrench_command for the load branch, (transient local) /crane/predicted_axis_stiffness.
+Pairs samples by header stamp, fits loading and unloading branches apart (windowed LS + RLS) and publishes
+  /stiffness/estimate_values (Float64MultiArray, rows loading, unloading × columns VALUE_FIELDS) and
+  /stiffness/stiffness (Float64, loading branch) after every message that changed it, and
+  /stiffness/estimate (DiagnosticArray: one status per branch plus an input status with the counters) and again
+  /stiffness/stiffness at ``diagnostics_rate_hz``.
+Service ~/reset (std_srvs/Trigger) clears the fits. Plug in a real driver by remapping the input topics.
+"""
+from __future__ import annotations
+
+from typing import Any
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import PointStamped, WrenchStamped
+from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
+from rclpy.node import Node
+from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension
+from std_srvs.srv import Trigger
+
+from crane_stiffness import topics
+from crane_stiffness.config import ParamSpec
+from crane_stiffness.estimation.fit import BRANCHES
+from crane_stiffness.estimation.live import VALUE_FIELDS, LiveSettings, LiveStiffness
+from crane_stiffness.nodes.common import (LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS, Diagnostics, Params, check,
+                                          positive, run, stamp_to_s)
+
+__all__ = ['VALUE_FIELDS', 'PARAMS', 'StiffnessEstimatorNode', 'main']
+
+DISPLACEMENT_TYPES = ('point_stamped', 'float64')
+_D = LiveSettings()
+# rclpy's SingleThreadedExecutor adds QoS-event handlers to every wait set for each publisher and subscription with
+# default callbacks (a few µs each per wait). The high-rate endpoints below go without: a best-effort volatile
+# subscription matches every publisher, and a reliable volatile publisher every volatile subscriber.
+_NO_EVENTS_SUB = SubscriptionEventCallbacks(use_default_callbacks=False)
+_NO_EVENTS_PUB = PublisherEventCallbacks(use_default_callbacks=False)
+#: Most queued sensor messages handled by one callback (see ``_take_queued``).
+MAX_BATCH = 400
+
+
+def _take_queued(subscription) -> tuple[Any, dict] | None:
+    """The next (message, message info) already queued on ``subscription``, or None.
+
+    rclpy's executors take one message per subscription per wait (~0.2 ms for the SingleThreadedExecutor here): a DAQ
+    burst of N samples on two topics would cost up to 2N waits. Taking what is queued within one callback (the call
+    the SingleThreadedExecutor's own ``_take_subscription`` makes) handles a burst for the price of one wait; at 1 kHz
+    it roughly halves the node's CPU and keeps the newest sample's latency at 2-3 ms.
+    """
+    with subscription.handle:
+        return subscription.handle.take_message(subscription.msg_type, subscription.raw)
+
+PARAMS = (
+    ParamSpec('force_axis', _D.force_axis, 'wrench component fitted as the load: fx fy fz [N] or mx my mz [N·m]'),
+    ParamSpec('displacement_type', 'point_stamped', "displacement message: 'point_stamped' (PointStamped, point.x "
+              "in m, header stamp) or 'float64' (Float64 in V, stamped on arrival) [-]"),
+    ParamSpec('displacement_gain', _D.displacement_gain, 'float64 channel: metres per volt [m/V]'),
+    ParamSpec('displacement_offset', _D.displacement_offset, 'float64 channel: metres at 0 V [m]'),
+    ParamSpec('slop_s', _D.slop_s, 'largest stamp difference of a force/displacement pair [s]'),
+    ParamSpec('max_age_s', _D.max_age_s, 'samples older than the other stream by more than this are stale; also '
+              'the longest a sample waits for its partner [s]'),
+    ParamSpec('expected_period_s', _D.expected_period_s, 'sample period of both streams, 0 = estimated online [s]'),
+    ParamSpec('dropout_factor', _D.dropout_factor, 'a stamp gap above this many periods counts as a dropout, '
+              '0 = not detected [-]'),
+    ParamSpec('window', _D.window, 'pairs per windowed least-squares fit; span several load levels [pairs]'),
+    ParamSpec('forgetting', _D.forgetting, 'RLS forgetting factor in (0, 1], memory ~ 1/(1 - forgetting) [-]'),
+    ParamSpec('hysteresis', _D.hysteresis, 'dead band of the loading/unloading switch; above the force noise when '
+              'the branch follows the measured force [N or N·m]'),
+    ParamSpec('branch_source', _D.branch_source, "'auto': branch from /crane/wrench_command once a command is "
+              "seen, else from the measured force; 'force': always from the measured force [-]"),
+    ParamSpec('max_abs_force', _D.max_abs_force, 'force samples above this magnitude are absurd and dropped '
+              '[N or N·m]'),
+    ParamSpec('max_abs_displacement', _D.max_abs_displacement, 'displacement samples above this magnitude are '
+              'absurd and dropped [m or rad]'),
+    ParamSpec('nonlinearity_warn', _D.nonlinearity_warn, 'a branch whose nonlinearity (1 - k_upper/k_lower) '
+              'exceeds this is reported WARN: slack wires [-]'),
+    ParamSpec('diagnostics_rate_hz', 5.0, 'rate of /stiffness/estimate and of the nonlinearity update [Hz]'),
+)
+
+
+def _validate(values: dict[str, Any]) -> LiveSettings:
+    check(values['displacement_type'] in DISPLACEMENT_TYPES, 'displacement_type', values['displacement_type'],
+          f'must be one of {", ".join(DISPLACEMENT_TYPES)}')
+    positive(values, 'diagnostics_rate_hz')
+    settings = LiveSettings.from_params(values)  # ValueError naming the parameter
+    settings.make_sync()
+    settings.make_estimator()
+    return settings
+
+
+class StiffnessEstimatorNode(Node):
+    """Feeds decoded messages to LiveStiffness and publishes what it returns."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__('stiffness_estimator', **kwargs)
+        self.core = LiveStiffness()
+        self.settings: dict[str, Any] = {}
+        self.sub_displacement = None
+        self.drained: list = []  # (subscription, handler) taken from in turn: command, force, displacement
+        self.timer = None
+        self.last_stiffness = float('nan')
+        self.pub_values = self.create_publisher(Float64MultiArray, topics.STIFFNESS_VALUES, RELIABLE_QOS,
+                                                event_callbacks=_NO_EVENTS_PUB)
+        self.pub_stiffness = self.create_publisher(Float64, topics.STIFFNESS, RELIABLE_QOS,
+                                                   event_callbacks=_NO_EVENTS_PUB)
+        self.pub_estimate = self.create_publisher(DiagnosticArray, topics.STIFFNESS_ESTIMATE, RELIABLE_QOS,
+                                                  event_callbacks=_NO_EVENTS_PUB)
+        n = len(VALUE_FIELDS)
+        self.layout_dims = [MultiArrayDimension(label='branch', size=len(BRANCHES), stride=len(BRANCHES) * n),
+                            MultiArrayDimension(label='field', size=n, stride=n)]
+        self.sub_command = self.create_subscription(WrenchStamped, topics.WRENCH_COMMAND, self._on_command,
+                                                    RELIABLE_QOS)
+        self.sub_force = self.create_subscription(WrenchStamped, topics.LOAD_CELL_WRENCH,
+                                                  self._then_drain(self._on_force), SENSOR_QOS,
+                                                  event_callbacks=_NO_EVENTS_SUB)
+        self.params = Params(self, PARAMS, _validate, self._apply)  # subscribes the displacement
+        self.create_subscription(Float64, topics.PREDICTED_AXIS_STIFFNESS, self._on_prediction, LATCHED_QOS)
+        self.create_service(Trigger, '~/reset', self._srv_reset)
+        self.diagnostics = Diagnostics(self, lambda: self.core.input_report('diagnostics'))
+
+    @property
+    def counters(self):
+        """The input counters (what ``run`` prints at exit); the pairing's own are ``core.sync_counters``."""
+        return self.core.counters
+
+    def _apply(self, settings: LiveSettings, values: dict[str, Any]) -> None:
+        if self.core.configure(settings):
+            self.get_logger().info(f'fitting {settings.force_axis}: window {settings.window} pairs, slop '
+                                   f'{settings.slop_s} s, branch from {settings.branch_source}')
+        if values['displacement_type'] != self.settings.get('displacement_type'):
+            if self.sub_displacement is not None:
+                self.destroy_subscription(self.sub_displacement)
+            msg_type, handle = ((Float64, self._on_volts) if values['displacement_type'] == 'float64'
+                                else (PointStamped, self._on_point))
+            self.sub_displacement = self.create_subscription(msg_type, topics.LVDT_DISPLACEMENT,
+                                                             self._then_drain(handle), SENSOR_QOS,
+                                                             event_callbacks=_NO_EVENTS_SUB)
+            self.drained = [(self.sub_command, self._on_command), (self.sub_force, self._on_force),
+                            (self.sub_displacement, handle)]
+        if values['diagnostics_rate_hz'] != self.settings.get('diagnostics_rate_hz'):
+            if self.timer is not None:
+                self.destroy_timer(self.timer)
+            self.timer = self.create_timer(1.0 / values['diagnostics_rate_hz'], self._publish_estimate)
+        self.settings = values
+
+    # --- inputs: a message and, when taken by _drain, its message info ---
+    def _on_force(self, msg: WrenchStamped, info: dict | None = None) -> None:
+        f, m = msg.wrench.force, msg.wrench.torque
+        if self.core.add_force(stamp_to_s(msg.header.stamp), (f.x, f.y, f.z, m.x, m.y, m.z)):
+            self._publish_values()
+
+    def _on_point(self, msg: PointStamped, info: dict | None = None) -> None:
+        if self.core.add_displacement(stamp_to_s(msg.header.stamp), msg.point.x):
+            self._publish_values()
+
+    def _on_volts(self, msg: Float64, info: dict | None = None) -> None:
+        if self.core.add_volts(self._arrival_s(info), msg.data):
+            self._publish_values()
+
+    def _on_command(self, msg: WrenchStamped, info: dict | None = None) -> None:
+        f, m = msg.wrench.force, msg.wrench.torque
+        self.core.add_command(stamp_to_s(msg.header.stamp), (f.x, f.y, f.z, m.x, m.y, m.z),
+                              self._arrival_s(info))
+
+    def _arrival_s(self, info: dict | None) -> float:
+        """When a message arrived, s: the middleware's reception stamp (system clock = the node clock) if known, else
+        the node clock's now (always under simulated time)."""
+        clock = self.get_clock()
+        received = (info or {}).get('received_timestamp') or 0
+        if received > 0 and not clock.ros_time_is_active:
+            return received * 1e-9
+        return clock.now().nanoseconds * 1e-9
+
+    def _then_drain(self, handle):
+        """A subscription callback: ``handle`` the message, then what is already queued (see ``_take_queued``).
+
+        Message-only on purpose: rclpy's EventsExecutor (Jazzy) fails on callbacks that take the message info.
+        """
+        def callback(msg) -> None:
+            handle(msg)
+            self._drain()
+        return callback
+
+    def _drain(self) -> None:
+        """Handle the queued messages: commands first (a pair's branch follows the command in effect at its stamp),
+        then force and displacement alternately (neither stream runs ahead of the other)."""
+        for _ in range(MAX_BATCH):
+            progress = False
+            for subscription, handle in self.drained:
+                taken = _take_queued(subscription)
+                if taken is not None:
+                    handle(*taken)
+                    progress = True
+            if not progress:
+                return
+
+    def _on_prediction(self, msg: Float64) -> None:
+        self.core.set_prediction(msg.data)
+
+    # --- outputs ---
+    def _publish_values(self) -> None:
+        msg = Float64MultiArray(data=self.core.values())
+        msg.layout.dim = self.layout_dims
+        self.pub_values.publish(msg)
+        k = self.core.loading_stiffness()
+        if k != self.last_stiffness and k == k:  # changed and not NaN
+            self.pub_stiffness.publish(Float64(data=k))
+        self.last_stiffness = k
+
+    def _publish_estimate(self) -> None:
+        stiffness = self.core.loading_stiffness()
+        if stiffness == stiffness:  # not NaN; also at this slow rate, for a late subscriber during a hold
+            self.pub_stiffness.publish(Float64(data=stiffness))
+        self.core.refresh()
+        name = self.get_fully_qualified_name()
+        msg = DiagnosticArray()
+        msg.header.stamp = self.get_clock().now().to_msg()
+        for r in self.core.report():
+            msg.status.append(DiagnosticStatus(level=bytes([r.level]), name=f'{name}: {r.branch}',
+                                               message=r.message, hardware_id=self.get_name(),
+                                               values=[KeyValue(key=k, value=v) for k, v in r.values]))
+        level, message, pairs = self.core.input_report('estimate')
+        msg.status.append(DiagnosticStatus(level=bytes([level]), name=f'{name}: input', message=message,
+                                           hardware_id=self.get_name(),
+                                           values=[KeyValue(key=k, value=v) for k, v in pairs]))
+        self.pub_estimate.publish(msg)
+
+    def _srv_reset(self, request, response):
+        fitted = self.core.counters.pairs_fitted
+        self.core.reset()
+        self._publish_values()
+        response.success = True
+        response.message = f'fits cleared ({fitted} pairs fitted so far)'
+        self.get_logger().info(response.message)
+        return response
+
+
+def main(args=None) -> int:
+    return run(StiffnessEstimatorNode, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

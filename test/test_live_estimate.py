@@ -1,0 +1,177 @@
+"""Tests of crane_stiffness.estimation.live: the stiffness_estimator node's logic without ROS."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from crane_stiffness.estimation.errors import ParameterError
+from crane_stiffness.estimation.fit import BranchTracker, fit_line
+from crane_stiffness.estimation.live import OK, STALE, VALUE_FIELDS, WARN, LiveSettings, LiveStiffness
+
+K = 2000.0      # N/m
+C = 0.1         # N
+PERIOD = 0.002  # s
+T0 = 1000.0     # s, a plausible header stamp
+
+
+def _triangle(n: int, peak: float = 4.0) -> np.ndarray:
+    half = n // 2
+    return np.concatenate([np.linspace(0.0, peak, half), np.linspace(peak, 0.0, n - half)])
+
+
+def _wrench(fy: float) -> tuple[float, ...]:
+    return (0.0, fy, 0.0, 0.0, 0.0, 0.0)
+
+
+def _row(values: list[float], branch: int) -> dict[str, float]:
+    n = len(VALUE_FIELDS)
+    return dict(zip(VALUE_FIELDS, values[branch * n:(branch + 1) * n]))
+
+
+def _feed(live: LiveStiffness, force: np.ndarray, x: np.ndarray, t0: float = T0, command: np.ndarray | None = None):
+    fitted = 0
+    for i, (f, d) in enumerate(zip(force, x)):
+        t = t0 + i * PERIOD
+        if command is not None:
+            live.add_command(t, _wrench(command[i]), t)
+        fitted += live.add_force(t, _wrench(f))
+        fitted += live.add_displacement(t, d)
+    return fitted
+
+
+def test_settings_validation_names_the_value() -> None:
+    assert LiveSettings.from_params({}) == LiveSettings()
+    for values, name in [({'force_axis': 'fq'}, 'force_axis'), ({'window': 2}, 'window'),
+                         ({'slop_s': -1.0}, 'slop_s'), ({'slop_s': 0.2, 'max_age_s': 0.1}, 'max_age_s'),
+                         ({'forgetting': 1.5}, 'forgetting'), ({'dropout_factor': 0.5}, 'dropout_factor'),
+                         ({'displacement_gain': 0.0}, 'displacement_gain'), ({'hysteresis': math.nan}, 'hysteresis'),
+                         ({'branch_source': 'psychic'}, 'branch_source'), ({'max_abs_force': 0.0}, 'max_abs_force')]:
+        with pytest.raises(ParameterError) as info:
+            LiveSettings.from_params(values)
+        assert info.value.field == name and repr(values[name]) in str(info.value)
+
+
+def test_branches_match_batch_fits_of_the_same_pairs() -> None:
+    rng = np.random.default_rng(5)
+    n = 400
+    command = _triangle(n)
+    force = command + rng.normal(0.0, 0.02, n)
+    x = (command - C) / K + rng.normal(0.0, 1e-7, n)
+    live = LiveStiffness(LiveSettings(window=1000, hysteresis=0.05))
+    fitted = _feed(live, force, x, command=command)
+    assert fitted == n - 1 or fitted == n  # the newest pair may wait for its successor
+    values = live.values()
+    loading, unloading = _row(values, 0), _row(values, 1)
+    # The branch follows the (noise-free) command, with the dead band's lag after the peak.
+    tracker = BranchTracker(0.05)
+    up = np.array([tracker.update(c) == 'loading' for c in command])
+    assert n // 2 < up.sum() < n // 2 + 5
+    ref = fit_line(x[up], force[up])
+    assert loading['stiffness'] == pytest.approx(ref.stiffness, rel=1e-9)
+    assert loading['ci95_low'] < K < loading['ci95_high']
+    assert unloading['stiffness'] == pytest.approx(K, rel=0.02)
+    assert unloading['current'] == 1.0 and loading['current'] == 0.0
+    assert loading['sample_stamp'] == unloading['sample_stamp'] == pytest.approx(T0 + (fitted - 1) * PERIOD)
+    assert math.isnan(loading['nonlinearity'])  # only after refresh()
+    nl = live.refresh()
+    assert abs(nl['loading']) < 0.05
+    assert _row(live.values(), 0)['nonlinearity'] == nl['loading']
+    assert live.loading_stiffness() == loading['stiffness']
+    reports = live.report()
+    assert [r.level for r in reports] == [OK, OK]
+    assert 'N/m' in reports[0].message
+
+
+def test_prediction_gives_relative_error() -> None:
+    live = LiveStiffness()
+    assert math.isnan(_row(live.values(), 0)['relative_error'])
+    n = 200
+    f = np.linspace(0.0, 2.0, n)
+    _feed(live, f, f / K)
+    assert live.set_prediction(1600.0)
+    assert not live.set_prediction(math.inf)
+    row = _row(live.values(), 0)
+    assert row['prediction'] == 1600.0
+    assert row['relative_error'] == pytest.approx((K - 1600.0) / 1600.0, rel=1e-6)
+
+
+def test_bad_samples_are_dropped_and_counted_and_never_fitted() -> None:
+    live = LiveStiffness(LiveSettings(max_abs_force=100.0, max_abs_displacement=0.01))
+    assert live.add_force(T0, _wrench(math.nan)) == 0
+    assert live.add_force(T0, (math.inf, 1.0, 0.0, 0.0, 0.0, 0.0)) == 0  # NaN/Inf anywhere in the wrench
+    assert live.add_displacement(T0, math.inf) == 0
+    assert live.add_force(T0, _wrench(1e6)) == 0
+    assert live.add_displacement(T0, 5.0) == 0
+    assert live.add_force(0.0, _wrench(1.0)) == 0
+    c = live.counters
+    assert (c.dropped_non_finite, c.dropped_absurd, c.dropped_zero_stamp) == (3, 2, 1)
+    assert live.sync_counters.force.received == 0
+    level, message, pairs = live.input_report()
+    assert level == WARN and '6 dropped' in message
+    assert live.input_report()[0] == OK  # nothing new since
+
+
+def test_out_of_order_samples_are_counted_and_not_fitted() -> None:
+    live = LiveStiffness()
+    n = 100
+    f = np.linspace(0.0, 2.0, n)
+    _feed(live, f, f / K)
+    before = live.counters.pairs_fitted
+    # Late samples with wild values, stamped before what was already received.
+    for i in range(5):
+        live.add_force(T0 + i * PERIOD, _wrench(50.0))
+        live.add_displacement(T0 + i * PERIOD, -0.005)
+    assert live.sync_counters.total('out_of_order') == 10
+    assert live.counters.pairs_fitted == before
+    assert _row(live.values(), 0)['stiffness'] == pytest.approx(K, rel=1e-9)
+
+
+def test_volts_channel_and_reset_and_restart_on_change() -> None:
+    settings = LiveSettings(displacement_gain=0.002, displacement_offset=-0.001)
+    live = LiveStiffness(settings)
+    n = 100
+    f = np.linspace(0.0, 2.0, n)
+    volts = (f / K + 0.001) / 0.002
+    for i in range(n):
+        live.add_force(T0 + i * PERIOD, _wrench(f[i]))
+        live.add_volts(T0 + i * PERIOD, volts[i])
+    assert _row(live.values(), 0)['stiffness'] == pytest.approx(K, rel=1e-9)
+    live.reset()
+    assert math.isnan(_row(live.values(), 0)['stiffness'])
+    assert live.report()[0].level == STALE
+    # A threshold change keeps the fit; a fit setting restarts it.
+    assert not live.configure(LiveSettings(displacement_gain=0.002, displacement_offset=-0.001,
+                                           nonlinearity_warn=0.5))
+    assert live.configure(LiveSettings(window=50))
+    assert live.counters.fit_restarts == 2
+
+
+def test_softening_curve_is_reported_nonlinear() -> None:
+    live = LiveStiffness(LiveSettings(window=1000, nonlinearity_warn=0.2))
+    n = 400
+    f = np.linspace(0.0, 8.0, n)
+    x = f / K + np.where(f > 4.0, (f - 4.0) / (0.3 * K), 0.0)  # stiffness drops to 23 % above 4 N (slack)
+    _feed(live, f, x)
+    nl = live.refresh()['loading']
+    assert nl > 0.5
+    report = live.report()[0]
+    assert report.level == WARN and 'nonlinear' in report.message
+    assert dict(report.values)['nonlinearity'] == f'{nl:.6g}'
+
+
+def test_branch_follows_the_command_in_effect_at_each_pair_stamp() -> None:
+    live = LiveStiffness(LiveSettings(hysteresis=0.05))
+    n = 200
+    f = np.concatenate([np.linspace(0.0, 2.0, n // 2), np.linspace(2.0, 0.0, n // 2)])
+    # The command reverses at the peak; the measured force lags it by 20 samples (a slow actuator): the branch
+    # must follow the command, so the unloading branch starts at the command's reversal.
+    command_stamps = T0 + np.arange(n) * PERIOD
+    command = np.concatenate([np.linspace(0.0, 2.0, n // 2 - 20), np.linspace(2.0, 0.0, n // 2 + 20)])
+    for t, c in zip(command_stamps, command):
+        live.add_command(t, _wrench(c), t)
+    _feed(live, f, f / K)
+    assert live.counters.command_received == n
+    unloading = live.estimate('unloading')
+    assert unloading is not None and unloading.n > n // 2 + 10

@@ -1,0 +1,339 @@
+"""load_cell and lvdt nodes in-process: real rclpy, DDS on loopback, measured rates and noise, exact LVDT readings.
+
+Every node under test gets its own node name and topic names (remapped), so tests cannot hear each other.
+"""
+from __future__ import annotations
+
+import itertools
+import math
+import os
+import time
+from pathlib import Path
+
+os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')  # normally set by conftest.py already
+os.environ.setdefault('ROS_DOMAIN_ID', str(os.getpid() % 100 + 1))
+
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from geometry_msgs.msg import PointStamped, PoseStamped, WrenchStamped  # noqa: E402
+from rclpy.executors import SingleThreadedExecutor  # noqa: E402
+from rclpy.node import Node  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
+from std_srvs.srv import Trigger  # noqa: E402
+
+from conftest import spin_until  # noqa: E402
+from crane_stiffness import topics  # noqa: E402
+from crane_stiffness.config import load_params  # noqa: E402
+from crane_stiffness.model.rotation import euler_zxy_to_matrix, matrix_to_quaternion  # noqa: E402
+from crane_stiffness.nodes import load_cell, lvdt  # noqa: E402
+from crane_stiffness.nodes.common import RELIABLE_QOS, SENSOR_QOS  # noqa: E402
+
+_ids = itertools.count()
+MS = 1_000_000  # ns
+
+
+def stamp_ns(stamp) -> int:
+    return stamp.sec * 1_000_000_000 + stamp.nanosec
+
+
+def isolated(base: str) -> tuple[str, str, list[str]]:
+    """A unique node name, a topic prefix and the cli_args remapping the rig's topics under that prefix."""
+    name = f'{base}_{os.getpid()}_{next(_ids)}'
+    prefix = f'/{name}_t'
+    args = ['--ros-args', '-r', f'__node:={name}']
+    for topic in (topics.WRENCH_COMMAND, topics.PLATFORM_POSE, topics.LOAD_CELL_WRENCH, topics.LVDT_DISPLACEMENT,
+                  topics.DIAGNOSTICS):
+        args += ['-r', f'{topic}:={prefix}{topic}']
+    return name, prefix, args
+
+
+def call(ex, node: Node, service: str) -> Trigger.Response:
+    client = node.create_client(Trigger, service)
+    assert client.wait_for_service(timeout_sec=5.0), service
+    future = client.call_async(Trigger.Request())
+    assert spin_until(ex, future.done, 5.0)
+    return future.result()
+
+
+def wait_connected(ex, pub, sub_count: int = 1) -> None:
+    assert spin_until(ex, lambda: pub.get_subscription_count() >= sub_count, 5.0)
+
+
+def collect_for(ex, seconds: float) -> None:
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        ex.spin_once(timeout_sec=0.01)
+
+
+class LoadCellProbe:
+    """Commands a wrench and records the load cell's samples and diagnostics."""
+
+    def __init__(self, ctx, prefix: str):
+        self.node = Node(f'probe{prefix.replace("/", "_")}', context=ctx)
+        self.samples: list[tuple[float, str, np.ndarray]] = []  # (stamp, frame, wrench)
+        self.arrivals: list[float] = []
+        self.diagnostics: list = []
+        self.cmd = self.node.create_publisher(WrenchStamped, prefix + topics.WRENCH_COMMAND, RELIABLE_QOS)
+        self.node.create_subscription(WrenchStamped, prefix + topics.LOAD_CELL_WRENCH, self._on_sample, SENSOR_QOS)
+        self.node.create_subscription(DiagnosticArray, prefix + topics.DIAGNOSTICS,
+                                      lambda m: self.diagnostics.extend(m.status), 10)
+
+    def _on_sample(self, msg: WrenchStamped) -> None:
+        f, m = msg.wrench.force, msg.wrench.torque
+        self.arrivals.append(time.monotonic())
+        self.samples.append((stamp_ns(msg.header.stamp), msg.header.frame_id,
+                             np.array([f.x, f.y, f.z, m.x, m.y, m.z])))
+
+    def command(self, wrench) -> int:
+        msg = WrenchStamped()
+        now = self.node.get_clock().now()
+        msg.header.stamp = now.to_msg()
+        msg.header.frame_id = topics.FRAME_BASE
+        f, m = msg.wrench.force, msg.wrench.torque
+        f.x, f.y, f.z, m.x, m.y, m.z = (float(v) for v in wrench)
+        self.cmd.publish(msg)
+        return now.nanoseconds
+
+    def readings_after(self, t_ns: int) -> np.ndarray:
+        return np.array([w for s, _, w in self.samples if s > t_ns + MS])
+
+
+def test_load_cell_rate_stamps_noise_and_applied_wrench(rclpy_context):
+    noise = np.array([0.02, 0.05, 0.1, 0.001, 0.002, 0.003])
+    name, prefix, args = isolated('load_cell')
+    node = load_cell.LoadCell(context=rclpy_context, cli_args=args, parameter_overrides=[
+        Parameter('noise_std', value=noise.tolist()), Parameter('bias', value=[0.0] * 6),
+        Parameter('resolution', value=[0.0] * 6), Parameter('seed', value=3)])
+    probe = LoadCellProbe(rclpy_context, prefix)
+    ex = SingleThreadedExecutor(context=rclpy_context)
+    ex.add_node(node)
+    ex.add_node(probe.node)
+    wait_connected(ex, probe.cmd)
+    assert spin_until(ex, lambda: len(probe.samples) > 50, 5.0)
+    applied = np.array([0.0, 2.0, 0.0, 0.0, 0.0, 0.1])
+    t_cmd = probe.command(applied)
+    collect_for(ex, 1.6)
+    stamps = np.array([s for s, _, _ in probe.samples])
+    # Stamps on the 1 ms grid, one per sample; the timer delivers them ~1000 per second of wall time.
+    assert np.all(stamps % MS == 0)
+    gaps = np.diff(stamps)
+    assert np.mean(gaps == MS) > 0.99 and np.all(gaps > 0)
+    arrivals = np.array(probe.arrivals)
+    last_second = arrivals > arrivals[-1] - 1.0
+    rate_wall = last_second.sum()
+    rate_stamps = (len(stamps) - 1) / ((stamps[-1] - stamps[0]) * 1e-9)
+    print(f'load_cell: {rate_wall} samples in the last second of wall time, {rate_stamps:.1f} Hz by stamps')
+    assert rate_wall == pytest.approx(1000, rel=0.1)
+    assert rate_stamps == pytest.approx(1000, rel=0.02)
+    assert {f for _, f, _ in probe.samples} == {'load_cell'}
+    # The command takes effect at its stamp; noise as configured, mean = applied wrench.
+    w = probe.readings_after(t_cmd)
+    assert len(w) > 1000
+    std = w.std(axis=0, ddof=1)
+    print('load_cell noise std measured', std.round(5).tolist(), 'configured', noise.tolist())
+    np.testing.assert_allclose(std, noise, rtol=0.1)
+    assert np.all(np.abs(w.mean(axis=0) - applied) < 4 * noise / math.sqrt(len(w)))
+    before = np.array([w for s, _, w in probe.samples if s < t_cmd - MS])
+    assert np.all(np.abs(before.mean(axis=0)) < 4 * noise / math.sqrt(len(before)))
+    assert node.counters.received == 1 and node.clock.skipped == 0
+    ex.shutdown()
+
+
+def test_load_cell_tare_crosstalk_and_overload(rclpy_context):
+    bias = np.array([0.5, -0.3, 1.0, 0.01, -0.02, 0.005])
+    noise = np.array([0.01, 0.01, 0.01, 0.0005, 0.0005, 0.0005])
+    crosstalk = np.eye(6)
+    crosstalk[0, 1] = 0.02  # 2 % of fy leaks into fx
+    name, prefix, args = isolated('load_cell')
+    node = load_cell.LoadCell(context=rclpy_context, cli_args=args, parameter_overrides=[
+        Parameter('noise_std', value=noise.tolist()), Parameter('bias', value=bias.tolist()),
+        Parameter('resolution', value=[0.0] * 6), Parameter('crosstalk', value=crosstalk.ravel().tolist()),
+        Parameter('full_scale', value=[40.0, 5.0, 120.0, 2.0, 2.0, 2.0]), Parameter('tare_samples', value=400),
+        Parameter('sample_rate_hz', value=500.0), Parameter('seed', value=11)])
+    probe = LoadCellProbe(rclpy_context, prefix)
+    ex = SingleThreadedExecutor(context=rclpy_context)
+    ex.add_node(node)
+    ex.add_node(probe.node)
+    wait_connected(ex, probe.cmd)
+    assert spin_until(ex, lambda: len(probe.samples) > 300, 5.0)
+    raw = np.array([w for _, _, w in probe.samples])
+    tol = 4 * noise / math.sqrt(len(raw))
+    assert np.all(np.abs(raw.mean(axis=0) - bias) < tol)  # before the tare, the bias shows
+    reply = call(ex, probe.node, f'/{name}/tare')
+    assert reply.success and 'tared on 400 samples' in reply.message and '0.5' in reply.message
+    np.testing.assert_allclose(node.model.offset, bias, atol=4 * noise.max() / math.sqrt(400) + 1e-12)
+    t_tare = probe.node.get_clock().now().nanoseconds
+    collect_for(ex, 0.8)
+    tared = probe.readings_after(t_tare)
+    assert len(tared) > 300
+    # After the tare the zero-load reading is zero within the tare's own averaging error and this mean's.
+    assert np.all(np.abs(tared.mean(axis=0)) < 4 * noise / math.sqrt(400) + 4 * noise / math.sqrt(len(tared)))
+    # Cross-talk: 3 N along y reads 0.06 N along x.
+    t_cmd = probe.command([0.0, 3.0, 0.0, 0.0, 0.0, 0.0])
+    collect_for(ex, 0.6)
+    loaded = probe.readings_after(t_cmd)
+    assert loaded[:, 0].mean() == pytest.approx(0.06, abs=0.005)
+    assert loaded[:, 1].mean() == pytest.approx(3.0, abs=0.005)
+    # Overload: 10 N on a 5 N axis saturates at full scale (minus the tare offset) and /diagnostics warns.
+    probe.diagnostics.clear()
+    t_cmd = probe.command([0.0, 10.0, 0.0, 0.0, 0.0, 0.0])
+    assert spin_until(ex, lambda: any(s.level == b'\x01' and s.hardware_id == name for s in probe.diagnostics),
+                      3.0)
+    warn = [s for s in probe.diagnostics if s.level == b'\x01'][0]
+    assert 'overload' in warn.message and 'fy' in warn.message
+    saturated = probe.readings_after(t_cmd)
+    np.testing.assert_allclose(saturated[:, 1], 5.0 - node.model.offset[1], atol=1e-12)
+    assert node.saturated[1] >= len(saturated)
+    ex.shutdown()
+
+
+def test_load_cell_parameters_validated_and_bad_start_refused(rclpy_context):
+    name, prefix, args = isolated('load_cell')
+    node = load_cell.LoadCell(context=rclpy_context, cli_args=args)
+    bad = node.set_parameters([Parameter('noise_std', value=[0.1, 0.1, 0.1])])[0]
+    assert not bad.successful and 'noise_std' in bad.reason and '6 numbers' in bad.reason
+    bad = node.set_parameters([Parameter('sample_rate_hz', value=-5.0)])[0]
+    assert not bad.successful and 'sample_rate_hz = -5.0' in bad.reason
+    bad = node.set_parameters([Parameter('full_scale', value=[40.0, 40.0, 0.0, 2.0, 2.0, 2.0])])[0]
+    assert not bad.successful and 'full_scale' in bad.reason
+    assert node.get_parameter('sample_rate_hz').value == 1000.0
+    assert list(node.get_parameter('noise_std').value) == [0.01, 0.01, 0.01, 0.0005, 0.0005, 0.0005]
+    assert node.set_parameters([Parameter('sample_rate_hz', value=250.0)])[0].successful
+    assert node.clock.period_ns == 4_000_000
+    with pytest.raises(ValueError, match='tare_samples = 0'):
+        load_cell.LoadCell(context=rclpy_context, cli_args=isolated('load_cell')[2],
+                           parameter_overrides=[Parameter('tare_samples', value=0)])
+    node.destroy_node()
+
+
+def test_node_mains_exit_2_on_bad_parameters(capsys):
+    assert load_cell.main(['--ros-args', '-p', 'tare_samples:=0']) == 2
+    assert lvdt.main(['--ros-args', '-p', 'range_m:=[0.001, -0.001]']) == 2
+    err = capsys.readouterr().err
+    assert 'tare_samples = 0' in err and 'range_m' in err
+
+
+class LvdtProbe:
+    def __init__(self, ctx, prefix: str):
+        self.node = Node(f'probe{prefix.replace("/", "_")}', context=ctx)
+        self.samples: list[tuple[float, str, float]] = []
+        self.diagnostics: list = []
+        self.pose = self.node.create_publisher(PoseStamped, prefix + topics.PLATFORM_POSE, RELIABLE_QOS)
+        self.node.create_subscription(
+            PointStamped, prefix + topics.LVDT_DISPLACEMENT,
+            lambda m: self.samples.append((stamp_ns(m.header.stamp), m.header.frame_id, m.point.x)), SENSOR_QOS)
+        self.node.create_subscription(DiagnosticArray, prefix + topics.DIAGNOSTICS,
+                                      lambda m: self.diagnostics.extend(m.status), 10)
+
+    def publish(self, u, q: np.ndarray) -> int:
+        msg = PoseStamped()
+        now = self.node.get_clock().now()
+        msg.header.stamp = now.to_msg()
+        msg.header.frame_id = topics.FRAME_BASE
+        p, o = msg.pose.position, msg.pose.orientation
+        p.x, p.y, p.z = (float(v) for v in u)
+        o.x, o.y, o.z, o.w = (float(v) for v in matrix_to_quaternion(q))
+        self.pose.publish(msg)
+        return now.nanoseconds
+
+    def readings_after(self, t_ns: int) -> np.ndarray:
+        return np.array([x for s, _, x in self.samples if s > t_ns + MS])
+
+
+def test_lvdt_reading_of_a_rotated_pose_zero_service_and_stroke(rclpy_context):
+    axis = np.array([0.3, 1.0, 0.2])
+    contact = np.array([0.05, -0.02, 0.01])
+    name, prefix, args = isolated('lvdt')
+    node = lvdt.Lvdt(context=rclpy_context, cli_args=args, parameter_overrides=[
+        Parameter('axis', value=axis.tolist()), Parameter('contact_point', value=contact.tolist()),
+        Parameter('noise_std', value=0.0), Parameter('resolution', value=0.0),
+        Parameter('range_m', value=[-0.004, 0.004]), Parameter('zero_on_first_pose', value=False),
+        Parameter('sample_rate_hz', value=500.0), Parameter('frame_id', value='lvdt_side')])
+    probe = LvdtProbe(rclpy_context, prefix)
+    ex = SingleThreadedExecutor(context=rclpy_context)
+    ex.add_node(node)
+    ex.add_node(probe.node)
+    wait_connected(ex, probe.pose)
+    collect_for(ex, 0.2)
+    assert probe.samples == []  # nothing before the first pose
+    reply = call(ex, probe.node, f'/{name}/zero')
+    assert not reply.success and 'no pose' in reply.message
+    # Pose: translation plus a rotation of 10, 20 and -15 mrad (z, x, y): the contact point moves by u + (Q - I) p.
+    u = np.array([0.001, 0.002, 0.003])
+    q = euler_zxy_to_matrix(0.01, 0.02, -0.015)
+    unit = axis / np.linalg.norm(axis)
+    expected = float(unit @ (u + q @ contact - contact))
+    t_pose = probe.publish(u, q)
+    assert spin_until(ex, lambda: len(probe.readings_after(t_pose)) >= 20, 3.0)
+    readings = probe.readings_after(t_pose)
+    assert readings == pytest.approx(np.full(len(readings), expected), abs=1e-12)
+    # Hand check, small angles: (Q - I) p ≈ ω × p with ω = (θ, ψ, φ) = (0.02, -0.015, 0.01) rad.
+    small = float(unit @ (u + np.cross([0.02, -0.015, 0.01], contact)))
+    assert small == pytest.approx(0.0030903, abs=1e-7)
+    assert expected == pytest.approx(small, abs=3e-5)  # second-order terms: |ω|²·|p| ≈ 3e-5 m
+    stamps = np.array([s for s, _, _ in probe.samples])
+    assert np.all(stamps % (2 * MS) == 0) and np.median(np.diff(stamps)) == 2 * MS
+    assert {f for _, f, _ in probe.samples} == {'lvdt_side'}
+    # ~/zero at the current pose: the reading becomes 0; a further move reads the difference.
+    reply = call(ex, probe.node, f'/{name}/zero')
+    assert reply.success and 'zeroed' in reply.message
+    t_zero = probe.node.get_clock().now().nanoseconds
+    assert spin_until(ex, lambda: len(probe.readings_after(t_zero)) >= 5, 3.0)
+    assert probe.readings_after(t_zero) == pytest.approx(np.zeros(len(probe.readings_after(t_zero))), abs=1e-15)
+    u2 = u + np.array([0.0, 0.0005, 0.0])
+    t2 = probe.publish(u2, q)
+    assert spin_until(ex, lambda: len(probe.readings_after(t2)) >= 5, 3.0)
+    assert probe.readings_after(t2) == pytest.approx(unit[1] * 0.0005, abs=1e-12)
+    # Beyond the stroke: the reading saturates at the limit and /diagnostics warns.
+    probe.diagnostics.clear()
+    t3 = probe.publish(u + np.array([0.0, 0.01, 0.0]), q)
+    assert spin_until(ex, lambda: any(s.level == b'\x01' and s.hardware_id == name for s in probe.diagnostics),
+                      3.0)
+    warn = [s for s in probe.diagnostics if s.level == b'\x01'][0]
+    assert 'out of range' in warn.message
+    assert probe.readings_after(t3) == pytest.approx(0.004, abs=1e-15)
+    assert node.out_of_range > 0
+    ex.shutdown()
+
+
+def test_lvdt_zeroes_on_first_pose_with_noise_and_resolution(rclpy_context):
+    name, prefix, args = isolated('lvdt')
+    node = lvdt.Lvdt(context=rclpy_context, cli_args=args, parameter_overrides=[
+        Parameter('noise_std', value=2e-7), Parameter('resolution', value=1e-8), Parameter('seed', value=5)])
+    probe = LvdtProbe(rclpy_context, prefix)
+    ex = SingleThreadedExecutor(context=rclpy_context)
+    ex.add_node(node)
+    ex.add_node(probe.node)
+    wait_connected(ex, probe.pose)
+    rest = np.array([0.0, 0.0, 2.4e-5])  # the loaded rest pose sags under the weight
+    t0 = probe.publish(rest, np.eye(3))
+    collect_for(ex, 0.8)
+    zero = probe.readings_after(t0)
+    assert len(zero) > 500
+    assert np.allclose(zero / 1e-8, np.round(zero / 1e-8), atol=1e-6)  # on the 10 nm grid
+    assert abs(zero.mean()) < 4 * 2e-7 / math.sqrt(len(zero))
+    print(f'lvdt noise std measured {zero.std(ddof=1):.3e} m, configured 2e-7 m')
+    assert zero.std(ddof=1) == pytest.approx(2e-7, rel=0.1)
+    # 50 µm along y from the rest pose reads 50 µm.
+    t1 = probe.publish(rest + [0.0, 5e-5, 0.0], np.eye(3))
+    collect_for(ex, 0.4)
+    moved = probe.readings_after(t1)
+    assert moved.mean() == pytest.approx(5e-5, abs=4 * 2e-7 / math.sqrt(len(moved)) + 1e-9)
+    bad = node.set_parameters([Parameter('axis', value=[0.0, 0.0, 0.0])])[0]
+    assert not bad.successful and 'axis' in bad.reason and 'non-zero' in bad.reason
+    assert list(node.get_parameter('axis').value) == [0.0, 1.0, 0.0]
+    ex.shutdown()
+
+
+@pytest.mark.parametrize('module, cls, section', [(load_cell, load_cell.LoadCell, 'load_cell'),
+                                                  (lvdt, lvdt.Lvdt, 'lvdt')])
+def test_sensors_yaml_sets_every_parameter_with_its_declared_type(rclpy_context, module, cls, section):
+    path = Path(__file__).resolve().parent.parent / 'config' / 'sensors.yaml'
+    values = load_params(path, section)
+    assert set(values) == {spec.name for spec in module.PARAMS}
+    node = cls(context=rclpy_context, cli_args=['--ros-args', '--params-file', str(path)])
+    for name, value in values.items():
+        got = node.get_parameter(name).value
+        assert (list(got) if isinstance(value, list) else got) == value, name
+    node.destroy_node()
