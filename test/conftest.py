@@ -20,8 +20,21 @@ os.environ.setdefault('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp')
 os.environ.setdefault('MPLBACKEND', 'Agg')
 
 
+_DOMAINS = __import__('itertools').cycle(list(range(int(os.environ['ROS_DOMAIN_ID']), 101))
+                                         + list(range(1, int(os.environ['ROS_DOMAIN_ID']))))
+
+
+@pytest.fixture(autouse=True)
+def ros_domain(monkeypatch):
+    """Every test in a DDS domain of its own (nodes it creates, and processes it starts, inherit it), so nothing a
+    previous test left alive (a latched publisher, a slow process) can reach it."""
+    domain = str(next(_DOMAINS))
+    monkeypatch.setenv('ROS_DOMAIN_ID', domain)
+    return domain
+
+
 @pytest.fixture
-def rclpy_context():
+def rclpy_context(ros_domain):
     """A fresh rclpy context for one test; create nodes with ``context=rclpy_context``."""
     import rclpy
     ctx = rclpy.Context()
@@ -43,18 +56,23 @@ def spin_until(executor, predicate: Callable[[], bool], timeout_s: float) -> boo
 REPO = __import__('pathlib').Path(__file__).resolve().parent.parent
 
 
-@pytest.fixture(scope='session')
-def install_tree(tmp_path_factory):
-    """A colcon build of this package (copied out of the work tree), as a real ROS workspace would have it.
+@pytest.fixture
+def install_tree(colcon_install, ros_domain):
+    """(install_base, env) of the session's colcon build; env is what sourcing the install's local_setup gives, in
+    this test's DDS domain."""
+    from crane_stiffness.rosrun import install_environment
+    return colcon_install, install_environment(colcon_install)
 
-    Returns (install_base, env): env is what sourcing the install's local_setup gives.
-    """
+
+@pytest.fixture(scope='session')
+def colcon_install(tmp_path_factory):
+    """A colcon build of this package (copied out of the work tree), as a real ROS workspace would have it."""
     import shutil
 
-    from crane_stiffness.rosrun import colcon_build, install_environment
+    from crane_stiffness.rosrun import colcon_build
     ws = tmp_path_factory.mktemp('ws')
     src = ws / 'src' / 'crane_stiffness'
     shutil.copytree(REPO, src, ignore=shutil.ignore_patterns('.venv', '.git', 'build', 'install', 'log', 'out',
                                                              '__pycache__', 'bags', '*.egg-info'))
     colcon_build(src, ws / 'build', ws / 'install', ws / 'log')
-    return ws / 'install', install_environment(ws / 'install')
+    return ws / 'install'

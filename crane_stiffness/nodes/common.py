@@ -20,8 +20,9 @@ from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityP
 from crane_stiffness import topics
 from crane_stiffness.config import ParamSpec
 
-#: Commands and model outputs: nothing may be lost.
-RELIABLE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100, reliability=ReliabilityPolicy.RELIABLE,
+#: Commands and model outputs: nothing may be lost. 1000 deep = 10 s of commands at 100 Hz, so a reader starved of CPU
+#: for a while (a recorder on a busy machine) catches up instead of losing what the writer overwrote.
+RELIABLE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000, reliability=ReliabilityPolicy.RELIABLE,
                           durability=DurabilityPolicy.VOLATILE)
 #: Sensor data: best effort (matches best-effort and reliable publishers), deep queue for bursts.
 SENSOR_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=topics.SENSOR_QUEUE_DEPTH,
