@@ -73,12 +73,17 @@ def geometry_to_params(geometry: CraneGeometry, prefix: str = 'geometry.') -> di
     return {prefix + k: v for k, v in d.items()}
 
 
-def _flatten(prefix: str, value: Any, out: dict[str, Any]) -> None:
-    if isinstance(value, Mapping):
-        for k, v in value.items():
-            _flatten(f'{prefix}.{k}' if prefix else str(k), v, out)
-    else:
-        out[prefix] = value
+def flatten_params(values: Mapping[str, Any], prefix: str = '') -> dict[str, Any]:
+    """Nested mappings as dotted parameter names, the way rclpy flattens a parameter file
+    (``{geometry: {a: 0.1}}`` → ``{'geometry.a': 0.1}``)."""
+    out: dict[str, Any] = {}
+    for key, value in values.items():
+        name = f'{prefix}{key}'
+        if isinstance(value, Mapping):
+            out.update(flatten_params(value, name + '.'))
+        else:
+            out[name] = value
+    return out
 
 
 def load_params(path: str | os.PathLike, node_name: str | None = None) -> dict[str, Any]:
@@ -104,7 +109,7 @@ def load_params(path: str | os.PathLike, node_name: str | None = None) -> dict[s
     for name, body in sections:
         if not isinstance(body, Mapping) or 'ros__parameters' not in body:
             raise ConfigError(f'{path}: section {name!r} has no ros__parameters mapping')
-        _flatten('', body['ros__parameters'] or {}, out)
+        out.update(flatten_params(body['ros__parameters'] or {}))
     return out
 
 

@@ -1,23 +1,16 @@
 """Errors raised by the estimation package (fits, branch tracking, time pairing)."""
 from __future__ import annotations
 
-from typing import Any
 
-from crane_stiffness.errors import CraneStiffnessError
+from crane_stiffness.errors import CraneStiffnessError, FieldError
 
 
 class EstimationError(CraneStiffnessError):
     """Base class of the estimation package's errors."""
 
 
-class ParameterError(EstimationError, ValueError):
+class ParameterError(EstimationError, FieldError):
     """An invalid constructor or configuration value. Names the field, the value and the rule it breaks."""
-
-    def __init__(self, field: str, value: Any, rule: str) -> None:
-        self.field = field
-        self.value = value
-        self.rule = rule
-        super().__init__(f'{field} = {value!r}: {rule}')
 
 
 class DataError(EstimationError, ValueError):

@@ -52,7 +52,7 @@ from crane_stiffness.analysis.session import NODE_PARAMETERS_METADATA
 from crane_stiffness.bag import SESSION_METADATA, BagWriter, dump_qos_profiles, session_metadata
 from crane_stiffness.bag.errors import BagError
 from crane_stiffness.bag.writer import COMPRESSIONS
-from crane_stiffness.config import GEOMETRY_PARAMS, ParamSpec, geometry_from_params
+from crane_stiffness.config import GEOMETRY_PARAMS, ParamSpec, flatten_params, geometry_from_params
 from crane_stiffness.nodes.common import ERROR, OK, Diagnostics, Params, check, run
 from crane_stiffness.nodes.load_program import PARAMS as PROGRAM_NODE_PARAMS
 from crane_stiffness.nodes.load_program import PROGRAM_KEYS
@@ -134,14 +134,6 @@ def params_files_from_args(args: Sequence[str] | None) -> list[str]:
     return files
 
 
-def _flatten(prefix: str, value: Any, out: dict[str, Any]) -> None:
-    if isinstance(value, dict):
-        for k, v in value.items():
-            _flatten(f'{prefix}.{k}' if prefix else str(k), v, out)
-    else:
-        out[prefix] = value
-
-
 def read_params_files(paths: Sequence[str]) -> tuple[list[dict[str, str]], dict[str, dict[str, Any]], list[str]]:
     """(files as {path, text}, sections {node: flat params} merged in file order, problems) of parameter files."""
     files: list[dict[str, str]] = []
@@ -160,7 +152,7 @@ def read_params_files(paths: Sequence[str]) -> tuple[list[dict[str, str]], dict[
         for name, body in doc.items():
             if isinstance(body, dict) and isinstance(body.get('ros__parameters'), dict):
                 flat: dict[str, Any] = {}
-                _flatten('', body['ros__parameters'], flat)
+                flat.update(flatten_params(body['ros__parameters']))
                 sections.setdefault(str(name), {}).update(flat)
     return files, sections, problems
 

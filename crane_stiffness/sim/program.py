@@ -38,6 +38,7 @@ import numpy as np
 import yaml
 from numpy.typing import NDArray
 
+from crane_stiffness.config import flatten_params
 from crane_stiffness.sim.errors import ParameterError, ProgramFileError
 
 AXES = ('fx', 'fy', 'fz', 'mx', 'my', 'mz')
@@ -353,18 +354,6 @@ class LoadProgram:
                 f'duration_s={self.duration_s:g})')
 
 
-def _flatten(params: Mapping[str, Any], prefix: str = '') -> dict[str, Any]:
-    """Nested parameter dicts to dotted names, as ROS 2 does (``segments: {kind: ...}`` → ``segments.kind``)."""
-    flat: dict[str, Any] = {}
-    for key, value in params.items():
-        name = f'{prefix}{key}'
-        if isinstance(value, Mapping):
-            flat.update(_flatten(value, name + '.'))
-        else:
-            flat[name] = value
-    return flat
-
-
 def load_program_file(path: str | PathLike[str], node: str | None = None, *, strict: bool = True) -> LoadProgram:
     """Read a load program from a ROS 2 parameter YAML file.
 
@@ -401,5 +390,5 @@ def load_program_file(path: str | PathLike[str], node: str | None = None, *, str
         if not matches:
             raise ProgramFileError(f'{path}: no parameters for node {node!r}; nodes in file: {", ".join(blocks)}')
         params = blocks[matches[0]]
-    return LoadProgram.from_params(_flatten(params), strict=strict)
+    return LoadProgram.from_params(flatten_params(params), strict=strict)
 
