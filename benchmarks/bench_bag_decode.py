@@ -25,29 +25,12 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from crane_stiffness.analysis.cdr import encode_stamped  # noqa: E402
 from crane_stiffness.bag import BagReader, BagWriter  # noqa: E402
 
 WRENCH_TOPIC = '/load_cell/wrench'
 LVDT_TOPIC = '/lvdt/displacement'
 T0_NS = 1_700_000_000_000_000_000
-
-
-def _cdr_stamped(stamp_ns: np.ndarray, frame_id: str, values: np.ndarray) -> tuple[bytes, int]:
-    """CDR (XCDR1 LE) payloads of stamped messages: header then float64 columns; returns (all bytes, size each)."""
-    n = len(frame_id) + 1
-    start = 4 + ((12 + n + 7) & ~7)
-    size = start + 8 * values.shape[1]
-    dtype = np.dtype({'names': ['enc', 'sec', 'nsec', 'slen', 'frame', 'values'],
-                      'formats': ['<u4', '<i4', '<u4', '<u4', f'S{n}', ('<f8', (values.shape[1],))],
-                      'offsets': [0, 4, 8, 12, 16, start], 'itemsize': size})
-    rec = np.zeros(len(stamp_ns), dtype)
-    rec['enc'] = 0x100  # bytes 00 01 00 00
-    rec['sec'] = stamp_ns // 1_000_000_000
-    rec['nsec'] = stamp_ns % 1_000_000_000
-    rec['slen'] = n
-    rec['frame'] = frame_id.encode()
-    rec['values'] = values
-    return rec.tobytes(), size
 
 
 def generate(path: Path, seconds: float, rate_hz: float) -> int:
@@ -58,8 +41,8 @@ def generate(path: Path, seconds: float, rate_hz: float) -> int:
     force = np.column_stack([10 * np.sin(phase), np.cos(phase), 500 + 200 * np.sin(0.1 * phase),
                              0.1 * phase % 3, -0.2 * np.sin(phase), np.full(count, 0.05)])
     disp = np.column_stack([1e-5 * np.sin(phase), 2e-5 * np.cos(phase), 1e-3 * np.sin(0.1 * phase)])
-    wrench, wsize = _cdr_stamped(t, 'load_cell', force)
-    lvdt, lsize = _cdr_stamped(t + 250_000, 'lvdt', disp)
+    wrench, wsize = encode_stamped(t, 'load_cell', force)
+    lvdt, lsize = encode_stamped(t + 250_000, 'lvdt', disp)
     with BagWriter(path, compression='zstd') as writer:
         writer.add_topic(WRENCH_TOPIC, 'geometry_msgs/msg/WrenchStamped')
         writer.add_topic(LVDT_TOPIC, 'geometry_msgs/msg/PointStamped')

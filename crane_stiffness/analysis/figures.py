@@ -15,6 +15,21 @@ from crane_stiffness.analysis.sweep import ForceDisplacement, StiffnessRow  # no
 _FORCE_AXES = ('fx', 'fy', 'fz')
 
 
+def _finish(fig, ax, xlabel: str, ylabel: str, title: str, path: str | Path, *, title_size: float = 10,
+            legend_size: float = 8, legend_loc: str = 'best') -> Path:
+    """Labels, grid, legend, then save to ``path`` (PNG or SVG by its extension) and free the figure."""
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title, fontsize=title_size)
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=legend_size, loc=legend_loc)
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
 def _labels(axis: str) -> tuple[str, str, float]:
     """(load label, displacement label, displacement scale to plotted unit)."""
     if axis in _FORCE_AXES:
@@ -46,16 +61,8 @@ def plot_force_displacement(curves: ForceDisplacement, path: str | Path, title: 
                 label=measured_label)
     xmax = max(np.nanmax(np.abs(curves.nonlinear)), np.nanmax(np.abs(curves.linear))) * s * 1.4
     ax.set_xlim(min(0.0, -0.05 * xmax), xmax)
-    ax.set_xlabel(xlab)
-    ax.set_ylabel(ylab)
-    ax.set_title(title, fontsize=10)
-    ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=8, loc='lower right')
-    fig.tight_layout()
-    path = Path(path)
-    fig.savefig(path)
-    plt.close(fig)
-    return path
+    return _finish(fig, ax, xlab, ylab, title, path, title_size=10,
+                   legend_size=8, legend_loc='lower right')
 
 
 def plot_stiffness_vs_weight(rows: Sequence[StiffnessRow], axis: str, path: str | Path, title: str = '') -> Path:
@@ -68,16 +75,9 @@ def plot_stiffness_vs_weight(rows: Sequence[StiffnessRow], axis: str, path: str 
         w = np.array([r.weight for r in sel])
         ax.plot(w, [r.tangent for r in sel], '-', lw=1.6, label=f'l0 = {sel[0].l0:.3f} m (model)')
         ax.plot(w, [r.paper for r in sel], 'x', ms=5, color=ax.lines[-1].get_color())
-    ax.set_xlabel('suspended weight W [N]')
-    ax.set_ylabel(f'stiffness to {axis} [{unit}]')
-    ax.set_title(title or f'stiffness to {axis} against weight (x: eq. 18)', fontsize=10)
-    ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    path = Path(path)
-    fig.savefig(path)
-    plt.close(fig)
-    return path
+    return _finish(fig, ax, 'suspended weight W [N]', f'stiffness to {axis} [{unit}]',
+                   title or f'stiffness to {axis} against weight (x: eq. 18)', path, title_size=10,
+                   legend_size=8, legend_loc='best')
 
 
 # --- recorded sessions (crane_stiffness.analysis.session) ------------------------------------------------------
@@ -144,16 +144,8 @@ def plot_session_force_displacement(path: str | Path, axis: str, *, curves: dict
         lo, hi = min(extent + [0.0]), max(extent + [0.0])
         pad = 0.08 * (hi - lo) if hi > lo else 1.0
         ax.set_xlim(lo - pad, hi + pad)
-    ax.set_xlabel(xlab)
-    ax.set_ylabel(ylab)
-    ax.set_title(title, fontsize=9)
-    ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=7, loc='best')
-    fig.tight_layout()
-    path = Path(path)
-    fig.savefig(path)
-    plt.close(fig)
-    return path
+    return _finish(fig, ax, xlab, ylab, title, path, title_size=9,
+                   legend_size=7, legend_loc='best')
 
 
 def plot_session_timeseries(path: str | Path, axis: str, series: dict[str, tuple[np.ndarray, np.ndarray]],
@@ -216,13 +208,6 @@ def plot_sessions_overlay(path: str | Path, axis: str,
                         label=name if branch == 'loading' or not (approach == 'loading').any() else None)
         if curve is not None:
             ax.plot(np.asarray(curve[0]) * s, curve[1], '-', color=color, lw=1.0, alpha=0.6)
-    ax.set_xlabel(xlab)
-    ax.set_ylabel(ylab)
-    ax.set_title(title or 'sessions compared (lines: nonlinear model of each)', fontsize=9)
-    ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=7, loc='best')
-    fig.tight_layout()
-    path = Path(path)
-    fig.savefig(path)
-    plt.close(fig)
-    return path
+    return _finish(fig, ax, xlab, ylab, title or 'sessions compared (lines: nonlinear model of each)', path,
+                   title_size=9,
+                   legend_size=7, legend_loc='best')

@@ -248,6 +248,17 @@ def _trial(top, plat, l0, kw, weight, com, ploc, load, u, q, dx, alpha, u_try, q
 
 
 @njit(cache=True)
+def _take(u, q, w, u_new, q_new, w_new):
+    """Copy a pose (u (3,), q (3,3)) and its wrench w (6,) into the current ones."""
+    for i in range(3):
+        u[i] = u_new[i]
+        for j in range(3):
+            q[i, j] = q_new[i, j]
+    for i in range(6):
+        w[i] = w_new[i]
+
+
+@njit(cache=True)
 def _energy(l0, kw, weight, com, ploc, load, u, q, lengths):
     """Potential energy [J] of wires, weight and external force (the couple is added by the caller, see below).
 
@@ -342,12 +353,7 @@ def newton_solve(top, plat, l0, kw, weight, com, ploc, load, u, q, xtol, max_ite
             # Newton's own correction is below the tolerance: apply it and stop.
             _trial(top, plat, l0, kw, weight, com, ploc, load, u, q, dx, 1.0, u_try, q_try, w_try, kmat,
                    lengths, tensions, lc, dw, m33, v3)
-            for i in range(3):
-                u[i] = u_try[i]
-                for j in range(3):
-                    q[i, j] = q_try[i, j]
-            for i in range(6):
-                w[i] = w_try[i]
+            _take(u, q, w, u_try, q_try, w_try)
             return CONVERGED, it, full_step
         accepted = False
         alpha = 1.0
@@ -382,12 +388,7 @@ def newton_solve(top, plat, l0, kw, weight, com, ploc, load, u, q, xtol, max_ite
                     phi_soc = _trial(top, plat, l0, kw, weight, com, ploc, load, u_try, q_try, dc, 1.0, u_soc,
                                      q_soc, w_soc, k_try, lengths, tensions, lc, dw, m33, v3)
                     if phi_soc <= (1.0 - 1e-4 * alpha) * phi:
-                        for i in range(3):
-                            u_try[i] = u_soc[i]
-                            for j in range(3):
-                                q_try[i, j] = q_soc[i, j]
-                        for i in range(6):
-                            w_try[i] = w_soc[i]
+                        _take(u_try, q_try, w_try, u_soc, q_soc, w_soc)
                         phi_try = phi_soc
                         accepted = True
                         break
@@ -428,12 +429,7 @@ def newton_solve(top, plat, l0, kw, weight, com, ploc, load, u, q, xtol, max_ite
         step = 0.0
         for i in range(3):
             step = max(step, abs(u_try[i] - u[i]))
-        for i in range(3):
-            u[i] = u_try[i]
-            for j in range(3):
-                q[i, j] = q_try[i, j]
-        for i in range(6):
-            w[i] = w_try[i]
+        _take(u, q, w, u_try, q_try, w_try)
         phi = phi_try
         # The last evaluation was at the accepted pose: keep its K and wire lengths.
         for i in range(6):
