@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import math
 import sys
+import time
 from dataclasses import dataclass
 from typing import Any, Callable, Iterable, Mapping, Sequence
 
@@ -131,6 +132,31 @@ class Diagnostics:
 
 
 OK, WARN, ERROR = 0, 1, 2
+
+#: Longest a node waits at start (or on a rate change) to put its timer on the clock grid [s].
+MAX_ALIGN_WAIT_S = 0.05
+
+
+def create_grid_timer(node: Node, period_s: float, callback: Callable[[], None]):
+    """A timer of ``period_s`` whose calls fall on multiples of the period on the node clock.
+
+    Two sensor nodes publishing buffers at the same rate then deliver them at the same instants, like two channels
+    of one DAQ sharing a sample clock: the newest force and displacement samples reach a consumer together, so a
+    pair never waits up to a whole buffer for its partner. rcl timers keep their phase (the next call is the
+    previous due time plus the period), so aligning the start is enough. The start waits for the next grid instant
+    (sleeping, then spinning the last 0.3 ms for precision) when that is at most ``MAX_ALIGN_WAIT_S`` away; longer
+    periods and simulated time (no wall-clock grid to share) start at once.
+    """
+    period_ns = max(1, round(period_s * 1e9))
+    clock = node.get_clock()
+    if period_s <= MAX_ALIGN_WAIT_S and not getattr(clock, 'ros_time_is_active', False):
+        now = clock.now().nanoseconds
+        start = (now // period_ns + 1) * period_ns
+        if start - now > 300_000:
+            time.sleep((start - now - 300_000) * 1e-9)
+        while clock.now().nanoseconds < start:
+            pass
+    return node.create_timer(period_ns * 1e-9, callback)
 
 
 def make_executor(kind: str, context: Any):

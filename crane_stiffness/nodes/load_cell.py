@@ -4,7 +4,8 @@ Subscribes /crane/wrench_command (WrenchStamped, reliable) = the wrench the actu
 stamp on. Publishes /load_cell/wrench (WrenchStamped [N, N·m], sensor QoS, frame ``frame_id``) sampled at
 ``sample_rate_hz`` with noise, bias, drift, cross-talk, quantization and overload saturation; a timer at
 ``publish_rate_hz`` publishes the samples taken since its last tick, each stamped with its own sample instant on the
-grid k/sample_rate_hz of the node clock (like a DAQ delivering buffers). Service ~/tare (std_srvs/Trigger) zeroes
+grid k/sample_rate_hz of the node clock (like a DAQ delivering buffers; the timer ticks on the grid
+k/publish_rate_hz, see nodes.common.create_grid_timer). Service ~/tare (std_srvs/Trigger) zeroes
 the sensor on the mean of ``tare_samples`` readings at the current load; the reply states the offsets. Overload is
 reported on /diagnostics (WARN).
 """
@@ -20,7 +21,7 @@ from std_srvs.srv import Trigger
 from crane_stiffness import topics
 from crane_stiffness.config import ParamSpec
 from crane_stiffness.nodes.common import (OK, RELIABLE_QOS, SENSOR_QOS, WARN, Counters, Diagnostics, Params, check,
-                                          finite, positive, run)
+                                          create_grid_timer, finite, positive, run)
 from crane_stiffness.sim.sampling import NS_PER_S, SampleClock, StampedHold
 from crane_stiffness.sim.sensors import LoadCellModel
 
@@ -30,8 +31,9 @@ IDENTITY_6X6 = [1.0 if i == j else 0.0 for i in range(6) for j in range(6)]
 PARAMS = (
     ParamSpec('sample_rate_hz', 1000.0, 'sample rate; stamps are 1/sample_rate_hz apart on a grid of the node '
               'clock [Hz]'),
-    ParamSpec('publish_rate_hz', 200.0, 'rate of the timer that publishes the samples taken since its last tick; '
-              'smaller bursts keep the latency of a consumer low [Hz]'),
+    ParamSpec('publish_rate_hz', 500.0, 'rate of the timer that publishes the samples taken since its last tick '
+              '(a DAQ buffer); its ticks fall on multiples of its period of the node clock, so sensors at the same '
+              'rate deliver together. Higher: lower latency, more CPU [Hz]'),
     ParamSpec('frame_id', 'load_cell', 'header.frame_id of the published wrench; axes aligned with crane_base [-]'),
     ParamSpec('noise_std', [0.01, 0.01, 0.01, 0.0005, 0.0005, 0.0005],
               'white-noise standard deviation per axis fx fy fz mx my mz [N, N, N, N·m, N·m, N·m]'),
@@ -91,7 +93,7 @@ class LoadCell(Node):
         if self.timer is None or values['publish_rate_hz'] != self.settings.get('publish_rate_hz'):
             if self.timer is not None:
                 self.destroy_timer(self.timer)
-            self.timer = self.create_timer(1.0 / values['publish_rate_hz'], self._tick)
+            self.timer = create_grid_timer(self, 1.0 / values['publish_rate_hz'], self._tick)
         self.settings = values
 
     def _on_command(self, msg: WrenchStamped) -> None:

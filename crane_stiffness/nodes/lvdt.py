@@ -4,7 +4,8 @@ Subscribes /crane/platform_pose (PoseStamped, frame crane_base), held from its h
 /lvdt/displacement (PointStamped, sensor QoS, frame ``frame_id``): point.x = the reading [m] along ``axis`` of the
 contact point ``contact_point`` (body frame) relative to the zero, with noise, resolution and a stroke
 ``range_m`` outside which the reading saturates (throttled warning, WARN on /diagnostics). Samples at
-``sample_rate_hz`` on the grid k/sample_rate_hz of the node clock, published in bursts at ``publish_rate_hz``.
+``sample_rate_hz`` on the grid k/sample_rate_hz of the node clock, published in bursts at ``publish_rate_hz`` (ticks
+on the grid k/publish_rate_hz, together with the load cell's).
 Nothing is published before the first pose. Service ~/zero (std_srvs/Trigger) zeroes at the current pose;
 ``zero_on_first_pose`` zeroes at the first pose received (the loaded rest pose).
 """
@@ -22,15 +23,16 @@ from crane_stiffness import topics
 from crane_stiffness.config import ParamSpec
 from crane_stiffness.model.rotation import quaternion_to_matrix
 from crane_stiffness.nodes.common import (OK, RELIABLE_QOS, SENSOR_QOS, WARN, Counters, Diagnostics, Params, check,
-                                          finite, positive, run)
+                                          create_grid_timer, finite, positive, run)
 from crane_stiffness.sim.sampling import NS_PER_S, SampleClock, StampedHold
 from crane_stiffness.sim.sensors import LvdtModel
 
 PARAMS = (
     ParamSpec('sample_rate_hz', 1000.0, 'sample rate; stamps are 1/sample_rate_hz apart on a grid of the node '
               'clock [Hz]'),
-    ParamSpec('publish_rate_hz', 200.0, 'rate of the timer that publishes the samples taken since its last tick; '
-              'smaller bursts keep the latency of a consumer low [Hz]'),
+    ParamSpec('publish_rate_hz', 500.0, 'rate of the timer that publishes the samples taken since its last tick '
+              '(a DAQ buffer); its ticks fall on multiples of its period of the node clock, so sensors at the same '
+              'rate deliver together. Higher: lower latency, more CPU [Hz]'),
     ParamSpec('frame_id', 'lvdt', 'header.frame_id of the published reading [-]'),
     ParamSpec('axis', [0.0, 1.0, 0.0], 'measuring direction in crane_base (normalised; default along y) [-]'),
     ParamSpec('contact_point', [0.0, 0.0, 0.0], 'contact point on the platform, body frame (default: its centre) '
@@ -95,7 +97,7 @@ class Lvdt(Node):
         if self.timer is None or values['publish_rate_hz'] != self.settings.get('publish_rate_hz'):
             if self.timer is not None:
                 self.destroy_timer(self.timer)
-            self.timer = self.create_timer(1.0 / values['publish_rate_hz'], self._tick)
+            self.timer = create_grid_timer(self, 1.0 / values['publish_rate_hz'], self._tick)
         self.settings = values
 
     def _zero(self, pose: np.ndarray) -> None:
