@@ -257,6 +257,12 @@ def test_known_stiffness_interval_prediction_outputs_and_reset(rclpy_context):
     assert 'N/m' in last.status[0].message
     inputs = {k.key: k.value for k in last.status[2].values}
     assert int(inputs['pairs_fitted']) == counters.pairs_fitted
+    # The estimator's own lag (publication − newest pair stamp) over every estimate it published: the rig's
+    # bursts are 10 ms apart, so the lag is positive and its percentiles ordered; no bound (machine load).
+    lag = {k: float(inputs[f'lag_{k}_ms']) for k in ('p50', 'p99', 'max')}
+    assert int(inputs['lag_n']) > 0 and estimator.core.lag.n >= len(probe.values) > 0
+    assert 0.0 < lag['p50'] <= lag['p99'] <= lag['max'] + 0.1
+    print(f'estimator lag in-process: {lag} ms over {inputs["lag_n"]} estimates')
     # ~/reset clears the fits.
     reply = call(ex, probe.node, f'/{name}/reset')
     assert reply.success and 'cleared' in reply.message
@@ -333,8 +339,8 @@ def test_driver_like_inputs_by_remapping_reliable_wrench_and_volts_channel(rclpy
     ex.shutdown()
 
 
-def test_nan_inf_absurd_and_zero_stamp_messages_dropped_counted_estimates_go_on(rclpy_context):
-    injected = {'non_finite': 0, 'absurd': 0, 'zero_stamp': 0}
+def test_nan_inf_absurd_zero_stamp_and_malformed_messages_dropped_counted_estimates_go_on(rclpy_context):
+    injected = {'non_finite': 0, 'absurd': 0, 'zero_stamp': 0, 'malformed': 0}
 
     def inject(rig: SyntheticRig, i: int, t_ns: int) -> None:
         if i % 40 != 20:
@@ -349,6 +355,9 @@ def test_nan_inf_absurd_and_zero_stamp_messages_dropped_counted_estimates_go_on(
         rig.pub_force.publish(rig.wrench_msg(0, 1.0))                    # zero stamp
         rig.pub_point.publish(rig.point_msg(0, 1e-4))
         injected['zero_stamp'] += 2
+        rig.pub_force.publish(b'\x00\x01\x00\x00\x05\x00')             # serialized, cut short
+        rig.pub_point.publish(b'\x00\x01\x00\x00' + bytes(12))       # a header without its point
+        injected['malformed'] += 2
 
     name, prefix, args = isolated()
     probe = Probe(rclpy_context, prefix)
@@ -359,10 +368,11 @@ def test_nan_inf_absurd_and_zero_stamp_messages_dropped_counted_estimates_go_on(
     run_program(ex, rig, estimator)
     c = estimator.core.counters
     print(f'injected {injected}; counted non_finite {c.dropped_non_finite}, absurd {c.dropped_absurd}, '
-          f'zero_stamp {c.dropped_zero_stamp}; fitted {c.pairs_fitted} of {rig.sent}')
+          f'zero_stamp {c.dropped_zero_stamp}, malformed {c.dropped_malformed}; fitted {c.pairs_fitted} of '
+          f'{rig.sent}')
     assert injected['non_finite'] >= 60
-    assert (c.dropped_non_finite, c.dropped_absurd, c.dropped_zero_stamp) == (
-        injected['non_finite'], injected['absurd'], injected['zero_stamp'])
+    assert (c.dropped_non_finite, c.dropped_absurd, c.dropped_zero_stamp, c.dropped_malformed) == (
+        injected['non_finite'], injected['absurd'], injected['zero_stamp'], injected['malformed'])
     assert c.pairs_fitted >= rig.sent - 2
     # Estimates kept coming all along (after nearly every burst of samples), up to the last pair.
     stamps = np.unique([row(data, 0)['sample_stamp'] for _, data in probe.values])

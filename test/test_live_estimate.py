@@ -8,7 +8,8 @@ import pytest
 
 from crane_stiffness.estimation.errors import ParameterError
 from crane_stiffness.estimation.fit import BranchTracker, fit_line
-from crane_stiffness.estimation.live import OK, STALE, VALUE_FIELDS, WARN, LiveSettings, LiveStiffness
+from crane_stiffness.estimation.live import (OK, STALE, VALUE_FIELDS, WARN, LagHistogram, LiveSettings,
+                                            LiveStiffness)
 
 K = 2000.0      # N/m
 C = 0.1         # N
@@ -175,3 +176,33 @@ def test_branch_follows_the_command_in_effect_at_each_pair_stamp() -> None:
     assert live.counters.command_received == n
     unloading = live.estimate('unloading')
     assert unloading is not None and unloading.n > n // 2 + 10
+
+
+def test_lag_histogram_percentiles_match_numpy_to_a_bin() -> None:
+    rng = np.random.default_rng(4)
+    lags = rng.lognormal(mean=np.log(2e-3), sigma=0.6, size=20_000)  # s, a latency-like tail
+    hist = LagHistogram(limit_s=0.05)
+    assert math.isnan(hist.percentile(50)) and math.isnan(hist.max_s)
+    for v in lags.tolist() + [math.nan, math.inf]:  # non-finite lags are not counted
+        hist.add(v)
+    assert hist.n == lags.size and hist.max_s == lags.max()
+    for q in (1, 50, 90, 99, 99.9):
+        exact = np.percentile(lags, q, method='inverted_cdf')
+        assert exact <= hist.percentile(q) <= exact + LagHistogram.BIN_S, q
+    over = LagHistogram(limit_s=0.01)
+    over.add(5.0)  # beyond the range: counted in the last bin, max exact
+    assert over.percentile(50) == pytest.approx(0.0101) and over.max_s == 5.0
+
+
+def test_published_records_the_lag_of_the_newest_pair() -> None:
+    live = LiveStiffness(LiveSettings(window=10, slop_s=1e-4))
+    live.published(100.0)  # nothing fitted yet: no lag
+    assert live.lag.n == 0
+    for i in range(5):
+        t = 100.0 + i * 1e-3
+        live.add_force(t, (0.0, 2.0 * i, 0.0, 0.0, 0.0, 0.0))
+        live.add_displacement(t, 1e-3 * i)
+    live.published(live.newest_stamp + 0.0025)
+    assert live.lag.n == 1 and live.lag.max_s == pytest.approx(0.0025)
+    pairs = dict(live.input_report()[2])
+    assert pairs['lag_n'] == '1' and float(pairs['lag_p50_ms']) == pytest.approx(2.6, abs=0.11)

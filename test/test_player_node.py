@@ -248,7 +248,8 @@ def test_replay_through_the_estimator_reproduces_the_live_estimates(rclpy_contex
         counts = {t: i.count for t, i in reader.topics.items()}
         nodes = {k: json.loads(v) for k, v in reader.metadata_records()[NODE_PARAMETERS_METADATA].items()}
         live = [decode_float64_multiarray(m.data)[1] for m in reader.messages([topics.STIFFNESS_VALUES])]
-    assert counts[topics.LOAD_CELL_WRENCH] > 250 and counts[topics.STIFFNESS_VALUES] > 100
+    # about one estimate per sensor buffer (20 Hz) while pairs come in: the estimator publishes once per batch
+    assert counts[topics.LOAD_CELL_WRENCH] > 250 and counts[topics.STIFFNESS_VALUES] > 50
     # the recorder read the nodes' parameters as they ran (the estimator's window was not in any file)
     assert nodes['stiffness_estimator']['window'] == 60 and nodes['load_cell']['sample_rate_hz'] == 100.0
     assert nodes['load_program']['segments.target'] == [0.0, 2.0, 2.0, 0.0, 0.0]

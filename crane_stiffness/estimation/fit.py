@@ -131,6 +131,23 @@ def _assemble(n: int, xm: Any, ym: Any, sxx: Any, sxy: Any, syy: Any, sse: Any, 
     )
 
 
+def _assemble_scalar(n: int, xm: float, ym: float, sxx: float, sxy: float, syy: float, sse: float,
+                     nonlinearity: float) -> LineFit:
+    """:func:`_assemble` for Python floats (sxx > 0, n ≥ 3): the same operations in the same order, so the same
+    bits, at a tenth of the cost (the live estimator calls it for every published estimate)."""
+    k = sxy / sxx
+    c = ym - k * xm
+    dof = n - 2
+    s2 = sse / dof
+    stderr = math.sqrt(s2 / sxx)
+    intercept_stderr = math.sqrt(s2 * (1.0 / n + xm * xm / sxx))
+    half_width = t_quantile(dof) * stderr
+    r2 = min(sxy * sxy / (sxx * syy) if syy > 0.0 else 0.0, 1.0)
+    return LineFit(stiffness=k, intercept=c, stderr=stderr, intercept_stderr=intercept_stderr,
+                   ci95_low=k - half_width, ci95_high=k + half_width, r2=r2, n=n,
+                   residual_rms=math.sqrt(sse / n), nonlinearity=float(nonlinearity))
+
+
 def _slopes(x: NDArray[np.float64], y: NDArray[np.float64]) -> NDArray[np.float64]:
     """OLS slopes along the last axis; NaN where x has no spread."""
     dx = x - x.mean(axis=-1, keepdims=True)
@@ -327,7 +344,7 @@ class WindowedLeastSquares:
             x, y = self.data()
             k = sxy / sxx
             nonlinearity = split_half_nonlinearity(x, y, k, ym - k * xm)
-        return _assemble(n, xm, ym, sxx, sxy, syy, sse, nonlinearity)
+        return _assemble_scalar(n, xm, ym, sxx, sxy, syy, sse, nonlinearity)
 
 
 @dataclass(frozen=True, slots=True)

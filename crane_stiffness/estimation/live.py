@@ -6,7 +6,8 @@ publishing one:
 1. Input checks. A force sample is the selected component (``force_axis``, N or N·m) of a wrench; a displacement
    sample is a reading in m (or rad), or a voltage converted by ``x = displacement_gain · V + displacement_offset``.
    Dropped and counted (:class:`InputCounters`): a NaN/Inf anywhere in the sample, a zero (or negative) stamp, a
-   selected force above ``max_abs_force`` or a displacement above ``max_abs_displacement`` in magnitude.
+   selected force above ``max_abs_force`` or a displacement above ``max_abs_displacement`` in magnitude, and a
+   message its reader could not decode (:meth:`LiveStiffness.add_malformed`).
 2. Pairing by header stamp with :class:`~crane_stiffness.estimation.sync.ApproximateTimeSync` (``slop_s``,
    ``max_age_s``, ``expected_period_s``, ``dropout_factor``): out-of-order and stale samples are counted there and
    never fitted; dropouts are counted.
@@ -154,13 +155,14 @@ class InputCounters:
     dropped_non_finite: int = 0
     dropped_absurd: int = 0
     dropped_zero_stamp: int = 0
+    dropped_malformed: int = 0
     command_dropped: int = 0
     pairs_fitted: int = 0
     fit_restarts: int = 0
 
     @property
     def dropped(self) -> int:
-        return self.dropped_non_finite + self.dropped_absurd + self.dropped_zero_stamp
+        return self.dropped_non_finite + self.dropped_absurd + self.dropped_zero_stamp + self.dropped_malformed
 
 
 @dataclass(frozen=True)
@@ -208,12 +210,46 @@ def _fmt(value: float) -> str:
     return f'{value:.6g}'
 
 
+class LagHistogram:
+    """Distribution of the estimate's lag (publication time − stamp of its newest pair), s, in 0.1 ms bins up to
+    ``limit_s`` (longer lags count in the last bin). O(1) per value, so the node can record every estimate."""
+
+    BIN_S = 1e-4
+
+    def __init__(self, limit_s: float = 10.0) -> None:
+        self._counts = [0] * (int(round(limit_s / self.BIN_S)) + 1)
+        self.n = 0
+        self.max_s = math.nan
+
+    def add(self, lag_s: float) -> None:
+        if not math.isfinite(lag_s):
+            return
+        i = min(len(self._counts) - 1, max(0, int(lag_s / self.BIN_S)))
+        self._counts[i] += 1
+        self.n += 1
+        if not lag_s <= self.max_s:  # also replaces the initial NaN
+            self.max_s = lag_s
+
+    def percentile(self, q: float) -> float:
+        """The ``q`` % point (0–100), s, to the upper edge of its bin; NaN while empty."""
+        if self.n == 0:
+            return math.nan
+        rank = max(1, math.ceil(q / 100.0 * self.n))
+        seen = 0
+        for i, count in enumerate(self._counts):
+            seen += count
+            if seen >= rank:
+                return (i + 1) * self.BIN_S
+        return math.inf  # not reached
+
+
 class LiveStiffness:
     """Streams in, live stiffness estimate out (see the module docstring)."""
 
     def __init__(self, settings: LiveSettings | None = None) -> None:
         self.counters = InputCounters()
         self.prediction = math.nan
+        self.lag = LagHistogram()
         self._settings = settings or LiveSettings()
         self._build()
 
@@ -298,6 +334,14 @@ class LiveStiffness:
             return 0
         return self._fit(self._sync.push(FORCE, stamp_s, value))
 
+    def add_malformed(self, stream: str) -> None:
+        """Count a ``'force'`` or ``'displacement'`` message that could not be decoded (dropped)."""
+        if stream == FORCE:
+            self.counters.force_received += 1
+        else:
+            self.counters.displacement_received += 1
+        self.counters.dropped_malformed += 1
+
     def add_displacement(self, stamp_s: float, value_m: float) -> int:
         """A displacement sample, m (or rad); returns the number of pairs it completed and fitted."""
         self.counters.displacement_received += 1
@@ -373,6 +417,10 @@ class LiveStiffness:
             self._rows[branch] = self._row(self._estimator.estimate(branch))
         self._dirty.clear()
 
+    def published(self, now_s: float) -> None:
+        """Note that :meth:`values` was published at ``now_s`` (s, the clock of the stamps): records the lag."""
+        self.lag.add(now_s - self._newest_stamp)
+
     @property
     def newest_stamp(self) -> float:
         """Stamp of the newest fitted pair, s (NaN before the first)."""
@@ -437,6 +485,9 @@ class LiveStiffness:
         for stream, counters in ((FORCE, sc.force), (DISPLACEMENT, sc.displacement)):
             pairs += [(f'{stream}.{f.name}', str(getattr(counters, f.name))) for f in fields(counters)]
         pairs += [('newest_pair_stamp', _fmt(self._newest_stamp))]
+        pairs += [(f'lag_{name}_ms', _fmt(value * 1e3)) for name, value in (
+            ('p50', self.lag.percentile(50)), ('p99', self.lag.percentile(99)), ('max', self.lag.max_s))]
+        pairs += [('lag_n', str(self.lag.n))]
         if new:
             return WARN, 'since last report: ' + ', '.join(f'{v} {k}' for k, v in new.items()), pairs
         return OK, f'{sc.pairs} pairs, {c.pairs_fitted} fitted', pairs
