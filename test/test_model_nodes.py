@@ -18,6 +18,7 @@ from conftest import spin_until
 from crane_stiffness import topics
 from crane_stiffness.model import lab_model, paper_coefficients, solve_equilibrium
 from crane_stiffness.nodes.common import LATCHED_QOS, RELIABLE_QOS
+from crane_stiffness.nodes import crane_model
 from crane_stiffness.nodes.crane_model import MODEL_STATUS, CraneModel
 from crane_stiffness.nodes.load_program import LoadProgramNode
 
@@ -56,7 +57,11 @@ def lab_overrides(height=0.5, weight=50.0):
     return [Parameter('geometry.height', value=height), Parameter('geometry.weight', value=weight)]
 
 
-def test_crane_model_solves_commands_and_reports_no_equilibrium(rclpy_context):
+def stamp_ns(header) -> int:
+    return header.stamp.sec * 1_000_000_000 + header.stamp.nanosec
+
+
+def test_crane_model_solves_commands_and_reports_no_equilibrium(rclpy_context, monkeypatch):
     ex = SingleThreadedExecutor(context=rclpy_context)
     model = CraneModel(context=rclpy_context, parameter_overrides=lab_overrides())
     probe = Probe(rclpy_context)
@@ -86,6 +91,24 @@ def test_crane_model_solves_commands_and_reports_no_equilibrium(rclpy_context):
     assert len(probe.poses) == n1
     probe.command(fy=1.0)
     assert spin_until(ex, lambda: len(probe.poses) > n1 and probe.status[-1].startswith('ok'), 10)
+    # A repeated command (a hold at the program's rate) restamps the same pose without solving again and does not
+    # repeat the latched prediction; after a failed solve the same load is solved again.
+    solves = []
+    real_solve = crane_model.solve_equilibrium
+    monkeypatch.setattr(crane_model, 'solve_equilibrium', lambda *a, **k: solves.append(1) or real_solve(*a, **k))
+    before, n_axis = probe.poses[-1], len(probe.axis)
+    probe.command(fy=1.0)
+    assert spin_until(ex, lambda: probe.poses[-1] is not before and probe.wires[-1].header == probe.poses[-1].header,
+                      10)
+    after = probe.poses[-1]
+    assert after.pose == before.pose and stamp_ns(after.header) > stamp_ns(before.header)
+    spin_until(ex, lambda: False, 0.3)
+    assert solves == [] and len(probe.axis) == n_axis
+    probe.command(fz=-80.0)
+    assert spin_until(ex, lambda: probe.status[-1].startswith('no_equilibrium'), 10)
+    probe.command(fy=1.0)
+    assert spin_until(ex, lambda: probe.status[-1].startswith('ok'), 10)
+    assert len(solves) == 2
     # NaN and absurd commands are dropped and counted.
     probe.command(fy=float('nan'))
     probe.command(fy=1e9)

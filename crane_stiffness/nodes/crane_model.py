@@ -57,6 +57,7 @@ class CraneModel(Node):
         self.load = np.zeros(6)
         self.axis = 'fy'
         self.stamp = None
+        self.solved: tuple | None = None  # the load the published pose and stiffness belong to (None: re-solve)
         self.pub_pose = self.create_publisher(PoseStamped, topics.PLATFORM_POSE, RELIABLE_QOS)
         self.pub_wires = self.create_publisher(JointState, topics.WIRE_STATES, RELIABLE_QOS)
         self.pub_k = self.create_publisher(Float64MultiArray, topics.PREDICTED_STIFFNESS, LATCHED_QOS)
@@ -72,6 +73,7 @@ class CraneModel(Node):
         changed = geometry != self.geometry
         self.geometry = geometry
         self.settings = values
+        self.solved = None  # any parameter change: solve and publish everything again
         if changed:
             self.equilibrium = None  # a new crane: solve from its own rest pose
             self.get_logger().info(
@@ -94,6 +96,12 @@ class CraneModel(Node):
             return
         self.load = load
         self.stamp = msg.header.stamp if (msg.header.stamp.sec or msg.header.stamp.nanosec) else None
+        if self.solved == tuple(load.tolist()):
+            # A hold repeats the command at the program's rate: the same equilibrium, pose restamped. The latched
+            # stiffness topics already carry its values.
+            self._publish_pose(self.equilibrium)
+            self.counters.published += 1
+            return
         self._solve_and_publish()
 
     # --- work ---
@@ -103,27 +111,15 @@ class CraneModel(Node):
             eq = solve_equilibrium(g, load=self.load, initial=self.equilibrium)
         except ModelError as exc:
             self.failures += 1
+            self.solved = None  # the same load again must be solved again (and clear this status)
             self.status = f'no_equilibrium: {exc}'
             self.pub_status.publish(String(data=self.status))
             self.get_logger().error(str(exc), throttle_duration_sec=1.0)
             self.diagnostics.publish()
             return  # keep the last valid pose; nothing wrong is published
         self.equilibrium = eq
-        stamp = self.stamp or self.get_clock().now().to_msg()
-        pose = PoseStamped()
-        pose.header.stamp = stamp
-        pose.header.frame_id = topics.FRAME_BASE
-        pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = (float(v) for v in eq.displacement)
-        q = matrix_to_quaternion(eq.rotation)
-        o = pose.pose.orientation
-        o.x, o.y, o.z, o.w = (float(v) for v in q)
-        self.pub_pose.publish(pose)
-        wires = JointState()
-        wires.header = pose.header
-        wires.name = list(WIRE_NAMES)
-        wires.position = [float(v) for v in eq.wire_lengths]
-        wires.effort = [float(v) for v in eq.wire_tensions]
-        self.pub_wires.publish(wires)
+        self.solved = tuple(self.load.tolist())
+        self._publish_pose(eq)
         k = tangent_stiffness(g, eq)
         km = Float64MultiArray()
         km.layout.dim = [MultiArrayDimension(label='load [fx fy fz mx my mz]', size=6, stride=36),
@@ -143,6 +139,23 @@ class CraneModel(Node):
         if new_status != self.status:
             self.status = new_status
             self.pub_status.publish(String(data=self.status))
+
+    def _publish_pose(self, eq: Equilibrium) -> None:
+        """The platform pose and the wire states of ``eq``, stamped with the command's stamp (else now)."""
+        pose = PoseStamped()
+        pose.header.stamp = self.stamp or self.get_clock().now().to_msg()
+        pose.header.frame_id = topics.FRAME_BASE
+        pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = (float(v) for v in eq.displacement)
+        q = matrix_to_quaternion(eq.rotation)
+        o = pose.pose.orientation
+        o.x, o.y, o.z, o.w = (float(v) for v in q)
+        self.pub_pose.publish(pose)
+        wires = JointState()
+        wires.header = pose.header
+        wires.name = list(WIRE_NAMES)
+        wires.position = [float(v) for v in eq.wire_lengths]
+        wires.effort = [float(v) for v in eq.wire_tensions]
+        self.pub_wires.publish(wires)
 
     def _report(self):
         level = ERROR if self.status.startswith('no_equilibrium') else OK
