@@ -2,14 +2,17 @@
 from __future__ import annotations
 
 import ast
+import importlib
 import json
 import subprocess
 import sys
+import time
 
 import pytest
 from geometry_msgs.msg import PoseStamped, WrenchStamped
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 from conftest import REPO, spin_until
 from crane_stiffness import rosrun, topics
@@ -80,6 +83,65 @@ def test_node_started_like_ros2_run_answers_over_dds(install_tree, rclpy_context
         codes = procs.stop()
     assert codes['crane_model'] == 0, procs.log('crane_model')  # Ctrl-C is a clean exit
     ex.shutdown()
+
+
+def _message_class(type_name: str):
+    """'geometry_msgs/msg/PoseStamped' → the class, as rosidl_runtime_py.utilities.get_message does."""
+    package, kind, name = type_name.split('/')
+    return getattr(importlib.import_module(f'{package}.{kind}'), name)
+
+
+def _echo_qos(node: Node, topic: str) -> QoSProfile:
+    """The QoS `ros2 topic echo` picks: reliable / transient local only if every publisher offers it."""
+    infos = node.get_publishers_info_by_topic(topic)
+    reliable = all(i.qos_profile.reliability == ReliabilityPolicy.RELIABLE for i in infos)
+    latched = all(i.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL for i in infos)
+    return QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+                      durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
+
+
+def test_every_rig_node_runs_from_the_install_tree_and_its_topics_echo(install_tree, rclpy_context, tmp_path):
+    """What `ros2 run crane_stiffness <node>` then `ros2 topic echo --once <topic>` do, for every node of the rig:
+    the executable found through the ament index, each topic the node advertises found in the ROS graph, its type
+    imported from the advertised type name, a subscription with the QoS echo would choose, one message received."""
+    install, env = install_tree
+    config = install / 'crane_stiffness/share/crane_stiffness/config'
+    params = {'crane_model': ['crane_lab.yaml'], 'load_cell': ['sensors.yaml'], 'lvdt': ['sensors.yaml'],
+              'stiffness_estimator': ['crane_lab.yaml', 'sensors.yaml'], 'load_program': ['program_side_force.yaml']}
+    node = Node('probe_echo', context=rclpy_context)
+    ex = SingleThreadedExecutor(context=rclpy_context)
+    ex.add_node(node)
+    received: dict[str, object] = {}
+    with rosrun.Processes(env, tmp_path) as procs:
+        for name, files in params.items():
+            args = ['--ros-args'] + [a for f in files for a in ('--params-file', str(config / f))]
+            if name == 'load_program':
+                args += ['-p', 'start_delay_s:=0.5', '-p', 'min_subscribers:=4']
+            procs.start(name, 'crane_stiffness', name, args)
+        assert spin_until(ex, lambda: set(params) <= set(node.get_node_names()), 60), procs.log('load_program')
+        advertised: dict[str, str] = {}
+        for name in params:
+            for topic, types in node.get_publisher_names_and_types_by_node(name, '/'):
+                if topic not in ('/rosout', '/parameter_events'):
+                    advertised[topic] = types[0]
+        for topic, type_name in advertised.items():
+            node.create_subscription(_message_class(type_name), topic,
+                                     lambda msg, t=topic: received.setdefault(t, msg), _echo_qos(node, topic))
+        deadline = time.monotonic() + 60
+        while set(received) < set(advertised) and time.monotonic() < deadline:
+            procs.check_alive()
+            ex.spin_once(timeout_sec=0.05)
+        codes = procs.stop()
+    ex.shutdown()
+    expected = {topics.WRENCH_COMMAND, topics.PLATFORM_POSE, topics.WIRE_STATES, topics.PREDICTED_STIFFNESS,
+                topics.PREDICTED_AXIS_STIFFNESS, topics.LOAD_CELL_WRENCH, topics.LVDT_DISPLACEMENT,
+                topics.STIFFNESS_ESTIMATE, topics.STIFFNESS_VALUES, topics.STIFFNESS, topics.PROGRAM_STATE,
+                topics.PROGRAM_PROGRESS, topics.DIAGNOSTICS}
+    assert expected <= set(advertised), sorted(advertised)
+    assert set(received) == set(advertised), sorted(set(advertised) - set(received))
+    assert received[topics.LOAD_CELL_WRENCH].header.frame_id == 'load_cell'
+    assert received[topics.PLATFORM_POSE].header.frame_id == topics.FRAME_BASE
+    assert all(code == 0 for code in codes.values()), codes
 
 
 def test_launch_file_starts_every_rig_node_with_existing_config():
