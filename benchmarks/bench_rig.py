@@ -1,13 +1,18 @@
 """Rig benchmark: the simulated rig as separate processes at 1 kHz (and 5 kHz), for 60 s each.
 
 Every node starts the way `ros2 run` starts it, from a colcon install tree. For each rate it reports, per sensor
-topic, the messages the sensor node published (its /diagnostics counter) against those the estimator received (its
-counter) and those an independent observer in this process received; and the estimator's lag from the stamp of the
-newest sample it used to the arrival of the estimate here (p50, p99). The baseline, measured in the same run, is the
-transport lag of the raw sensor messages (stamp to arrival here): the estimator's own share is the difference.
+topic, the messages the sensor node published (its exit counter) against those the estimator received (its counter)
+and the samples an independent observer in this process received against the stamp grid (exact loss). Lag, from the
+stamp of the newest pair an estimate includes:
+- at the estimator, when it publishes (its own record of every estimate, reported on /stiffness/estimate): the
+  figure the target is about;
+- at the observer (one more DDS hop), in steady state from ``--warmup`` s after the program start;
+- per sample: every displacement sample's stamp to the arrival of the first estimate that includes it (adds the
+  wait inside the sensor's buffer).
+The baseline, measured in the same run, is the raw transport lag of the sensor messages (stamp to arrival here).
 Targets at 1 kHz: nothing lost, p99 ≤ 5 ms.
 
-Run: .venv/bin/python benchmarks/bench_rig.py [--seconds 60] [--rates 1000 5000] [--json out.json]
+Run: .venv/bin/python benchmarks/bench_rig.py [--seconds 60] [--rates 1000 5000] [--publish-rate HZ] [--json out.json]
 """
 from __future__ import annotations
 
@@ -17,6 +22,7 @@ import os
 import random
 import sys
 import time
+from array import array
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parent.parent
@@ -36,48 +42,53 @@ def final_counters(log: str) -> dict:
     return {}
 
 
-def run_rate(rate: float, seconds: float, env: dict, share: Path, log_dir: Path, publish_rate: float = 0.0) -> dict:
+def run_rate(rate: float, seconds: float, env: dict, share: Path, log_dir: Path, publish_rate: float = 0.0,
+             warmup_s: float = 2.0) -> dict:
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
     from geometry_msgs.msg import PointStamped, WrenchStamped
     from std_msgs.msg import Float64MultiArray
 
     from crane_stiffness import rosrun, topics
-    from crane_stiffness.nodes.common import RELIABLE_QOS, SENSOR_QOS, stamp_to_s
+    from crane_stiffness.analysis.cdr import decode_stamped
+    from crane_stiffness.nodes.common import RELIABLE_QOS, SENSOR_QOS, make_executor
     from crane_stiffness.rig import estimate_fields
 
     fields = estimate_fields()
     i_stamp = fields.index('sample_stamp')
     rclpy.init()
     node = rclpy.create_node('bench_observer')
-    from crane_stiffness.nodes.common import make_executor
     executor = make_executor('events', node.context)  # the observer must not be the bottleneck it measures
     executor.add_node(node)
-    counts = {topics.LOAD_CELL_WRENCH: 0, topics.LVDT_DISPLACEMENT: 0}
-    stamps: dict[str, list[int]] = {topics.LOAD_CELL_WRENCH: [], topics.LVDT_DISPLACEMENT: []}
-    sensor_lag: list[float] = []
-    est_lag: list[float] = []
+    sensors = (topics.LOAD_CELL_WRENCH, topics.LVDT_DISPLACEMENT)
+    # Flat arrays, not lists of tuples: a quarter of a million tuples would make the observer's garbage collector
+    # stall it for tens of milliseconds (and lose samples) - an artefact of the measurement, not of the rig.
+    seen = {t: array('q') for t in sensors}  # stamp, arrival here, stamp, arrival, ... ns
+    est_seen = array('d')  # newest pair stamp, arrival here, ... of every estimate, s
     est_input: dict[str, str] = {}
 
-    def on_sensor(topic):
-        def cb(msg):
-            counts[topic] += 1
-            stamps[topic].append(msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec)
-            sensor_lag.append(time.time() - stamp_to_s(msg.header.stamp))
+    def on_sensor(topic, count):
+        out = seen[topic]
+
+        def cb(data: bytes):  # serialized: the observer decodes only the stamp, a few µs
+            sec, nanosec, _ = decode_stamped(data, count)
+            out.extend((sec * 1_000_000_000 + nanosec, time.time_ns()))
         return cb
 
     def on_values(msg: Float64MultiArray):
         stamp = np.nanmax([msg.data[i_stamp], msg.data[len(fields) + i_stamp]])
         if np.isfinite(stamp) and stamp > 0:
-            est_lag.append(time.time() - stamp)
+            est_seen.extend((stamp, time.time()))
 
     def on_estimate(msg: DiagnosticArray):
         for st in msg.status:
             if st.name.endswith(': input'):
                 est_input.update({kv.key: kv.value for kv in st.values})
 
-    node.create_subscription(WrenchStamped, topics.LOAD_CELL_WRENCH, on_sensor(topics.LOAD_CELL_WRENCH), SENSOR_QOS)
-    node.create_subscription(PointStamped, topics.LVDT_DISPLACEMENT, on_sensor(topics.LVDT_DISPLACEMENT), SENSOR_QOS)
+    node.create_subscription(WrenchStamped, topics.LOAD_CELL_WRENCH, on_sensor(topics.LOAD_CELL_WRENCH, 6),
+                             SENSOR_QOS, raw=True)
+    node.create_subscription(PointStamped, topics.LVDT_DISPLACEMENT, on_sensor(topics.LVDT_DISPLACEMENT, 3),
+                             SENSOR_QOS, raw=True)
     node.create_subscription(Float64MultiArray, topics.STIFFNESS_VALUES, on_values, RELIABLE_QOS)
     node.create_subscription(DiagnosticArray, topics.STIFFNESS_ESTIMATE, on_estimate, RELIABLE_QOS)
     cfg = lambda n: ['--params-file', str(share / n)]  # noqa: E731
@@ -100,6 +111,8 @@ def run_rate(rate: float, seconds: float, env: dict, share: Path, log_dir: Path,
         procs.start('load_program', 'crane_stiffness', 'load_program',
                     ['--ros-args', *cfg('program_side_force.yaml'), '-p', f'repeats:={repeats}',
                      '-p', 'start_delay_s:=0.5'])
+        program_start = time.time()
+        window = (program_start + warmup_s, program_start + seconds)  # steady state, wall clock s
         t_end = time.monotonic() + seconds
         while time.monotonic() < t_end:
             executor.spin_once(timeout_sec=0.01)
@@ -114,29 +127,58 @@ def run_rate(rate: float, seconds: float, env: dict, share: Path, log_dir: Path,
     executor.remove_node(node)
     node.destroy_node()
     rclpy.shutdown()
+    arrays = {t: np.frombuffer(v, dtype=np.int64).reshape(-1, 2) for t, v in seen.items()}
+    est = np.frombuffer(est_seen, dtype=float).reshape(-1, 2)
+    if os.environ.get('BENCH_DUMP'):  # raw arrays for a closer look
+        np.savez(os.environ['BENCH_DUMP'], est=est, **{t.strip('/').replace('/', '_'): a for t, a in arrays.items()})
 
-    def grid_loss(ns: list[int]) -> dict:
+    def grid_loss(ns: np.ndarray) -> dict:
         """Samples sit on a grid of 1/rate: every missing grid point between the first and last received stamp
         is a message lost on the way to this observer (exact, unlike counts that include start-up)."""
+        ns = np.unique(ns)
         if len(ns) < 2:
-            return {'expected': None, 'received': len(ns), 'lost': None}
+            return {'expected': None, 'received': len(ns), 'lost': None, 'gaps': []}
         period = 1e9 / rate
-        expected = int(round((max(ns) - min(ns)) / period)) + 1
-        return {'expected': expected, 'received': len(set(ns)), 'lost': expected - len(set(ns))}
+        expected = int(round((ns[-1] - ns[0]) / period)) + 1
+        steps = np.round(np.diff(ns) / period).astype(int)
+        where = np.nonzero(steps > 1)[0]
+        gaps = [(round(float(ns[i] * 1e-9 - program_start), 3), int(steps[i] - 1)) for i in where[:20]]
+        return {'expected': expected, 'received': len(ns), 'lost': expected - len(ns), 'gaps': gaps}
 
-    def pct(xs, q):
-        return round(float(np.percentile(np.asarray(xs) * 1e3, q)), 3) if xs else float('nan')
+    def stats(lag_s: np.ndarray) -> dict:
+        if lag_s.size == 0:
+            return {'p50': float('nan'), 'p99': float('nan'), 'max': float('nan'), 'n': 0}
+        p50, p99 = np.percentile(lag_s * 1e3, [50, 99])
+        return {'p50': round(float(p50), 3), 'p99': round(float(p99), 3), 'max': round(float(lag_s.max() * 1e3), 3),
+                'n': int(lag_s.size)}
 
+    in_window = lambda arrival_s: (arrival_s >= window[0]) & (arrival_s <= window[1])  # noqa: E731
+    est_in = est[in_window(est[:, 1])]
+    raw = np.concatenate([a for a in arrays.values()]) if arrays else np.zeros((0, 2), np.int64)
+    raw_lag = (raw[:, 1] - raw[:, 0]) * 1e-9
+    raw_lag = raw_lag[in_window(raw[:, 1] * 1e-9)]
+
+    # Every displacement sample in the window to the first estimate whose newest pair is at least as new.
+    per_sample = np.zeros(0)
+    if len(est):
+        newest = np.maximum.accumulate(est[:, 0])
+        t = np.unique(arrays[topics.LVDT_DISPLACEMENT][:, 0]) * 1e-9
+        t = t[(t >= window[0]) & (t <= window[1] - 1.0)]
+        i = np.searchsorted(newest, t - 1e-6)
+        ok = i < len(newest)
+        per_sample = est[i[ok], 1] - t[ok]
     received = {topics.LOAD_CELL_WRENCH: int(est_input.get('force_received', -1)),
                 topics.LVDT_DISPLACEMENT: int(est_input.get('displacement_received', -1))}
     return {
-        'rate_hz': rate, 'seconds': seconds,
-        'topics': {t: {'sent': sent[t], 'estimator_received': received[t], 'observer_received': counts[t],
+        'rate_hz': rate, 'seconds': seconds, 'publish_rate_hz': publish_rate or None, 'steady_state_from_s': warmup_s,
+        'topics': {t: {'sent': sent[t], 'estimator_received': received[t], 'observer_received': len(arrays[t]),
                        'sent_minus_estimator_received': None if sent[t] is None else sent[t] - received[t],
-                       'observer_grid': grid_loss(stamps[t])} for t in sent},
-        'estimate_lag_ms': {'p50': pct(est_lag, 50), 'p99': pct(est_lag, 99), 'n': len(est_lag)},
-        'baseline_sensor_transport_lag_ms': {'p50': pct(sensor_lag, 50), 'p99': pct(sensor_lag, 99),
-                                             'n': len(sensor_lag)},
+                       'observer_grid': grid_loss(arrays[t][:, 0])} for t in sensors},
+        'estimator_own_lag_ms': {k: float(est_input.get(f'lag_{k}_ms', 'nan')) for k in ('p50', 'p99', 'max')}
+        | {'n': int(est_input.get('lag_n', 0))},
+        'estimate_lag_ms': stats(est_in[:, 1] - est_in[:, 0]),
+        'sample_to_estimate_ms': stats(per_sample),
+        'baseline_sensor_transport_lag_ms': stats(raw_lag),
     }
 
 
@@ -146,6 +188,8 @@ def main(argv=None) -> int:
     ap.add_argument('--rates', type=float, nargs='+', default=[1000.0, 5000.0])
     ap.add_argument('--publish-rate', type=float, default=0.0,
                     help='sensor publish (burst) rate [Hz]; 0 = config/sensors.yaml')
+    ap.add_argument('--warmup', type=float, default=2.0,
+                    help='observer statistics start this long after the program start [s]')
     ap.add_argument('--json', help='write the figures here')
     args = ap.parse_args(argv)
     from crane_stiffness import rosrun
@@ -153,17 +197,26 @@ def main(argv=None) -> int:
     rosrun.colcon_build(REPO, ws / 'build', ws / 'install', ws / 'log')
     env = rosrun.install_environment(ws / 'install')
     share = ws / 'install' / 'crane_stiffness' / 'share' / 'crane_stiffness' / 'config'
-    results = [run_rate(r, args.seconds, env, share, ws / 'logs', args.publish_rate) for r in args.rates]
+    results = [run_rate(r, args.seconds, env, share, ws / 'logs', args.publish_rate, args.warmup) for r in args.rates]
     for res in results:
         print(f"--- {res['rate_hz']:.0f} Hz load cell and LVDT, {res['seconds']:.0f} s")
         for topic, c in res['topics'].items():
             g = c['observer_grid']
             print(f"  {topic:22s} sent {c['sent']}, estimator received {c['estimator_received']} (difference "
                   f"{c['sent_minus_estimator_received']}, includes samples sent before it was matched); observer: "
-                  f"{g['received']} of {g['expected']} grid samples, lost {g['lost']}")
+                  f"{g['received']} of {g['expected']} grid samples, lost {g['lost']}"
+                  + (f" (at s after the program start, count: {g['gaps']})" if g['gaps'] else ''))
         e, b = res['estimate_lag_ms'], res['baseline_sensor_transport_lag_ms']
-        print(f"  estimate lag from sample stamp: p50 {e['p50']} ms, p99 {e['p99']} ms (n = {e['n']}); "
-              f"baseline raw sensor lag p50 {b['p50']} ms, p99 {b['p99']} ms")
+        s, o = res['sample_to_estimate_ms'], res['estimator_own_lag_ms']
+        print(f"  estimator's lag at publication (its clock - newest pair stamp; whole run, its /stiffness/estimate):"
+              f" p50 {o['p50']:.1f} ms, p99 {o['p99']:.1f} ms, max {o['max']:.1f} ms (n = {o['n']})")
+        print(f"  at this observer, steady state (from {res['steady_state_from_s']:.0f} s after the program start):")
+        print(f"    estimate arrival - its newest pair stamp: p50 {e['p50']} ms, p99 {e['p99']} ms, max {e['max']} ms "
+              f"(n = {e['n']})")
+        print(f"    every displacement sample to the first estimate including it (adds the wait in the sensor's "
+              f"buffer): p50 {s['p50']} ms, p99 {s['p99']} ms (n = {s['n']})")
+        print(f"    baseline, raw sensor messages stamp to arrival: p50 {b['p50']} ms, p99 {b['p99']} ms "
+              f"(n = {b['n']})")
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=1))
     return 0
