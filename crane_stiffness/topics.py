@@ -51,5 +51,7 @@ RIG_TOPICS: dict[str, str] = {
 }
 
 #: Sensor streams use best-effort delivery (so reliable and best-effort publishers both match a subscriber) with
-#: a deeper queue than rclpy's qos_profile_sensor_data (5), because DAQ drivers publish in bursts.
-SENSOR_QUEUE_DEPTH = 200
+#: a deeper queue than rclpy's qos_profile_sensor_data (5), because DAQ drivers publish in bursts: 1 s at 1 kHz.
+#: A sensor stalled for a moment (Fast DDS matching a node that joins can block a publisher for ~0.3 s) publishes
+#: its backlog at once; a 200-deep queue lost the burst's oldest samples.
+SENSOR_QUEUE_DEPTH = 1000

@@ -25,7 +25,7 @@ from crane_stiffness.model import CraneGeometry
 from crane_stiffness.sim.program import LoadProgram
 
 T0_NS = 1_700_000_000_000_000_000
-SENSOR_QOS = dump_qos_profiles([qos_profile(reliability='best_effort', depth=200)])
+SENSOR_QOS = dump_qos_profiles([qos_profile(reliability='best_effort', depth=topics.SENSOR_QUEUE_DEPTH)])
 RELIABLE_QOS = dump_qos_profiles([qos_profile(depth=100)])
 LATCHED_QOS = dump_qos_profiles([qos_profile(depth=1, durability='transient_local')])
 
