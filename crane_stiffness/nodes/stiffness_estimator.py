@@ -156,22 +156,24 @@ class StiffnessEstimatorNode(Node):
         self.settings = values
 
     # --- inputs: a message (sensors: serialized) and, when taken by _drain, its message info ---
-    def _on_force(self, data: bytes, info: dict | None = None) -> None:
+    def _decode(self, data: bytes, count: int, stream: str) -> tuple[float, tuple[float, ...]] | None:
+        """(stamp in s, exactly as stamp_to_s computes it; the floats) of a stamped message, or None: counted as
+        malformed."""
         try:
-            sec, nanosec, wrench = decode_stamped(data, 6)
+            sec, nanosec, values = decode_stamped(data, count)
         except CdrError:
-            self.core.add_malformed(FORCE)
-            return
-        if self.core.add_force(sec + nanosec * 1e-9, wrench):  # = stamp_to_s, bit for bit
+            self.core.add_malformed(stream)
+            return None
+        return sec + nanosec * 1e-9, values
+
+    def _on_force(self, data: bytes, info: dict | None = None) -> None:
+        sample = self._decode(data, 6, FORCE)
+        if sample is not None and self.core.add_force(*sample):
             self.changed = True
 
     def _on_point(self, data: bytes, info: dict | None = None) -> None:
-        try:
-            sec, nanosec, point = decode_stamped(data, 3)
-        except CdrError:
-            self.core.add_malformed(DISPLACEMENT)
-            return
-        if self.core.add_displacement(sec + nanosec * 1e-9, point[0]):
+        sample = self._decode(data, 3, DISPLACEMENT)
+        if sample is not None and self.core.add_displacement(sample[0], sample[1][0]):
             self.changed = True
 
     def _on_volts(self, data: bytes, info: dict | None = None) -> None:
