@@ -326,8 +326,11 @@ class WindowedLeastSquares:
         order = np.r_[self._head:self._window, 0:self._head]
         return self._xbuf[order], self._ybuf[order]
 
-    def result(self) -> LineFit | None:
-        """Fit of the current window, or None with fewer than 3 pairs or no spread in x."""
+    def result(self, nonlinearity: bool | None = None) -> LineFit | None:
+        """Fit of the current window, or None with fewer than 3 pairs or no spread in x.
+
+        ``nonlinearity``: compute the indicator (sorts the window) — None: as chosen at construction.
+        """
         n = self._n
         if n < 3:
             return None
@@ -339,12 +342,12 @@ class WindowedLeastSquares:
         sse = max(syy - sxy * sxy / sxx, 0.0)  # clipped: rounding can make a perfect fit slightly negative
         xm = self._x0 + self._sx / n
         ym = self._y0 + self._sy / n
-        nonlinearity = math.nan
-        if self._nonlinearity:
+        indicator = math.nan
+        if self._nonlinearity if nonlinearity is None else nonlinearity:
             x, y = self.data()
             k = sxy / sxx
-            nonlinearity = split_half_nonlinearity(x, y, k, ym - k * xm)
-        return _assemble_scalar(n, xm, ym, sxx, sxy, syy, sse, nonlinearity)
+            indicator = split_half_nonlinearity(x, y, k, ym - k * xm)
+        return _assemble_scalar(n, xm, ym, sxx, sxy, syy, sse, indicator)
 
 
 @dataclass(frozen=True, slots=True)
@@ -630,6 +633,12 @@ class StiffnessEstimator:
         self._rls[branch].add(displacement, force)
         self._stamps[branch] = float(stamp_s)
         return branch
+
+    def nonlinearity(self, branch: Branch) -> float:
+        """The nonlinearity indicator of ``branch``'s window (sorts the window, whatever the constructor's
+        ``nonlinearity``); NaN while the window cannot be fitted."""
+        fit = self._windows[branch].result(nonlinearity=True)
+        return math.nan if fit is None else float(fit.nonlinearity)
 
     def estimate(self, branch: Branch | None = None) -> Estimate | None:
         """Estimate of ``branch`` (default: the current one), or None while its window cannot be fitted."""

@@ -31,8 +31,7 @@ from dataclasses import dataclass, field, fields
 from typing import Any
 
 from crane_stiffness.estimation.errors import ParameterError
-from crane_stiffness.estimation.fit import BRANCHES, LOADING, Branch, Estimate, StiffnessEstimator, \
-    WindowedLeastSquares, t_quantile
+from crane_stiffness.estimation.fit import BRANCHES, LOADING, Branch, Estimate, StiffnessEstimator, t_quantile
 from crane_stiffness.estimation.sync import DISPLACEMENT, FORCE, ApproximateTimeSync, Pair, SyncCounters
 
 #: Load axes, in the order of a wrench [fx, fy, fz, mx, my, mz].
@@ -258,7 +257,6 @@ class LiveStiffness:
         self._axis = s.axis_index
         self._sync = s.make_sync()
         self._estimator = s.make_estimator()
-        self._slow = {b: WindowedLeastSquares(s.window) for b in BRANCHES}
         self._commands = _CommandHold()
         for dof in range(1, min(s.window - 1, _T_CACHE)):  # fill scipy's t quantiles now, not one per pair later
             t_quantile(dof)
@@ -292,8 +290,6 @@ class LiveStiffness:
     def reset(self) -> None:
         """Clear the fits of both branches (pairing and counters go on)."""
         self._estimator.reset()
-        for window in self._slow.values():
-            window.reset()
         self._clear_outputs()
         self.counters.fit_restarts += 1
 
@@ -375,7 +371,6 @@ class LiveStiffness:
             branch = self._estimator.add(stamp, pair.force, pair.displacement, load)
             if branch is None:
                 continue
-            self._slow[branch].add(pair.displacement, pair.force)
             self._dirty.add(branch)
             self._current = branch
             self._newest_stamp = stamp
@@ -434,8 +429,7 @@ class LiveStiffness:
     def refresh(self) -> dict[Branch, float]:
         """Recompute the nonlinearity indicator of each branch's window (sorts the window: call it slowly)."""
         for branch in BRANCHES:
-            fit = self._slow[branch].result()
-            self._nonlinearity[branch] = math.nan if fit is None else float(fit.nonlinearity)
+            self._nonlinearity[branch] = self._estimator.nonlinearity(branch)
         return dict(self._nonlinearity)
 
     def report(self) -> list[BranchReport]:

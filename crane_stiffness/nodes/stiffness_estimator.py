@@ -90,10 +90,7 @@ def _validate(values: dict[str, Any]) -> LiveSettings:
     check(values['displacement_type'] in DISPLACEMENT_TYPES, 'displacement_type', values['displacement_type'],
           f'must be one of {", ".join(DISPLACEMENT_TYPES)}')
     positive(values, 'diagnostics_rate_hz')
-    settings = LiveSettings.from_params(values)  # ValueError naming the parameter
-    settings.make_sync()
-    settings.make_estimator()
-    return settings
+    return LiveSettings.from_params(values)  # ValueError naming the parameter; checks what the fits would
 
 
 class StiffnessEstimatorNode(Node):
