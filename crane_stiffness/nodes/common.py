@@ -20,6 +20,7 @@ from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityP
 
 from crane_stiffness import topics
 from crane_stiffness.config import ParamSpec
+from crane_stiffness.sim.sampling import SampleClock
 
 #: Commands and model outputs: nothing may be lost. 1000 deep = 10 s of commands at 100 Hz, so a reader starved of CPU
 #: for a while (a recorder on a busy machine) catches up instead of losing what the writer overwrote.
@@ -157,6 +158,47 @@ def create_grid_timer(node: Node, period_s: float, callback: Callable[[], None])
         while clock.now().nanoseconds < start:
             pass
     return node.create_timer(period_ns * 1e-9, callback)
+
+
+def check_sensor_params(values: Mapping[str, Any]) -> int | None:
+    """The parameters every simulated sensor has: ``sample_rate_hz``, ``publish_rate_hz``, ``frame_id``, ``seed``.
+    Raises ValueError naming a bad one; returns the noise seed (None = random)."""
+    positive(values, 'sample_rate_hz', 'publish_rate_hz')
+    check(isinstance(values['frame_id'], str) and values['frame_id'] != '', 'frame_id', values['frame_id'],
+          'must be a non-empty string')
+    check(values['seed'] >= -1, 'seed', values['seed'], 'must be -1 (random) or a seed >= 0')
+    SampleClock(values['sample_rate_hz'])  # raises for a rate it cannot represent
+    return None if values['seed'] < 0 else values['seed']
+
+
+class SampleSchedule:
+    """A simulated sensor's timing: the sample clock (``sample_rate_hz``; stamps on its grid) and the grid timer
+    (``publish_rate_hz``) whose ``tick`` publishes the samples due (:meth:`due`).
+
+    :meth:`configure` runs on start and on every parameter change: it re-creates only what changed, and a new
+    sample rate continues after the last instant already handed out.
+    """
+
+    def __init__(self, node: Node, tick: Callable[[], None]) -> None:
+        self._node = node
+        self._tick = tick
+        self._rates: tuple[float, float] | None = None
+        self.clock: SampleClock | None = None
+        self.timer = None
+
+    def configure(self, sample_rate_hz: float, publish_rate_hz: float) -> None:
+        previous = self._rates or (None, None)
+        if self.clock is None or sample_rate_hz != previous[0]:
+            self.clock = SampleClock(sample_rate_hz, start_after_ns=None if self.clock is None else self.clock.last_ns)
+        if self.timer is None or publish_rate_hz != previous[1]:
+            if self.timer is not None:
+                self._node.destroy_timer(self.timer)
+            self.timer = create_grid_timer(self._node, 1.0 / publish_rate_hz, self._tick)
+        self._rates = (sample_rate_hz, publish_rate_hz)
+
+    def due(self):
+        """The sample instants since the previous call (int64 ns, ascending; see SampleClock.due)."""
+        return self.clock.due(self._node.get_clock().now().nanoseconds)
 
 
 def make_executor(kind: str, context: Any):

@@ -20,8 +20,8 @@ from std_srvs.srv import Trigger
 
 from crane_stiffness import topics
 from crane_stiffness.config import ParamSpec
-from crane_stiffness.nodes.common import (OK, RELIABLE_QOS, SENSOR_QOS, WARN, Counters, Diagnostics, Params, check,
-                                          create_grid_timer, finite, positive, run)
+from crane_stiffness.nodes.common import (OK, RELIABLE_QOS, SENSOR_QOS, WARN, Counters, Diagnostics, Params,
+                                          SampleSchedule, check, check_sensor_params, finite, run)
 from crane_stiffness.sim.sampling import NS_PER_S, SampleClock, StampedHold
 from crane_stiffness.sim.sensors import LoadCellModel
 
@@ -53,13 +53,8 @@ MODEL_KEYS = ('noise_std', 'bias', 'drift_per_s', 'crosstalk', 'resolution', 'fu
 
 
 def _validate(values: dict[str, Any]) -> LoadCellModel:
-    positive(values, 'sample_rate_hz', 'publish_rate_hz')
-    check(isinstance(values['frame_id'], str) and values['frame_id'] != '', 'frame_id', values['frame_id'],
-          'must be a non-empty string')
+    seed = check_sensor_params(values)
     check(values['tare_samples'] >= 1, 'tare_samples', values['tare_samples'], 'must be >= 1')
-    check(values['seed'] >= -1, 'seed', values['seed'], 'must be -1 (random) or a seed >= 0')
-    SampleClock(values['sample_rate_hz'])  # raises for a rate it cannot represent
-    seed = None if values['seed'] < 0 else values['seed']
     return LoadCellModel.from_params({**{k: values[k] for k in MODEL_KEYS}, 'seed': seed})  # names a bad field
 
 
@@ -73,8 +68,7 @@ class LoadCell(Node):
         self._saturated_reported = np.zeros(6, dtype=np.int64)
         self.applied = StampedHold(6, initial=np.zeros(6))
         self.model: LoadCellModel | None = None
-        self.clock: SampleClock | None = None
-        self.timer = None
+        self.schedule = SampleSchedule(self, self._tick)
         self.settings: dict[str, Any] = {}
         self.t0_ns = self.get_clock().now().nanoseconds  # drift time origin
         self.pub = self.create_publisher(WrenchStamped, topics.LOAD_CELL_WRENCH, SENSOR_QOS)
@@ -83,17 +77,16 @@ class LoadCell(Node):
         self.create_service(Trigger, '~/tare', self._srv_tare)
         self.diagnostics = Diagnostics(self, self._report)
 
+    @property
+    def clock(self) -> SampleClock:
+        """The sample clock (period, skipped samples)."""
+        return self.schedule.clock
+
     def _apply(self, model: LoadCellModel, values: dict[str, Any]) -> None:
         if self.model is not None and self.model.offset.any():
             model.tare(self.model.offset)  # keep the tare across a parameter change
         self.model = model
-        if self.clock is None or values['sample_rate_hz'] != self.settings.get('sample_rate_hz'):
-            self.clock = SampleClock(values['sample_rate_hz'], start_after_ns=None if self.clock is None
-                                     else self.clock.last_ns)
-        if self.timer is None or values['publish_rate_hz'] != self.settings.get('publish_rate_hz'):
-            if self.timer is not None:
-                self.destroy_timer(self.timer)
-            self.timer = create_grid_timer(self, 1.0 / values['publish_rate_hz'], self._tick)
+        self.schedule.configure(values['sample_rate_hz'], values['publish_rate_hz'])
         self.settings = values
 
     def _on_command(self, msg: WrenchStamped) -> None:
@@ -107,7 +100,7 @@ class LoadCell(Node):
         self.applied.update(wrench, stamp_ns, self.get_clock().now().nanoseconds)
 
     def _tick(self) -> None:
-        times = self.clock.due(self.get_clock().now().nanoseconds)
+        times = self.schedule.due()
         if times.size == 0:
             return
         true_wrench, _ = self.applied.read(times)

@@ -22,8 +22,8 @@ from std_srvs.srv import Trigger
 from crane_stiffness import topics
 from crane_stiffness.config import ParamSpec
 from crane_stiffness.model.rotation import quaternion_to_matrix
-from crane_stiffness.nodes.common import (OK, RELIABLE_QOS, SENSOR_QOS, WARN, Counters, Diagnostics, Params, check,
-                                          create_grid_timer, finite, positive, run)
+from crane_stiffness.nodes.common import (OK, RELIABLE_QOS, SENSOR_QOS, WARN, Counters, Diagnostics, Params,
+                                          SampleSchedule, check_sensor_params, finite, run)
 from crane_stiffness.sim.sampling import NS_PER_S, SampleClock, StampedHold
 from crane_stiffness.sim.sensors import LvdtModel
 
@@ -49,12 +49,7 @@ MODEL_KEYS = ('axis', 'contact_point', 'noise_std', 'resolution', 'range_m')
 
 
 def _validate(values: dict[str, Any]) -> LvdtModel:
-    positive(values, 'sample_rate_hz', 'publish_rate_hz')
-    check(isinstance(values['frame_id'], str) and values['frame_id'] != '', 'frame_id', values['frame_id'],
-          'must be a non-empty string')
-    check(values['seed'] >= -1, 'seed', values['seed'], 'must be -1 (random) or a seed >= 0')
-    SampleClock(values['sample_rate_hz'])  # raises for a rate it cannot represent
-    seed = None if values['seed'] < 0 else values['seed']
+    seed = check_sensor_params(values)
     return LvdtModel.from_params({**{k: values[k] for k in MODEL_KEYS}, 'seed': seed})  # names a bad field
 
 
@@ -78,8 +73,7 @@ class Lvdt(Node):
         self.zero_pose: np.ndarray | None = None  # [u, Q] of the pose the sensor was zeroed at
         self.pose = StampedHold(12)
         self.model: LvdtModel | None = None
-        self.clock: SampleClock | None = None
-        self.timer = None
+        self.schedule = SampleSchedule(self, self._tick)
         self.settings: dict[str, Any] = {}
         self.pub = self.create_publisher(PointStamped, topics.LVDT_DISPLACEMENT, SENSOR_QOS)
         self.params = Params(self, PARAMS, _validate, self._apply)
@@ -87,17 +81,16 @@ class Lvdt(Node):
         self.create_service(Trigger, '~/zero', self._srv_zero)
         self.diagnostics = Diagnostics(self, self._report)
 
+    @property
+    def clock(self) -> SampleClock:
+        """The sample clock (period, skipped samples)."""
+        return self.schedule.clock
+
     def _apply(self, model: LvdtModel, values: dict[str, Any]) -> None:
         self.model = model
         if self.zero_pose is not None:
             self._zero(self.zero_pose)  # the new sensor set-up keeps the zero
-        if self.clock is None or values['sample_rate_hz'] != self.settings.get('sample_rate_hz'):
-            self.clock = SampleClock(values['sample_rate_hz'], start_after_ns=None if self.clock is None
-                                     else self.clock.last_ns)
-        if self.timer is None or values['publish_rate_hz'] != self.settings.get('publish_rate_hz'):
-            if self.timer is not None:
-                self.destroy_timer(self.timer)
-            self.timer = create_grid_timer(self, 1.0 / values['publish_rate_hz'], self._tick)
+        self.schedule.configure(values['sample_rate_hz'], values['publish_rate_hz'])
         self.settings = values
 
     def _zero(self, pose: np.ndarray) -> None:
@@ -118,7 +111,7 @@ class Lvdt(Node):
             self.get_logger().info(f'zeroed at the first pose: u = {pose[:3].tolist()} m')
 
     def _tick(self) -> None:
-        times = self.clock.due(self.get_clock().now().nanoseconds)
+        times = self.schedule.due()
         if times.size == 0:
             return
         poses, valid = self.pose.read(times)
