@@ -42,7 +42,7 @@ import numpy as np
 from crane_stiffness import __version__, topics
 from crane_stiffness.analysis.cdr import (CdrError, decode_diagnostic_array, decode_float64_multiarray,
                                           decode_string)
-from crane_stiffness.bag import BagDamageWarning, BagReader, TopicNotFoundError
+from crane_stiffness.bag import NODE_PARAMETERS_METADATA, BagDamageWarning, BagReader, TopicNotFoundError
 from crane_stiffness.config import geometry_from_params
 from crane_stiffness.errors import CraneStiffnessError
 from crane_stiffness.estimation.errors import DataError
@@ -60,9 +60,6 @@ RLS_REPLAY_PAIRS = 20_000
 PLOT_POINTS = 20_000
 #: Shortest run of equal commands taken as a hold [s].
 MIN_HOLD_S = 0.2
-NODE_PARAMETERS_METADATA = 'crane_stiffness/node_parameters'
-"""MCAP metadata record (written by session_recorder) of the parameters the rig's nodes ran with, read from the
-nodes over ROS: {node name: JSON of {parameter: value}}. Preferred to the parameter files of the session record."""
 COMPARED_FIELDS = ('stiffness', 'intercept', 'stderr', 'ci95_low', 'ci95_high', 'r2', 'n', 'residual_rms',
                    'rls_stiffness')
 

@@ -15,7 +15,8 @@ from .errors import (
 )
 from .reader import SUPPORTED_TYPES, BagReader, McapFile, RawMessage, TopicInfo
 from .writer import (
-    SESSION_METADATA, BagWriter, dump_qos_profiles, qos_profile, session_metadata,
+    NODE_PARAMETERS_METADATA, SESSION_END_METADATA, SESSION_METADATA, BagWriter, dump_qos_profiles, qos_profile,
+    session_metadata,
 )
 
 
@@ -29,7 +30,7 @@ def __getattr__(name: str) -> object:
 
 __all__ = [
     'BagCorruptError', 'BagDamageWarning', 'BagError', 'BagExistsError', 'BagFormatError', 'BagNotFoundError',
-    'BagReader', 'BagWriter', 'BagWriterError', 'McapFile', 'MessageDefinitionError', 'RawMessage',
-    'RecoveryReport', 'SESSION_METADATA', 'SUPPORTED_TYPES', 'TopicInfo', 'TopicNotFoundError',
-    'UnsupportedTypeError', 'dump_qos_profiles', 'qos_profile', 'recover_bag', 'session_metadata',
+    'BagReader', 'BagWriter', 'BagWriterError', 'McapFile', 'MessageDefinitionError', 'NODE_PARAMETERS_METADATA',
+    'RawMessage', 'RecoveryReport', 'SESSION_END_METADATA', 'SESSION_METADATA', 'SUPPORTED_TYPES', 'TopicInfo',
+    'TopicNotFoundError', 'UnsupportedTypeError', 'dump_qos_profiles', 'qos_profile', 'recover_bag', 'session_metadata',
 ]

@@ -38,6 +38,11 @@ METADATA_VERSION = 9
 ROS_DISTRO = 'jazzy'
 SESSION_METADATA = 'crane_stiffness/session'
 """Name of the MCAP Metadata record that describes a test session (rig, program, software, notes)."""
+NODE_PARAMETERS_METADATA = 'crane_stiffness/node_parameters'
+"""MCAP metadata record (written by session_recorder) of the parameters the rig's nodes ran with, read from the
+nodes over ROS: {node name: JSON of {parameter: value}}. Preferred to the parameter files of the session record."""
+SESSION_END_METADATA = 'crane_stiffness/session_end'
+"""MCAP metadata record written when the recording is closed: stop reason, end time, message counts."""
 ROSBAG2_METADATA = 'rosbag2'
 """Name of the MCAP Metadata record in which rosbag2 stores its serialized bag metadata."""
 LIBRARY = f'crane_stiffness/{__version__}'

@@ -48,8 +48,8 @@ from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
 from crane_stiffness import __version__, topics
-from crane_stiffness.analysis.session import NODE_PARAMETERS_METADATA
-from crane_stiffness.bag import SESSION_METADATA, BagWriter, dump_qos_profiles, session_metadata
+from crane_stiffness.bag import (NODE_PARAMETERS_METADATA, SESSION_END_METADATA, SESSION_METADATA, BagWriter,
+                                 dump_qos_profiles, session_metadata)
 from crane_stiffness.bag.errors import BagError
 from crane_stiffness.bag.writer import COMPRESSIONS
 from crane_stiffness.config import GEOMETRY_PARAMS, ParamSpec, flatten_params, geometry_from_params
@@ -60,8 +60,6 @@ from crane_stiffness.nodes.session_qos import (adapted_qos, contract_qos, has_he
                                                offered_profiles, publisher_types)
 from crane_stiffness.sim.program import LoadProgram
 
-SESSION_END_METADATA = 'crane_stiffness/session_end'
-"""MCAP metadata record written when the recording is closed: stop reason, end time, message counts."""
 
 PROGRAM_PARAMS = tuple(p for p in PROGRAM_NODE_PARAMS if p.name in PROGRAM_KEYS)
 PROGRAM_DEFAULTS = {p.name: p.default for p in PROGRAM_PARAMS}
@@ -151,9 +149,7 @@ def read_params_files(paths: Sequence[str]) -> tuple[list[dict[str, str]], dict[
             continue
         for name, body in doc.items():
             if isinstance(body, dict) and isinstance(body.get('ros__parameters'), dict):
-                flat: dict[str, Any] = {}
-                flat.update(flatten_params(body['ros__parameters']))
-                sections.setdefault(str(name), {}).update(flat)
+                sections.setdefault(str(name), {}).update(flatten_params(body['ros__parameters']))
     return files, sections, problems
 
 
