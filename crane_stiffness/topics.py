@@ -17,6 +17,8 @@ WIRE_STATES = '/crane/wire_states'
 PREDICTED_STIFFNESS = '/crane/predicted_stiffness'
 # Predicted stiffness along the commanded axis (other DOFs free), std_msgs/Float64 [N/m or N·m/rad].
 PREDICTED_AXIS_STIFFNESS = '/crane/predicted_axis_stiffness'
+# The model's state, std_msgs/String 'ok: N slack wire(s)' or 'no_equilibrium: ...', transient local.
+MODEL_STATUS = '/crane/model_status'
 # Load program progress, std_msgs/Float64 in [0, 1], and its state, std_msgs/String.
 PROGRAM_PROGRESS = '/load_program/progress'
 PROGRAM_STATE = '/load_program/state'

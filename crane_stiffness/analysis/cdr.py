@@ -68,6 +68,12 @@ def encode_float64(value: float) -> bytes:
     return ENCAPSULATION + struct.pack('<d', float(value))
 
 
+def stamp_seconds(sec: int, nanosec: int) -> float:
+    """A header stamp in seconds, ``sec + nanosec · 1e-9``: the one rounding every node and the offline analysis
+    use, so that live and offline results agree bit for bit."""
+    return sec + nanosec * 1e-9
+
+
 _HEADER = {True: struct.Struct('<iII'), False: struct.Struct('>iII')}
 _DOUBLES: dict[tuple[int, bool], struct.Struct] = {}
 

@@ -17,7 +17,8 @@ from typing import Any
 import numpy as np
 
 from crane_stiffness import topics
-from crane_stiffness.analysis.cdr import encode_float64, encode_float64_multiarray, encode_stamped, encode_string
+from crane_stiffness.analysis.cdr import (encode_float64, encode_float64_multiarray, encode_stamped, encode_string,
+                                         stamp_seconds)
 from crane_stiffness.bag import SESSION_METADATA, BagWriter, dump_qos_profiles, qos_profile, session_metadata
 from crane_stiffness.config import geometry_to_params
 from crane_stiffness.estimation.live import AXES, VALUE_FIELDS, LiveSettings, LiveStiffness
@@ -48,8 +49,8 @@ class SyntheticSession:
 
 
 def _seconds(ns: int) -> float:
-    """A stamp in seconds computed as the nodes do (``sec + nanosec * 1e-9``), bit for bit."""
-    return ns // 1_000_000_000 + (ns % 1_000_000_000) * 1e-9
+    """A stamp in ns as seconds, computed as the nodes do (cdr.stamp_seconds), bit for bit."""
+    return stamp_seconds(*divmod(ns, 1_000_000_000))
 
 
 def model_displacement(geometry: CraneGeometry, axis: str, loads: np.ndarray, points: int = 401) -> np.ndarray:

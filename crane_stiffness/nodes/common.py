@@ -19,6 +19,7 @@ from rclpy.node import Node
 from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy)
 
 from crane_stiffness import topics
+from crane_stiffness.analysis.cdr import stamp_seconds
 from crane_stiffness.config import ParamSpec
 from crane_stiffness.sim.sampling import SampleClock
 
@@ -85,12 +86,7 @@ def positive(values: Mapping[str, Any], *names: str) -> None:
 
 
 def stamp_to_s(stamp: Time) -> float:
-    return stamp.sec + stamp.nanosec * 1e-9
-
-
-def s_to_stamp(t: float) -> Time:
-    sec = math.floor(t)
-    return Time(sec=int(sec), nanosec=min(999_999_999, int(round((t - sec) * 1e9))))
+    return stamp_seconds(stamp.sec, stamp.nanosec)
 
 
 def finite(values: Iterable[float]) -> bool:

@@ -24,7 +24,7 @@ from crane_stiffness.model.rotation import matrix_to_quaternion
 from crane_stiffness.nodes.common import (ERROR, LATCHED_QOS, OK, RELIABLE_QOS, Counters, Diagnostics, Params,
                                           check, finite, run)
 
-MODEL_STATUS = '/crane/model_status'
+MODEL_STATUS = topics.MODEL_STATUS
 
 PARAMS = GEOMETRY_PARAMS + (
     ParamSpec('prediction_axis', 'auto', "axis of the predicted stiffness: fx fy fz mx my mz, or 'auto' = the "

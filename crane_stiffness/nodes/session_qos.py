@@ -24,7 +24,7 @@ DEFAULT_DEPTH = 100
 
 SENSOR_TOPICS = frozenset({topics.LOAD_CELL_WRENCH, topics.LVDT_DISPLACEMENT})
 LATCHED_TOPICS = frozenset({topics.PREDICTED_STIFFNESS, topics.PREDICTED_AXIS_STIFFNESS, topics.PROGRAM_PROGRESS,
-                            topics.PROGRAM_STATE, '/crane/model_status'})
+                            topics.PROGRAM_STATE, topics.MODEL_STATUS})
 RELIABLE_TOPICS = frozenset({topics.WRENCH_COMMAND, topics.PLATFORM_POSE, topics.WIRE_STATES,
                              topics.STIFFNESS_ESTIMATE, topics.STIFFNESS_VALUES, topics.STIFFNESS})
 

@@ -26,7 +26,7 @@ from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension
 from std_srvs.srv import Trigger
 
 from crane_stiffness import topics
-from crane_stiffness.analysis.cdr import CdrError, decode_float64, decode_stamped
+from crane_stiffness.analysis.cdr import CdrError, decode_float64, decode_stamped, stamp_seconds
 from crane_stiffness.config import ParamSpec
 from crane_stiffness.estimation.fit import BRANCHES
 from crane_stiffness.estimation.live import VALUE_FIELDS, LiveSettings, LiveStiffness
@@ -154,14 +154,13 @@ class StiffnessEstimatorNode(Node):
 
     # --- inputs: a message (sensors: serialized) and, when taken by _drain, its message info ---
     def _decode(self, data: bytes, count: int, stream: str) -> tuple[float, tuple[float, ...]] | None:
-        """(stamp in s, exactly as stamp_to_s computes it; the floats) of a stamped message, or None: counted as
-        malformed."""
+        """(stamp in s, the floats) of a stamped message, or None: counted as malformed."""
         try:
             sec, nanosec, values = decode_stamped(data, count)
         except CdrError:
             self.core.add_malformed(stream)
             return None
-        return sec + nanosec * 1e-9, values
+        return stamp_seconds(sec, nanosec), values
 
     def _on_force(self, data: bytes, info: dict | None = None) -> None:
         sample = self._decode(data, 6, FORCE)
