@@ -53,6 +53,16 @@ def spin_until(executor, predicate: Callable[[], bool], timeout_s: float) -> boo
     return predicate()
 
 
+def call_trigger(executor, node, service: str, timeout_s: float = 5.0):
+    """Call the std_srvs/Trigger ``service`` from ``node``, spinning ``executor``; returns the response."""
+    from std_srvs.srv import Trigger
+    client = node.create_client(Trigger, service)
+    assert client.wait_for_service(timeout_sec=timeout_s), service
+    future = client.call_async(Trigger.Request())
+    assert spin_until(executor, future.done, timeout_s)
+    return future.result()
+
+
 REPO = __import__('pathlib').Path(__file__).resolve().parent.parent
 
 

@@ -24,8 +24,8 @@ from rclpy.node import Node  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 from std_msgs.msg import Float64, Float64MultiArray  # noqa: E402
-from std_srvs.srv import Trigger  # noqa: E402
 
+from conftest import call_trigger as call  # noqa: E402
 from conftest import spin_until  # noqa: E402
 from crane_stiffness import topics  # noqa: E402
 from crane_stiffness.config import load_params  # noqa: E402
@@ -176,14 +176,6 @@ class Probe:
 
     def last(self, branch: int) -> dict[str, float]:
         return row(self.values[-1][1], branch)
-
-
-def call(ex, node: Node, service: str) -> Trigger.Response:
-    client = node.create_client(Trigger, service)
-    assert client.wait_for_service(timeout_sec=5.0), service
-    future = client.call_async(Trigger.Request())
-    assert spin_until(ex, future.done, 5.0)
-    return future.result()
 
 
 def setup(ctx, *nodes) -> SingleThreadedExecutor:

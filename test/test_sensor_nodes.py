@@ -20,8 +20,8 @@ from geometry_msgs.msg import PointStamped, PoseStamped, WrenchStamped  # noqa: 
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.node import Node  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
-from std_srvs.srv import Trigger  # noqa: E402
 
+from conftest import call_trigger as call  # noqa: E402
 from conftest import spin_until  # noqa: E402
 from crane_stiffness import topics  # noqa: E402
 from crane_stiffness.config import load_params  # noqa: E402
@@ -46,14 +46,6 @@ def isolated(base: str) -> tuple[str, str, list[str]]:
                   topics.DIAGNOSTICS):
         args += ['-r', f'{topic}:={prefix}{topic}']
     return name, prefix, args
-
-
-def call(ex, node: Node, service: str) -> Trigger.Response:
-    client = node.create_client(Trigger, service)
-    assert client.wait_for_service(timeout_sec=5.0), service
-    future = client.call_async(Trigger.Request())
-    assert spin_until(ex, future.done, 5.0)
-    return future.result()
 
 
 def wait_connected(ex, pub, sub_count: int = 1) -> None:
