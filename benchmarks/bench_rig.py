@@ -49,10 +49,11 @@ def run_rate(rate: float, seconds: float, env: dict, share: Path, log_dir: Path,
     from geometry_msgs.msg import PointStamped, WrenchStamped
     from std_msgs.msg import Float64MultiArray
 
-    from crane_stiffness import rosrun, topics
+    from crane_stiffness import topics
     from crane_stiffness.analysis.cdr import decode_stamped
     from crane_stiffness.nodes.common import RELIABLE_QOS, SENSOR_QOS, make_executor
-    from crane_stiffness.rig import estimate_fields
+    from crane_stiffness.testing import rosrun
+    from crane_stiffness.testing.rig import estimate_fields
 
     fields = estimate_fields()
     i_stamp = fields.index('sample_stamp')
@@ -192,7 +193,7 @@ def main(argv=None) -> int:
                     help='observer statistics start this long after the program start [s]')
     ap.add_argument('--json', help='write the figures here')
     args = ap.parse_args(argv)
-    from crane_stiffness import rosrun
+    from crane_stiffness.testing import rosrun
     ws = REPO / 'out' / 'bench_rig'
     rosrun.colcon_build(REPO, ws / 'build', ws / 'install', ws / 'log')
     env = rosrun.install_environment(ws / 'install')

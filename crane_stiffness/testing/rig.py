@@ -18,7 +18,7 @@ from crane_stiffness import __version__, topics
 from crane_stiffness.config import geometry_from_params, load_params
 from crane_stiffness.model import axis_stiffness, rest_pose, tangent_stiffness
 from crane_stiffness.nodes.common import LATCHED_QOS, RELIABLE_QOS
-from crane_stiffness.rosrun import Processes, RosRunError
+from crane_stiffness.testing.rosrun import Processes, RosRunError
 from crane_stiffness.sim.program import LoadProgram, load_program_file
 
 PACKAGE = 'crane_stiffness'

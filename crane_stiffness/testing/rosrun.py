@@ -3,7 +3,7 @@
 ``ros2 run PKG EXE`` finds PKG's prefix through the ament index (the first prefix in AMENT_PREFIX_PATH holding
 ``share/ament_index/resource_index/packages/PKG``) and executes ``<prefix>/lib/PKG/EXE``. :func:`command` uses the
 real ``ros2`` when it is on PATH and otherwise performs exactly that look-up, so the demo and the tests start every
-node from the colcon install tree in the same way. ``python -m crane_stiffness.rosrun PKG EXE [args]`` is the
+node from the colcon install tree in the same way. ``python -m crane_stiffness.testing.rosrun PKG EXE [args]`` is the
 command-line form. :class:`Processes` runs a set of such nodes and stops them cleanly.
 """
 from __future__ import annotations
@@ -129,7 +129,7 @@ class Processes:
 def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if len(argv) < 2:
-        print('usage: python -m crane_stiffness.rosrun PACKAGE EXECUTABLE [args...]', file=sys.stderr)
+        print('usage: python -m crane_stiffness.testing.rosrun PACKAGE EXECUTABLE [args...]', file=sys.stderr)
         return 2
     try:
         exe = executable_path(argv[0], argv[1])
