@@ -14,11 +14,10 @@ from typing import Any, Mapping
 
 import yaml
 
+from crane_stiffness import PACKAGE
 from crane_stiffness.errors import CraneStiffnessError
 from crane_stiffness.model.geometry import LAB_A, LAB_B, LAB_WIRE_DIAMETER, LAB_YOUNGS_MODULUS, CraneGeometry
 from crane_stiffness.param_files import ParamFile, applicable_sections, flatten_params  # noqa: F401 (re-exported)
-
-PACKAGE = 'crane_stiffness'
 
 
 class ConfigError(CraneStiffnessError, ValueError):

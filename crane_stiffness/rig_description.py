@@ -16,7 +16,10 @@ import os
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
-PACKAGE = 'crane_stiffness'
+from crane_stiffness import PACKAGE
+
+__all__ = ['ARGUMENTS', 'NODES', 'PACKAGE', 'Argument', 'NodeStart', 'RigNode', 'argument_values', 'config_files',
+           'flag', 'program_file', 'rig_nodes']
 
 
 @dataclass(frozen=True)

@@ -17,6 +17,7 @@ import time
 from pathlib import Path
 from typing import Mapping, Sequence
 
+from crane_stiffness import PACKAGE
 from crane_stiffness.errors import CraneStiffnessError
 
 
@@ -53,7 +54,7 @@ def command(package: str, executable: str, args: Sequence[str] = (), env: Mappin
     return [str(executable_path(package, executable, apath)), *args]
 
 
-def install_environment(install_base: str | os.PathLike, package: str = 'crane_stiffness',
+def install_environment(install_base: str | os.PathLike, package: str = PACKAGE,
                         base: Mapping[str, str] | None = None) -> dict[str, str]:
     """The environment ``source install/local_setup.sh`` would give for an isolated colcon install of package:
     its prefix first in AMENT_PREFIX_PATH and its site-packages first on PYTHONPATH."""
