@@ -118,15 +118,26 @@ def test_every_rig_node_runs_from_the_install_tree_and_its_topics_echo(install_t
     ex = SingleThreadedExecutor(context=rclpy_context)
     ex.add_node(node)
     received: dict[str, object] = {}
+    expected = {topics.WRENCH_COMMAND, topics.PLATFORM_POSE, topics.WIRE_STATES, topics.PREDICTED_STIFFNESS,
+                topics.PREDICTED_AXIS_STIFFNESS, topics.LOAD_CELL_WRENCH, topics.LVDT_DISPLACEMENT,
+                topics.STIFFNESS_ESTIMATE, topics.STIFFNESS_VALUES, topics.STIFFNESS, topics.PROGRAM_STATE,
+                topics.PROGRAM_PROGRESS, topics.DIAGNOSTICS}
+
+    def advertised_now() -> dict[str, str]:
+        found: dict[str, str] = {}
+        for name in params:
+            for topic, types in node.get_publisher_names_and_types_by_node(name, '/'):
+                if topic not in ('/rosout', '/parameter_events'):
+                    found[topic] = types[0]
+        return found
+
     with rosrun.Processes(env, tmp_path) as procs:
         for name, rig_node in params.items():
             start_node(procs, rig_node, {'start_delay_s': 0.5, 'min_subscribers': 4} if rig_node.runs_program else None)
         assert spin_until(ex, lambda: set(params) <= set(node.get_node_names()), 60), procs.log('load_program')
-        advertised: dict[str, str] = {}
-        for name in params:
-            for topic, types in node.get_publisher_names_and_types_by_node(name, '/'):
-                if topic not in ('/rosout', '/parameter_events'):
-                    advertised[topic] = types[0]
+        # A node's name is discovered apart from its publishers (which can take longer on a busy machine).
+        spin_until(ex, lambda: expected <= set(advertised_now()), 30)
+        advertised = advertised_now()
         for topic, type_name in advertised.items():
             node.create_subscription(_message_class(type_name), topic,
                                      lambda msg, t=topic: received.setdefault(t, msg), _echo_qos(node, topic))
@@ -136,10 +147,6 @@ def test_every_rig_node_runs_from_the_install_tree_and_its_topics_echo(install_t
             ex.spin_once(timeout_sec=0.05)
         codes = procs.stop()
     ex.shutdown()
-    expected = {topics.WRENCH_COMMAND, topics.PLATFORM_POSE, topics.WIRE_STATES, topics.PREDICTED_STIFFNESS,
-                topics.PREDICTED_AXIS_STIFFNESS, topics.LOAD_CELL_WRENCH, topics.LVDT_DISPLACEMENT,
-                topics.STIFFNESS_ESTIMATE, topics.STIFFNESS_VALUES, topics.STIFFNESS, topics.PROGRAM_STATE,
-                topics.PROGRAM_PROGRESS, topics.DIAGNOSTICS}
     assert expected <= set(advertised), sorted(advertised)
     assert set(received) == set(advertised), sorted(set(advertised) - set(received))
     assert received[topics.LOAD_CELL_WRENCH].header.frame_id == 'load_cell'
