@@ -1,6 +1,6 @@
 """Benchmark: ``analyze_session`` on one hour of a 1 kHz rig, beside decoding the same bag with mcap-ros2-support.
 
-Generates a synthetic session bag (crane_stiffness.analysis.synthetic) in a temporary directory: the side-force
+Generates a synthetic session bag (crane_stiffness.testing.synthetic) in a temporary directory: the side-force
 program (config/program_side_force.yaml, 21 s) repeated for ``--seconds`` (default 3600), load cell and LVDT at
 ``--rate`` (default 1000 Hz) from the nonlinear model of the lab crane (h = 0.5 m, W = 50 N) with sensor noise,
 the commands at 100 Hz, program state, the model's prediction, and the live estimator's output over the last
@@ -31,7 +31,7 @@ os.environ.setdefault('AMENT_PREFIX_PATH', sys.prefix)  # the .msg files for the
 os.environ.setdefault('MPLBACKEND', 'Agg')
 
 from crane_stiffness.analysis.session import analyze_session  # noqa: E402
-from crane_stiffness.analysis.synthetic import write_synthetic_session  # noqa: E402
+from crane_stiffness.testing.synthetic import write_synthetic_session  # noqa: E402
 from crane_stiffness.model import lab_model  # noqa: E402
 from crane_stiffness.sim.program import LoadProgram, load_program_file  # noqa: E402
 

@@ -49,10 +49,12 @@ def run_rate(rate: float, seconds: float, env: dict, share: Path, log_dir: Path,
     from geometry_msgs.msg import PointStamped, WrenchStamped
     from std_msgs.msg import Float64MultiArray
 
-    from crane_stiffness import rosrun, topics
+    from crane_stiffness import topics
     from crane_stiffness.analysis.cdr import decode_stamped
     from crane_stiffness.nodes.common import RELIABLE_QOS, SENSOR_QOS, make_executor
-    from crane_stiffness.rig import estimate_fields
+    from crane_stiffness.rig_description import rig_nodes
+    from crane_stiffness.testing import rosrun
+    from crane_stiffness.testing.rig import estimate_fields, start_node
 
     fields = estimate_fields()
     i_stamp = fields.index('sample_stamp')
@@ -91,15 +93,14 @@ def run_rate(rate: float, seconds: float, env: dict, share: Path, log_dir: Path,
                              SENSOR_QOS, raw=True)
     node.create_subscription(Float64MultiArray, topics.STIFFNESS_VALUES, on_values, RELIABLE_QOS)
     node.create_subscription(DiagnosticArray, topics.STIFFNESS_ESTIMATE, on_estimate, RELIABLE_QOS)
-    cfg = lambda n: ['--params-file', str(share / n)]  # noqa: E731
-    rate_args = ['-p', f'sample_rate_hz:={rate}'] + (['-p', f'publish_rate_hz:={publish_rate}'] if publish_rate else [])
+    # The rig of rig.launch.py without the recorder, the sensors at the benchmark's rates.
+    nodes = rig_nodes(share, {'program': 'side_force', 'record': False})
+    rates = {'sample_rate_hz': rate, **({'publish_rate_hz': publish_rate} if publish_rate else {})}
     repeats = int(np.ceil(seconds / 21.0))
     with rosrun.Processes(env, log_dir / f'{int(rate)}hz') as procs:
-        procs.start('crane_model', 'crane_stiffness', 'crane_model', ['--ros-args', *cfg('crane_lab.yaml')])
-        procs.start('load_cell', 'crane_stiffness', 'load_cell', ['--ros-args', *cfg('sensors.yaml'), *rate_args])
-        procs.start('lvdt', 'crane_stiffness', 'lvdt', ['--ros-args', *cfg('sensors.yaml'), *rate_args])
-        procs.start('stiffness_estimator', 'crane_stiffness', 'stiffness_estimator',
-                    ['--ros-args', *cfg('crane_lab.yaml'), *cfg('sensors.yaml')])
+        for n in nodes:
+            if not n.runs_program:
+                start_node(procs, n, rates if n.name in ('load_cell', 'lvdt') else None)
         deadline = time.monotonic() + 90
         while not (node.count_subscribers(topics.LOAD_CELL_WRENCH) >= 2
                    and node.count_subscribers(topics.LVDT_DISPLACEMENT) >= 2
@@ -108,9 +109,9 @@ def run_rate(rate: float, seconds: float, env: dict, share: Path, log_dir: Path,
             if time.monotonic() > deadline:
                 raise RuntimeError('rig did not connect')
             executor.spin_once(timeout_sec=0.05)
-        procs.start('load_program', 'crane_stiffness', 'load_program',
-                    ['--ros-args', *cfg('program_side_force.yaml'), '-p', f'repeats:={repeats}',
-                     '-p', 'start_delay_s:=0.5'])
+        for n in nodes:
+            if n.runs_program:
+                start_node(procs, n, {'repeats': repeats, 'start_delay_s': 0.5})
         program_start = time.time()
         window = (program_start + warmup_s, program_start + seconds)  # steady state, wall clock s
         t_end = time.monotonic() + seconds
@@ -192,7 +193,7 @@ def main(argv=None) -> int:
                     help='observer statistics start this long after the program start [s]')
     ap.add_argument('--json', help='write the figures here')
     args = ap.parse_args(argv)
-    from crane_stiffness import rosrun
+    from crane_stiffness.testing import rosrun
     ws = REPO / 'out' / 'bench_rig'
     rosrun.colcon_build(REPO, ws / 'build', ws / 'install', ws / 'log')
     env = rosrun.install_environment(ws / 'install')

@@ -12,3 +12,5 @@ Layout (where to change what):
 """
 
 __version__ = '0.1.0'
+#: The ROS package: its share/ and lib/ directories, the ament index entry, the launch files' package.
+PACKAGE = 'crane_stiffness'

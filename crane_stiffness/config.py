@@ -1,8 +1,9 @@
 """Config files in the ROS 2 parameter YAML format, read the same way by the nodes and by the offline CLI.
 
 A file holds ``<node name or /**>: ros__parameters: {name: value}``; nested mappings flatten to dotted names the way
-rclpy does (``geometry: {a: 0.1}`` is the parameter ``geometry.a``). The crane's geometry parameters are defined here
-once (name, type, unit, description) so the nodes declare exactly what the CLI reads.
+rclpy does (``geometry: {a: 0.1}`` is the parameter ``geometry.a``); crane_stiffness.param_files reads them. The
+crane's geometry parameters are defined here once (name, type, unit, description) so the nodes declare exactly what
+the CLI reads.
 """
 from __future__ import annotations
 
@@ -13,10 +14,10 @@ from typing import Any, Mapping
 
 import yaml
 
+from crane_stiffness import PACKAGE
 from crane_stiffness.errors import CraneStiffnessError
 from crane_stiffness.model.geometry import LAB_A, LAB_B, LAB_WIRE_DIAMETER, LAB_YOUNGS_MODULUS, CraneGeometry
-
-PACKAGE = 'crane_stiffness'
+from crane_stiffness.param_files import ParamFile, applicable_sections, flatten_params  # noqa: F401 (re-exported)
 
 
 class ConfigError(CraneStiffnessError, ValueError):
@@ -73,44 +74,25 @@ def geometry_to_params(geometry: CraneGeometry, prefix: str = 'geometry.') -> di
     return {prefix + k: v for k, v in d.items()}
 
 
-def flatten_params(values: Mapping[str, Any], prefix: str = '') -> dict[str, Any]:
-    """Nested mappings as dotted parameter names, the way rclpy flattens a parameter file
-    (``{geometry: {a: 0.1}}`` → ``{'geometry.a': 0.1}``)."""
-    out: dict[str, Any] = {}
-    for key, value in values.items():
-        name = f'{prefix}{key}'
-        if isinstance(value, Mapping):
-            out.update(flatten_params(value, name + '.'))
-        else:
-            out[name] = value
-    return out
-
-
 def load_params(path: str | os.PathLike, node_name: str | None = None) -> dict[str, Any]:
-    """Flat parameters of a ROS parameter YAML file.
-
-    Sections apply in the order ROS applies them: ``/**`` first, then the named node (with or without a leading
-    slash). Without ``node_name`` every section is merged in file order.
+    """Flat parameters of a ROS parameter YAML file for the node ``node_name`` (its name, or its fully qualified
+    name), the sections applied the way ROS applies them (crane_stiffness.param_files: ``/**`` and other
+    wildcards first, then the node's own). Without ``node_name`` every section is merged in file order.
     """
     path = Path(path)
     try:
-        doc = yaml.safe_load(path.read_text())
+        file = ParamFile.read(path)
     except FileNotFoundError:
         raise ConfigError(f'{path}: no such config file') from None
     except yaml.YAMLError as exc:
         raise ConfigError(f'{path}: not valid YAML: {exc}') from None
-    if not isinstance(doc, Mapping):
+    if not file.is_mapping:
         raise ConfigError(f'{path}: expected "<node>: ros__parameters: ..." at the top level')
-    out: dict[str, Any] = {}
-    sections = list(doc.items())
-    if node_name is not None:
-        wanted = {'/**', node_name, '/' + node_name.lstrip('/')}
-        sections = sorted((s for s in sections if s[0] in wanted), key=lambda s: s[0] != '/**')
-    for name, body in sections:
-        if not isinstance(body, Mapping) or 'ros__parameters' not in body:
-            raise ConfigError(f'{path}: section {name!r} has no ros__parameters mapping')
-        out.update(flatten_params(body['ros__parameters'] or {}))
-    return out
+    keys = applicable_sections(file.sections, node_name)
+    for key in keys:
+        if file.sections[key] is None:
+            raise ConfigError(f'{path}: section {key!r} has no ros__parameters mapping')
+    return file.params(keys)
 
 
 def share_dir() -> Path:

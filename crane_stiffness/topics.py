@@ -6,6 +6,8 @@ is the body frame; each sensor stamps its own ``frame_id`` (a parameter).
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 # Commanded wrench on the platform [N, N·m], geometry_msgs/WrenchStamped, frame crane_base, reliable.
 WRENCH_COMMAND = '/crane/wrench_command'
 # Platform pose, geometry_msgs/PoseStamped, frame crane_base (z down), reliable.
@@ -52,8 +54,49 @@ RIG_TOPICS: dict[str, str] = {
     STIFFNESS: 'std_msgs/msg/Float64',
 }
 
+
+@dataclass(frozen=True)
+class QoS:
+    """A class of QoS: reliability and durability as rosbag2 and rmw name the policies, and the KEEP_LAST depth of
+    the rig's publishers (and of the subscribers that must keep up with them). History is always KEEP_LAST."""
+
+    reliability: str  # 'reliable' | 'best_effort'
+    durability: str   # 'volatile' | 'transient_local'
+    depth: int
+
+
 #: Sensor streams use best-effort delivery (so reliable and best-effort publishers both match a subscriber) with
 #: a deeper queue than rclpy's qos_profile_sensor_data (5), because DAQ drivers publish in bursts: 1 s at 1 kHz.
 #: A sensor stalled for a moment (Fast DDS matching a node that joins can block a publisher for ~0.3 s) publishes
 #: its backlog at once; a 200-deep queue lost the burst's oldest samples.
 SENSOR_QUEUE_DEPTH = 1000
+SENSOR_DATA = QoS('best_effort', 'volatile', SENSOR_QUEUE_DEPTH)
+#: Commands and model outputs: nothing may be lost. 1000 deep = 10 s of commands at 100 Hz, so a reader starved of CPU
+#: for a while (a recorder on a busy machine) catches up instead of losing what the writer overwrote.
+RELIABLE = QoS('reliable', 'volatile', 1000)
+#: Latest-value topics a late joiner should still get (program state, predicted stiffness, model status).
+LATCHED = QoS('reliable', 'transient_local', 1)
+
+#: The QoS of every topic of the contract, the one table the rest is built from: the nodes' rclpy profiles
+#: (crane_stiffness.nodes.common), the recorder's and player's QoS (crane_stiffness.nodes.session_qos) and the
+#: offered QoS a synthetic session records (crane_stiffness.testing.synthetic).
+TOPIC_QOS: dict[str, QoS] = {
+    WRENCH_COMMAND: RELIABLE,
+    PLATFORM_POSE: RELIABLE,
+    WIRE_STATES: RELIABLE,
+    PREDICTED_STIFFNESS: LATCHED,
+    PREDICTED_AXIS_STIFFNESS: LATCHED,
+    MODEL_STATUS: LATCHED,
+    PROGRAM_PROGRESS: LATCHED,
+    PROGRAM_STATE: LATCHED,
+    LOAD_CELL_WRENCH: SENSOR_DATA,
+    LVDT_DISPLACEMENT: SENSOR_DATA,
+    STIFFNESS_ESTIMATE: RELIABLE,
+    STIFFNESS_VALUES: RELIABLE,
+    STIFFNESS: RELIABLE,
+}
+
+#: The recorder's subscriptions and the player's publishers are at least this deep: a latched topic's publishers
+#: keep one value, but progress is published at the command rate and the recorder must not lose updates while it
+#: writes. Also the depth for topics outside the table (their publishers' depth is unknown: DDS does not tell).
+RECORD_QUEUE_DEPTH = 100

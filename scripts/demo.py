@@ -38,8 +38,8 @@ def main(argv=None) -> int:
     import rclpy
     from tqdm import tqdm
 
-    from crane_stiffness import rosrun
-    from crane_stiffness.rig import Observer, start_rig, summarize
+    from crane_stiffness.testing import rosrun
+    from crane_stiffness.testing.rig import Observer, start_rig, summarize
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

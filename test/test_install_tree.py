@@ -3,10 +3,14 @@ from __future__ import annotations
 
 import ast
 import importlib
+import importlib.util
 import json
+import os
 import subprocess
 import sys
 import time
+import types
+from pathlib import Path
 
 import pytest
 from geometry_msgs.msg import PoseStamped, WrenchStamped
@@ -15,7 +19,10 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 from conftest import REPO, spin_until
-from crane_stiffness import rosrun, topics
+from crane_stiffness import topics
+from crane_stiffness.rig_description import rig_nodes
+from crane_stiffness.testing import rosrun
+from crane_stiffness.testing.rig import start_node
 from crane_stiffness.nodes.common import RELIABLE_QOS
 
 # The node executables setup.py declares (read, not imported: importing it would run setup()).
@@ -54,7 +61,7 @@ def test_cli_runs_from_the_install_tree_with_installed_config(install_tree):
     assert res['paper_coefficients']['Kj'] == pytest.approx(53793.509, rel=1e-6)  # lab model, h 0.5, W 50
     assert len(res['tangent']) == 6
     # And the module form of the stand-in for `ros2 run`.
-    out = subprocess.run([sys.executable, '-m', 'crane_stiffness.rosrun', 'crane_stiffness', 'crane-stiffness',
+    out = subprocess.run([sys.executable, '-m', 'crane_stiffness.testing.rosrun', 'crane_stiffness', 'crane-stiffness',
                           'solve', '--config', 'crane_lab', '--force', '0', '1', '0', '--json'],
                          env=env, capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
@@ -106,24 +113,31 @@ def test_every_rig_node_runs_from_the_install_tree_and_its_topics_echo(install_t
     imported from the advertised type name, a subscription with the QoS echo would choose, one message received."""
     install, env = install_tree
     config = install / 'crane_stiffness/share/crane_stiffness/config'
-    params = {'crane_model': ['crane_lab.yaml'], 'load_cell': ['sensors.yaml'], 'lvdt': ['sensors.yaml'],
-              'stiffness_estimator': ['crane_lab.yaml', 'sensors.yaml'], 'load_program': ['program_side_force.yaml']}
+    params = {n.name: n for n in rig_nodes(config, {'record': False})}  # the launch file's rig, no recorder
     node = Node('probe_echo', context=rclpy_context)
     ex = SingleThreadedExecutor(context=rclpy_context)
     ex.add_node(node)
     received: dict[str, object] = {}
-    with rosrun.Processes(env, tmp_path) as procs:
-        for name, files in params.items():
-            args = ['--ros-args'] + [a for f in files for a in ('--params-file', str(config / f))]
-            if name == 'load_program':
-                args += ['-p', 'start_delay_s:=0.5', '-p', 'min_subscribers:=4']
-            procs.start(name, 'crane_stiffness', name, args)
-        assert spin_until(ex, lambda: set(params) <= set(node.get_node_names()), 60), procs.log('load_program')
-        advertised: dict[str, str] = {}
+    expected = {topics.WRENCH_COMMAND, topics.PLATFORM_POSE, topics.WIRE_STATES, topics.PREDICTED_STIFFNESS,
+                topics.PREDICTED_AXIS_STIFFNESS, topics.LOAD_CELL_WRENCH, topics.LVDT_DISPLACEMENT,
+                topics.STIFFNESS_ESTIMATE, topics.STIFFNESS_VALUES, topics.STIFFNESS, topics.PROGRAM_STATE,
+                topics.PROGRAM_PROGRESS, topics.DIAGNOSTICS}
+
+    def advertised_now() -> dict[str, str]:
+        found: dict[str, str] = {}
         for name in params:
             for topic, types in node.get_publisher_names_and_types_by_node(name, '/'):
                 if topic not in ('/rosout', '/parameter_events'):
-                    advertised[topic] = types[0]
+                    found[topic] = types[0]
+        return found
+
+    with rosrun.Processes(env, tmp_path) as procs:
+        for name, rig_node in params.items():
+            start_node(procs, rig_node, {'start_delay_s': 0.5, 'min_subscribers': 4} if rig_node.runs_program else None)
+        assert spin_until(ex, lambda: set(params) <= set(node.get_node_names()), 60), procs.log('load_program')
+        # A node's name is discovered apart from its publishers (which can take longer on a busy machine).
+        spin_until(ex, lambda: expected <= set(advertised_now()), 30)
+        advertised = advertised_now()
         for topic, type_name in advertised.items():
             node.create_subscription(_message_class(type_name), topic,
                                      lambda msg, t=topic: received.setdefault(t, msg), _echo_qos(node, topic))
@@ -133,10 +147,6 @@ def test_every_rig_node_runs_from_the_install_tree_and_its_topics_echo(install_t
             ex.spin_once(timeout_sec=0.05)
         codes = procs.stop()
     ex.shutdown()
-    expected = {topics.WRENCH_COMMAND, topics.PLATFORM_POSE, topics.WIRE_STATES, topics.PREDICTED_STIFFNESS,
-                topics.PREDICTED_AXIS_STIFFNESS, topics.LOAD_CELL_WRENCH, topics.LVDT_DISPLACEMENT,
-                topics.STIFFNESS_ESTIMATE, topics.STIFFNESS_VALUES, topics.STIFFNESS, topics.PROGRAM_STATE,
-                topics.PROGRAM_PROGRESS, topics.DIAGNOSTICS}
     assert expected <= set(advertised), sorted(advertised)
     assert set(received) == set(advertised), sorted(set(advertised) - set(received))
     assert received[topics.LOAD_CELL_WRENCH].header.frame_id == 'load_cell'
@@ -144,16 +154,68 @@ def test_every_rig_node_runs_from_the_install_tree_and_its_topics_echo(install_t
     assert all(code == 0 for code in codes.values()), codes
 
 
-def test_launch_file_starts_every_rig_node_with_existing_config():
-    """`launch` is not installable here, so check the file's structure: each Node() names a real executable."""
-    tree = ast.parse((REPO / 'launch/rig.launch.py').read_text())
-    executables = {kw.value.value for node in ast.walk(tree) if isinstance(node, ast.Call)
-                   and getattr(node.func, 'id', '') == 'Node'
-                   for kw in node.keywords if kw.arg == 'executable'}
+class _Recorded:
+    """Stands in for a launch / launch_ros class: keeps its arguments; a substitution also performs itself."""
+
+    def __init__(self, *args, **kwargs):
+        self.args, self.kwargs = args, kwargs
+
+    def perform(self, context: dict) -> str:
+        kind = type(self).__name__
+        if kind == 'LaunchConfiguration':
+            return context[self.args[0]]
+        if kind == 'FindPackageShare':
+            return str(REPO)  # the source tree holds config/ as share/crane_stiffness does
+        assert kind == 'PathJoinSubstitution', kind
+        return os.path.join(*(p if isinstance(p, str) else p.perform(context) for p in self.args[0]))
+
+
+def _launch(monkeypatch, **arguments: str) -> list[_Recorded]:
+    """Evaluate launch/rig.launch.py as `ros2 launch crane_stiffness rig.launch.py name:=value ...` would, with
+    stand-ins for launch and launch_ros (not installable here); returns the Node actions it starts."""
+    names = {'launch': ['LaunchDescription'], 'launch.actions': ['DeclareLaunchArgument', 'OpaqueFunction'],
+             'launch.substitutions': ['LaunchConfiguration', 'PathJoinSubstitution'],
+             'launch_ros.actions': ['Node'], 'launch_ros.substitutions': ['FindPackageShare']}
+    for module_name, classes in names.items():
+        module = types.ModuleType(module_name)
+        for cls in classes:
+            setattr(module, cls, type(cls, (_Recorded,), {}))
+        monkeypatch.setitem(sys.modules, module_name, module)
+    spec = importlib.util.spec_from_file_location('rig_launch', REPO / 'launch/rig.launch.py')
+    launch_file = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(launch_file)
+    context: dict[str, str] = {}
+    started = []
+    for action in launch_file.generate_launch_description().args[0]:
+        if type(action).__name__ == 'DeclareLaunchArgument':
+            default = action.kwargs['default_value']
+            context[action.args[0]] = default if isinstance(default, str) else default.perform(context)
+            context.update({k: v for k, v in arguments.items() if k == action.args[0]})
+        else:
+            started += action.kwargs['function'](context)
+    return started
+
+
+def test_launch_file_starts_every_rig_node_with_existing_config(monkeypatch):
+    """`launch` is not installable here: evaluate the file against stand-ins: each Node() names a real executable
+    and is given existing parameter files."""
+    nodes = _launch(monkeypatch)
+    executables = {n.kwargs['executable'] for n in nodes}
     assert executables == {'crane_model', 'load_cell', 'lvdt', 'stiffness_estimator', 'session_recorder',
                            'load_program'}
     assert executables <= set(NODES)
-    text = (REPO / 'launch/rig.launch.py').read_text()
+    files = [Path(f) for n in nodes for f in n.kwargs['parameters'] if isinstance(f, str)]
     for cfg in ('crane_lab.yaml', 'sensors.yaml'):
-        assert cfg in text and (REPO / 'config' / cfg).is_file()
+        assert cfg in {f.name for f in files} and (REPO / 'config' / cfg).is_file()
+    assert all(f.is_file() for f in files) and REPO / 'config/program_side_force.yaml' in files
+    text = (REPO / 'launch/rig.launch.py').read_text()
     compile(text, 'rig.launch.py', 'exec')
+    # The arguments choose the nodes and their files as rig_description says, the way the process rig starts them.
+    nodes = _launch(monkeypatch, program='moment_z', sim_sensors='false', record='False', session='s1')
+    assert [n.kwargs['executable'] for n in nodes] == ['crane_model', 'stiffness_estimator', 'load_program']
+    assert nodes[-1].kwargs['parameters'] == [str(REPO / 'config/program_moment_z.yaml')]
+    recorder = next(n for n in _launch(monkeypatch, session='s1') if n.kwargs['name'] == 'session_recorder')
+    assert recorder.kwargs['parameters'][-1] == {'session': 's1'}
+    started = {n.kwargs['name']: n.kwargs['parameters'] for n in _launch(monkeypatch)}
+    assert started == {n.name: [*n.parameter_files, *([n.parameters] if n.parameters else [])]
+                       for n in rig_nodes(REPO / 'config')}

@@ -26,7 +26,8 @@ from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import Trigger
 
 from conftest import REPO, spin_until
-from crane_stiffness import rosrun, topics
+from crane_stiffness import topics
+from crane_stiffness.testing import rosrun
 from crane_stiffness.bag import BagDamageWarning, BagReader
 from crane_stiffness.cli import main as cli_main
 from crane_stiffness.nodes.common import LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS

@@ -1,7 +1,7 @@
 """Offline analysis of recorded sessions (crane_stiffness.analysis.session): pairing and branch labels equal to the
 live estimator's, known truth recovered, the recorded live estimate reproduced, outputs written, damaged input.
 
-Sessions are synthetic bags written like session_recorder writes them (crane_stiffness.analysis.synthetic); the
+Sessions are synthetic bags written like session_recorder writes them (crane_stiffness.testing.synthetic); the
 live estimate in them comes from the estimator's own core (LiveStiffness) run over the messages in arrival order.
 """
 from __future__ import annotations
@@ -24,7 +24,7 @@ from crane_stiffness.analysis.cdr import (decode_diagnostic_array, decode_float6
                                           encode_float64_multiarray, encode_stamped, encode_string)
 from crane_stiffness.analysis.session import (SessionAnalysisError, analyze_session, branch_labels,
                                               compare_sessions, pair_by_stamp)
-from crane_stiffness.analysis.synthetic import write_synthetic_session
+from crane_stiffness.testing.synthetic import write_synthetic_session
 from crane_stiffness.bag import (BagDamageWarning, BagFormatError, BagReader, BagWriter, McapFile,
                                  TopicNotFoundError)
 from crane_stiffness.cli import main as cli_main

@@ -16,23 +16,25 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
-from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy)
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from crane_stiffness import topics
 from crane_stiffness.analysis.cdr import stamp_seconds
 from crane_stiffness.config import ParamSpec
 from crane_stiffness.sim.sampling import SampleClock
 
-#: Commands and model outputs: nothing may be lost. 1000 deep = 10 s of commands at 100 Hz, so a reader starved of CPU
-#: for a while (a recorder on a busy machine) catches up instead of losing what the writer overwrote.
-RELIABLE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000, reliability=ReliabilityPolicy.RELIABLE,
-                          durability=DurabilityPolicy.VOLATILE)
-#: Sensor data: best effort (matches best-effort and reliable publishers), deep queue for bursts.
-SENSOR_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=topics.SENSOR_QUEUE_DEPTH,
-                        reliability=ReliabilityPolicy.BEST_EFFORT, durability=DurabilityPolicy.VOLATILE)
-#: Latest-value topics a late joiner should still get (program state, predicted stiffness).
-LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+def rclpy_qos(qos: topics.QoS, depth: int | None = None) -> QoSProfile:
+    """The rclpy profile of a QoS class of crane_stiffness.topics (KEEP_LAST; ``depth`` overrides the class's)."""
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=qos.depth if depth is None else depth,
+                      reliability=ReliabilityPolicy[qos.reliability.upper()],
+                      durability=DurabilityPolicy[qos.durability.upper()])
+
+
+#: The rig's three QoS classes (crane_stiffness.topics.TOPIC_QOS says which topic has which).
+RELIABLE_QOS = rclpy_qos(topics.RELIABLE)
+SENSOR_QOS = rclpy_qos(topics.SENSOR_DATA)
+LATCHED_QOS = rclpy_qos(topics.LATCHED)
 
 
 class Params:

@@ -1,7 +1,7 @@
 """QoS of recorded and replayed topics, shared by session_recorder and session_player.
 
-- :func:`contract_qos`: the QoS a subscriber needs to match the rig's publishers of a topic (the contract of
-  crane_stiffness.topics and nodes.common): sensor streams best effort, latched topics transient local, the rest
+- :func:`contract_qos`: the QoS a subscriber needs to match the rig's publishers of a topic (the contract's table,
+  crane_stiffness.topics.TOPIC_QOS): sensor streams best effort, latched topics transient local, the rest
   reliable. Topics outside the contract adapt to the publishers found in the graph (:func:`adapted_qos`), the way
   rosbag2 does.
 - :func:`offered_profiles`: the publishers' offered QoS as rosbag2 stores it in a bag (``offered_qos_profiles``).
@@ -9,6 +9,7 @@
 """
 from __future__ import annotations
 
+from enum import IntEnum
 from typing import Any, Iterable, Mapping, Sequence
 
 import yaml
@@ -17,36 +18,18 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from crane_stiffness import topics
-from crane_stiffness.nodes.common import LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS
-
-#: Depth of the recorder's and player's queues where the publisher's own depth is unknown.
-DEFAULT_DEPTH = 100
-
-SENSOR_TOPICS = frozenset({topics.LOAD_CELL_WRENCH, topics.LVDT_DISPLACEMENT})
-LATCHED_TOPICS = frozenset({topics.PREDICTED_STIFFNESS, topics.PREDICTED_AXIS_STIFFNESS, topics.PROGRAM_PROGRESS,
-                            topics.PROGRAM_STATE, topics.MODEL_STATUS})
-RELIABLE_TOPICS = frozenset({topics.WRENCH_COMMAND, topics.PLATFORM_POSE, topics.WIRE_STATES,
-                             topics.STIFFNESS_ESTIMATE, topics.STIFFNESS_VALUES, topics.STIFFNESS})
-
-
-def _copy(profile: QoSProfile, depth: int | None = None) -> QoSProfile:
-    return QoSProfile(history=profile.history, depth=profile.depth if depth is None else depth,
-                      reliability=profile.reliability, durability=profile.durability)
+from crane_stiffness.nodes.common import rclpy_qos
 
 
 def contract_qos(topic: str) -> QoSProfile | None:
     """Subscriber QoS matching the rig's publishers of ``topic``; None for a topic outside the contract.
 
-    Latched topics get a deeper queue than the publishers' depth 1: progress is published at the command rate and
-    the recorder must not lose updates while it writes.
+    At least topics.RECORD_QUEUE_DEPTH deep (latched topics: deeper than the publishers' depth 1).
     """
-    if topic in SENSOR_TOPICS:
-        return _copy(SENSOR_QOS)
-    if topic in LATCHED_TOPICS:
-        return _copy(LATCHED_QOS, DEFAULT_DEPTH)
-    if topic in RELIABLE_TOPICS:
-        return _copy(RELIABLE_QOS)
-    return None
+    qos = topics.TOPIC_QOS.get(topic)
+    if qos is None:
+        return None
+    return rclpy_qos(qos, max(qos.depth, topics.RECORD_QUEUE_DEPTH))
 
 
 def adapted_qos(profiles: Sequence[QoSProfile]) -> QoSProfile:
@@ -57,7 +40,7 @@ def adapted_qos(profiles: Sequence[QoSProfile]) -> QoSProfile:
     """
     reliable = bool(profiles) and all(p.reliability == ReliabilityPolicy.RELIABLE for p in profiles)
     latched = bool(profiles) and all(p.durability == DurabilityPolicy.TRANSIENT_LOCAL for p in profiles)
-    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=DEFAULT_DEPTH,
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=topics.RECORD_QUEUE_DEPTH,
                       reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
                       durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
 
@@ -115,17 +98,22 @@ def playback_qos(topic: str, offered: str | Iterable[Mapping[str, Any]] | None) 
     profiles = _parse_profiles(offered)
     contract = contract_qos(topic)
     if not profiles:
-        return contract or _copy(RELIABLE_QOS, DEFAULT_DEPTH)
-    names = {'reliability': {1: 'reliable', 2: 'best_effort'}, 'durability': {1: 'transient_local', 2: 'volatile'}}
+        return contract or rclpy_qos(topics.RELIABLE, topics.RECORD_QUEUE_DEPTH)
 
-    def policy(p: Mapping[str, Any], key: str) -> str:
+    def policy(p: Mapping[str, Any], key: str, enum: type[IntEnum]) -> str:
+        """A recorded policy by name: rosbag2's names, or rmw's integers (rclpy's enums name them)."""
         value = p.get(key)
-        return names[key].get(value, str(value)) if isinstance(value, int) else str(value)
+        if isinstance(value, int):
+            try:
+                return enum(value).name.lower()
+            except ValueError:
+                pass
+        return str(value)
 
-    reliable = all(policy(p, 'reliability') == 'reliable' for p in profiles)
-    latched = all(policy(p, 'durability') == 'transient_local' for p in profiles)
+    reliable = all(policy(p, 'reliability', ReliabilityPolicy) == 'reliable' for p in profiles)
+    latched = all(policy(p, 'durability', DurabilityPolicy) == 'transient_local' for p in profiles)
     depths = [int(p['depth']) for p in profiles if isinstance(p.get('depth'), int) and p['depth'] > 0]
-    depth = max(depths) if depths else (contract.depth if contract is not None else DEFAULT_DEPTH)
+    depth = max(depths) if depths else (contract.depth if contract is not None else topics.RECORD_QUEUE_DEPTH)
     return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=max(1, depth),
                       reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
                       durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)

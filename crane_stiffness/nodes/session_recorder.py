@@ -31,13 +31,11 @@ import os
 import signal
 import socket
 import struct
-import sys
 import threading
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, Sequence
 
-import yaml
 from rcl_interfaces.srv import GetParameters, ListParameters
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
@@ -52,19 +50,20 @@ from crane_stiffness.bag import (NODE_PARAMETERS_METADATA, SESSION_END_METADATA,
                                  dump_qos_profiles, session_metadata)
 from crane_stiffness.bag.errors import BagError
 from crane_stiffness.bag.writer import COMPRESSIONS
-from crane_stiffness.config import GEOMETRY_PARAMS, ParamSpec, flatten_params, geometry_from_params
+from crane_stiffness.config import GEOMETRY_PARAMS, ParamSpec, geometry_from_params
 from crane_stiffness.nodes.common import ERROR, OK, Diagnostics, Params, check, run
 from crane_stiffness.nodes.load_program import PARAMS as PROGRAM_NODE_PARAMS
 from crane_stiffness.nodes.load_program import PROGRAM_KEYS
 from crane_stiffness.nodes.session_qos import (adapted_qos, contract_qos, has_header, message_class,
                                                offered_profiles, publisher_types)
+from crane_stiffness.param_files import NodeSections, params_files_from_args, read_params_files
 from crane_stiffness.sim.program import LoadProgram
 
 
 PROGRAM_PARAMS = tuple(p for p in PROGRAM_NODE_PARAMS if p.name in PROGRAM_KEYS)
 PROGRAM_DEFAULTS = {p.name: p.default for p in PROGRAM_PARAMS}
-#: Sections of a parameter file that hold this node's own parameters (not recorded as another node's).
-OWN_SECTIONS = ('session_recorder', '/session_recorder', '/**')
+#: Sections of a parameter file that hold this node's own parameters (not recorded as another node's): ROS's rule.
+OWN_SECTIONS = NodeSections('session_recorder')
 
 PARAMS = GEOMETRY_PARAMS + PROGRAM_PARAMS + (
     ParamSpec('topics', list(topics.RIG_TOPICS), 'topics to record; rig topics use their contract type and QoS, '
@@ -115,42 +114,6 @@ def plain(value: Any) -> Any:
 
 def utc_session_name(now_ns: int) -> str:
     return 'session_' + datetime.fromtimestamp(now_ns / 1e9, tz=timezone.utc).strftime('%Y%m%dT%H%M%SZ')
-
-
-def params_files_from_args(args: Sequence[str] | None) -> list[str]:
-    """The ``--params-file`` paths in the ROS arguments of a command line (sys.argv when None)."""
-    argv = list(sys.argv if args is None else args)
-    files: list[str] = []
-    in_ros = False
-    for i, arg in enumerate(argv):
-        if arg == '--ros-args':
-            in_ros = True
-        elif arg == '--':
-            in_ros = False
-        elif in_ros and arg == '--params-file' and i + 1 < len(argv):
-            files.append(argv[i + 1])
-    return files
-
-
-def read_params_files(paths: Sequence[str]) -> tuple[list[dict[str, str]], dict[str, dict[str, Any]], list[str]]:
-    """(files as {path, text}, sections {node: flat params} merged in file order, problems) of parameter files."""
-    files: list[dict[str, str]] = []
-    sections: dict[str, dict[str, Any]] = {}
-    problems: list[str] = []
-    for path in paths:
-        try:
-            text = Path(path).read_text(encoding='utf-8')
-            doc = yaml.safe_load(text)
-        except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
-            problems.append(f'{path}: {exc}')
-            continue
-        files.append({'path': str(Path(path).resolve()), 'text': text})
-        if not isinstance(doc, dict):
-            continue
-        for name, body in doc.items():
-            if isinstance(body, dict) and isinstance(body.get('ros__parameters'), dict):
-                sections.setdefault(str(name), {}).update(flatten_params(body['ros__parameters']))
-    return files, sections, problems
 
 
 def header_stamp_ns(data: bytes) -> int | None:

@@ -38,7 +38,7 @@ import numpy as np
 import yaml
 from numpy.typing import NDArray
 
-from crane_stiffness.config import flatten_params
+from crane_stiffness.param_files import ParamFile, applicable_sections
 from crane_stiffness.sim.errors import ParameterError, ProgramFileError
 
 AXES = ('fx', 'fy', 'fz', 'mx', 'my', 'mz')
@@ -359,8 +359,9 @@ def load_program_file(path: str | PathLike[str], node: str | None = None, *, str
 
     Args:
         path: The YAML file (``<node>: {ros__parameters: {...}}``).
-        node: Node whose ``ros__parameters`` to use: matched against the full key, the key without leading '/',
-            or its last '/'-separated component, then a ``/**`` wildcard block. None: the first block in the file.
+        node: Node whose parameters to use: its name (in any namespace) or fully qualified name; the sections that
+            apply to it are merged as ROS merges them (wildcards such as ``/**`` first; see
+            crane_stiffness.param_files). None: the first block in the file.
         strict: Passed to :meth:`LoadProgram.from_params`.
 
     Raises:
@@ -369,26 +370,15 @@ def load_program_file(path: str | PathLike[str], node: str | None = None, *, str
     """
     path = Path(path)
     try:
-        document = yaml.safe_load(path.read_text(encoding='utf-8'))
+        file = ParamFile.read(path)
     except OSError as exc:
         raise ProgramFileError(f'{path}: cannot read: {exc}') from exc
     except yaml.YAMLError as exc:
         raise ProgramFileError(f'{path}: invalid YAML: {exc}') from exc
-    blocks = {}
-    if isinstance(document, Mapping):
-        blocks = {str(key): value['ros__parameters'] for key, value in document.items()
-                  if isinstance(value, Mapping) and isinstance(value.get('ros__parameters'), Mapping)}
+    blocks = [key for key, params in file.sections.items() if params is not None]
     if not blocks:
         raise ProgramFileError(f'{path}: no "<node>: ros__parameters:" block found')
-    if node is None:
-        params = next(iter(blocks.values()))
-    else:
-        wanted = node.strip('/')
-        matches = [key for key in blocks if key.strip('/') == wanted or key.rsplit('/', 1)[-1] == wanted]
-        if not matches:
-            matches = [key for key in blocks if key.strip('/') == '**']
-        if not matches:
-            raise ProgramFileError(f'{path}: no parameters for node {node!r}; nodes in file: {", ".join(blocks)}')
-        params = blocks[matches[0]]
-    return LoadProgram.from_params(flatten_params(params), strict=strict)
-
+    keys = blocks[:1] if node is None else applicable_sections(blocks, node)
+    if not keys:
+        raise ProgramFileError(f'{path}: no parameters for node {node!r}; nodes in file: {", ".join(blocks)}')
+    return LoadProgram.from_params(file.params(keys), strict=strict)

@@ -26,9 +26,12 @@ from crane_stiffness.model import CraneGeometry
 from crane_stiffness.sim.program import LoadProgram
 
 T0_NS = 1_700_000_000_000_000_000
-SENSOR_QOS = dump_qos_profiles([qos_profile(reliability='best_effort', depth=topics.SENSOR_QUEUE_DEPTH)])
-RELIABLE_QOS = dump_qos_profiles([qos_profile(depth=100)])
-LATCHED_QOS = dump_qos_profiles([qos_profile(depth=1, durability='transient_local')])
+
+
+def offered_qos(topic: str) -> str:
+    """The offered QoS of the rig's publishers of ``topic`` as a bag stores it (topics.TOPIC_QOS, rosbag2's YAML)."""
+    qos = topics.TOPIC_QOS[topic]
+    return dump_qos_profiles([qos_profile(reliability=qos.reliability, durability=qos.durability, depth=qos.depth)])
 
 
 @dataclass
@@ -193,14 +196,10 @@ def write_synthetic_session(path: str | Path, program: LoadProgram, *, geometry:
     order = np.argsort(logs, kind='stable')
     counts: dict[str, int] = {}
     with BagWriter(path, chunk_size=chunk_size, metadata={SESSION_METADATA: meta}) as writer:
-        writer.add_topic(topics.LOAD_CELL_WRENCH, 'geometry_msgs/msg/WrenchStamped', SENSOR_QOS)
-        writer.add_topic(topics.LVDT_DISPLACEMENT, 'geometry_msgs/msg/PointStamped', SENSOR_QOS)
-        writer.add_topic(topics.WRENCH_COMMAND, 'geometry_msgs/msg/WrenchStamped', RELIABLE_QOS)
-        writer.add_topic(topics.PROGRAM_STATE, 'std_msgs/msg/String', LATCHED_QOS)
-        writer.add_topic(topics.PREDICTED_AXIS_STIFFNESS, 'std_msgs/msg/Float64', LATCHED_QOS)
-        if live:
-            writer.add_topic(topics.STIFFNESS_VALUES, 'std_msgs/msg/Float64MultiArray', RELIABLE_QOS)
-            writer.add_topic(topics.STIFFNESS, 'std_msgs/msg/Float64', RELIABLE_QOS)
+        recorded = [topics.LOAD_CELL_WRENCH, topics.LVDT_DISPLACEMENT, topics.WRENCH_COMMAND, topics.PROGRAM_STATE,
+                    topics.PREDICTED_AXIS_STIFFNESS] + ([topics.STIFFNESS_VALUES, topics.STIFFNESS] if live else [])
+        for topic in recorded:
+            writer.add_topic(topic, topics.RIG_TOPICS[topic], offered_qos(topic))
         write = writer.write
         f_stamp = stamps.tolist()
         c_stamp = cmd_stamp.tolist()

@@ -1,14 +1,15 @@
 """The simulated rig as separate node processes: start order, readiness, and the run's summary.
 
-Used by ``make demo`` (scripts/demo.py) and the rig benchmark. Every node is started the way ``ros2 run`` starts
-it (crane_stiffness.rosrun), with the ROS parameter files from the install tree's config/ directory.
+Used by ``make demo`` (scripts/demo.py), the tests and the rig benchmark. Every node is started the way ``ros2 run``
+starts it (crane_stiffness.testing.rosrun) with what the launch file gives it (crane_stiffness.rig_description:
+parameter files from the install tree's config/ directory, parameters, remappings).
 """
 from __future__ import annotations
 
 import json
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping
 
 import numpy as np
 from rclpy.node import Node
@@ -18,10 +19,10 @@ from crane_stiffness import __version__, topics
 from crane_stiffness.config import geometry_from_params, load_params
 from crane_stiffness.model import axis_stiffness, rest_pose, tangent_stiffness
 from crane_stiffness.nodes.common import LATCHED_QOS, RELIABLE_QOS
-from crane_stiffness.rosrun import Processes, RosRunError
+from crane_stiffness.rig_description import PACKAGE, NodeStart, rig_nodes
+from crane_stiffness.rig_description import config_files as rig_config_files
 from crane_stiffness.sim.program import LoadProgram, load_program_file
-
-PACKAGE = 'crane_stiffness'
+from crane_stiffness.testing.rosrun import Processes, RosRunError
 
 
 class Observer(Node):
@@ -67,9 +68,22 @@ class Observer(Node):
             rclpy.spin_once(self, timeout_sec=0.05)
 
 
+def ros_args(node: NodeStart, overrides: Mapping[str, Any] | None = None) -> list[str]:
+    """The ROS arguments that give ``node`` what the launch file gives it, ``overrides`` set on top (``-p``)."""
+    args = ['--ros-args', *(a for f in node.parameter_files for a in ('--params-file', str(f)))]
+    for name, value in {**node.parameters, **(overrides or {})}.items():
+        text = ('true' if value else 'false') if isinstance(value, bool) else str(value)
+        args += ['-p', f'{name}:={text}']
+    return args + [a for old, new in node.remappings for a in ('-r', f'{old}:={new}')]
+
+
+def start_node(procs: Processes, node: NodeStart, overrides: Mapping[str, Any] | None = None) -> None:
+    """Start ``node`` as ``ros2 run`` would, with :func:`ros_args`."""
+    procs.start(node.name, PACKAGE, node.executable, ros_args(node, overrides))
+
+
 def config_files(share: Path, program: str) -> dict[str, Path]:
-    files = {'crane': share / 'crane_lab.yaml', 'sensors': share / 'sensors.yaml',
-             'program': share / f'program_{program}.yaml'}
+    files = {role: Path(path) for role, path in rig_config_files(share, {'program': program}).items()}
     for name, path in files.items():
         if not path.is_file():
             raise RosRunError(f'{name} config {path} not found')
@@ -79,23 +93,15 @@ def config_files(share: Path, program: str) -> dict[str, Path]:
 def start_rig(procs: Processes, share: Path, program: str, session: str, bags: Path, observer: Observer,
               record: bool = True, ready_timeout_s: float = 60.0) -> LoadProgram:
     """Start crane_model, sensors, estimator and recorder; when all are connected, start load_program."""
-    cfg = config_files(share, program)
-    prog = load_program_file(cfg['program'])
-
-    def p(*names: str) -> list[str]:
-        return [a for n in names for a in ('--params-file', str(cfg[n]))]
-
-    procs.start('crane_model', PACKAGE, 'crane_model', ['--ros-args', *p('crane')])
-    procs.start('load_cell', PACKAGE, 'load_cell', ['--ros-args', *p('sensors')])
-    procs.start('lvdt', PACKAGE, 'lvdt', ['--ros-args', *p('sensors')])
-    procs.start('stiffness_estimator', PACKAGE, 'stiffness_estimator', ['--ros-args', *p('crane', 'sensors')])
+    prog = load_program_file(config_files(share, program)['program'])
+    nodes = rig_nodes(share, {'program': program, 'record': record, 'session': session})
     readers = 1
-    if record:
-        bags.mkdir(parents=True, exist_ok=True)
-        procs.start('session_recorder', PACKAGE, 'session_recorder',
-                    ['--ros-args', *p('crane', 'sensors', 'program'), '-p', f'session:={session}',
-                     '-p', f'output_dir:={bags}'])
-        readers += 1
+    for node in nodes:
+        if node.name == 'session_recorder':
+            bags.mkdir(parents=True, exist_ok=True)
+            readers += 1
+        if not node.runs_program:
+            start_node(procs, node, {'output_dir': bags} if node.name == 'session_recorder' else None)
     # Ready when the model has published its prediction and every sensor stream has all its readers.
     print(f'  waiting for {len(procs.procs)} nodes to connect ...', flush=True)
     t0 = time.monotonic()
@@ -108,9 +114,9 @@ def start_rig(procs: Processes, share: Path, program: str, session: str, bags: P
         ready_timeout_s, 'the rig nodes to connect', procs)
     print(f'  connected in {time.monotonic() - t0:.1f} s; starting load_program', flush=True)
     n_cmd = observer.count_subscribers(topics.WRENCH_COMMAND)
-    procs.start('load_program', PACKAGE, 'load_program',
-                ['--ros-args', *p('program'), '-p', 'start_delay_s:=0.5', '-p', f'min_subscribers:={n_cmd}',
-                 '-p', 'exit_on_done:=true'])
+    for node in nodes:
+        if node.runs_program:
+            start_node(procs, node, {'start_delay_s': 0.5, 'min_subscribers': n_cmd, 'exit_on_done': True})
     return prog
 
 

@@ -3,7 +3,7 @@
 ``ros2 run PKG EXE`` finds PKG's prefix through the ament index (the first prefix in AMENT_PREFIX_PATH holding
 ``share/ament_index/resource_index/packages/PKG``) and executes ``<prefix>/lib/PKG/EXE``. :func:`command` uses the
 real ``ros2`` when it is on PATH and otherwise performs exactly that look-up, so the demo and the tests start every
-node from the colcon install tree in the same way. ``python -m crane_stiffness.rosrun PKG EXE [args]`` is the
+node from the colcon install tree in the same way. ``python -m crane_stiffness.testing.rosrun PKG EXE [args]`` is the
 command-line form. :class:`Processes` runs a set of such nodes and stops them cleanly.
 """
 from __future__ import annotations
@@ -17,6 +17,7 @@ import time
 from pathlib import Path
 from typing import Mapping, Sequence
 
+from crane_stiffness import PACKAGE
 from crane_stiffness.errors import CraneStiffnessError
 
 
@@ -53,7 +54,7 @@ def command(package: str, executable: str, args: Sequence[str] = (), env: Mappin
     return [str(executable_path(package, executable, apath)), *args]
 
 
-def install_environment(install_base: str | os.PathLike, package: str = 'crane_stiffness',
+def install_environment(install_base: str | os.PathLike, package: str = PACKAGE,
                         base: Mapping[str, str] | None = None) -> dict[str, str]:
     """The environment ``source install/local_setup.sh`` would give for an isolated colcon install of package:
     its prefix first in AMENT_PREFIX_PATH and its site-packages first on PYTHONPATH."""
@@ -129,7 +130,7 @@ class Processes:
 def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if len(argv) < 2:
-        print('usage: python -m crane_stiffness.rosrun PACKAGE EXECUTABLE [args...]', file=sys.stderr)
+        print('usage: python -m crane_stiffness.testing.rosrun PACKAGE EXECUTABLE [args...]', file=sys.stderr)
         return 2
     try:
         exe = executable_path(argv[0], argv[1])

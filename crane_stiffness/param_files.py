@@ -1,0 +1,157 @@
+"""ROS 2 parameter files (the YAML of ``--params-file``): the one reader behind the offline CLI
+(crane_stiffness.config.load_params), the load programs (crane_stiffness.sim.program.load_program_file) and the
+files the session recorder stores with a session. No ROS import.
+
+A file maps node names to ``ros__parameters`` (``<node>: ros__parameters: {name: value}``); nested mappings flatten
+to dotted names the way rclpy does (``geometry: {a: 0.1}`` is the parameter ``geometry.a``).
+
+Which sections apply to a node (:func:`section_applies`) follows ROS: a key without a leading '/' gets one
+(``crane_model`` is ``/crane_model``), ``*`` stands for one name and ``**`` for any number of them (``/**``: every
+node; ``/rig/*``: every node in /rig), the way rclcpp matches keys against a node's fully qualified name (rclpy
+knows ``/**`` and the node's own name, a subset of that). The node is given by its fully qualified name
+(``/rig/lvdt``) or by its name alone (``lvdt``: that node in whatever namespace; a section of any namespace applies).
+Sections with a wildcard apply first, then those naming the node, each group in file order: rclpy's order (``/**``
+first, then the node's own section).
+"""
+from __future__ import annotations
+
+import os
+import re
+import sys
+from dataclasses import dataclass
+from functools import cached_property
+from pathlib import Path
+from typing import Any, Iterable, Mapping, Sequence
+
+import yaml
+
+PARAMETERS_KEY = 'ros__parameters'
+
+
+def flatten_params(values: Mapping[str, Any], prefix: str = '') -> dict[str, Any]:
+    """Nested mappings as dotted parameter names, the way rclpy flattens a parameter file
+    (``{geometry: {a: 0.1}}`` → ``{'geometry.a': 0.1}``)."""
+    out: dict[str, Any] = {}
+    for key, value in values.items():
+        name = f'{prefix}{key}'
+        if isinstance(value, Mapping):
+            out.update(flatten_params(value, name + '.'))
+        else:
+            out[name] = value
+    return out
+
+
+def _key_pattern(key: str) -> re.Pattern[str]:
+    """rclcpp's rule: the key with a leading '/', ``/*`` → one name, ``/**`` → any number of names."""
+    parts = key.strip('/').split('/')
+    return re.compile(''.join(r'(/\w+)*' if p == '**' else r'/\w+' if p == '*' else '/' + re.escape(p)
+                              for p in parts))
+
+
+def section_applies(key: str, node: str) -> bool:
+    """Whether the parameter file section ``key`` applies to ``node`` (see the module docstring)."""
+    if node.startswith('/'):
+        return _key_pattern(key).fullmatch(node) is not None
+    return key.rstrip('/').rsplit('/', 1)[-1] in (node, '*', '**')  # the node in some namespace
+
+
+def _is_wildcard(key: str) -> bool:
+    return '*' in key
+
+
+def applicable_sections(keys: Iterable[str], node: str | None) -> list[str]:
+    """The keys that apply to ``node`` in the order their parameters apply (wildcards first, then the node's own,
+    each in file order); every key in file order when ``node`` is None."""
+    keys = list(keys)
+    if node is None:
+        return keys
+    chosen = [k for k in keys if section_applies(k, node)]
+    return [k for k in chosen if _is_wildcard(k)] + [k for k in chosen if not _is_wildcard(k)]
+
+
+class NodeSections:
+    """The section keys that apply to one node, as a container: ``key in NodeSections('session_recorder')``."""
+
+    def __init__(self, node: str) -> None:
+        self.node = node
+
+    def __contains__(self, key: object) -> bool:
+        return isinstance(key, str) and section_applies(key, self.node)
+
+    def __repr__(self) -> str:
+        return f'NodeSections({self.node!r})'
+
+
+@dataclass(frozen=True)
+class ParamFile:
+    """One parameter file as read: its path, text and YAML document."""
+
+    path: Path
+    text: str
+    document: Any
+
+    @classmethod
+    def read(cls, path: str | os.PathLike) -> ParamFile:
+        """Read and parse ``path``; raises OSError, UnicodeDecodeError or yaml.YAMLError (callers say which file
+        and why in their own terms)."""
+        path = Path(path)
+        text = path.read_text(encoding='utf-8')
+        return cls(path, text, yaml.safe_load(text))
+
+    @property
+    def is_mapping(self) -> bool:
+        """False when the top level is not ``<node>: ...`` at all (an empty file, a list, a scalar)."""
+        return isinstance(self.document, Mapping)
+
+    @cached_property
+    def sections(self) -> dict[str, dict[str, Any] | None]:
+        """Every top-level section in file order: its flat parameters, or None where it has no ros__parameters
+        mapping (``ros__parameters:`` left empty counts as no parameters)."""
+        out: dict[str, dict[str, Any] | None] = {}
+        for key, body in (self.document.items() if self.is_mapping else ()):
+            params = body.get(PARAMETERS_KEY, False) if isinstance(body, Mapping) else False
+            if params is None:
+                params = {}
+            out[str(key)] = flatten_params(params) if isinstance(params, Mapping) else None
+        return out
+
+    def params(self, keys: Iterable[str]) -> dict[str, Any]:
+        """The parameters of the sections ``keys`` (well-formed ones), later ones overriding earlier ones."""
+        out: dict[str, Any] = {}
+        for key in keys:
+            out.update(self.sections[key] or {})
+        return out
+
+
+def params_files_from_args(args: Sequence[str] | None) -> list[str]:
+    """The ``--params-file`` paths in the ROS arguments of a command line (sys.argv when None)."""
+    argv = list(sys.argv if args is None else args)
+    files: list[str] = []
+    in_ros = False
+    for i, arg in enumerate(argv):
+        if arg == '--ros-args':
+            in_ros = True
+        elif arg == '--':
+            in_ros = False
+        elif in_ros and arg == '--params-file' and i + 1 < len(argv):
+            files.append(argv[i + 1])
+    return files
+
+
+def read_params_files(paths: Sequence[str]) -> tuple[list[dict[str, str]], dict[str, dict[str, Any]], list[str]]:
+    """(files as {path, text}, sections {key: flat params} merged in file order, problems) of parameter files:
+    what a recorder stores with a session. A file that cannot be read is a problem, not an error."""
+    files: list[dict[str, str]] = []
+    sections: dict[str, dict[str, Any]] = {}
+    problems: list[str] = []
+    for path in paths:
+        try:
+            file = ParamFile.read(path)
+        except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
+            problems.append(f'{path}: {exc}')
+            continue
+        files.append({'path': str(file.path.resolve()), 'text': file.text})
+        for key, params in file.sections.items():
+            if params is not None:
+                sections.setdefault(key, {}).update(params)
+    return files, sections, problems

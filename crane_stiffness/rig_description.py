@@ -1,0 +1,132 @@
+"""The simulated rig as data: which nodes run, which parameter files and parameters each gets, which arguments
+choose them. Pure Python (no ROS, no launch import): ``launch/rig.launch.py`` builds its launch description from
+it for ``ros2 launch``, and crane_stiffness.testing.rig starts the same nodes as processes for the demo, the tests
+and the benchmarks.
+
+    ros2 launch crane_stiffness rig.launch.py program:=side_force record:=true
+
+Arguments (:data:`ARGUMENTS`): program (side_force | side_force_slack | moment_z | force_z, or a path to a program
+YAML), crane (a geometry YAML; default the lab model), sensors (sensor YAML), sim_sensors and record (true/false),
+session (bag name). To use real sensors, set sim_sensors:=false and remap the drivers' topics onto /load_cell/wrench
+and /lvdt/displacement (see README, "Real drivers").
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from typing import Any, Mapping
+
+from crane_stiffness import PACKAGE
+
+__all__ = ['ARGUMENTS', 'NODES', 'PACKAGE', 'Argument', 'NodeStart', 'RigNode', 'argument_values', 'config_files',
+           'flag', 'program_file', 'rig_nodes']
+
+
+@dataclass(frozen=True)
+class Argument:
+    """A launch argument of the rig. ``config_file``: its default names a file in the package's config/ directory."""
+
+    name: str
+    default: str
+    description: str
+    config_file: bool = False
+
+
+ARGUMENTS: tuple[Argument, ...] = (
+    Argument('program', 'side_force', 'test program name or file'),
+    Argument('crane', 'crane_lab.yaml', 'crane geometry parameters (ROS parameter YAML)', config_file=True),
+    Argument('sensors', 'sensors.yaml', 'sensor and estimator parameters', config_file=True),
+    Argument('sim_sensors', 'true', 'start the simulated sensors'),
+    Argument('record', 'true', 'record the session to bags/'),
+    Argument('session', '', 'bag name (default: time stamped)'),
+)
+
+
+@dataclass(frozen=True)
+class RigNode:
+    """One node of the rig (node name = executable name).
+
+    ``files``: the parameter files it reads, in order, by role: 'crane', 'sensors' (the arguments of those names)
+    or 'program' (the program's file). ``arguments``: parameters set from arguments, {parameter: argument}.
+    ``condition``: the true/false argument that starts it (None: always). ``remappings``: (from, to) topic pairs.
+    ``runs_program``: the node that plays the program; crane_stiffness.testing.rig starts it once every other node
+    is connected (``ros2 launch`` starts it with the others; it waits for its subscribers).
+    """
+
+    executable: str
+    files: tuple[str, ...]
+    arguments: Mapping[str, str] = field(default_factory=dict)
+    condition: str | None = None
+    remappings: tuple[tuple[str, str], ...] = ()
+    runs_program: bool = False
+
+    @property
+    def name(self) -> str:
+        return self.executable
+
+
+NODES: tuple[RigNode, ...] = (
+    RigNode('crane_model', ('crane',)),
+    RigNode('load_cell', ('sensors',), condition='sim_sensors'),
+    RigNode('lvdt', ('sensors',), condition='sim_sensors'),
+    RigNode('stiffness_estimator', ('crane', 'sensors')),
+    RigNode('session_recorder', ('crane', 'sensors', 'program'), arguments={'session': 'session'},
+            condition='record'),
+    RigNode('load_program', ('program',), runs_program=True),
+)
+
+
+@dataclass(frozen=True)
+class NodeStart:
+    """A node as it is started for given arguments: parameter files (paths), parameters, remappings."""
+
+    name: str
+    executable: str
+    parameter_files: tuple[str, ...]
+    parameters: dict[str, str]
+    remappings: tuple[tuple[str, str], ...]
+    runs_program: bool
+
+
+def program_file(program: str, config_dir: str | os.PathLike) -> str:
+    """The parameter file of a program: a path ending in .yaml as it is, else ``<config_dir>/program_<name>.yaml``."""
+    return program if program.endswith('.yaml') else os.path.join(config_dir, f'program_{program}.yaml')
+
+
+def flag(value: str | bool) -> bool:
+    """A true/false argument as launch's IfCondition reads it ('true'/'1', 'false'/'0', any case)."""
+    if isinstance(value, bool):
+        return value
+    if value.strip().lower() in ('true', '1'):
+        return True
+    if value.strip().lower() in ('false', '0'):
+        return False
+    raise ValueError(f'{value!r}: expected true or false')
+
+
+def argument_values(config_dir: str | os.PathLike, given: Mapping[str, str | bool] | None = None) -> dict[str, Any]:
+    """Every argument's value: the given ones, else the defaults (config files in ``config_dir``)."""
+    given = dict(given or {})
+    unknown = set(given) - {a.name for a in ARGUMENTS}
+    if unknown:
+        raise ValueError(f'unknown rig argument(s) {", ".join(sorted(unknown))}; known: '
+                         f'{", ".join(a.name for a in ARGUMENTS)}')
+    return {a.name: given[a.name] if a.name in given else
+            os.path.join(config_dir, a.default) if a.config_file else a.default for a in ARGUMENTS}
+
+
+def config_files(config_dir: str | os.PathLike, given: Mapping[str, str | bool] | None = None) -> dict[str, str]:
+    """The parameter file of each role ('crane', 'sensors', 'program') for the arguments ``given``."""
+    values = argument_values(config_dir, given)
+    return {'crane': str(values['crane']), 'sensors': str(values['sensors']),
+            'program': program_file(str(values['program']), config_dir)}
+
+
+def rig_nodes(config_dir: str | os.PathLike, given: Mapping[str, str | bool] | None = None) -> list[NodeStart]:
+    """The nodes the rig starts for the arguments ``given`` (the rest at their defaults), in start order."""
+    values = argument_values(config_dir, given)
+    files = config_files(config_dir, values)
+    return [NodeStart(node.name, node.executable, tuple(files[f] for f in node.files),
+                      {param: str(values[arg]) for param, arg in node.arguments.items()}, node.remappings,
+                      node.runs_program)
+            for node in NODES if node.condition is None or flag(values[node.condition])]
