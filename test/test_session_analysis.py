@@ -22,20 +22,17 @@ from conftest import REPO
 from crane_stiffness import topics
 from crane_stiffness.analysis.cdr import (decode_diagnostic_array, decode_float64_multiarray, decode_string,
                                           encode_float64_multiarray, encode_stamped, encode_string)
-from crane_stiffness.analysis.session import (SessionAnalysisError, analyze_session, branch_labels,
-                                              compare_sessions, pair_by_stamp)
+from crane_stiffness.analysis.session import SessionAnalysisError, analyze_session, compare_sessions, pair_by_stamp
 from crane_stiffness.analysis.synthetic import write_synthetic_session
 from crane_stiffness.bag import (BagDamageWarning, BagFormatError, BagReader, BagWriter, McapFile,
                                  TopicNotFoundError)
 from crane_stiffness.cli import main as cli_main
-from crane_stiffness.estimation.fit import BranchTracker
 from crane_stiffness.estimation.live import VALUE_FIELDS
 from crane_stiffness.estimation.sync import ApproximateTimeSync
 from crane_stiffness.model import lab_model, paper_coefficients
 from crane_stiffness.sim.program import LoadProgram, Segment, load_program_file
 
 K_TRUE = 48_000.0  # N/m, the linear truth of the synthetic sessions
-SIDE_FORCE = load_program_file(REPO / 'config' / 'program_side_force.yaml')
 
 
 def short_program(repeats: int = 2) -> LoadProgram:
@@ -104,18 +101,6 @@ def test_vectorized_pairing_equals_the_live_synchroniser(case):
         assert got.counters['replayed_stretches'] == 0 and len(expected) == n
     if case == 'stale':
         assert got.counters['displacement_stale'] > 0
-
-
-@pytest.mark.parametrize('threshold', [0.0, 0.2, 1.5])
-def test_vectorized_branch_labels_equal_the_tracker(threshold):
-    rng = np.random.default_rng(1)
-    t, wrench = SIDE_FORCE.sample(1000.0)
-    walks = [wrench[:, 1], wrench[:, 1] + rng.normal(0, 0.08, t.size), np.cumsum(rng.normal(0, 0.3, 20_000)),
-             -wrench[:, 1]]
-    for load in walks:
-        tracker = BranchTracker(threshold)
-        expected = np.array([tracker.update(v) == 'loading' for v in load])
-        assert np.array_equal(branch_labels(load, threshold), expected)
 
 
 def test_cdr_helpers_match_rclpy_serialization():

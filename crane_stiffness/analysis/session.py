@@ -46,7 +46,8 @@ from crane_stiffness.bag import NODE_PARAMETERS_METADATA, BagDamageWarning, BagR
 from crane_stiffness.config import geometry_from_params
 from crane_stiffness.errors import CraneStiffnessError
 from crane_stiffness.estimation.errors import DataError
-from crane_stiffness.estimation.fit import BRANCHES, LOADING, UNLOADING, LineFit, RecursiveLeastSquares, fit_line
+from crane_stiffness.estimation.branch import BRANCHES, LOADING, UNLOADING, branch_labels
+from crane_stiffness.estimation.fit import LineFit, RecursiveLeastSquares, fit_line
 from crane_stiffness.estimation.live import AXES, VALUE_FIELDS, LiveSettings
 from crane_stiffness.sim.program import LoadProgram
 
@@ -338,66 +339,6 @@ def pair_by_stamp(force_stamp: np.ndarray, force_log: np.ndarray, disp_stamp: np
     counters.update(pairs=int(fi.size), force_unmatched=int(f_idx.size - fi.size),
                     displacement_unmatched=int(d_idx.size - fi.size), replayed_stretches=int(gaps.size))
     return PairResult(fi, di, counters)
-
-
-def _first_switch(m: np.ndarray, start: int, loading: bool, threshold: float) -> int:
-    """Index of the sample after ``start`` at which BranchTracker leaves its branch (len(m) if never)."""
-    n = m.size
-    extreme = m[start]
-    pos = start + 1
-    size = 4096
-    while pos < n:
-        stop = min(n, pos + size)
-        seg = m[pos:stop]
-        if loading:
-            run = np.maximum(np.maximum.accumulate(seg), extreme)
-            hit = run - seg > threshold
-        else:
-            run = np.minimum(np.minimum.accumulate(seg), extreme)
-            hit = seg - run > threshold
-        if hit.any():
-            return pos + int(np.argmax(hit))
-        extreme = run[-1]
-        pos = stop
-        size *= 2
-    return n
-
-
-def _labels_loop(m: list[float], threshold: float, loading: bool, extreme: float) -> list[bool]:
-    """BranchTracker over a list, sample by sample (for loads that switch branch very often)."""
-    out = []
-    append = out.append
-    for v in m:
-        if loading:
-            if v > extreme:
-                extreme = v
-            elif extreme - v > threshold:
-                loading, extreme = False, v
-        elif v < extreme:
-            extreme = v
-        elif v - extreme > threshold:
-            loading, extreme = True, v
-        append(loading)
-    return out
-
-
-def branch_labels(load: np.ndarray, threshold: float) -> np.ndarray:
-    """Loading (True) / unloading (False) of each sample, exactly as
-    :class:`~crane_stiffness.estimation.fit.BranchTracker` labels the sequence ``load`` (N or N·m), vectorized:
-    one numpy search per branch switch (a noisy load that switches all the time goes sample by sample)."""
-    m = np.abs(np.asarray(load, dtype=float))
-    out = np.empty(m.size, bool)
-    start, loading, switches = 0, True, 0
-    while start < m.size:
-        if switches > 2000 and start < 50 * switches:  # a switch every < 50 samples: numpy calls would dominate
-            out[start] = loading
-            out[start + 1:] = _labels_loop(m[start + 1:].tolist(), threshold, loading, float(m[start]))
-            break
-        switch = _first_switch(m, start, loading, threshold)
-        out[start:switch] = loading
-        start, loading = switch, not loading
-        switches += 1
-    return out
 
 
 def hold_runs(stamp: np.ndarray, value: np.ndarray, min_hold_s: float = MIN_HOLD_S) -> list[tuple[int, int]]:

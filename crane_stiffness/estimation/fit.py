@@ -23,18 +23,14 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import lru_cache
-from typing import Any, Literal, Union
+from typing import Any, Union
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import stats
 
+from crane_stiffness.estimation.branch import BRANCHES, Branch, BranchTracker
 from crane_stiffness.estimation.errors import DataError, ParameterError
-
-Branch = Literal['loading', 'unloading']
-LOADING: Branch = 'loading'
-UNLOADING: Branch = 'unloading'
-BRANCHES: tuple[Branch, Branch] = (LOADING, UNLOADING)
 
 #: A float for a single fit, an array for a batch of fits (leading axes of the input).
 FloatOrArray = Union[float, NDArray[np.float64]]
@@ -463,70 +459,6 @@ class RecursiveLeastSquares:
         if dof >= 1.0 and self._p00 > 0.0:
             stderr = math.sqrt(self._cost / dof * self._p00 * ratio)
         return RlsResult(stiffness=self._k, intercept=self._c, stderr=stderr, n=self._n, effective_n=self._w)
-
-
-class BranchTracker:
-    """Labels samples as on the loading or the unloading branch of a load cycle, with hysteresis.
-
-    Works on the magnitude ``|load|`` (commanded or measured, N or N·m), so a program that crosses zero into
-    negative loads counts the move away from zero as loading. A peak detector with a dead band:
-
-    - while loading, the running maximum of |load| is tracked; a drop of more than ``threshold`` below it switches
-      to unloading;
-    - while unloading, the running minimum is tracked; a rise of more than ``threshold`` above it switches back.
-
-    Holds and noise smaller than ``threshold`` keep the previous branch. The price of the dead band is a lag: the
-    samples between a turning point and the switch (a load change of up to ``threshold``) keep the old label. With
-    the commanded load, which has no noise, ``threshold`` can be tiny.
-    """
-
-    def __init__(self, threshold: float, initial: Branch = LOADING) -> None:
-        """Args: threshold: dead band in load units, ≥ 0. initial: branch before the first reversal."""
-        threshold = float(threshold)
-        if not (math.isfinite(threshold) and threshold >= 0.0):
-            raise ParameterError('threshold', threshold, 'must be finite and >= 0')
-        if initial not in BRANCHES:
-            raise ParameterError('initial', initial, f'must be one of {", ".join(BRANCHES)}')
-        self._threshold = threshold
-        self._initial: Branch = initial
-        self.reset()
-
-    def reset(self) -> None:
-        """Back to the initial branch with no history."""
-        self._branch: Branch = self._initial
-        self._extreme: float | None = None
-
-    @property
-    def branch(self) -> Branch:
-        """Branch of the last sample."""
-        return self._branch
-
-    @property
-    def threshold(self) -> float:
-        """Dead band, in load units."""
-        return self._threshold
-
-    def update(self, load: float) -> Branch:
-        """Classify one sample of the load (N or N·m) and return its branch. Raises DataError on NaN/Inf."""
-        magnitude = abs(float(load))
-        if not math.isfinite(magnitude):
-            raise DataError(f'load must be finite, got {load!r}')
-        extreme = self._extreme
-        if extreme is None:
-            self._extreme = magnitude
-        elif self._branch == LOADING:
-            if magnitude > extreme:
-                self._extreme = magnitude
-            elif extreme - magnitude > self._threshold:
-                self._branch = UNLOADING
-                self._extreme = magnitude
-        else:
-            if magnitude < extreme:
-                self._extreme = magnitude
-            elif magnitude - extreme > self._threshold:
-                self._branch = LOADING
-                self._extreme = magnitude
-        return self._branch
 
 
 @dataclass(frozen=True, slots=True)

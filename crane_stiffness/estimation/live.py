@@ -31,7 +31,8 @@ from dataclasses import dataclass, field, fields
 from typing import Any
 
 from crane_stiffness.estimation.errors import ParameterError
-from crane_stiffness.estimation.fit import BRANCHES, LOADING, Branch, Estimate, StiffnessEstimator, t_quantile
+from crane_stiffness.estimation.branch import BRANCHES, LOADING, Branch
+from crane_stiffness.estimation.fit import Estimate, StiffnessEstimator, t_quantile
 from crane_stiffness.estimation.sync import DISPLACEMENT, FORCE, ApproximateTimeSync, Pair, SyncCounters
 
 #: Load axes, in the order of a wrench [fx, fy, fz, mx, my, mz].
