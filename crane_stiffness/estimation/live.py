@@ -32,7 +32,8 @@ from typing import Any
 
 from crane_stiffness.estimation.errors import ParameterError
 from crane_stiffness.estimation.branch import BRANCHES, LOADING, Branch
-from crane_stiffness.estimation.fit import Estimate, StiffnessEstimator, t_quantile
+from crane_stiffness.estimation.estimator import Estimate, StiffnessEstimator
+from crane_stiffness.estimation.fit import t_quantile
 from crane_stiffness.estimation.sync import DISPLACEMENT, FORCE, ApproximateTimeSync, Pair, SyncCounters
 
 #: Load axes, in the order of a wrench [fx, fy, fz, mx, my, mz].
