@@ -46,10 +46,10 @@ from crane_stiffness.bag import NODE_PARAMETERS_METADATA, BagDamageWarning, BagR
 from crane_stiffness.config import geometry_from_params
 from crane_stiffness.errors import CraneStiffnessError
 from crane_stiffness.estimation.errors import DataError
-from crane_stiffness.estimation.branch import BRANCHES, LOADING, UNLOADING, branch_labels
+from crane_stiffness.estimation.branch import BRANCHES, LOADING, UNLOADING
 from crane_stiffness.estimation.fit import LineFit, RecursiveLeastSquares, fit_line
-from crane_stiffness.estimation.live import AXES, VALUE_FIELDS, LiveSettings
-from crane_stiffness.estimation.sync import pair_by_stamp
+from crane_stiffness.estimation.inputs import INPUT_CHECKS, CommandSeries, Samples, checked_samples
+from crane_stiffness.estimation.live import AXES, VALUE_FIELDS, LivePairs, LiveSettings, live_pairs
 from crane_stiffness.sim.program import LoadProgram
 
 REQUIRED_TOPICS = (topics.LOAD_CELL_WRENCH, topics.LVDT_DISPLACEMENT)
@@ -235,15 +235,6 @@ def hold_runs(stamp: np.ndarray, value: np.ndarray, min_hold_s: float = MIN_HOLD
 
 
 # -------------------------------------------------------------------------------------------- reading a bag --
-@dataclass
-class _Pairs:
-    stamp: np.ndarray
-    force: np.ndarray
-    displacement: np.ndarray
-    loading: np.ndarray
-    fit_log: np.ndarray
-
-
 @dataclass
 class _Data:
     path: Path
@@ -441,73 +432,40 @@ def _read(path: Path, axis: str | None, problems: list[str], missing: list[str])
 
 
 # ------------------------------------------------------------------------------------------------ analysis --
-def _inputs(data: _Data) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray], dict[str, int]]:
-    """The live estimator's input checks on both streams: (force, displacement) dicts of stamp/log/value arrays."""
+def _inputs(data: _Data) -> tuple[Samples, Samples, dict[str, int]]:
+    """The live estimator's input checks on both streams: the (force, displacement) samples kept, and the counts."""
     s = data.settings
     f = data.force
-    wrench = np.column_stack([f[k] for k in ('fx', 'fy', 'fz', 'mx', 'my', 'mz')]) if f.size else np.zeros((0, 6))
-    f_value = wrench[:, s.axis_index] if f.size else np.zeros(0)
+    wrench = np.column_stack([f[k] for k in AXES]) if f.size else np.zeros((0, 6))
     f_stamp = f['stamp_s']
-    finite = np.isfinite(wrench).all(axis=1) & np.isfinite(f_stamp)
-    zero = finite & (f_stamp <= 0.0)
-    absurd = finite & ~zero & (np.abs(f_value) > s.max_abs_force)
-    f_keep = finite & ~zero & ~absurd
+    force, f_counts = checked_samples(f_stamp, f['log_time_ns'], wrench[:, s.axis_index],
+                                      np.isfinite(wrench).all(axis=1) & np.isfinite(f_stamp), s.max_abs_force)
     d = data.disp
     if 'stamp_s' in d.dtype.names:
         d_stamp = d['stamp_s']
         d_value = d['x'].astype(float)
     else:  # std_msgs/Float64 in volts, stamped on arrival by the estimator
         d_stamp = d['log_time_ns'] * 1e-9
-        d_value = s.displacement_gain * d['data'] + s.displacement_offset
-    d_finite = np.isfinite(d_value) & np.isfinite(d_stamp)
-    d_zero = d_finite & (d_stamp <= 0.0)
-    d_absurd = d_finite & ~d_zero & (np.abs(d_value) > s.max_abs_displacement)
-    d_keep = d_finite & ~d_zero & ~d_absurd
+        d_value = s.volts_to_displacement(d['data'])
+    disp, d_counts = checked_samples(d_stamp, d['log_time_ns'], d_value, np.isfinite(d_value) & np.isfinite(d_stamp),
+                                     s.max_abs_displacement)
     counters = {'force_messages': int(f.size), 'displacement_messages': int(d.size),
-                'dropped_non_finite': int((~finite).sum() + (~d_finite).sum()),
-                'dropped_zero_stamp': int(zero.sum() + d_zero.sum()),
-                'dropped_absurd': int(absurd.sum() + d_absurd.sum())}
-    return ({'stamp': f_stamp[f_keep], 'log': f['log_time_ns'][f_keep], 'value': f_value[f_keep]},
-            {'stamp': d_stamp[d_keep], 'log': d['log_time_ns'][d_keep], 'value': d_value[d_keep]}, counters)
+                **{name: f_counts[name] + d_counts[name] for name in INPUT_CHECKS}}
+    return force, disp, counters
 
 
-def _commands(data: _Data) -> dict[str, np.ndarray] | None:
+def _commands(data: _Data) -> CommandSeries | None:
     c = data.command
     if c is None or c.size == 0:
         return None
-    s = data.settings
-    load = c[s.force_axis].astype(float)
-    stamp = np.where(c['stamp_s'] > 0.0, c['stamp_s'], c['log_time_ns'] * 1e-9)
-    ok = np.isfinite(load) & np.isfinite(stamp)
-    if not ok.any():
-        return None
-    order = np.argsort(stamp[ok], kind='stable')
-    return {'stamp': stamp[ok][order], 'log': c['log_time_ns'][ok][order], 'value': load[ok][order],
-            'first_log': int(c['log_time_ns'][ok].min())}
+    return CommandSeries.of(c['stamp_s'], c['log_time_ns'], c[data.settings.force_axis].astype(float))
 
 
-def _pairs(data: _Data, force: dict, disp: dict, commands: dict | None) -> tuple[_Pairs, dict[str, int]]:
-    s = data.settings
-    result = pair_by_stamp(force['stamp'], force['log'], disp['stamp'], disp['log'], s.slop_s, s.max_age_s)
-    fi, di = result.force_index, result.displacement_index
-    stamp = 0.5 * (force['stamp'][fi] + disp['stamp'][di])
-    fvalue = force['value'][fi]
-    dvalue = disp['value'][di]
-    fit_log = np.maximum(force['log'][fi], disp['log'][di])
-    load = fvalue
-    if commands is not None and s.branch_source == 'auto':
-        k = np.searchsorted(commands['stamp'], stamp, side='right') - 1
-        use = (k >= 0) & (fit_log >= commands['first_log'])
-        load = np.where(use, commands['value'][np.maximum(k, 0)], fvalue)
-    loading = branch_labels(load, s.hysteresis)
-    return _Pairs(stamp, fvalue, dvalue, loading, fit_log), result.counters
-
-
-def _steps(data: _Data, pairs: _Pairs, commands: dict | None, t0: float, settle_fraction: float,
+def _steps(data: _Data, pairs: LivePairs, commands: CommandSeries | None, t0: float, settle_fraction: float,
            problems: list[str]) -> list[Step]:
     if commands is None:
         return []
-    stamp, value = commands['stamp'], commands['value']
+    stamp, value = commands.stamp, commands.value
     runs = hold_runs(stamp, value)
     period = float(np.median(np.diff(stamp))) if stamp.size > 1 else 0.0
     holds = data.program.holds(data.settings.force_axis) if data.program is not None else []
@@ -556,13 +514,13 @@ def _steps(data: _Data, pairs: _Pairs, commands: dict | None, t0: float, settle_
     return steps
 
 
-def _branch_fits(pairs: _Pairs, lo: int, hi: int) -> dict[str, FitSummary | None]:
+def _branch_fits(pairs: LivePairs, lo: int, hi: int) -> dict[str, FitSummary | None]:
     sel = slice(lo, hi)
     x, y, loading = pairs.displacement[sel], pairs.force[sel], pairs.loading[sel]
     return {LOADING: _fit(x[loading], y[loading]), UNLOADING: _fit(x[~loading], y[~loading])}
 
 
-def _window_fit(pairs: _Pairs, cut: int, branch: str, window: int, forgetting: float) -> dict[str, float]:
+def _window_fit(pairs: LivePairs, cut: int, branch: str, window: int, forgetting: float) -> dict[str, float]:
     sel = np.flatnonzero(pairs.loading[:cut] == (branch == LOADING))
     nan = math.nan
     out = {k: nan for k in COMPARED_FIELDS}
@@ -582,7 +540,7 @@ def _window_fit(pairs: _Pairs, cut: int, branch: str, window: int, forgetting: f
     return out
 
 
-def _live(data: _Data, pairs: _Pairs) -> LiveComparison | None:
+def _live(data: _Data, pairs: LivePairs) -> LiveComparison | None:
     if data.live_values is None:
         return None
     log, rows = data.live_values
@@ -636,7 +594,7 @@ def lvdt_scale(axis: str, lvdt: dict[str, Any] | None) -> float | None:
     return float(a[i]) if i < 3 else float(np.cross(p, a)[i - 3])
 
 
-def _model(data: _Data, steps: list[Step], commands: dict | None, points: int,
+def _model(data: _Data, steps: list[Step], commands: CommandSeries | None, points: int,
            problems: list[str]) -> ModelSummary | None:
     if data.geometry_params is None:
         return None
@@ -658,7 +616,7 @@ def _model(data: _Data, steps: list[Step], commands: dict | None, points: int,
     recorded = math.nan
     if data.prediction is not None and data.prediction.size:
         recorded = float(data.prediction['data'][0])
-    levels = np.array([s.level for s in steps]) if steps else (commands['value'] if commands else np.zeros(0))
+    levels = np.array([s.level for s in steps]) if steps else (commands.value if commands else np.zeros(0))
     peak = float(levels[np.argmax(np.abs(levels))]) if levels.size and np.abs(levels).max() > 0 else 0.0
     lvdt = data.sensors.get('lvdt') or data.sensors.get('/lvdt')
     scale = lvdt_scale(axis, lvdt)
@@ -686,7 +644,7 @@ def _model(data: _Data, steps: list[Step], commands: dict | None, points: int,
     return summary
 
 
-def _cycles(data: _Data, pairs: _Pairs, steps: list[Step], t0: float) -> list[CycleFits]:
+def _cycles(data: _Data, pairs: LivePairs, steps: list[Step], t0: float) -> list[CycleFits]:
     if data.program is None or data.program.repeats < 2 or not steps or steps[0].repeat is None:
         return []
     starts: dict[int, float] = {}
@@ -781,20 +739,20 @@ def analyze_session(bag_path: str | Path, out_dir: str | Path | None = None, *, 
             bar.stage('pair')
             force, disp, input_counters = _inputs(data)
             commands = _commands(data)
-            pairs, pair_counters = _pairs(data, force, disp, commands)
+            pairs = live_pairs(data.settings, force, disp, commands)
             if pairs.stamp.size < 3:
                 raise SessionAnalysisError(
                     f'{path}: only {pairs.stamp.size} load-cell/LVDT pair(s) within slop_s = {data.settings.slop_s} s '
-                    f'({force["stamp"].size} force and {disp["stamp"].size} displacement samples usable)')
+                    f'({force.stamp.size} force and {disp.stamp.size} displacement samples usable)')
             bar.done()
             bar.stage('steps')
-            t0 = float(commands['stamp'][0]) if commands is not None else float(pairs.stamp[0])
+            t0 = float(commands.stamp[0]) if commands is not None else float(pairs.stamp[0])
             steps = _steps(data, pairs, commands, t0, settle_fraction, problems)
             bar.done()
             bar.stage('fits')
             if commands is not None:
-                lo = np.searchsorted(pairs.stamp, commands['stamp'][0], side='left')
-                hi = np.searchsorted(pairs.stamp, commands['stamp'][-1], side='right')
+                lo = np.searchsorted(pairs.stamp, commands.stamp[0], side='left')
+                hi = np.searchsorted(pairs.stamp, commands.stamp[-1], side='right')
             else:
                 lo, hi = 0, pairs.stamp.size
             branch_fits = _branch_fits(pairs, int(lo), int(hi))
@@ -851,7 +809,7 @@ def analyze_session(bag_path: str | Path, out_dir: str | Path | None = None, *, 
                 geometry = {**g.to_dict(), 'l0': g.l0, 'k': g.k}
             except ValueError as exc:
                 problems.append(f'recorded geometry invalid: {exc}')
-        counters = {**input_counters, **pair_counters}
+        counters = {**input_counters, **pairs.counters}
         result = SessionAnalysis(
             bag=str(path), session=str(session.get('session') or path.name), notes=str(session.get('notes', '')),
             recorded_with=str(session.get('software_version', '')), analysed_with=__version__,
@@ -885,7 +843,7 @@ def _decimate(n: int, limit: int = PLOT_POINTS) -> slice:
     return slice(None, None, max(1, math.ceil(n / limit)))
 
 
-def _figures(result: SessionAnalysis, data: _Data, pairs: _Pairs, commands: dict | None, t0: float, out: Path,
+def _figures(result: SessionAnalysis, data: _Data, pairs: LivePairs, commands: CommandSeries | None, t0: float, out: Path,
              formats: Sequence[str]) -> list[str]:
     from crane_stiffness.analysis import figures
     written: list[str] = []
@@ -911,7 +869,7 @@ def _figures(result: SessionAnalysis, data: _Data, pairs: _Pairs, commands: dict
         series = {'force': (data.force['stamp_s'][f_step] - t0, data.force[result.axis][f_step]),
                   'displacement': (pairs.stamp[step] - t0, pairs.displacement[step])}
         if commands is not None:
-            series['command'] = (commands['stamp'] - t0, commands['value'])
+            series['command'] = (commands.stamp - t0, commands.value)
         if data.live_series is not None and data.live_series.size:
             l_step = _decimate(data.live_series.size)
             series['live_stiffness'] = (data.live_series['log_time_ns'][l_step] * 1e-9 - t0,

@@ -5,7 +5,9 @@
 - :mod:`.branch` — loading/unloading branch tracking, live and vectorized.
 - :mod:`.estimator` — :class:`StiffnessEstimator`: tracker and fits per branch composed, its :class:`Estimate`.
 - :mod:`.sync` — approximate pairing of the force and displacement streams by header stamp, live and vectorized.
-- :mod:`.live` — :class:`~.live.LiveStiffness`, everything the stiffness_estimator node computes.
+- :mod:`.inputs` — the input checks and the commanded load in effect, live and vectorized.
+- :mod:`.live` — :class:`~.live.LiveStiffness`, everything the stiffness_estimator node computes, and the same
+  pairs and branches for whole recorded streams.
 - :mod:`.errors` — the package's exceptions.
 """
 from crane_stiffness.estimation.branch import BRANCHES, LOADING, UNLOADING, Branch, BranchTracker, branch_labels

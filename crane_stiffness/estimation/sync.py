@@ -58,7 +58,12 @@ class Pair:
     @property
     def stamp_s(self) -> float:
         """Mean of the two stamps, s."""
-        return 0.5 * (self.force_stamp_s + self.displacement_stamp_s)
+        return pair_stamp(self.force_stamp_s, self.displacement_stamp_s)
+
+
+def pair_stamp(force_stamp_s: Any, displacement_stamp_s: Any) -> Any:
+    """Stamp of a pair, s: the mean of its two stamps (floats, or element-wise arrays)."""
+    return 0.5 * (force_stamp_s + displacement_stamp_s)
 
 
 @dataclass(slots=True)
