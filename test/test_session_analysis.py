@@ -1,5 +1,6 @@
-"""Offline analysis of recorded sessions (crane_stiffness.analysis.session): pairing and branch labels equal to the
-live estimator's, known truth recovered, the recorded live estimate reproduced, outputs written, damaged input.
+"""Offline analysis of recorded sessions (crane_stiffness.analysis.analyze, .compare): known truth recovered, the
+recorded live estimate reproduced, outputs written, damaged input. (The vectorized pairing, branch labels and input
+checks it uses are pinned to the live estimator's beside them: test_sync, test_branch, test_inputs.)
 
 Sessions are synthetic bags written like session_recorder writes them (crane_stiffness.analysis.synthetic); the
 live estimate in them comes from the estimator's own core (LiveStiffness) run over the messages in arrival order.
@@ -22,7 +23,9 @@ from conftest import REPO
 from crane_stiffness import topics
 from crane_stiffness.analysis.cdr import (decode_diagnostic_array, decode_float64_multiarray, decode_string,
                                           encode_float64_multiarray, encode_stamped, encode_string)
-from crane_stiffness.analysis.session import SessionAnalysisError, analyze_session, compare_sessions
+from crane_stiffness.analysis.analyze import analyze_session
+from crane_stiffness.analysis.compare import compare_sessions
+from crane_stiffness.analysis.errors import SessionAnalysisError
 from crane_stiffness.analysis.synthetic import write_synthetic_session
 from crane_stiffness.bag import (BagDamageWarning, BagFormatError, BagReader, BagWriter, McapFile,
                                  TopicNotFoundError)
