@@ -63,7 +63,8 @@ def _normal_quantile(confidence: float) -> float:
 
 @dataclass(frozen=True, slots=True)
 class LineFit:
-    """Result of an ordinary least-squares fit ``y = stiffness·x + intercept``.
+    """Result of an ordinary least-squares fit ``y = stiffness·x + intercept``: the one record of a line fit (the live
+    :class:`~crane_stiffness.estimation.estimator.Estimate` extends it; the offline analysis reports it as it is).
 
     Units follow the inputs: stiffness in N/m (N·m/rad), intercept in N (N·m). Fields are floats for one fit and
     arrays over the leading axes for a batch (:func:`fit_line` with 2-D or higher input).

@@ -317,10 +317,15 @@ class LiveStiffness:
         """The input checks (:func:`~crane_stiffness.estimation.inputs.input_faults`); a dropped sample is counted."""
         non_finite, zero_stamp, absurd = input_faults(finite, stamp_s, value, limit)
         c = self.counters
-        c.dropped_non_finite += non_finite
-        c.dropped_zero_stamp += zero_stamp
-        c.dropped_absurd += absurd
-        return not (non_finite or zero_stamp or absurd)
+        if non_finite:
+            c.dropped_non_finite += 1
+        elif zero_stamp:
+            c.dropped_zero_stamp += 1
+        elif absurd:
+            c.dropped_absurd += 1
+        else:
+            return True
+        return False
 
     def _fit(self, pairs: list[Pair]) -> int:
         fitted = 0
