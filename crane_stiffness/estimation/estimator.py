@@ -18,7 +18,7 @@ _LINE_FIT_FIELDS = tuple(f.name for f in fields(LineFit))
 @dataclass(frozen=True, slots=True)
 class Estimate(LineFit):
     """Stiffness estimate of one load branch: the :class:`~crane_stiffness.estimation.fit.LineFit` of the branch's
-    window (floats; its ``nonlinearity`` is over the window, > 0 means softening) with
+    window (floats; its ``nonlinearity`` is over the window, > 0 means softening), and:
 
     Attributes:
         stamp_s: Stamp of the newest sample on this branch, s.
