@@ -30,7 +30,7 @@ sys.path.insert(0, str(REPO))
 os.environ.setdefault('AMENT_PREFIX_PATH', sys.prefix)  # the .msg files for the writer's schemas
 os.environ.setdefault('MPLBACKEND', 'Agg')
 
-from crane_stiffness.analysis.session import analyze_session  # noqa: E402
+from crane_stiffness.analysis.analyze import analyze_session  # noqa: E402
 from crane_stiffness.testing.synthetic import write_synthetic_session  # noqa: E402
 from crane_stiffness.model import lab_model  # noqa: E402
 from crane_stiffness.sim.program import LoadProgram, load_program_file  # noqa: E402

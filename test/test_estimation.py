@@ -205,18 +205,6 @@ def test_rls_no_windup_during_long_hold() -> None:
     assert result.stiffness == pytest.approx(K_TRUE, rel=0.05)
 
 
-def test_branch_tracker_hysteresis() -> None:
-    tracker = BranchTracker(threshold=0.2)
-    loads = [0.0, 1.0, 2.0, 2.1, 2.0, 1.95, 1.85, 1.0, 0.5, 0.6, 0.71, 1.5, -0.1, -3.0]
-    labels = [tracker.update(v) for v in loads]
-    assert labels == ['loading', 'loading', 'loading', 'loading', 'loading', 'loading',  # noise within band
-                      'unloading', 'unloading', 'unloading', 'unloading',  # 0.6 is 0.1 above the minimum
-                      'loading', 'loading',  # 0.71 - 0.5 > 0.2
-                      'unloading', 'loading']  # |-0.1| drop, then |-3| away from zero is loading again
-    with pytest.raises(ParameterError, match='threshold'):
-        BranchTracker(-1.0)
-
-
 def _hysteretic_run(program: LoadProgram, k_load: float, k_unload: float, rate_hz: float,
                     rng: np.random.Generator) -> StiffnessEstimator:
     """Feed a load-unload cycle whose unloading branch is stiffer (friction/hysteresis in the rig)."""

@@ -6,8 +6,9 @@ import math
 import numpy as np
 import pytest
 
+from crane_stiffness.estimation.branch import BranchTracker
 from crane_stiffness.estimation.errors import ParameterError
-from crane_stiffness.estimation.fit import BranchTracker, fit_line
+from crane_stiffness.estimation.fit import fit_line
 from crane_stiffness.estimation.live import (OK, STALE, VALUE_FIELDS, WARN, LagHistogram, LiveSettings,
                                             LiveStiffness)
 

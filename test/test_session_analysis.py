@@ -1,5 +1,6 @@
-"""Offline analysis of recorded sessions (crane_stiffness.analysis.session): pairing and branch labels equal to the
-live estimator's, known truth recovered, the recorded live estimate reproduced, outputs written, damaged input.
+"""Offline analysis of recorded sessions (crane_stiffness.analysis.analyze, .compare): known truth recovered, the
+recorded live estimate reproduced, outputs written, damaged input. (The vectorized pairing, branch labels and input
+checks it uses are pinned to the live estimator's beside them: test_sync, test_branch, test_inputs.)
 
 Sessions are synthetic bags written like session_recorder writes them (crane_stiffness.testing.synthetic); the
 live estimate in them comes from the estimator's own core (LiveStiffness) run over the messages in arrival order.
@@ -22,20 +23,18 @@ from conftest import REPO
 from crane_stiffness import topics
 from crane_stiffness.analysis.cdr import (decode_diagnostic_array, decode_float64_multiarray, decode_string,
                                           encode_float64_multiarray, encode_stamped, encode_string)
-from crane_stiffness.analysis.session import (SessionAnalysisError, analyze_session, branch_labels,
-                                              compare_sessions, pair_by_stamp)
+from crane_stiffness.analysis.analyze import analyze_session
+from crane_stiffness.analysis.compare import compare_sessions
+from crane_stiffness.analysis.errors import SessionAnalysisError
 from crane_stiffness.testing.synthetic import write_synthetic_session
 from crane_stiffness.bag import (BagDamageWarning, BagFormatError, BagReader, BagWriter, McapFile,
                                  TopicNotFoundError)
 from crane_stiffness.cli import main as cli_main
-from crane_stiffness.estimation.fit import BranchTracker
 from crane_stiffness.estimation.live import VALUE_FIELDS
-from crane_stiffness.estimation.sync import ApproximateTimeSync
 from crane_stiffness.model import lab_model, paper_coefficients
 from crane_stiffness.sim.program import LoadProgram, Segment, load_program_file
 
 K_TRUE = 48_000.0  # N/m, the linear truth of the synthetic sessions
-SIDE_FORCE = load_program_file(REPO / 'config' / 'program_side_force.yaml')
 
 
 def short_program(repeats: int = 2) -> LoadProgram:
@@ -58,64 +57,6 @@ def linear_session(tmp_path_factory):
 def analysis(linear_session, tmp_path_factory):
     out = tmp_path_factory.mktemp('out')
     return analyze_session(linear_session.path, out, formats=('png', 'svg'), reports=('md', 'html'))
-
-
-# ------------------------------------------------------------------------------------ the vectorized core --
-def _streaming_pairs(fs, fl, ds, dl, slop, max_age):
-    sync = ApproximateTimeSync(slop, max_age=max_age)
-    events = sorted([(l, 0, i) for i, l in enumerate(fl)] + [(l, 1, i) for i, l in enumerate(dl)])
-    out = []
-    for _, kind, i in events:
-        out += sync.push('force', fs[i], i) if kind == 0 else sync.push('displacement', ds[i], i)
-    out += sync.flush()
-    return [(p.force, p.displacement) for p in out]
-
-
-@pytest.mark.parametrize('case', ['one_clock', 'jitter', 'large_jitter', 'rates_1000_700', 'dropouts',
-                                  'out_of_order', 'stale'])
-def test_vectorized_pairing_equals_the_live_synchroniser(case):
-    rng = np.random.default_rng(7)
-    n, slop = 4000, 6e-4
-    f_period, d_period, jitter, d_offset = 1e-3, 1e-3, 0.0, 0.0
-    if case == 'jitter':
-        jitter, d_offset = 5e-5, 2e-4
-    elif case == 'large_jitter':
-        jitter = 4e-4
-    elif case == 'rates_1000_700':
-        d_period, jitter = 1 / 700, 1e-4
-    fs = np.sort(100 + np.arange(n) * f_period + rng.normal(0, jitter, n))
-    ds = np.sort(100 + d_offset + np.arange(int(n * f_period / d_period)) * d_period
-                 + rng.normal(0, jitter, int(n * f_period / d_period)))
-    if case == 'dropouts':
-        fs = fs[rng.random(fs.size) > 0.05]
-        ds = ds[rng.random(ds.size) > 0.05]
-    fl = np.sort((np.floor(fs * 100) + 1) / 100 + 1e-4) + np.arange(fs.size) * 1e-7
-    dl = np.sort((np.floor(ds * 100) + 1) / 100 + 2e-4) + np.arange(ds.size) * 1e-7
-    if case == 'out_of_order':
-        fs[rng.choice(fs.size, 40, replace=False)] -= 3e-3
-    if case == 'stale':
-        dl[1000:1300] += 0.3  # a burst of LVDT samples arrives late: the older ones are stale
-        dl = np.maximum.accumulate(dl)
-    expected = _streaming_pairs(fs, fl, ds, dl, slop, 0.1)
-    got = pair_by_stamp(fs, fl, ds, dl, slop, 0.1)
-    assert list(zip(got.force_index.tolist(), got.displacement_index.tolist())) == expected
-    assert got.counters['pairs'] == len(expected)
-    if case == 'one_clock':
-        assert got.counters['replayed_stretches'] == 0 and len(expected) == n
-    if case == 'stale':
-        assert got.counters['displacement_stale'] > 0
-
-
-@pytest.mark.parametrize('threshold', [0.0, 0.2, 1.5])
-def test_vectorized_branch_labels_equal_the_tracker(threshold):
-    rng = np.random.default_rng(1)
-    t, wrench = SIDE_FORCE.sample(1000.0)
-    walks = [wrench[:, 1], wrench[:, 1] + rng.normal(0, 0.08, t.size), np.cumsum(rng.normal(0, 0.3, 20_000)),
-             -wrench[:, 1]]
-    for load in walks:
-        tracker = BranchTracker(threshold)
-        expected = np.array([tracker.update(v) == 'loading' for v in load])
-        assert np.array_equal(branch_labels(load, threshold), expected)
 
 
 def test_cdr_helpers_match_rclpy_serialization():

@@ -1,4 +1,4 @@
-"""Tests of crane_stiffness.estimation.sync: approximate stamp pairing and its counters."""
+"""Tests of crane_stiffness.estimation.sync: approximate stamp pairing and its counters, live and vectorized."""
 from __future__ import annotations
 
 import math
@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from crane_stiffness.estimation import ApproximateTimeSync, ParameterError, SyncError
+from crane_stiffness.estimation.sync import pair_by_stamp
 
 RATE_HZ = 5000.0
 PERIOD = 1.0 / RATE_HZ
@@ -165,3 +166,49 @@ def test_throughput_two_5khz_streams() -> None:
     elapsed = time.perf_counter() - start
     assert len(pairs) == 10_000
     assert elapsed < 1.0  # real time is 2 s; typically ~0.1 s
+
+
+# ------------------------------------------------------------------------------------------- vectorized --
+def _streaming_pairs(fs, fl, ds, dl, slop, max_age):
+    sync = ApproximateTimeSync(slop, max_age=max_age)
+    events = sorted([(l, 0, i) for i, l in enumerate(fl)] + [(l, 1, i) for i, l in enumerate(dl)])
+    out = []
+    for _, kind, i in events:
+        out += sync.push('force', fs[i], i) if kind == 0 else sync.push('displacement', ds[i], i)
+    out += sync.flush()
+    return [(p.force, p.displacement) for p in out]
+
+
+@pytest.mark.parametrize('case', ['one_clock', 'jitter', 'large_jitter', 'rates_1000_700', 'dropouts',
+                                  'out_of_order', 'stale'])
+def test_vectorized_pairing_equals_the_live_synchroniser(case):
+    rng = np.random.default_rng(7)
+    n, slop = 4000, 6e-4
+    f_period, d_period, jitter, d_offset = 1e-3, 1e-3, 0.0, 0.0
+    if case == 'jitter':
+        jitter, d_offset = 5e-5, 2e-4
+    elif case == 'large_jitter':
+        jitter = 4e-4
+    elif case == 'rates_1000_700':
+        d_period, jitter = 1 / 700, 1e-4
+    fs = np.sort(100 + np.arange(n) * f_period + rng.normal(0, jitter, n))
+    ds = np.sort(100 + d_offset + np.arange(int(n * f_period / d_period)) * d_period
+                 + rng.normal(0, jitter, int(n * f_period / d_period)))
+    if case == 'dropouts':
+        fs = fs[rng.random(fs.size) > 0.05]
+        ds = ds[rng.random(ds.size) > 0.05]
+    fl = np.sort((np.floor(fs * 100) + 1) / 100 + 1e-4) + np.arange(fs.size) * 1e-7
+    dl = np.sort((np.floor(ds * 100) + 1) / 100 + 2e-4) + np.arange(ds.size) * 1e-7
+    if case == 'out_of_order':
+        fs[rng.choice(fs.size, 40, replace=False)] -= 3e-3
+    if case == 'stale':
+        dl[1000:1300] += 0.3  # a burst of LVDT samples arrives late: the older ones are stale
+        dl = np.maximum.accumulate(dl)
+    expected = _streaming_pairs(fs, fl, ds, dl, slop, 0.1)
+    got = pair_by_stamp(fs, fl, ds, dl, slop, 0.1)
+    assert list(zip(got.force_index.tolist(), got.displacement_index.tolist())) == expected
+    assert got.counters['pairs'] == len(expected)
+    if case == 'one_clock':
+        assert got.counters['replayed_stretches'] == 0 and len(expected) == n
+    if case == 'stale':
+        assert got.counters['displacement_stale'] > 0

@@ -1,8 +1,11 @@
-"""Figures in the style of the paper (matplotlib, headless Agg backend): PNG or SVG by the file's extension."""
+"""Figures in the style of the paper (matplotlib, headless Agg backend): PNG or SVG by the file's extension; and the
+figures of an analysed session and of a comparison of sessions (:func:`write_session_figures`,
+:func:`write_comparison_figures`)."""
 from __future__ import annotations
 
+import math
 from pathlib import Path
-from typing import Sequence
+from typing import TYPE_CHECKING, Sequence
 
 import matplotlib
 
@@ -11,8 +14,17 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from crane_stiffness.analysis.sweep import ForceDisplacement, StiffnessRow  # noqa: E402
+from crane_stiffness.estimation.branch import BRANCHES, LOADING, UNLOADING  # noqa: E402
+
+if TYPE_CHECKING:
+    from crane_stiffness.analysis.load import SessionData
+    from crane_stiffness.analysis.results import SessionAnalysis
+    from crane_stiffness.estimation.inputs import CommandSeries
+    from crane_stiffness.estimation.live import LivePairs
 
 _FORCE_AXES = ('fx', 'fy', 'fz')
+#: Largest number of points drawn per series in a figure.
+PLOT_POINTS = 20_000
 
 
 def _finish(fig, ax, xlabel: str, ylabel: str, title: str, path: str | Path, *, title_size: float = 10,
@@ -80,7 +92,7 @@ def plot_stiffness_vs_weight(rows: Sequence[StiffnessRow], axis: str, path: str 
                    legend_size=8, legend_loc='best')
 
 
-# --- recorded sessions (crane_stiffness.analysis.session) ------------------------------------------------------
+# --- recorded sessions (crane_stiffness.analysis.analyze, .compare) --------------------------------------------
 
 _BRANCH_STYLE = {'loading': ('tab:blue', '^'), 'unloading': ('tab:red', 'v')}
 
@@ -211,3 +223,67 @@ def plot_sessions_overlay(path: str | Path, axis: str,
     return _finish(fig, ax, xlab, ylab, title or 'sessions compared (lines: nonlinear model of each)', path,
                    title_size=9,
                    legend_size=7, legend_loc='best')
+
+
+# ---------------------------------------------------------------------------------------- analysed sessions --
+def _decimate(n: int, limit: int = PLOT_POINTS) -> slice:
+    return slice(None, None, max(1, math.ceil(n / limit)))
+
+
+def write_session_figures(result: SessionAnalysis, data: SessionData, pairs: LivePairs,
+                          commands: CommandSeries | None, t0: float, out: Path, formats: Sequence[str]) -> list[str]:
+    """The figures of one analysed session in ``out`` (force_displacement and timeseries, one file per format);
+    returns the paths written. Times are drawn from ``t0`` (s)."""
+    written: list[str] = []
+    scale = result.model.lvdt_scale if result.model is not None and abs(result.model.lvdt_scale) > 1e-9 else None
+    step = _decimate(pairs.stamp.size)
+    cloud = {LOADING: (pairs.displacement[step][pairs.loading[step]], pairs.force[step][pairs.loading[step]]),
+             UNLOADING: (pairs.displacement[step][~pairs.loading[step]], pairs.force[step][~pairs.loading[step]])}
+    holds = {a: (np.array([s.displacement_mean for s in result.steps if s.approach == a]),
+                 np.array([s.force_mean for s in result.steps if s.approach == a])) for a in BRANCHES}
+    title = f'{result.session}: {result.axis}' + (f', program {result.program["name"]}' if result.program else '')
+    if result.geometry:
+        title += f', W = {result.geometry["weight"]:g} N, l0 = {result.geometry["l0"]:.3f} m'
+    for fmt in formats:
+        path = out / f'force_displacement.{fmt}'
+        plot_session_force_displacement(
+            path, result.axis, curves=result.model.curves if result.model is not None and scale else None,
+            lvdt_scale=scale or 1.0, cloud=cloud, holds=holds,
+            fits={b: (f.stiffness, f.intercept) for b, f in result.branch_fits.items() if f is not None},
+            title=title)
+        written.append(str(path))
+        path = out / f'timeseries.{fmt}'
+        f_step = _decimate(data.force.size)
+        series = {'force': (data.force['stamp_s'][f_step] - t0, data.force[result.axis][f_step]),
+                  'displacement': (pairs.stamp[step] - t0, pairs.displacement[step])}
+        if commands is not None:
+            series['command'] = (commands.stamp - t0, commands.value)
+        if data.live_series is not None and data.live_series.size:
+            l_step = _decimate(data.live_series.size)
+            series['live_stiffness'] = (data.live_series['log_time_ns'][l_step] * 1e-9 - t0,
+                                        data.live_series['data'][l_step])
+        plot_session_timeseries(path, result.axis, series,
+                                holds=[(s.start_s, s.end_s, s.approach) for s in result.steps],
+                                title=f'{result.session}: command, load and displacement')
+        written.append(str(path))
+    return written
+
+
+def write_comparison_figures(analyses: Sequence[SessionAnalysis], out: Path, formats: Sequence[str]) -> list[str]:
+    """The overlay of the sessions' quasi-static points and model curves in ``out`` (one file per format); returns
+    the paths written."""
+    written: list[str] = []
+    for fmt in formats:
+        path = out / f'compare_force_displacement.{fmt}'
+        series = []
+        for a in analyses:
+            holds = ([s.displacement_mean for s in a.steps], [s.force_mean for s in a.steps],
+                     [s.approach for s in a.steps])
+            curve = None
+            if a.model is not None and a.model.curves and abs(a.model.lvdt_scale) > 1e-9:
+                curve = (np.asarray(a.model.curves['nonlinear']) * a.model.lvdt_scale,
+                         np.asarray(a.model.curves['load']))
+            series.append((a.session, holds, curve))
+        plot_sessions_overlay(path, analyses[0].axis, series, title=f'{len(analyses)} session(s) compared')
+        written.append(str(path))
+    return written

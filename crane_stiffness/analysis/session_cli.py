@@ -1,5 +1,6 @@
-"""``crane-stiffness analyze | compare | recover``: thin command-line layers over crane_stiffness.analysis.session and
-crane_stiffness.bag.recover_bag (added to the parser of crane_stiffness.cli by :func:`add_commands`).
+"""``crane-stiffness analyze | compare | recover``: thin command-line layers over crane_stiffness.analysis.analyze,
+crane_stiffness.analysis.compare and crane_stiffness.bag.recover_bag (added to the parser of crane_stiffness.cli by
+:func:`add_commands`).
 
 Exit codes as crane_stiffness.cli: 0 ok, 2 bad input (a missing or unreadable bag, a missing sensor topic, nothing to
 fit; the reason on stderr). Damage the reader works around (a truncated or corrupt part of a bag) is reported on
@@ -80,7 +81,7 @@ def _print_summary(a: Any) -> None:
 
 
 def cmd_analyze(args: argparse.Namespace) -> int:
-    from crane_stiffness.analysis.session import analyze_session
+    from crane_stiffness.analysis.analyze import analyze_session
     analysis = analyze_session(args.bag, args.out, formats=(args.format,), reports=(args.report,),
                                write_json=args.json, axis=args.axis, settle_fraction=args.settle,
                                progress=not args.quiet and not args.json)
@@ -96,7 +97,7 @@ def cmd_analyze(args: argparse.Namespace) -> int:
 
 
 def cmd_compare(args: argparse.Namespace) -> int:
-    from crane_stiffness.analysis.session import compare_sessions
+    from crane_stiffness.analysis.compare import compare_sessions
     comparison = compare_sessions(args.bags, args.out, formats=(args.format,), reports=(args.report,),
                                   write_json=args.json, axis=args.axis, progress=not args.quiet and not args.json)
     if args.json:

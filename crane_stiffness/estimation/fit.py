@@ -1,4 +1,4 @@
-"""Straight-line fits of load against displacement: batch, sliding window, recursive, and per load branch.
+"""Straight-line fits of load against displacement: batch, sliding window and recursive.
 
 The model fitted everywhere is ``y = k·x + c`` with
 
@@ -20,21 +20,15 @@ It is NaN when a half has no spread in x or ``k_lower`` is 0.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import lru_cache
-from typing import Any, Literal, Union
+from typing import Any, Union
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import stats
 
 from crane_stiffness.estimation.errors import DataError, ParameterError
-
-Branch = Literal['loading', 'unloading']
-LOADING: Branch = 'loading'
-UNLOADING: Branch = 'unloading'
-BRANCHES: tuple[Branch, Branch] = (LOADING, UNLOADING)
 
 #: A float for a single fit, an array for a batch of fits (leading axes of the input).
 FloatOrArray = Union[float, NDArray[np.float64]]
@@ -69,7 +63,8 @@ def _normal_quantile(confidence: float) -> float:
 
 @dataclass(frozen=True, slots=True)
 class LineFit:
-    """Result of an ordinary least-squares fit ``y = stiffness·x + intercept``.
+    """Result of an ordinary least-squares fit ``y = stiffness·x + intercept``: the one record of a line fit (the live
+    :class:`~crane_stiffness.estimation.estimator.Estimate` extends it; the offline analysis reports it as it is).
 
     Units follow the inputs: stiffness in N/m (N·m/rad), intercept in N (N·m). Fields are floats for one fit and
     arrays over the leading axes for a batch (:func:`fit_line` with 2-D or higher input).
@@ -135,6 +130,7 @@ def _assemble_scalar(n: int, xm: float, ym: float, sxx: float, sxy: float, syy: 
                      nonlinearity: float) -> LineFit:
     """:func:`_assemble` for Python floats (sxx > 0, n ≥ 3): the same operations in the same order, so the same
     bits, at a tenth of the cost (the live estimator calls it for every published estimate)."""
+    xm, ym, sxx, sxy, syy, sse = float(xm), float(ym), float(sxx), float(sxy), float(syy), float(sse)
     k = sxy / sxx
     c = ym - k * xm
     dof = n - 2
@@ -463,208 +459,3 @@ class RecursiveLeastSquares:
         if dof >= 1.0 and self._p00 > 0.0:
             stderr = math.sqrt(self._cost / dof * self._p00 * ratio)
         return RlsResult(stiffness=self._k, intercept=self._c, stderr=stderr, n=self._n, effective_n=self._w)
-
-
-class BranchTracker:
-    """Labels samples as on the loading or the unloading branch of a load cycle, with hysteresis.
-
-    Works on the magnitude ``|load|`` (commanded or measured, N or N·m), so a program that crosses zero into
-    negative loads counts the move away from zero as loading. A peak detector with a dead band:
-
-    - while loading, the running maximum of |load| is tracked; a drop of more than ``threshold`` below it switches
-      to unloading;
-    - while unloading, the running minimum is tracked; a rise of more than ``threshold`` above it switches back.
-
-    Holds and noise smaller than ``threshold`` keep the previous branch. The price of the dead band is a lag: the
-    samples between a turning point and the switch (a load change of up to ``threshold``) keep the old label. With
-    the commanded load, which has no noise, ``threshold`` can be tiny.
-    """
-
-    def __init__(self, threshold: float, initial: Branch = LOADING) -> None:
-        """Args: threshold: dead band in load units, ≥ 0. initial: branch before the first reversal."""
-        threshold = float(threshold)
-        if not (math.isfinite(threshold) and threshold >= 0.0):
-            raise ParameterError('threshold', threshold, 'must be finite and >= 0')
-        if initial not in BRANCHES:
-            raise ParameterError('initial', initial, f'must be one of {", ".join(BRANCHES)}')
-        self._threshold = threshold
-        self._initial: Branch = initial
-        self.reset()
-
-    def reset(self) -> None:
-        """Back to the initial branch with no history."""
-        self._branch: Branch = self._initial
-        self._extreme: float | None = None
-
-    @property
-    def branch(self) -> Branch:
-        """Branch of the last sample."""
-        return self._branch
-
-    @property
-    def threshold(self) -> float:
-        """Dead band, in load units."""
-        return self._threshold
-
-    def update(self, load: float) -> Branch:
-        """Classify one sample of the load (N or N·m) and return its branch. Raises DataError on NaN/Inf."""
-        magnitude = abs(float(load))
-        if not math.isfinite(magnitude):
-            raise DataError(f'load must be finite, got {load!r}')
-        extreme = self._extreme
-        if extreme is None:
-            self._extreme = magnitude
-        elif self._branch == LOADING:
-            if magnitude > extreme:
-                self._extreme = magnitude
-            elif extreme - magnitude > self._threshold:
-                self._branch = UNLOADING
-                self._extreme = magnitude
-        else:
-            if magnitude < extreme:
-                self._extreme = magnitude
-            elif magnitude - extreme > self._threshold:
-                self._branch = LOADING
-                self._extreme = magnitude
-        return self._branch
-
-
-@dataclass(frozen=True, slots=True)
-class Estimate:
-    """Stiffness estimate of one load branch.
-
-    Attributes:
-        stamp_s: Stamp of the newest sample on this branch, s.
-        branch: 'loading' or 'unloading'.
-        stiffness: Windowed least-squares slope, N/m (N·m/rad).
-        intercept: Windowed intercept, N (N·m).
-        stderr: Standard error of ``stiffness``.
-        ci95_low: Lower end of its 95 % confidence interval.
-        ci95_high: Upper end.
-        r2: Coefficient of determination of the windowed fit.
-        n: Pairs in the window.
-        residual_rms: RMS residual of the windowed fit, N (N·m).
-        nonlinearity: ``1 − k_upper / k_lower`` over the window; > 0 means softening (module docstring).
-        rls_stiffness: Recursive least-squares slope over all samples of the branch (with forgetting); NaN if not
-            available yet.
-        rls_stderr: Its approximate standard error.
-    """
-
-    stamp_s: float
-    branch: Branch
-    stiffness: float
-    intercept: float
-    stderr: float
-    ci95_low: float
-    ci95_high: float
-    r2: float
-    n: int
-    residual_rms: float
-    nonlinearity: float
-    rls_stiffness: float
-    rls_stderr: float
-
-
-class StiffnessEstimator:
-    """Live stiffness of one loaded axis, fitted separately on the loading and the unloading branch.
-
-    Each sample ``(stamp_s, force, displacement)`` is labelled by a :class:`BranchTracker` (from ``load`` if given,
-    e.g. the commanded load, else from ``force``) and goes into that branch's :class:`WindowedLeastSquares` and
-    :class:`RecursiveLeastSquares`. ``force`` is the load along the axis (N, or N·m for a moment test) and
-    ``displacement`` the motion along it (m, or rad).
-
-    :meth:`add` is O(1); :meth:`estimate` costs a sort of the window (the nonlinearity indicator), so call it at
-    the publishing rate, not per sample. Choose ``window`` to span several hold levels: a window inside one hold
-    has no spread in displacement and yields no estimate.
-    """
-
-    PARAM_NAMES = ('hysteresis', 'window', 'forgetting', 'initial_covariance')
-
-    def __init__(self, hysteresis: float, window: int = 500, forgetting: float = 0.999, *,
-                 initial_covariance: float = 1e12, nonlinearity: bool = True) -> None:
-        """Args: hysteresis: branch dead band in load units (see BranchTracker). window: pairs per windowed fit.
-        forgetting: RLS λ. initial_covariance: RLS prior variance. nonlinearity: compute the indicator."""
-        self._tracker = BranchTracker(hysteresis)
-        self._windows = {b: WindowedLeastSquares(window, nonlinearity=nonlinearity) for b in BRANCHES}
-        self._rls = {b: RecursiveLeastSquares(forgetting, initial_covariance=initial_covariance) for b in BRANCHES}
-        self._stamps: dict[Branch, float] = {b: math.nan for b in BRANCHES}
-        self._rejected = 0
-
-    @classmethod
-    def from_params(cls, params: Mapping[str, Any]) -> StiffnessEstimator:
-        """Build from a parameter dict with keys from :attr:`PARAM_NAMES` (``hysteresis`` required)."""
-        unknown = sorted(set(params) - set(cls.PARAM_NAMES))
-        if unknown:
-            raise ParameterError(unknown[0], params[unknown[0]],
-                                 f'unknown parameter; known: {", ".join(cls.PARAM_NAMES)}')
-        if 'hysteresis' not in params:
-            raise ParameterError('hysteresis', None, 'is required (branch dead band in load units)')
-        return cls(**{key: params[key] for key in cls.PARAM_NAMES if key in params})
-
-    @property
-    def branch(self) -> Branch:
-        """Branch of the last accepted sample."""
-        return self._tracker.branch
-
-    @property
-    def rejected(self) -> int:
-        """Samples skipped because a value was NaN or Inf."""
-        return self._rejected
-
-    def reset(self) -> None:
-        """Forget everything (e.g. at the start of a new program)."""
-        self._tracker.reset()
-        for branch in BRANCHES:
-            self._windows[branch].reset()
-            self._rls[branch].reset()
-            self._stamps[branch] = math.nan
-        self._rejected = 0
-
-    def add(self, stamp_s: float, force: float, displacement: float, load: float | None = None) -> Branch | None:
-        """Feed one synchronised pair; returns its branch, or None if it was skipped for a NaN/Inf value."""
-        force = float(force)
-        displacement = float(displacement)
-        branch_load = force if load is None else float(load)
-        if not (math.isfinite(force) and math.isfinite(displacement) and math.isfinite(branch_load)):
-            self._rejected += 1
-            return None
-        branch = self._tracker.update(branch_load)
-        self._windows[branch].add(displacement, force)
-        self._rls[branch].add(displacement, force)
-        self._stamps[branch] = float(stamp_s)
-        return branch
-
-    def nonlinearity(self, branch: Branch) -> float:
-        """The nonlinearity indicator of ``branch``'s window (sorts the window, whatever the constructor's
-        ``nonlinearity``); NaN while the window cannot be fitted."""
-        fit = self._windows[branch].result(nonlinearity=True)
-        return math.nan if fit is None else float(fit.nonlinearity)
-
-    def estimate(self, branch: Branch | None = None) -> Estimate | None:
-        """Estimate of ``branch`` (default: the current one), or None while its window cannot be fitted."""
-        branch = self._tracker.branch if branch is None else branch
-        if branch not in BRANCHES:
-            raise ParameterError('branch', branch, f'must be one of {", ".join(BRANCHES)}')
-        fit = self._windows[branch].result()
-        if fit is None:
-            return None
-        rls = self._rls[branch].result()
-        return Estimate(
-            stamp_s=self._stamps[branch],
-            branch=branch,
-            stiffness=float(fit.stiffness),
-            intercept=float(fit.intercept),
-            stderr=float(fit.stderr),
-            ci95_low=float(fit.ci95_low),
-            ci95_high=float(fit.ci95_high),
-            r2=float(fit.r2),
-            n=fit.n,
-            residual_rms=float(fit.residual_rms),
-            nonlinearity=float(fit.nonlinearity),
-            rls_stiffness=math.nan if rls is None else rls.stiffness,
-            rls_stderr=math.nan if rls is None else rls.stderr,
-        )
-
-    def estimates(self) -> dict[Branch, Estimate | None]:
-        """Estimates of both branches."""
-        return {branch: self.estimate(branch) for branch in BRANCHES}

@@ -5,9 +5,10 @@ publishing one:
 
 1. Input checks. A force sample is the selected component (``force_axis``, N or N·m) of a wrench; a displacement
    sample is a reading in m (or rad), or a voltage converted by ``x = displacement_gain · V + displacement_offset``.
-   Dropped and counted (:class:`InputCounters`): a NaN/Inf anywhere in the sample, a zero (or negative) stamp, a
-   selected force above ``max_abs_force`` or a displacement above ``max_abs_displacement`` in magnitude, and a
-   message its reader could not decode (:meth:`LiveStiffness.add_malformed`).
+   Dropped and counted (:class:`~crane_stiffness.estimation.inputs.InputCounters`): a NaN/Inf anywhere in the
+   sample, a zero (or negative) stamp, a selected force above ``max_abs_force`` or a displacement above
+   ``max_abs_displacement`` in magnitude (:func:`~crane_stiffness.estimation.inputs.input_faults`), and a message
+   its reader could not decode (:meth:`LiveStiffness.add_malformed`).
 2. Pairing by header stamp with :class:`~crane_stiffness.estimation.sync.ApproximateTimeSync` (``slop_s``,
    ``max_age_s``, ``expected_period_s``, ``dropout_factor``): out-of-order and stale samples are counted there and
    never fitted; dropouts are counted.
@@ -21,18 +22,29 @@ publishing one:
    :meth:`LiveStiffness.report` (per-branch text for people, with a level).
 
 The model prediction (``set_prediction``) gives ``relative_error = (estimate − prediction) / prediction``.
+
+:func:`live_pairs` is steps 1–3 up to the fit for whole recorded streams at once (numpy, the offline analysis of a
+session): the pairs :class:`LiveStiffness` would fit and the branch of each, from the vectorized forms that sit beside
+each streaming rule (:mod:`~crane_stiffness.estimation.inputs`, :func:`~crane_stiffness.estimation.sync.pair_by_stamp`,
+:func:`~crane_stiffness.estimation.branch.branch_labels`).
 """
 from __future__ import annotations
 
-import bisect
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, fields
 from typing import Any
 
+import numpy as np
+
+from crane_stiffness.estimation.branch import BRANCHES, LOADING, Branch, branch_labels
 from crane_stiffness.estimation.errors import ParameterError
-from crane_stiffness.estimation.fit import BRANCHES, LOADING, Branch, Estimate, StiffnessEstimator, t_quantile
-from crane_stiffness.estimation.sync import DISPLACEMENT, FORCE, ApproximateTimeSync, Pair, SyncCounters
+from crane_stiffness.estimation.estimator import Estimate, StiffnessEstimator
+from crane_stiffness.estimation.fit import t_quantile
+from crane_stiffness.estimation.inputs import (CommandHold, CommandSeries, InputCounters, Samples, command_inputs,
+                                               input_faults)
+from crane_stiffness.estimation.sync import (DISPLACEMENT, FORCE, ApproximateTimeSync, Pair, SyncCounters,
+                                             pair_by_stamp, pair_stamp)
 
 #: Load axes, in the order of a wrench [fx, fy, fz, mx, my, mz].
 AXES = ('fx', 'fy', 'fz', 'mx', 'my', 'mz')
@@ -121,6 +133,10 @@ class LiveSettings:
                    displacement_gain=gain, displacement_offset=_number(v, 'displacement_offset'),
                    nonlinearity_warn=_number(v, 'nonlinearity_warn', above=0.0))
 
+    def volts_to_displacement(self, volts: Any) -> Any:
+        """Displacement, m (or rad), of a reading in volts (a float, or element-wise an array)."""
+        return self.displacement_gain * volts + self.displacement_offset
+
     @property
     def axis_index(self) -> int:
         return AXES.index(self.force_axis)
@@ -144,26 +160,6 @@ class LiveSettings:
                 self.displacement_offset)
 
 
-@dataclass
-class InputCounters:
-    """Counters of the inputs, before pairing (the pairing's own counters are in :class:`SyncCounters`)."""
-
-    force_received: int = 0
-    displacement_received: int = 0
-    command_received: int = 0
-    dropped_non_finite: int = 0
-    dropped_absurd: int = 0
-    dropped_zero_stamp: int = 0
-    dropped_malformed: int = 0
-    command_dropped: int = 0
-    pairs_fitted: int = 0
-    fit_restarts: int = 0
-
-    @property
-    def dropped(self) -> int:
-        return self.dropped_non_finite + self.dropped_absurd + self.dropped_zero_stamp + self.dropped_malformed
-
-
 @dataclass(frozen=True)
 class BranchReport:
     """One branch's status for people: level (OK/WARN/STALE), a one-line message and key/value strings."""
@@ -172,37 +168,6 @@ class BranchReport:
     level: int
     message: str
     values: list[tuple[str, str]] = field(default_factory=list)
-
-
-class _CommandHold:
-    """The commanded load in effect at a stamp: updates kept in stamp order, read at increasing stamps."""
-
-    def __init__(self) -> None:
-        self._stamps: list[float] = []
-        self._loads: list[float] = []
-
-    def __bool__(self) -> bool:
-        return bool(self._stamps)
-
-    MAX_HELD = 10_000  # commands kept while no pair reads them (100 s at 100 Hz)
-
-    def add(self, stamp_s: float, load: float) -> None:
-        i = bisect.bisect_right(self._stamps, stamp_s)
-        self._stamps.insert(i, stamp_s)
-        self._loads.insert(i, load)
-        if len(self._stamps) > self.MAX_HELD:
-            del self._stamps[0]
-            del self._loads[0]
-
-    def at(self, stamp_s: float) -> float | None:
-        """Load of the newest update stamped at or before ``stamp_s``; None before the first one."""
-        i = bisect.bisect_right(self._stamps, stamp_s) - 1
-        if i < 0:
-            return None
-        if i > 0:  # reads come at increasing stamps: drop what can no longer be in effect
-            del self._stamps[:i]
-            del self._loads[:i]
-        return self._loads[0]
 
 
 def _fmt(value: float) -> str:
@@ -257,7 +222,7 @@ class LiveStiffness:
         self._axis = s.axis_index
         self._sync = s.make_sync()
         self._estimator = s.make_estimator()
-        self._commands = _CommandHold()
+        self._commands = CommandHold()
         for dof in range(1, min(s.window - 1, _T_CACHE)):  # fill scipy's t quantiles now, not one per pair later
             t_quantile(dof)
         self._last_report: dict[str, tuple[int, ...]] = {}  # input_report's previous problem counts per consumer
@@ -308,25 +273,19 @@ class LiveStiffness:
         """A wrench command [N, N·m]; a zero stamp counts from ``arrival_s``. Returns False if dropped (NaN/Inf)."""
         self.counters.command_received += 1
         load = float(wrench[self._axis])
-        if not (math.isfinite(load) and math.isfinite(stamp_s) and math.isfinite(arrival_s)):
+        usable, stamp = command_inputs(stamp_s, arrival_s, load)
+        if not usable:
             self.counters.command_dropped += 1
             return False
-        self._commands.add(stamp_s if stamp_s > 0.0 else arrival_s, load)
+        self._commands.add(float(stamp), load)
         return True
 
     def add_force(self, stamp_s: float, wrench: Sequence[float]) -> int:
         """A wrench sample [N, N·m] stamped ``stamp_s``; returns the number of pairs it completed and fitted."""
         self.counters.force_received += 1
-        c = self.counters
-        if not all(math.isfinite(v) for v in wrench) or not math.isfinite(stamp_s):
-            c.dropped_non_finite += 1
-            return 0
-        if stamp_s <= 0.0:
-            c.dropped_zero_stamp += 1
-            return 0
+        finite = all(math.isfinite(v) for v in wrench) and math.isfinite(stamp_s)
         value = float(wrench[self._axis])
-        if abs(value) > self._settings.max_abs_force:
-            c.dropped_absurd += 1
+        if not self._accepted(finite, stamp_s, value, self._settings.max_abs_force):
             return 0
         return self._fit(self._sync.push(FORCE, stamp_s, value))
 
@@ -346,21 +305,27 @@ class LiveStiffness:
     def add_volts(self, stamp_s: float, volts: float) -> int:
         """A displacement sample in volts, converted with displacement_gain and displacement_offset."""
         self.counters.displacement_received += 1
-        s = self._settings
-        return self._displacement(stamp_s, s.displacement_gain * float(volts) + s.displacement_offset)
+        return self._displacement(stamp_s, self._settings.volts_to_displacement(float(volts)))
 
     def _displacement(self, stamp_s: float, value: float) -> int:
-        c = self.counters
-        if not (math.isfinite(value) and math.isfinite(stamp_s)):
-            c.dropped_non_finite += 1
-            return 0
-        if stamp_s <= 0.0:
-            c.dropped_zero_stamp += 1
-            return 0
-        if abs(value) > self._settings.max_abs_displacement:
-            c.dropped_absurd += 1
+        finite = math.isfinite(value) and math.isfinite(stamp_s)
+        if not self._accepted(finite, stamp_s, value, self._settings.max_abs_displacement):
             return 0
         return self._fit(self._sync.push(DISPLACEMENT, stamp_s, value))
+
+    def _accepted(self, finite: bool, stamp_s: float, value: float, limit: float) -> bool:
+        """The input checks (:func:`~crane_stiffness.estimation.inputs.input_faults`); a dropped sample is counted."""
+        non_finite, zero_stamp, absurd = input_faults(finite, stamp_s, value, limit)
+        c = self.counters
+        if non_finite:
+            c.dropped_non_finite += 1
+        elif zero_stamp:
+            c.dropped_zero_stamp += 1
+        elif absurd:
+            c.dropped_absurd += 1
+        else:
+            return True
+        return False
 
     def _fit(self, pairs: list[Pair]) -> int:
         fitted = 0
@@ -485,3 +450,39 @@ class LiveStiffness:
         if new:
             return WARN, 'since last report: ' + ', '.join(f'{v} {k}' for k, v in new.items()), pairs
         return OK, f'{sc.pairs} pairs, {c.pairs_fitted} fitted', pairs
+
+
+# ------------------------------------------------------------------------------------------------ vectorized --
+@dataclass(frozen=True)
+class LivePairs:
+    """The pairs :class:`LiveStiffness` fits from whole recorded streams (:func:`live_pairs`), in stamp order."""
+
+    stamp: np.ndarray
+    """Pair stamps, s."""
+    force: np.ndarray
+    displacement: np.ndarray
+    loading: np.ndarray
+    """The branch each pair is fitted to: True for loading."""
+    fit_log: np.ndarray
+    """When the live estimator fits each pair: the arrival (log) time of the later of its two samples, ns."""
+    counters: dict[str, int]
+    """The pairing's counters (:func:`~crane_stiffness.estimation.sync.pair_by_stamp`)."""
+
+
+def live_pairs(settings: LiveSettings, force: Samples, displacement: Samples,
+               commands: CommandSeries | None) -> LivePairs:
+    """What :class:`LiveStiffness` pairs and the branch it fits each pair to, for whole recorded streams that passed
+    the input checks (:func:`~crane_stiffness.estimation.inputs.checked_samples`), vectorized."""
+    s = settings
+    result = pair_by_stamp(force.stamp, force.arrival_ns, displacement.stamp, displacement.arrival_ns, s.slop_s,
+                           s.max_age_s)
+    fi, di = result.force_index, result.displacement_index
+    stamp = pair_stamp(force.stamp[fi], displacement.stamp[di])
+    value = force.value[fi]
+    fit_log = np.maximum(force.arrival_ns[fi], displacement.arrival_ns[di])
+    load = value
+    if commands is not None and s.branch_source == 'auto':
+        held_load, held = commands.at(stamp, fit_log)
+        load = np.where(held, held_load, value)
+    return LivePairs(stamp, value, displacement.value[di], branch_labels(load, s.hysteresis), fit_log,
+                     result.counters)

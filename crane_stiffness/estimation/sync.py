@@ -21,6 +21,10 @@ Bookkeeping per stream (see :class:`StreamCounters`):
 - unmatched: a sample discarded because no partner within ``slop`` can exist.
 
 Every push is amortised O(1) (deques, each sample enters and leaves once).
+
+:func:`pair_by_stamp` is the same pairing over whole recorded streams at once (numpy), for the offline analysis of a
+session: it finds the pairs and the out-of-order and stale counts :class:`ApproximateTimeSync` would, given the
+samples in their order of arrival.
 """
 from __future__ import annotations
 
@@ -54,7 +58,12 @@ class Pair:
     @property
     def stamp_s(self) -> float:
         """Mean of the two stamps, s."""
-        return 0.5 * (self.force_stamp_s + self.displacement_stamp_s)
+        return pair_stamp(self.force_stamp_s, self.displacement_stamp_s)
+
+
+def pair_stamp(force_stamp_s: Any, displacement_stamp_s: Any) -> Any:
+    """Stamp of a pair, s: the mean of its two stamps (floats, or element-wise arrays)."""
+    return 0.5 * (force_stamp_s + displacement_stamp_s)
 
 
 @dataclass(slots=True)
@@ -304,3 +313,115 @@ class ApproximateTimeSync:
         while queue and queue[0][0] < limit:
             queue.popleft()
             own.counters.unmatched += 1
+
+
+# ------------------------------------------------------------------------------------------------ vectorized --
+def _nearest(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Index of the nearest element of sorted ``b`` for each of ``a``; ties go to the earlier (lower) index."""
+    j = np.searchsorted(b, a, side='left')  # b[j - 1] < a <= b[j]
+    padded = np.concatenate([[-np.inf], b, [np.inf]])  # padded[j] = b[j - 1], padded[j + 1] = b[j]
+    pick = np.where(padded[j + 1] - a < a - padded[j], j, j - 1)
+    if b.size > 1 and not (np.diff(b) > 0).all():
+        pick = np.searchsorted(b, b[pick], side='left')  # the first of equal stamps
+    return pick
+
+
+def _in_order(stamp: np.ndarray) -> np.ndarray:
+    """True where a stamp is not older than every stamp before it (arrival order), as ApproximateTimeSync."""
+    ok = np.ones(stamp.size, bool)
+    if stamp.size > 1:
+        ok[1:] = stamp[1:] >= np.maximum.accumulate(stamp)[:-1]
+    return ok
+
+
+def _stale(stamp: np.ndarray, log: np.ndarray, other_stamp: np.ndarray, other_log: np.ndarray,
+           max_age: float) -> np.ndarray:
+    """True where a sample is older than the other stream's newest stamp at its arrival by more than max_age."""
+    if other_stamp.size == 0:
+        return np.zeros(stamp.size, bool)
+    newest = np.concatenate([[-np.inf], np.maximum.accumulate(other_stamp)])
+    return stamp < newest[np.searchsorted(other_log, log, side='left')] - max_age
+
+
+@dataclass
+class PairResult:
+    """Indices of paired samples (into the arrays given) and the counters of the live synchroniser."""
+
+    force_index: np.ndarray
+    displacement_index: np.ndarray
+    counters: dict[str, int]
+
+
+def _match_known(sync: ApproximateTimeSync, force: list[float], displacement: list[float]) -> list[tuple[int, int]]:
+    """``sync``'s matching of two short sorted stamp lists whose samples are all known (as at a flush), from empty
+    queues: (force index, displacement index) of each pair."""
+    fs, ds = sync._streams
+    fs.queue.clear()
+    ds.queue.clear()
+    fs.queue.extend(zip(force, range(len(force))))
+    ds.queue.extend(zip(displacement, range(len(displacement))))
+    return [(p.force, p.displacement) for p in sync._match(flush=True)]
+
+
+def pair_by_stamp(force_stamp: np.ndarray, force_log: np.ndarray, disp_stamp: np.ndarray, disp_log: np.ndarray,
+                  slop: float, max_age: float) -> PairResult:
+    """Pair two streams exactly as :class:`ApproximateTimeSync`, vectorized.
+
+    Inputs are in arrival order (log time ascending) and already passed the input checks. Out-of-order samples
+    (older than an earlier stamp of their stream) and stale ones (see :func:`_stale`) are dropped. Of the rest:
+
+    1. mutual nearest neighbours within ``slop`` (ties to the earlier sample), found with ``np.searchsorted`` over
+       the whole arrays. Every such pair is also a pair of the synchroniser, and when it forms, everything before
+       it on both streams is settled: each is a point where the synchroniser's state is known.
+    2. Between two consecutive such pairs the synchroniser's own matching rule is replayed on the few samples left
+       over (none at all when both sensors sample on one clock, as on the rig; a handful around a dropout).
+
+    The synchroniser's latency bound for a stalled stream (waiting at most ``max_age``) is not modelled: it matters
+    only when a stream stops for longer than ``max_age``. The last pair is included even though the live
+    synchroniser emits it only when a later sample arrives.
+    """
+    f_ok = _in_order(force_stamp)
+    d_ok = _in_order(disp_stamp)
+    f_stale = _stale(force_stamp, force_log, disp_stamp, disp_log, max_age) & f_ok
+    d_stale = _stale(disp_stamp, disp_log, force_stamp, force_log, max_age) & d_ok
+    f_idx = np.flatnonzero(f_ok & ~f_stale)
+    d_idx = np.flatnonzero(d_ok & ~d_stale)
+    counters = {'force_out_of_order': int((~f_ok).sum()), 'displacement_out_of_order': int((~d_ok).sum()),
+                'force_stale': int(f_stale.sum()), 'displacement_stale': int(d_stale.sum())}
+    if f_idx.size == 0 or d_idx.size == 0:
+        counters.update(pairs=0, force_unmatched=int(f_idx.size), displacement_unmatched=int(d_idx.size),
+                        replayed_stretches=0)
+        return PairResult(np.zeros(0, np.int64), np.zeros(0, np.int64), counters)
+    f = force_stamp[f_idx]
+    d = disp_stamp[d_idx]
+    nf = _nearest(f, d)
+    nd = _nearest(d, f)
+    mutual = (nd[nf] == np.arange(f.size)) & (np.abs(f - d[nf]) <= slop)
+    af = np.flatnonzero(mutual)          # anchors: positions in f and d of the mutual pairs
+    ad = nf[mutual]
+    # Stretches with samples left over between anchors (and before the first / after the last).
+    bf = np.concatenate([[-1], af, [f.size]])
+    bd = np.concatenate([[-1], ad, [d.size]])
+    gaps = np.flatnonzero((np.diff(bf) > 1) | (np.diff(bd) > 1))
+    extra_f: list[int] = []
+    extra_d: list[int] = []
+    replay = ApproximateTimeSync(slop, max_age=slop)
+    for g in gaps.tolist():
+        f0, f1 = int(bf[g]) + 1, int(bf[g + 1])  # the stretch, and the closing anchor (if any) at f1/d1
+        d0, d1 = int(bd[g]) + 1, int(bd[g + 1])
+        fs = f[f0:min(f1 + 1, f.size)].tolist()
+        ds = d[d0:min(d1 + 1, d.size)].tolist()
+        for i, j in _match_known(replay, fs, ds):
+            if f0 + i < f1 and d0 + j < d1:  # the closing anchor pairs as found above
+                extra_f.append(f0 + i)
+                extra_d.append(d0 + j)
+    if extra_f:
+        pf = np.concatenate([af, np.asarray(extra_f, dtype=np.int64)])
+        pd = np.concatenate([ad, np.asarray(extra_d, dtype=np.int64)])
+        order = np.argsort(pf, kind='stable')
+        af, ad = pf[order], pd[order]
+    fi = f_idx[af]
+    di = d_idx[ad]
+    counters.update(pairs=int(fi.size), force_unmatched=int(f_idx.size - fi.size),
+                    displacement_unmatched=int(d_idx.size - fi.size), replayed_stretches=int(gaps.size))
+    return PairResult(fi, di, counters)

@@ -28,7 +28,7 @@ from std_srvs.srv import Trigger
 from crane_stiffness import topics
 from crane_stiffness.analysis.cdr import CdrError, decode_float64, decode_stamped, stamp_seconds
 from crane_stiffness.config import ParamSpec
-from crane_stiffness.estimation.fit import BRANCHES
+from crane_stiffness.estimation.branch import BRANCHES
 from crane_stiffness.estimation.live import VALUE_FIELDS, LiveSettings, LiveStiffness
 from crane_stiffness.estimation.sync import DISPLACEMENT, FORCE
 from crane_stiffness.nodes.common import (LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS, Diagnostics, Params, check,

@@ -1,4 +1,5 @@
-"""Reports of :mod:`crane_stiffness.analysis.session`: one document model rendered as Markdown and as HTML.
+"""Reports of an analysed session and of a comparison of sessions (:mod:`crane_stiffness.analysis.results`): one
+document model rendered as Markdown and as HTML.
 
 A document is a list of blocks ``(kind, ...)``: ``('h1'|'h2', text)``, ``('p', text)``, ``('ul', [items])``,
 ``('table', headers, rows)`` and ``('img', relative path, caption)``. Numbers are formatted here; NaN shows as '–'.
@@ -8,10 +9,10 @@ from __future__ import annotations
 import html
 import math
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Sequence
+from typing import Any, Sequence
 
-if TYPE_CHECKING:
-    from crane_stiffness.analysis.session import FitSummary, SessionAnalysis, SessionComparison
+from crane_stiffness.analysis.results import SessionAnalysis, SessionComparison
+from crane_stiffness.estimation.fit import LineFit
 
 Block = tuple
 
@@ -32,7 +33,7 @@ def _um(value: float) -> str:
     return fmt(value * 1e6 if value is not None else None, 5)
 
 
-def _fit_cells(fit: FitSummary | None) -> list[str]:
+def _fit_cells(fit: LineFit | None) -> list[str]:
     if fit is None:
         return ['–'] * 5
     return [fmt(fit.stiffness), f'{fmt(fit.ci95_low)} … {fmt(fit.ci95_high)}', fmt(fit.r2, 7), fmt(fit.n),

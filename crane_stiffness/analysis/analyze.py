@@ -1,0 +1,460 @@
+"""Offline analysis of a recorded test session: stiffness per load branch and test step, the paper's model beside
+the measurements, the live estimate checked, figures, a report (Markdown, HTML) and JSON
+(:mod:`crane_stiffness.analysis.results`). Pure: no ROS import.
+
+:func:`analyze_session` reads a bag written by session_recorder (:mod:`crane_stiffness.analysis.load`, bulk numpy
+decode):
+
+1. **Pairing.** Load-cell and LVDT samples are paired by header stamp as the live estimator pairs them
+   (crane_stiffness.estimation.live.LiveStiffness), by its own rules in their vectorized form
+   (crane_stiffness.estimation.live.live_pairs): the same input checks (NaN/Inf, zero stamp, absurd values), then
+   the synchroniser's pairing over the whole arrays (arrival = the recorded log time). The estimator's parameters
+   are those recorded with the session: read from the running node (``crane_stiffness/node_parameters``), else the
+   ``stiffness_estimator`` section of its parameter file (:mod:`crane_stiffness.analysis.load`).
+2. **Branches.** Each pair is labelled loading or unloading as the live estimator labels it (hysteresis on |load|,
+   the commanded load in effect at the pair's stamp once a command was seen, else the measured force).
+3. **Test steps.** Holds of the commanded load on the tested axis (runs of equal /crane/wrench_command values),
+   matched to the recorded program's holds (level, loading/unloading approach, repeat); the mean load and
+   displacement over the settled part of each hold (``settle_fraction``) are the quasi-static points.
+4. **Fits** with :func:`crane_stiffness.estimation.fit.fit_line` (the live estimator's code): all pairs of each
+   branch over the program, the hold means of each approach, each repeat's branches; and the live-equivalent window
+   (the last ``window`` pairs of each branch up to the last recorded /stiffness/estimate_values) compared with that
+   live estimate.
+5. **Model** from the recorded geometry (crane_stiffness.analysis.sweep.force_displacement): the nonlinear model,
+   the linearized eq. (18), the W = 0 elastic model and a single wire carrying W/6, as in the paper's Figs. 5–9.
+
+A damaged bag (truncated, bad chunk) is analysed from its readable part, with the damage listed in the report; a
+missing sensor topic raises :class:`~crane_stiffness.bag.TopicNotFoundError` naming it and the topics present;
+missing optional topics (commands, program state, live estimates) are named in the report.
+"""
+from __future__ import annotations
+
+import json
+import math
+import warnings
+from dataclasses import asdict
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from crane_stiffness import __version__, topics
+from crane_stiffness.analysis import report
+from crane_stiffness.analysis.errors import SessionAnalysisError
+from crane_stiffness.analysis.load import SessionData, read_session
+from crane_stiffness.analysis.progress import Progress
+from crane_stiffness.analysis.results import (COMPARED_FIELDS, WINDOW_FIT_FIELDS, CycleFits, LiveComparison,
+                                              ModelSummary, SessionAnalysis, Step)
+from crane_stiffness.bag import BagDamageWarning
+from crane_stiffness.config import geometry_from_params
+from crane_stiffness.estimation.branch import BRANCHES, LOADING, UNLOADING
+from crane_stiffness.estimation.errors import DataError
+from crane_stiffness.estimation.fit import LineFit, RecursiveLeastSquares, fit_line
+from crane_stiffness.estimation.inputs import INPUT_CHECKS, CommandSeries, Samples, checked_samples
+from crane_stiffness.estimation.live import AXES, VALUE_FIELDS, LivePairs, live_pairs
+
+STAGES = ('open+decode', 'pair', 'steps', 'fits', 'model', 'figures', 'report')
+#: Pairs of a branch fed to the recursive least squares for the live comparison (its memory is ~1/(1-λ)).
+RLS_REPLAY_PAIRS = 20_000
+#: Shortest run of equal commands taken as a hold [s].
+MIN_HOLD_S = 0.2
+
+
+def hold_runs(stamp: np.ndarray, value: np.ndarray, min_hold_s: float = MIN_HOLD_S) -> list[tuple[int, int]]:
+    """(first, last + 1) index ranges of runs of equal command values lasting at least ``min_hold_s``."""
+    if value.size == 0:
+        return []
+    starts = np.concatenate([[0], np.flatnonzero(np.diff(value) != 0) + 1])
+    ends = np.concatenate([starts[1:], [value.size]])
+    out = []
+    for a, b in zip(starts.tolist(), ends.tolist()):
+        if b - a >= 2 and stamp[b - 1] - stamp[a] >= min_hold_s:
+            out.append((a, b))
+    return out
+
+
+def _fit(x: np.ndarray, y: np.ndarray) -> LineFit | None:
+    if len(x) < 3:
+        return None
+    try:
+        return fit_line(x, y)
+    except DataError:
+        return None
+
+
+def _inputs(data: SessionData) -> tuple[Samples, Samples, dict[str, int]]:
+    """The live estimator's input checks on both streams: the (force, displacement) samples kept, and the counts."""
+    s = data.settings
+    f = data.force
+    wrench = np.column_stack([f[k] for k in AXES]) if f.size else np.zeros((0, 6))
+    f_stamp = f['stamp_s']
+    force, f_counts = checked_samples(f_stamp, f['log_time_ns'], wrench[:, s.axis_index],
+                                      np.isfinite(wrench).all(axis=1) & np.isfinite(f_stamp), s.max_abs_force)
+    d = data.disp
+    if 'stamp_s' in d.dtype.names:
+        d_stamp = d['stamp_s']
+        d_value = d['x'].astype(float)
+    else:  # std_msgs/Float64 in volts, stamped on arrival by the estimator
+        d_stamp = d['log_time_ns'] * 1e-9
+        d_value = s.volts_to_displacement(d['data'])
+    disp, d_counts = checked_samples(d_stamp, d['log_time_ns'], d_value, np.isfinite(d_value) & np.isfinite(d_stamp),
+                                     s.max_abs_displacement)
+    counters = {'force_messages': int(f.size), 'displacement_messages': int(d.size),
+                **{name: f_counts[name] + d_counts[name] for name in INPUT_CHECKS}}
+    return force, disp, counters
+
+
+def _commands(data: SessionData) -> CommandSeries | None:
+    c = data.command
+    if c is None or c.size == 0:
+        return None
+    return CommandSeries.of(c['stamp_s'], c['log_time_ns'], c[data.settings.force_axis].astype(float))
+
+
+def _steps(data: SessionData, pairs: LivePairs, commands: CommandSeries | None, t0: float, settle_fraction: float,
+           problems: list[str]) -> list[Step]:
+    if commands is None:
+        return []
+    stamp, value = commands.stamp, commands.value
+    runs = hold_runs(stamp, value)
+    period = float(np.median(np.diff(stamp))) if stamp.size > 1 else 0.0
+    holds = data.program.holds(data.settings.force_axis) if data.program is not None else []
+
+    def fits_at(offset: int) -> bool:
+        return all(math.isclose(h.level, value[a], rel_tol=1e-9, abs_tol=1e-12)
+                   for h, (a, _) in zip(holds[offset:offset + len(runs)], runs))
+
+    # The commanded holds are the program's, or a contiguous part of them when the recording (or the delivery of
+    # the first commands) started late or the program was stopped early.
+    offsets = [k for k in range(len(holds) - len(runs) + 1) if fits_at(k)] if runs else []
+    matched = bool(offsets)
+    if matched:
+        holds = holds[offsets[0]:offsets[0] + len(runs)]
+        if len(runs) != len(data.program.holds(data.settings.force_axis)):
+            problems.append(f'the commands show {len(runs)} of the program\'s '
+                            f'{len(data.program.holds(data.settings.force_axis))} holds on {data.settings.force_axis} '
+                            f'(from hold {offsets[0] + 1}): the recording does not cover the whole program')
+    elif data.program is not None:
+        problems.append(f'the commands show {len(runs)} hold(s) on {data.settings.force_axis} that do not match the '
+                        f'recorded program\'s {len(holds)}: steps are labelled from the commands alone')
+    steps: list[Step] = []
+    previous_level, approach = None, 'loading'
+    for i, (a, b) in enumerate(runs):
+        level = float(value[a])
+        start = stamp[a]
+        end = stamp[b] if b < stamp.size else stamp[b - 1] + period
+        if matched:
+            hold = holds[i]
+            approach, repeat, segment = hold.approach, hold.repeat_index, hold.segment_index
+        else:
+            if previous_level is not None and abs(level) != abs(previous_level):
+                approach = 'loading' if abs(level) > abs(previous_level) else 'unloading'
+            repeat = segment = None
+        previous_level = level
+        lo = np.searchsorted(pairs.stamp, start + settle_fraction * (end - start), side='left')
+        hi = np.searchsorted(pairs.stamp, end, side='left')
+        f, d = pairs.force[lo:hi], pairs.displacement[lo:hi]
+        n = int(hi - lo)
+        steps.append(Step(index=i, level=level, approach=approach, repeat=repeat, segment=segment,
+                          start_s=float(start - t0), end_s=float(end - t0), n=n,
+                          force_mean=float(f.mean()) if n else math.nan,
+                          force_std=float(f.std(ddof=1)) if n > 1 else math.nan,
+                          displacement_mean=float(d.mean()) if n else math.nan,
+                          displacement_std=float(d.std(ddof=1)) if n > 1 else math.nan))
+    return steps
+
+
+def _branch_fits(pairs: LivePairs, lo: int, hi: int) -> dict[str, LineFit | None]:
+    sel = slice(lo, hi)
+    x, y, loading = pairs.displacement[sel], pairs.force[sel], pairs.loading[sel]
+    return {LOADING: _fit(x[loading], y[loading]), UNLOADING: _fit(x[~loading], y[~loading])}
+
+
+def _window_fit(pairs: LivePairs, cut: int, branch: str, window: int, forgetting: float) -> dict[str, float]:
+    sel = np.flatnonzero(pairs.loading[:cut] == (branch == LOADING))
+    nan = math.nan
+    out = {k: nan for k in COMPARED_FIELDS}
+    if sel.size < 3:
+        return out
+    last = sel[-window:]
+    fit = _fit(pairs.displacement[last], pairs.force[last])
+    if fit is not None:
+        out.update({k: float(getattr(fit, k)) for k in WINDOW_FIT_FIELDS})
+    rls = RecursiveLeastSquares(forgetting)
+    tail = sel[-RLS_REPLAY_PAIRS:]
+    for x, y in zip(pairs.displacement[tail].tolist(), pairs.force[tail].tolist()):
+        rls.add(x, y)
+    result = rls.result()
+    out['rls_stiffness'] = nan if result is None else result.stiffness
+    return out
+
+
+def _live(data: SessionData, pairs: LivePairs) -> LiveComparison | None:
+    if data.live_values is None:
+        return None
+    log, rows = data.live_values
+    s = data.settings
+    index = {f: i for i, f in enumerate(VALUE_FIELDS)}
+    stamp = float(rows[0, index['sample_stamp']])
+    cut = int(np.searchsorted(pairs.stamp, stamp, side='right')) if math.isfinite(stamp) else pairs.stamp.size
+    live, offline, worst = {}, {}, {}
+    for b, branch in enumerate(BRANCHES):
+        live[branch] = {f: float(rows[b, index[f]]) for f in COMPARED_FIELDS}
+        offline[branch] = _window_fit(pairs, cut, branch, s.window, s.forgetting)
+        diffs = []
+        for f in WINDOW_FIT_FIELDS:
+            a, o = live[branch][f], offline[branch][f]
+            if math.isfinite(a) and math.isfinite(o):
+                diffs.append(abs(o - a) / max(abs(a), 1e-300) if f not in ('intercept',) else
+                             abs(o - a) / max(abs(live[branch]['residual_rms']), abs(a), 1e-300))
+        worst[branch] = max(diffs) if diffs else math.nan
+    comparison = LiveComparison(sample_stamp_s=stamp, log_time_s=log * 1e-9, live=live, offline=offline,
+                                max_rel_diff=worst)
+    if len(data.live_inputs) == 2:
+        (t_a, a), (t_b, b) = data.live_inputs
+        try:
+            received = int(b['force_received']) - int(a['force_received'])
+            paired = int(b['pairs']) - int(a['pairs'])
+        except (KeyError, ValueError):
+            return comparison
+        in_bag = int(((data.force['log_time_ns'] > t_a) & (data.force['log_time_ns'] <= t_b)).sum())
+        offline_pairs = int(((pairs.fit_log > t_a) & (pairs.fit_log <= t_b)).sum())
+        comparison.inputs = {'from_s': t_a * 1e-9, 'to_s': t_b * 1e-9, 'live_force_received': received,
+                             'bag_force_messages': in_bag, 'live_pairs': paired, 'offline_pairs': offline_pairs}
+    return comparison
+
+
+def lvdt_scale(axis: str, lvdt: dict[str, Any] | None) -> float | None:
+    """LVDT reading per unit displacement (m) or rotation (rad) along ``axis`` for small motions.
+
+    The reading is ``a · (δu + δθ × p)`` for the unit measuring direction ``a`` and contact point ``p``; None when
+    the LVDT parameters were not recorded.
+    """
+    if not lvdt or 'axis' not in lvdt:
+        return None
+    a = np.asarray(lvdt.get('axis'), dtype=float)
+    if a.shape != (3,) or not np.isfinite(a).all() or not np.linalg.norm(a):
+        return None
+    a = a / np.linalg.norm(a)
+    p = np.asarray(lvdt.get('contact_point', [0.0, 0.0, 0.0]), dtype=float)
+    i = AXES.index(axis)
+    return float(a[i]) if i < 3 else float(np.cross(p, a)[i - 3])
+
+
+def _model(data: SessionData, steps: list[Step], commands: CommandSeries | None, points: int,
+           problems: list[str]) -> ModelSummary | None:
+    if data.geometry_params is None:
+        return None
+    from crane_stiffness.analysis.sweep import force_displacement, unit
+    from crane_stiffness.model import (ModelError, axis_stiffness, directional_stiffness, elastic_stiffness,
+                                       paper_stiffness, rest_pose, single_wire_pendulum_stiffness,
+                                       tangent_stiffness)
+    axis = data.settings.force_axis
+    try:
+        g = geometry_from_params(data.geometry_params)
+        d = unit(axis)
+        tangent = axis_stiffness(tangent_stiffness(g, rest_pose(g)), axis)
+        eq18 = directional_stiffness(paper_stiffness(g), d)
+        elastic = directional_stiffness(elastic_stiffness(g), d)
+        pendulum = single_wire_pendulum_stiffness(g) if axis in ('fx', 'fy') and g.weight > 0 else math.nan
+    except (ModelError, ValueError) as exc:
+        problems.append(f'model of the recorded geometry failed: {exc}')
+        return None
+    recorded = math.nan
+    if data.prediction is not None and data.prediction.size:
+        recorded = float(data.prediction['data'][0])
+    levels = np.array([s.level for s in steps]) if steps else (commands.value if commands else np.zeros(0))
+    peak = float(levels[np.argmax(np.abs(levels))]) if levels.size and np.abs(levels).max() > 0 else 0.0
+    lvdt = data.sensors.get('lvdt') or data.sensors.get('/lvdt')
+    scale = lvdt_scale(axis, lvdt)
+    if scale is None:
+        scale = 1.0
+        if lvdt is not None:
+            problems.append('the recorded LVDT parameters are incomplete: readings taken as displacement along '
+                            f'{axis}')
+    elif abs(scale) < 1e-9:
+        problems.append(f'the LVDT (axis {lvdt.get("axis")}, contact point {lvdt.get("contact_point")}) does not see '
+                        f'motion along {axis}: measured points are not comparable with the model curves')
+    summary = ModelSummary(axis=axis, unit='N/m' if axis.startswith('f') else 'N·m/rad', tangent_at_rest=tangent,
+                           eq18=eq18, elastic_w0=elastic, single_wire_w6=pendulum, recorded_prediction=recorded,
+                           lvdt_scale=scale)
+    if peak != 0.0:
+        try:
+            curves = force_displacement(g, axis, peak, points)
+            summary.curves = {k: np.asarray(v, dtype=float).tolist() for k, v in curves.columns().items()}
+            for step in steps:  # in LVDT reading units, comparable with displacement_mean
+                same_side = step.level * peak >= 0
+                step.model_displacement = float(np.interp(abs(step.level), np.abs(curves.load), curves.nonlinear)) \
+                    * scale if same_side else math.nan
+        except (ModelError, ValueError) as exc:
+            problems.append(f'model curves up to {peak:g} on {axis} failed: {exc}')
+    return summary
+
+
+def _cycles(data: SessionData, pairs: LivePairs, steps: list[Step], t0: float) -> list[CycleFits]:
+    if data.program is None or data.program.repeats < 2 or not steps or steps[0].repeat is None:
+        return []
+    starts: dict[int, float] = {}
+    for step in steps:
+        starts.setdefault(step.repeat, step.start_s)
+    order = sorted(starts)
+    out = []
+    for i, r in enumerate(order):
+        start = starts[r] if i else 0.0
+        end = starts[order[i + 1]] if i + 1 < len(order) else steps[-1].end_s
+        lo, hi = np.searchsorted(pairs.stamp, [t0 + start, t0 + end], side='left')
+        fits = _branch_fits(pairs, int(lo), int(hi))
+        out.append(CycleFits(repeat=r, start_s=start, end_s=end, loading=fits[LOADING], unloading=fits[UNLOADING]))
+    return out
+
+
+def _default_out(bag: Path) -> Path:
+    return Path('out') / 'analysis' / bag.name
+
+
+def analyze_session(bag_path: str | Path, out_dir: str | Path | None = None, *, formats: Sequence[str] = ('png',),
+                    reports: Sequence[str] = ('md',), write_json: bool = True, axis: str | None = None,
+                    settle_fraction: float = 0.3, model_points: int = 41, progress: bool = False,
+                    write_files: bool = True) -> SessionAnalysis:
+    """Analyse one recorded session (see the module docstring) and write its figures, report and JSON.
+
+    Args:
+        bag_path: bag directory or .mcap file.
+        out_dir: where the files go (default ``out/analysis/<bag name>``).
+        formats: figure formats, 'png' and/or 'svg'.
+        reports: 'md' and/or 'html'.
+        write_json: also write ``analysis.json``.
+        axis: load axis to analyse (default: the estimator's recorded ``force_axis``, else the program's axis).
+        settle_fraction: part of each hold skipped before averaging (dynamics, settling), 0..1.
+        model_points: points per model curve.
+        progress: show a tqdm progress bar over the stages.
+        write_files: False computes the results only (no figures, report or JSON).
+
+    Returns:
+        the :class:`SessionAnalysis` (its ``files`` lists what was written).
+
+    Raises:
+        BagNotFoundError / BagFormatError: no readable bag at ``bag_path``.
+        TopicNotFoundError: a sensor topic is missing (named, with the topics present).
+        SessionAnalysisError: nothing to pair or fit.
+    """
+    for fmt in formats:
+        if fmt not in ('png', 'svg'):
+            raise ValueError(f'format = {fmt!r}: must be png or svg')
+    for kind in reports:
+        if kind not in ('md', 'html'):
+            raise ValueError(f'report = {kind!r}: must be md or html')
+    if not 0.0 <= settle_fraction < 1.0:
+        raise ValueError(f'settle_fraction = {settle_fraction!r}: must be in [0, 1)')
+    path = Path(bag_path)
+    problems: list[str] = []
+    missing: list[str] = []
+    bar = Progress(progress, len(STAGES) if write_files else len(STAGES) - 2, f'analyze {path.name}')
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter('always', BagDamageWarning)
+            bar.stage('open+decode')
+            data = read_session(path, axis, problems, missing)
+            bar.done()
+            bar.stage('pair')
+            force, disp, input_counters = _inputs(data)
+            commands = _commands(data)
+            pairs = live_pairs(data.settings, force, disp, commands)
+            if pairs.stamp.size < 3:
+                raise SessionAnalysisError(
+                    f'{path}: only {pairs.stamp.size} load-cell/LVDT pair(s) within slop_s = {data.settings.slop_s} s '
+                    f'({force.stamp.size} force and {disp.stamp.size} displacement samples usable)')
+            bar.done()
+            bar.stage('steps')
+            t0 = float(commands.stamp[0]) if commands is not None else float(pairs.stamp[0])
+            steps = _steps(data, pairs, commands, t0, settle_fraction, problems)
+            bar.done()
+            bar.stage('fits')
+            if commands is not None:
+                lo = np.searchsorted(pairs.stamp, commands.stamp[0], side='left')
+                hi = np.searchsorted(pairs.stamp, commands.stamp[-1], side='right')
+            else:
+                lo, hi = 0, pairs.stamp.size
+            branch_fits = _branch_fits(pairs, int(lo), int(hi))
+            hold_fits = {}
+            for approach in BRANCHES:
+                sel = [s for s in steps if s.approach == approach and s.n > 0]
+                hold_fits[approach] = _fit(np.array([s.displacement_mean for s in sel]),
+                                           np.array([s.force_mean for s in sel]))
+            cycles = _cycles(data, pairs, steps, t0)
+            live = _live(data, pairs)
+            if live is not None and live.inputs:
+                got, kept = live.inputs['live_force_received'], live.inputs['bag_force_messages']
+                # Samples seen by only one of them matter only if they were fitted (not before the program).
+                reproduced = all(d <= 1e-6 for d in live.max_rel_diff.values())
+                if abs(got - kept) > max(3, 0.002 * kept) and not reproduced:
+                    problems.append(
+                        f'over the {live.inputs["to_s"] - live.inputs["from_s"]:.1f} s the estimator reported on, it '
+                        f'received {got} load-cell samples and the bag holds {kept}: one of them lost samples '
+                        f'(best-effort delivery under load), so its live estimate cannot be reproduced exactly '
+                        f'from the bag')
+
+            bar.done()
+            bar.stage('model')
+            model = _model(data, steps, commands, model_points, problems)
+            bar.done()
+        damage = []
+        for w in caught:
+            if issubclass(w.category, BagDamageWarning):
+                damage.append(str(w.message))
+                warnings.warn(str(w.message), BagDamageWarning, stacklevel=2)
+            else:
+                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        problems[:0] = damage
+        for topic in missing:
+            problems.append(f'topic {topic} is not in the bag' + {
+                topics.WRENCH_COMMAND: ': no test steps; branches follow the measured force',
+                topics.STIFFNESS_VALUES: ': no live estimate to compare with',
+                topics.PROGRAM_STATE: ': program state unknown',
+            }.get(topic, ''))
+        session = data.session
+        start_ns = int(session.get('start_time_ns') or data.start_ns or 0)
+        program = None
+        if data.program is not None:
+            p = data.program
+            program = {**p.to_params(), 'duration_s': p.duration_s,
+                       'levels': p.levels(data.settings.force_axis).tolist(),
+                       'source': (data.program_record or {}).get('source', '')}
+            final = [s for _, s in data.states]
+            program['final_state'] = final[-1].get('state') if final else None
+        geometry = None
+        if data.geometry_params is not None:
+            try:
+                g = geometry_from_params(data.geometry_params)
+                geometry = {**g.to_dict(), 'l0': g.l0, 'k': g.k}
+            except ValueError as exc:
+                problems.append(f'recorded geometry invalid: {exc}')
+        counters = {**input_counters, **pairs.counters}
+        result = SessionAnalysis(
+            bag=str(path), session=str(session.get('session') or path.name), notes=str(session.get('notes', '')),
+            recorded_with=str(session.get('software_version', '')), analysed_with=__version__,
+            start_time_utc=datetime.fromtimestamp(start_ns / 1e9, tz=timezone.utc).isoformat() if start_ns else '',
+            duration_s=((data.end_ns or 0) - (data.start_ns or 0)) * 1e-9, axis=data.settings.force_axis,
+            unit=data.settings.stiffness_unit, program=program, geometry=geometry,
+            settings=asdict(data.settings), counts=data.counts, pairing=counters, branch_fits=branch_fits,
+            hold_fits=hold_fits, cycle_fits=cycles, steps=steps, live=live, model=model, problems=problems,
+            missing_topics=missing)
+        if write_files:
+            out = Path(out_dir) if out_dir is not None else _default_out(path)
+            out.mkdir(parents=True, exist_ok=True)
+            bar.stage('figures')
+            from crane_stiffness.analysis import figures
+            result.files += figures.write_session_figures(result, data, pairs, commands, t0, out, formats)
+            bar.done()
+            bar.stage('report')
+            result.timings_s = dict(bar.timings)
+            result.files += report.write_session_report(result, out, reports)
+            if write_json:
+                result.files.append(str(out / 'analysis.json'))
+                (out / 'analysis.json').write_text(json.dumps(result.to_dict(), indent=1, allow_nan=False))
+            bar.done()
+        result.timings_s = dict(bar.timings)
+        return result
+    finally:
+        bar.close()

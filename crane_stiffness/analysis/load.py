@@ -1,0 +1,233 @@
+"""Reading a recorded session for its offline analysis: the bag's records (session, node parameters, program,
+geometry, the estimator's settings) and its streams decoded in bulk into numpy arrays
+(crane_stiffness.bag.BagReader), plus the few messages read one by one (program state, the live estimator's last
+estimate and input reports, from the ends of the bag only).
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from crane_stiffness import topics
+from crane_stiffness.analysis.cdr import (CdrError, decode_diagnostic_array, decode_float64_multiarray,
+                                          decode_string)
+from crane_stiffness.analysis.errors import SessionAnalysisError
+from crane_stiffness.bag import NODE_PARAMETERS_METADATA, BagReader, TopicNotFoundError
+from crane_stiffness.estimation.live import AXES, VALUE_FIELDS, LiveSettings
+from crane_stiffness.sim.program import LoadProgram
+
+REQUIRED_TOPICS = (topics.LOAD_CELL_WRENCH, topics.LVDT_DISPLACEMENT)
+OPTIONAL_TOPICS = (topics.WRENCH_COMMAND, topics.PROGRAM_STATE, topics.STIFFNESS_VALUES,
+                   topics.PREDICTED_AXIS_STIFFNESS, topics.STIFFNESS)
+
+
+@dataclass
+class SessionData:
+    """What :func:`read_session` read from a bag: its records, the recorded settings and the decoded streams."""
+
+    path: Path
+    session: dict[str, Any]
+    counts: dict[str, int]
+    topic_types: dict[str, str]
+    program: LoadProgram | None
+    program_record: dict[str, Any] | None
+    geometry_params: dict[str, Any] | None
+    settings: LiveSettings
+    sensors: dict[str, Any]
+    force: np.ndarray | None = None
+    disp: np.ndarray | None = None
+    command: np.ndarray | None = None
+    live_series: np.ndarray | None = None
+    prediction: np.ndarray | None = None
+    states: list[tuple[int, dict[str, Any]]] = field(default_factory=list)
+    live_values: tuple[int, np.ndarray] | None = None
+    live_inputs: list[tuple[int, dict[str, str]]] = field(default_factory=list)
+    start_ns: int | None = None
+    end_ns: int | None = None
+    message_count: int = 0
+
+
+def _program_from_record(record: Any, problems: list[str]) -> LoadProgram | None:
+    if not isinstance(record, dict):
+        return None
+    try:
+        return LoadProgram.from_params(record, strict=False)
+    except (ValueError, TypeError) as exc:
+        problems.append(f'recorded program is invalid ({exc}); steps come from the commands alone')
+        return None
+
+
+def _dominant_axis(program: LoadProgram | None) -> str | None:
+    if program is None:
+        return None
+    axes = [s.axis for s in program.segments if s.kind != 'hold' or s.target != 0.0]
+    return max(set(axes), key=axes.count) if axes else program.segments[0].axis
+
+
+def _last_live_values(reader: BagReader, problems: list[str]) -> tuple[int, np.ndarray] | None:
+    """(log time, rows) of the last recorded estimate with a finite stiffness, reading only the end of the bag."""
+    end, start = reader.end_ns, reader.start_ns
+    if end is None:
+        return None
+    span = 2_000_000_000
+    width = len(VALUE_FIELDS)
+    while True:
+        lo = None if end - span <= start else end - span
+        last = None
+        for msg in reader.messages([topics.STIFFNESS_VALUES], start_ns=lo):
+            try:
+                dims, data = decode_float64_multiarray(msg.data)
+            except CdrError as exc:
+                problems.append(f'unreadable {topics.STIFFNESS_VALUES} message at {msg.log_time_ns}: {exc}')
+                continue
+            if data.size != 2 * width:
+                problems.append(f'{topics.STIFFNESS_VALUES} has {data.size} values, expected 2 x {width} '
+                                f'({", ".join(VALUE_FIELDS)}); live comparison skipped')
+                return None
+            rows = data.reshape(2, width)
+            if np.isfinite(rows[:, 0]).any():
+                last = (msg.log_time_ns, rows)
+        if last is not None or lo is None:
+            return last
+        span *= 8
+
+
+def _input_status(data: bytes) -> dict[str, str] | None:
+    try:
+        statuses = decode_diagnostic_array(data)
+    except (CdrError, UnicodeDecodeError):
+        return None
+    for _, name, _, _, values in statuses:
+        if name.endswith(': input') and 'pairs' in values:
+            return values
+    return None
+
+
+def _live_input_reports(reader: BagReader) -> list[tuple[int, dict[str, str]]]:
+    """The first and the last input status the estimator published (/stiffness/estimate), reading only the start
+    and the end of the bag."""
+    start, end = reader.start_ns, reader.end_ns
+    if start is None or end is None:
+        return []
+    window = 10_000_000_000
+
+    def reports(lo: int | None, hi: int | None) -> list[tuple[int, dict[str, str]]]:
+        out = []
+        for msg in reader.messages([topics.STIFFNESS_ESTIMATE], start_ns=lo, end_ns=hi):
+            values = _input_status(msg.data)
+            if values is not None:
+                out.append((msg.log_time_ns, values))
+        return out
+
+    head = reports(None, start + window)
+    tail = reports(max(start + window, end - window), None)
+    if not head or not tail:
+        head = tail = reports(None, None)
+    found = sorted({t: (t, v) for t, v in head[:1] + tail[-1:]}.values(), key=lambda r: r[0])
+    return found
+
+
+def _node_parameters(reader: BagReader) -> dict[str, dict[str, Any]]:
+    """{node: {parameter: value}} of the recorded node-parameters record ({} without one)."""
+    out: dict[str, dict[str, Any]] = {}
+    for node, text in reader.metadata_records().get(NODE_PARAMETERS_METADATA, {}).items():
+        try:
+            values = json.loads(text)
+        except ValueError:
+            continue
+        if isinstance(values, dict):
+            out[node.lstrip('/')] = values
+    return out
+
+
+def read_session(path: Path, axis: str | None, problems: list[str], missing: list[str]) -> SessionData:
+    """Read a session's bag: records, settings and the streams the analysis needs, decoded in bulk.
+
+    ``axis`` overrides the analysed axis (default: the estimator's recorded ``force_axis``, else the program's
+    dominant axis). Problems found on the way are appended to ``problems``, absent optional topics to ``missing``.
+
+    Raises:
+        BagNotFoundError / BagFormatError: no readable bag at ``path``.
+        TopicNotFoundError: a sensor topic is missing (named, with the topics present).
+        SessionAnalysisError: an unknown axis, or a sensor topic of an unexpected type.
+    """
+    reader = BagReader(path)
+    try:
+        known = reader.topics
+        for topic in REQUIRED_TOPICS:
+            if topic not in known:
+                present = ', '.join(f'{t} [{i.msg_type}]' for t, i in sorted(known.items())) or 'none'
+                raise TopicNotFoundError(f'{path}: required topic {topic} is not in the bag (topics present: '
+                                         f'{present})')
+        for topic in OPTIONAL_TOPICS:
+            if topic not in known or known[topic].count == 0:
+                missing.append(topic)
+        session = reader.session()
+        nodes = _node_parameters(reader)
+        program_record = session.get('program') if isinstance(session.get('program'), dict) else None
+        if 'segments.kind' in nodes.get('load_program', {}):  # what the load_program node actually ran
+            program_record = {**nodes['load_program'], 'source': 'load_program node parameters'}
+        program = _program_from_record(program_record, problems)
+        sensors = dict(session.get('sensors')) if isinstance(session.get('sensors'), dict) else {}
+        sensors.update(nodes)
+        est_params = sensors.get('stiffness_estimator') or sensors.get('/stiffness_estimator') or {}
+        try:
+            settings = LiveSettings.from_params(est_params)
+        except ValueError as exc:
+            problems.append(f'recorded stiffness_estimator parameters are invalid ({exc}); using the defaults')
+            settings = LiveSettings()
+            est_params = {}
+        chosen = axis or (est_params.get('force_axis') if 'force_axis' in est_params else None) \
+            or _dominant_axis(program) or settings.force_axis
+        if chosen not in AXES:
+            raise SessionAnalysisError(f'axis = {chosen!r}: must be one of {", ".join(AXES)}')
+        settings = replace(settings, force_axis=chosen)
+        rig = session.get('rig') if isinstance(session.get('rig'), dict) else None
+        geometry_params = rig.get('geometry') if rig and isinstance(rig.get('geometry'), dict) else None
+        model_geometry = {k: v for k, v in nodes.get('crane_model', {}).items() if k.startswith('geometry.')}
+        if model_geometry:  # the crane_model node's geometry, as it ran
+            geometry_params = model_geometry
+        if geometry_params is None:
+            problems.append('no rig geometry recorded: no model curves')
+        data = SessionData(path=path, session=session, counts={t: i.count for t, i in known.items()},
+                     topic_types={t: i.msg_type for t, i in known.items()}, program=program,
+                     program_record=program_record, geometry_params=geometry_params, settings=settings,
+                     sensors=sensors, start_ns=reader.start_ns, end_ns=reader.end_ns,
+                     message_count=reader.message_count)
+        if known[topics.LOAD_CELL_WRENCH].msg_type != 'geometry_msgs/msg/WrenchStamped':
+            raise SessionAnalysisError(f'{topics.LOAD_CELL_WRENCH} has type {known[topics.LOAD_CELL_WRENCH].msg_type}'
+                                       ', expected geometry_msgs/msg/WrenchStamped')
+        if known[topics.LVDT_DISPLACEMENT].msg_type not in ('geometry_msgs/msg/PointStamped', 'std_msgs/msg/Float64'):
+            raise SessionAnalysisError(f'{topics.LVDT_DISPLACEMENT} has type '
+                                       f'{known[topics.LVDT_DISPLACEMENT].msg_type}, expected PointStamped or Float64')
+        wanted = list(REQUIRED_TOPICS)
+        for topic, msg_type in ((topics.WRENCH_COMMAND, 'geometry_msgs/msg/WrenchStamped'),
+                                (topics.PREDICTED_AXIS_STIFFNESS, 'std_msgs/msg/Float64'),
+                                (topics.STIFFNESS, 'std_msgs/msg/Float64')):
+            if topic in known and known[topic].count and known[topic].msg_type == msg_type:
+                wanted.append(topic)
+        arrays = reader.decode_topics(wanted)
+        data.force = arrays[topics.LOAD_CELL_WRENCH]
+        data.disp = arrays[topics.LVDT_DISPLACEMENT]
+        data.command = arrays.get(topics.WRENCH_COMMAND)
+        data.prediction = arrays.get(topics.PREDICTED_AXIS_STIFFNESS)
+        data.live_series = arrays.get(topics.STIFFNESS)
+        if topics.PROGRAM_STATE in known and known[topics.PROGRAM_STATE].count:
+            for msg in reader.messages([topics.PROGRAM_STATE]):
+                try:
+                    state = json.loads(decode_string(msg.data))
+                except (CdrError, ValueError):
+                    continue
+                if isinstance(state, dict):
+                    data.states.append((msg.log_time_ns, state))
+        if topics.STIFFNESS_VALUES in known and known[topics.STIFFNESS_VALUES].count:
+            data.live_values = _last_live_values(reader, problems)
+        if topics.STIFFNESS_ESTIMATE in known and known[topics.STIFFNESS_ESTIMATE].count:
+            data.live_inputs = _live_input_reports(reader)
+        return data
+    finally:
+        reader.close()
