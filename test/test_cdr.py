@@ -8,7 +8,7 @@ from geometry_msgs.msg import PointStamped, WrenchStamped
 from rclpy.serialization import serialize_message
 from std_msgs.msg import Float64
 
-from crane_stiffness.analysis.cdr import CdrError, decode_float64, decode_stamped
+from crane_stiffness.serde import CdrError, decode_float64, decode_stamped
 
 
 def _wrench(frame: str, sec: int, nanosec: int, values) -> WrenchStamped:

@@ -23,7 +23,7 @@ from std_msgs.msg import Float64, String
 
 from conftest import spin_until
 from crane_stiffness import topics
-from crane_stiffness.analysis.cdr import decode_float64_multiarray
+from crane_stiffness.serde import decode_float64_multiarray
 from crane_stiffness.analysis.session import NODE_PARAMETERS_METADATA, analyze_session
 from crane_stiffness.bag import BagReader, BagWriter, dump_qos_profiles, qos_profile
 from crane_stiffness.estimation.live import VALUE_FIELDS

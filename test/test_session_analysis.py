@@ -20,8 +20,8 @@ import pytest
 
 from conftest import REPO
 from crane_stiffness import topics
-from crane_stiffness.analysis.cdr import (decode_diagnostic_array, decode_float64_multiarray, decode_string,
-                                          encode_float64_multiarray, encode_stamped, encode_string)
+from crane_stiffness.serde import (decode_diagnostic_array, decode_float64_multiarray, decode_string,
+                                   encode_float64_multiarray, encode_stamped, encode_string)
 from crane_stiffness.analysis.session import (SessionAnalysisError, analyze_session, branch_labels,
                                               compare_sessions, pair_by_stamp)
 from crane_stiffness.analysis.synthetic import write_synthetic_session

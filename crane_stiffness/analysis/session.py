@@ -40,8 +40,7 @@ from typing import Any, Iterable, Sequence
 import numpy as np
 
 from crane_stiffness import __version__, topics
-from crane_stiffness.analysis.cdr import (CdrError, decode_diagnostic_array, decode_float64_multiarray,
-                                          decode_string)
+from crane_stiffness.serde import CdrError, decode_diagnostic_array, decode_float64_multiarray, decode_string
 from crane_stiffness.bag import NODE_PARAMETERS_METADATA, BagDamageWarning, BagReader, TopicNotFoundError
 from crane_stiffness.config import geometry_from_params
 from crane_stiffness.errors import CraneStiffnessError

@@ -36,6 +36,8 @@ from typing import Any, NamedTuple
 import numpy as np
 import yaml
 
+from crane_stiffness.serde.bulk import SUPPORTED_TYPES, Decoder, gather, new_decoder
+
 from .errors import (
     BagCorruptError, BagDamageWarning, BagFormatError, BagNotFoundError, TopicNotFoundError,
     UnsupportedTypeError,
@@ -61,12 +63,6 @@ _MESSAGE_REC = np.dtype({
     'formats': ['u1', '<u8', '<u2', '<u4', '<u8', '<u8'],
     'offsets': [0, 1, 9, 11, 15, 23], 'itemsize': MESSAGE_HEADER_SIZE,
 })
-_CDR_HEADER = np.dtype({
-    'names': ['e0', 'e1', 'sec', 'nanosec', 'slen'], 'formats': ['u1', 'u1', '<i4', '<u4', '<u4'],
-    'offsets': [0, 1, 4, 8, 12], 'itemsize': 16,
-})
-
-
 # ------------------------------------------------------------------------------------------------ MCAP records --
 @dataclass(frozen=True)
 class SchemaRecord:
@@ -208,22 +204,6 @@ def _walk(data: bytes | memoryview, start: int, end: int) -> Iterator[tuple[int,
             return
         yield opcode, pos, length
         pos += 9 + length
-
-
-def _gather(buf: np.ndarray, offsets: np.ndarray, dtype: Any) -> np.ndarray:
-    """Copy ``dtype`` items starting at arbitrary byte ``offsets`` of the uint8 array ``buf`` (one numpy gather)."""
-    dt = np.dtype(dtype)
-    if dt.subdtype is not None:  # ('<f8', (k,)): gather records of one field, then unwrap to shape (n, k)
-        return _gather(buf, offsets, np.dtype([('v', dt)]))['v']
-    if buf.size < dt.itemsize:  # only possible when no row is valid: gather zeros at the clamped offsets
-        buf = np.concatenate([buf, np.zeros(dt.itemsize, np.uint8)])
-    count = buf.size - dt.itemsize + 1
-    view = np.ndarray((count,), dtype=dt, buffer=buf, offset=0, strides=(1,))
-    return view[offsets]
-
-
-def _align(value: np.ndarray, alignment: int) -> np.ndarray:
-    return (value + (alignment - 1)) & ~(alignment - 1)
 
 
 # ------------------------------------------------------------------------------------------------- MCAP file --
@@ -495,7 +475,7 @@ class McapFile:
             if chunk.index is None:
                 chunk.counts = {cid: len(offsets) for cid, offsets in table.items()}
                 if chunk.loose and table:
-                    times = [_gather(data, offsets, '<u8') for offsets in
+                    times = [gather(data, offsets, '<u8') for offsets in
                              [o + 15 for o in table.values()]]
                     merged = np.concatenate(times)
                     chunk.start_ns, chunk.end_ns = int(merged.min()), int(merged.max())
@@ -573,7 +553,7 @@ class McapFile:
                 return table, list(_walk(data.tobytes(), 0, size))
             offsets = np.sort(np.concatenate(list(table.values())))
             offsets = offsets[offsets + 9 <= size]
-            ends = offsets + 9 + _gather(data, offsets + 1, '<u8').astype(np.int64)
+            ends = offsets + 9 + gather(data, offsets + 1, '<u8').astype(np.int64)
             starts = np.concatenate([[0], ends])
             stops = np.concatenate([offsets, [size]])
             gaps = [(int(a), int(b)) for a, b in zip(starts, stops) if b > a]
@@ -602,7 +582,7 @@ class McapFile:
         result = {}
         for cid, offsets in table.items():
             inside = (offsets >= 0) & (offsets + MESSAGE_HEADER_SIZE <= data.size)
-            head = _gather(data, np.where(inside, offsets, 0), _MESSAGE_REC)
+            head = gather(data, np.where(inside, offsets, 0), _MESSAGE_REC)
             ok = (inside & (head['op'] == OP_MESSAGE) & (head['channel'] == cid) & (head['length'] >= 22)
                   & (offsets + 9 + head['length'].astype(np.int64) <= data.size))
             if not ok.all():
@@ -654,164 +634,6 @@ class McapFile:
                 cid, seq, log, pub = struct.unpack_from('<HIQQ', data, p + 9)
                 out.append((cid, seq, log, pub, data[p + MESSAGE_HEADER_SIZE:p + 9 + length]))
         return out
-
-
-# ---------------------------------------------------------------------------------------------- bulk decoders --
-def _cdr_header(buf: np.ndarray, off: np.ndarray, dlen: np.ndarray
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, np.ndarray]]:
-    """Encapsulation + std_msgs/Header of each message: (valid, header fields, frame_id length n incl. NUL, cols)."""
-    valid = dlen >= 16
-    head = _gather(buf, np.where(valid, off, 0), _CDR_HEADER)
-    slen = head['slen'].astype(np.int64)
-    valid &= (head['e0'] == 0) & (head['e1'] == 1) & (slen >= 1) & (16 + slen <= dlen)
-    nul = buf[np.where(valid, off + 15 + slen, 0)]
-    valid &= nul == 0
-    frame = _gather_strings(buf, off + 16, slen - 1, valid)
-    return valid, head, slen, {'stamp_sec': head['sec'], 'stamp_nanosec': head['nanosec'], 'frame_id': frame}
-
-
-def _gather_strings(buf: np.ndarray, start: np.ndarray, length: np.ndarray, valid: np.ndarray) -> np.ndarray:
-    """Fixed-width bytes array of the strings ``buf[start:start+length]`` (rows not ``valid`` stay empty)."""
-    lengths = np.unique(length[valid]) if valid.any() else np.zeros(0, np.int64)
-    width = max(1, int(lengths.max()) if lengths.size else 1)
-    out = np.zeros(start.shape, dtype=f'S{width}')
-    for size in lengths.tolist():
-        if size <= 0:
-            continue
-        sel = valid & (length == size)
-        out[sel] = _gather(buf, start[sel], f'S{size}')
-    return out
-
-
-class _Decoder:
-    """Bulk decoder of one message type: columns of many messages from their byte offsets."""
-
-    msg_type = ''
-    value_fields: tuple[tuple[str, Any], ...] = ()
-    has_header = True
-
-    def decode(self, buf: np.ndarray, off: np.ndarray, dlen: np.ndarray
-               ) -> tuple[dict[str, np.ndarray], np.ndarray]:
-        raise NotImplementedError
-
-    def dtype(self, columns: Mapping[str, np.ndarray]) -> np.dtype:
-        fields: list[tuple[Any, ...]] = [('log_time_ns', '<i8')]
-        if self.has_header:
-            fields += [('stamp_sec', '<i4'), ('stamp_nanosec', '<u4'), ('stamp_s', '<f8'),
-                       ('frame_id', columns['frame_id'].dtype)]
-        for name, fmt in self.value_fields:
-            col = columns.get(name)
-            fields.append((name, col.dtype, col.shape[1:]) if col is not None and col.ndim > 1 else (name, fmt))
-        return np.dtype(fields)
-
-
-class _StampedDoubles(_Decoder):
-    """A std_msgs/Header followed by float64 fields only (WrenchStamped, PointStamped, PoseStamped)."""
-
-    def __init__(self, msg_type: str, names: Sequence[str]) -> None:
-        self.msg_type = msg_type
-        self.names = tuple(names)
-        self.value_fields = tuple((n, '<f8') for n in names)
-
-    def decode(self, buf: np.ndarray, off: np.ndarray, dlen: np.ndarray
-               ) -> tuple[dict[str, np.ndarray], np.ndarray]:
-        valid, _, slen, cols = _cdr_header(buf, off, dlen)
-        start = 4 + _align(12 + slen, 8)
-        valid &= start + 8 * len(self.names) <= dlen
-        values = _gather(buf, np.where(valid, off + start, 0), ('<f8', (len(self.names),)))
-        for i, name in enumerate(self.names):
-            cols[name] = values[:, i]
-        return cols, valid
-
-
-class _Float64(_Decoder):
-    msg_type = 'std_msgs/msg/Float64'
-    value_fields = (('data', '<f8'),)
-    has_header = False
-
-    def decode(self, buf: np.ndarray, off: np.ndarray, dlen: np.ndarray
-               ) -> tuple[dict[str, np.ndarray], np.ndarray]:
-        valid = dlen >= 12
-        enc = _gather(buf, np.where(valid, off, 0), ('u1', (2,)))
-        valid &= (enc[:, 0] == 0) & (enc[:, 1] == 1)
-        return {'data': _gather(buf, np.where(valid, off + 4, 0), '<f8')}, valid
-
-
-class _JointState(_Decoder):
-    """sensor_msgs/JointState with a fixed number of joints (set by the first chunk; 6 on the rig).
-
-    position/velocity/effort are (n, joints) float64, NaN where the message left the array empty.
-    """
-
-    msg_type = 'sensor_msgs/msg/JointState'
-    value_fields = (('name', 'S1'), ('position', '<f8'), ('velocity', '<f8'), ('effort', '<f8'))
-
-    def __init__(self) -> None:
-        self.joints: int | None = None
-
-    def decode(self, buf: np.ndarray, off: np.ndarray, dlen: np.ndarray
-               ) -> tuple[dict[str, np.ndarray], np.ndarray]:
-        valid, _, slen, cols = _cdr_header(buf, off, dlen)
-        base, limit = off + 4, dlen - 4
-        cur = _align(12 + slen, 4)
-
-        def read_u32(cur: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            valid &= cur + 4 <= limit
-            return _gather(buf, np.where(valid, base + cur, 0), '<u4').astype(np.int64), valid
-
-        count, valid = read_u32(cur, valid)
-        cur = cur + 4
-        if self.joints is None:
-            if not valid.any():
-                return cols, valid
-            values, counts = np.unique(count[valid], return_counts=True)
-            self.joints = int(values[np.argmax(counts)])
-        joints = self.joints
-        valid &= count == joints
-        name_start = np.zeros((off.size, joints), np.int64)
-        name_len = np.zeros((off.size, joints), np.int64)
-        for j in range(joints):
-            cur = np.where(valid, _align(cur, 4), 0)
-            size, valid = read_u32(cur, valid)
-            name_start[:, j] = base + cur + 4
-            name_len[:, j] = size - 1
-            cur = cur + 4 + size
-            valid &= (size >= 1) & (cur <= limit)
-            nul = buf[np.where(valid, base + cur - 1, 0)]
-            valid &= nul == 0
-        for key in ('position', 'velocity', 'effort'):
-            cur = np.where(valid, _align(cur, 4), 0)
-            size, valid = read_u32(cur, valid)
-            cur = cur + 4
-            full = size == joints
-            valid &= full | (size == 0)
-            if joints:
-                at = np.where(full, _align(cur, 8), cur)
-                valid &= ~full | (at + 8 * joints <= limit)
-                vals = _gather(buf, np.where(valid & full, base + at, 0), ('<f8', (joints,)))
-                vals[~full] = np.nan
-                cur = np.where(full, at + 8 * joints, cur)
-            else:
-                vals = np.zeros((off.size, 0))
-            cols[key] = vals
-        names = [_gather_strings(buf, name_start[:, j], name_len[:, j], valid) for j in range(joints)]
-        width = max([n.dtype.itemsize for n in names] + [1])
-        cols['name'] = np.stack([n.astype(f'S{width}') for n in names], axis=1) if names else \
-            np.zeros((off.size, 0), 'S1')
-        return cols, valid
-
-
-_DECODERS: dict[str, Any] = {
-    'geometry_msgs/msg/WrenchStamped': lambda: _StampedDoubles(
-        'geometry_msgs/msg/WrenchStamped', ('fx', 'fy', 'fz', 'mx', 'my', 'mz')),
-    'geometry_msgs/msg/PointStamped': lambda: _StampedDoubles('geometry_msgs/msg/PointStamped', ('x', 'y', 'z')),
-    'geometry_msgs/msg/PoseStamped': lambda: _StampedDoubles(
-        'geometry_msgs/msg/PoseStamped', ('x', 'y', 'z', 'qx', 'qy', 'qz', 'qw')),
-    'std_msgs/msg/Float64': _Float64,
-    'sensor_msgs/msg/JointState': _JointState,
-}
-SUPPORTED_TYPES = tuple(_DECODERS)
-"""Message types :meth:`BagReader.decode` turns into numpy structured arrays."""
 
 
 # -------------------------------------------------------------------------------------------------- bag reader --
@@ -1036,13 +858,14 @@ class BagReader:
         """Like :meth:`decode` for several topics in one pass over the file (each chunk decompressed once)."""
         known = self.topics
         per_file = self._channels_for(topics)
-        decoders: dict[str, _Decoder] = {}
+        decoders: dict[str, Decoder] = {}
         for topic in topics:
             msg_type = known[topic].msg_type
-            if msg_type not in _DECODERS:
+            decoder = new_decoder(msg_type)
+            if decoder is None:
                 raise UnsupportedTypeError(f'topic {topic} has type {msg_type}, which the bulk decoder does not '
                                            f'handle (supported: {", ".join(SUPPORTED_TYPES)}); use messages()')
-            decoders[topic] = _DECODERS[msg_type]()
+            decoders[topic] = decoder
         parts: dict[str, list[dict[str, np.ndarray]]] = {t: [] for t in topics}
         for mcap_file, chunk, channels in self._chunks(per_file, start_ns, end_ns):
             data = mcap_file.chunk_data(chunk)
@@ -1068,15 +891,10 @@ class BagReader:
         return {topic: self._assemble(decoders[topic], parts[topic], start_ns, end_ns) for topic in topics}
 
     @staticmethod
-    def _assemble(decoder: _Decoder, parts: list[dict[str, np.ndarray]], start_ns: int | None,
+    def _assemble(decoder: Decoder, parts: list[dict[str, np.ndarray]], start_ns: int | None,
                   end_ns: int | None) -> np.ndarray:
         if not parts:
-            empty: dict[str, np.ndarray] = {'frame_id': np.zeros(0, 'S1')}
-            if isinstance(decoder, _JointState):
-                joints = decoder.joints or 0
-                empty.update(name=np.zeros((0, joints), 'S1'), position=np.zeros((0, joints)),
-                             velocity=np.zeros((0, joints)), effort=np.zeros((0, joints)))
-            return np.zeros(0, decoder.dtype(empty))
+            return decoder.empty()
         columns = {key: np.concatenate([p[key] for p in parts]) for key in parts[0]}
         log = columns['log_time_ns']
         keep = np.ones(log.size, bool)
@@ -1090,12 +908,7 @@ class BagReader:
         if log.size > 1 and not (np.diff(log) >= 0).all():
             order = np.argsort(log, kind='stable')
             columns = {k: v[order] for k, v in columns.items()}
-        out = np.empty(log.size, decoder.dtype(columns))
-        for key, value in columns.items():
-            out[key] = value
-        if decoder.has_header:
-            out['stamp_s'] = columns['stamp_sec'] + columns['stamp_nanosec'] * 1e-9
-        return out
+        return decoder.to_array(columns)
 
 
 __all__ = [

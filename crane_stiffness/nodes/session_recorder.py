@@ -30,7 +30,6 @@ import json
 import os
 import signal
 import socket
-import struct
 import sys
 import threading
 from datetime import datetime, timezone
@@ -58,6 +57,7 @@ from crane_stiffness.nodes.load_program import PARAMS as PROGRAM_NODE_PARAMS
 from crane_stiffness.nodes.load_program import PROGRAM_KEYS
 from crane_stiffness.nodes.session_qos import (adapted_qos, contract_qos, has_header, message_class,
                                                offered_profiles, publisher_types)
+from crane_stiffness.serde import header_stamp_ns
 from crane_stiffness.sim.program import LoadProgram
 
 
@@ -98,7 +98,6 @@ PARAMS = GEOMETRY_PARAMS + PROGRAM_PARAMS + (
 RECORDING_KEYS = ('topics', 'session', 'output_dir', 'compression', 'chunk_size', 'flush_interval_s',
                   'split_max_bytes', 'split_max_duration_s', 'fsync')
 
-_STAMP = struct.Struct('<iI')
 # rclpy puts a QoS-event handler into every wait of the executor for each subscription with the default event
 # callbacks (~15 µs each per wait): with a dozen recorded topics at a few kHz that is a large share of a core.
 _NO_EVENTS = SubscriptionEventCallbacks(use_default_callbacks=False)
@@ -151,16 +150,6 @@ def read_params_files(paths: Sequence[str]) -> tuple[list[dict[str, str]], dict[
             if isinstance(body, dict) and isinstance(body.get('ros__parameters'), dict):
                 sections.setdefault(str(name), {}).update(flatten_params(body['ros__parameters']))
     return files, sections, problems
-
-
-def header_stamp_ns(data: bytes) -> int | None:
-    """The header stamp of a serialized stamped message (little-endian CDR), ns; None when unset or unreadable."""
-    if len(data) < 12 or data[1] != 1:
-        return None
-    sec, nanosec = _STAMP.unpack_from(data, 4)
-    if sec < 0 or nanosec >= 1_000_000_000 or (sec == 0 and nanosec == 0):
-        return None
-    return sec * 1_000_000_000 + nanosec
 
 
 class _Channel:
