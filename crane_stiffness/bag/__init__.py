@@ -14,10 +14,8 @@ from .errors import (
     MessageDefinitionError, TopicNotFoundError, UnsupportedTypeError,
 )
 from .reader import SUPPORTED_TYPES, BagReader, McapFile, RawMessage, TopicInfo
-from .writer import (
-    NODE_PARAMETERS_METADATA, SESSION_END_METADATA, SESSION_METADATA, BagWriter, dump_qos_profiles, qos_profile,
-    session_metadata,
-)
+from .qos import dump_qos_profiles, normalize_qos_profiles, qos_profile
+from .writer import NODE_PARAMETERS_METADATA, SESSION_END_METADATA, SESSION_METADATA, BagWriter, session_metadata
 
 
 def __getattr__(name: str) -> object:
@@ -32,5 +30,6 @@ __all__ = [
     'BagCorruptError', 'BagDamageWarning', 'BagError', 'BagExistsError', 'BagFormatError', 'BagNotFoundError',
     'BagReader', 'BagWriter', 'BagWriterError', 'McapFile', 'MessageDefinitionError', 'NODE_PARAMETERS_METADATA',
     'RawMessage', 'RecoveryReport', 'SESSION_END_METADATA', 'SESSION_METADATA', 'SUPPORTED_TYPES', 'TopicInfo',
-    'TopicNotFoundError', 'UnsupportedTypeError', 'dump_qos_profiles', 'qos_profile', 'recover_bag', 'session_metadata',
+    'TopicNotFoundError', 'UnsupportedTypeError', 'dump_qos_profiles', 'normalize_qos_profiles', 'qos_profile',
+    'recover_bag', 'session_metadata',
 ]

@@ -34,7 +34,6 @@ from types import TracebackType
 from typing import Any, NamedTuple
 
 import numpy as np
-import yaml
 
 from crane_stiffness.serde.bulk import SUPPORTED_TYPES, Decoder, gather, new_decoder
 
@@ -42,6 +41,7 @@ from .errors import (
     BagCorruptError, BagDamageWarning, BagFormatError, BagNotFoundError, TopicNotFoundError,
     UnsupportedTypeError,
 )
+from .metadata import METADATA_FILENAME, read_metadata_yaml
 
 MAGIC = b'\x89MCAP0\r\n'
 OP_HEADER, OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK, OP_MESSAGE_INDEX, OP_CHUNK_INDEX = range(1, 9)
@@ -680,11 +680,10 @@ class BagReader:
     def _resolve_files(self, strict: bool) -> list[Path]:
         if self.path.is_file():
             return [self.path]
-        meta_path = self.path / 'metadata.yaml'
+        meta_path = self.path / METADATA_FILENAME
         if meta_path.is_file():
             try:
-                loaded = yaml.safe_load(meta_path.read_text(encoding='utf-8'))
-                info = loaded['rosbag2_bagfile_information']
+                info = read_metadata_yaml(self.path)
                 names = [str(n) for n in info['relative_file_paths']]
                 self.bag_metadata = info
             except Exception as exc:  # any YAML or layout problem: fall back to the files on disk
