@@ -20,8 +20,6 @@ import pytest
 
 from conftest import REPO
 from crane_stiffness import topics
-from crane_stiffness.serde import (decode_diagnostic_array, decode_float64_multiarray, decode_string,
-                                   encode_float64_multiarray, encode_stamped, encode_string)
 from crane_stiffness.analysis.session import (SessionAnalysisError, analyze_session, branch_labels,
                                               compare_sessions, pair_by_stamp)
 from crane_stiffness.analysis.synthetic import write_synthetic_session
@@ -32,6 +30,8 @@ from crane_stiffness.estimation.fit import BranchTracker
 from crane_stiffness.estimation.live import VALUE_FIELDS
 from crane_stiffness.estimation.sync import ApproximateTimeSync
 from crane_stiffness.model import lab_model, paper_coefficients
+from crane_stiffness.serde import (decode_diagnostic_array, decode_float64_multiarray, decode_string,
+                                   encode_float64_multiarray, encode_stamped, encode_string)
 from crane_stiffness.sim.program import LoadProgram, Segment, load_program_file
 
 K_TRUE = 48_000.0  # N/m, the linear truth of the synthetic sessions

@@ -40,13 +40,14 @@ from typing import Any, Iterable, Sequence
 import numpy as np
 
 from crane_stiffness import __version__, topics
-from crane_stiffness.serde import CdrError, decode_diagnostic_array, decode_float64_multiarray, decode_string
-from crane_stiffness.bag import NODE_PARAMETERS_METADATA, BagDamageWarning, BagReader, TopicNotFoundError
+from crane_stiffness.bag import BagDamageWarning, BagReader, TopicNotFoundError
 from crane_stiffness.config import geometry_from_params
 from crane_stiffness.errors import CraneStiffnessError
 from crane_stiffness.estimation.errors import DataError
 from crane_stiffness.estimation.fit import BRANCHES, LOADING, UNLOADING, LineFit, RecursiveLeastSquares, fit_line
 from crane_stiffness.estimation.live import AXES, VALUE_FIELDS, LiveSettings
+from crane_stiffness.serde import CdrError, decode_diagnostic_array, decode_float64_multiarray, decode_string
+from crane_stiffness.session import read_node_parameters, read_session
 from crane_stiffness.sim.program import LoadProgram
 
 REQUIRED_TOPICS = (topics.LOAD_CELL_WRENCH, topics.LVDT_DISPLACEMENT)
@@ -526,19 +527,6 @@ def _live_input_reports(reader: BagReader) -> list[tuple[int, dict[str, str]]]:
     return found
 
 
-def _node_parameters(reader: BagReader) -> dict[str, dict[str, Any]]:
-    """{node: {parameter: value}} of the recorded node-parameters record ({} without one)."""
-    out: dict[str, dict[str, Any]] = {}
-    for node, text in reader.metadata_records().get(NODE_PARAMETERS_METADATA, {}).items():
-        try:
-            values = json.loads(text)
-        except ValueError:
-            continue
-        if isinstance(values, dict):
-            out[node.lstrip('/')] = values
-    return out
-
-
 def _read(path: Path, axis: str | None, problems: list[str], missing: list[str]) -> _Data:
     reader = BagReader(path)
     try:
@@ -551,8 +539,8 @@ def _read(path: Path, axis: str | None, problems: list[str], missing: list[str])
         for topic in OPTIONAL_TOPICS:
             if topic not in known or known[topic].count == 0:
                 missing.append(topic)
-        session = reader.session()
-        nodes = _node_parameters(reader)
+        session = read_session(reader)
+        nodes = read_node_parameters(reader)
         program_record = session.get('program') if isinstance(session.get('program'), dict) else None
         if 'segments.kind' in nodes.get('load_program', {}):  # what the load_program node actually ran
             program_record = {**nodes['load_program'], 'source': 'load_program node parameters'}

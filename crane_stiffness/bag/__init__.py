@@ -1,7 +1,7 @@
 """MCAP / rosbag2 bag reading and writing, pure Python; reading needs no ROS.
 
 - :class:`BagWriter` (``writer.py``): a rosbag2 bag directory of chunked MCAP files plus metadata.yaml (v9),
-  crash-safe chunk by chunk, split by size or duration, session metadata as MCAP Metadata records.
+  crash-safe chunk by chunk, split by size or duration, the caller's metadata as MCAP Metadata records.
 - :class:`BagReader` (``reader.py``): topics, metadata records, raw messages, and a fast bulk decoder of the rig's
   fixed-layout types into numpy structured arrays.
 - :func:`recover_bag` (``recover.py``): rewrite files left unfinished by a crash and (re)write metadata.yaml.
@@ -15,7 +15,7 @@ from .errors import (
 )
 from .reader import SUPPORTED_TYPES, BagReader, McapFile, RawMessage, TopicInfo
 from .qos import dump_qos_profiles, normalize_qos_profiles, qos_profile
-from .writer import NODE_PARAMETERS_METADATA, SESSION_END_METADATA, SESSION_METADATA, BagWriter, session_metadata
+from .writer import BagWriter
 
 
 def __getattr__(name: str) -> object:
@@ -28,8 +28,8 @@ def __getattr__(name: str) -> object:
 
 __all__ = [
     'BagCorruptError', 'BagDamageWarning', 'BagError', 'BagExistsError', 'BagFormatError', 'BagNotFoundError',
-    'BagReader', 'BagWriter', 'BagWriterError', 'McapFile', 'MessageDefinitionError', 'NODE_PARAMETERS_METADATA',
-    'RawMessage', 'RecoveryReport', 'SESSION_END_METADATA', 'SESSION_METADATA', 'SUPPORTED_TYPES', 'TopicInfo',
+    'BagReader', 'BagWriter', 'BagWriterError', 'McapFile', 'MessageDefinitionError', 'RawMessage',
+    'RecoveryReport', 'SUPPORTED_TYPES', 'TopicInfo',
     'TopicNotFoundError', 'UnsupportedTypeError', 'dump_qos_profiles', 'normalize_qos_profiles', 'qos_profile',
-    'recover_bag', 'session_metadata',
+    'recover_bag',
 ]

@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import heapq
 import itertools
-import json
 import mmap
 import re
 import struct
@@ -778,17 +777,6 @@ class BagReader:
             for name, data in mcap_file.metadata:
                 if include_rosbag2 or name != 'rosbag2':
                     out[name] = dict(data)
-        return out
-
-    def session(self, name: str = 'crane_stiffness/session') -> dict[str, Any]:
-        """The session metadata record with JSON values decoded ({} when the bag has none)."""
-        out: dict[str, Any] = {}
-        for key, value in self.metadata_records().get(name, {}).items():
-            try:
-                decoded = json.loads(value)
-            except ValueError:
-                decoded = value
-            out[key] = decoded if isinstance(decoded, (dict, list)) else value
         return out
 
     # -- topics --

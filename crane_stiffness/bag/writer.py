@@ -36,33 +36,11 @@ from .metadata import (
 from .msgdef import message_definition, normalize_type, type_description_hash
 from .qos import dump_qos_profiles
 
-SESSION_METADATA = 'crane_stiffness/session'
-"""Name of the MCAP Metadata record that describes a test session (rig, program, software, notes)."""
-NODE_PARAMETERS_METADATA = 'crane_stiffness/node_parameters'
-"""MCAP metadata record (written by session_recorder) of the parameters the rig's nodes ran with, read from the
-nodes over ROS: {node name: JSON of {parameter: value}}. Preferred to the parameter files of the session record."""
-SESSION_END_METADATA = 'crane_stiffness/session_end'
-"""MCAP metadata record written when the recording is closed: stop reason, end time, message counts."""
 LIBRARY = f'crane_stiffness/{__version__}'
 DEFAULT_CHUNK_SIZE = 1024 * 1024
 """Default uncompressed chunk size in bytes: about 10,000 rig messages, i.e. ~5 s of a 2 kHz recording."""
 
 COMPRESSIONS = {'zstd': CompressionType.ZSTD, 'lz4': CompressionType.LZ4, 'none': CompressionType.NONE}
-
-
-def session_metadata(*, rig: Mapping[str, Any] | None = None, program: Any = None,
-                     software_version: str = __version__, start_time_ns: int | None = None, notes: str = '',
-                     **extra: Any) -> dict[str, str]:
-    """Record for :data:`SESSION_METADATA`: rig geometry/parameters and program as JSON, version, start, notes."""
-    data: dict[str, Any] = {'software_version': software_version, 'notes': notes}
-    if rig is not None:
-        data['rig'] = rig
-    if program is not None:
-        data['program'] = program
-    if start_time_ns is not None:
-        data['start_time_ns'] = str(int(start_time_ns))
-    data.update(extra)
-    return encode_metadata(data)
 
 
 # ------------------------------------------------------------------------------------------------------- writer --
