@@ -333,7 +333,7 @@ def test_truncated_copy_reads_complete_chunks_and_recovers(tmp_path, bag, messag
     source = bag / 'session_0.mcap'
     with McapFile(source) as f:
         chunks = f.chunks
-        per_chunk = [sum(len(o) for o, _ in f.message_headers(c, f.chunk_data(c), None).values()) for c in chunks]
+        per_chunk = [sum(len(m) for m in f.chunk_messages(c, f.chunk_data(c)).values()) for c in chunks]
     cut_chunk = chunks[len(chunks) // 2]
     cut_at = cut_chunk.records_offset + cut_chunk.compressed_size // 2  # inside that chunk
     damaged = tmp_path / 'crashed'

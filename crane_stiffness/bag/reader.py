@@ -1,17 +1,14 @@
 """Reading rosbag2 MCAP bags without ROS, with a fast bulk decoder for the rig's fixed-layout message types.
 
 :class:`BagReader` opens a bag directory (through its metadata.yaml, or by scanning ``*.mcap`` when metadata.yaml is
-missing, as after a crash) or a single .mcap file. It parses MCAP itself (:class:`McapFile`): the summary when the
-file was finished, otherwise a scan of the records that are on disk, so a file cut short by SIGKILL gives every
-complete chunk. Damage is reported with :class:`~.errors.BagDamageWarning` (or raised when ``strict=True``) and the
-readable part is used.
+missing, as after a crash) or a single .mcap file. Each file is a :class:`~.mcapfile.McapFile` (its records read by
+the ``mcap`` package): the summary when the file was finished, otherwise the records that are on disk, so a file cut
+short by SIGKILL gives every complete chunk. Damage is reported with :class:`~.errors.BagDamageWarning` (or raised
+when ``strict=True``) and the readable part is used.
 
-Bulk decoding (:meth:`BagReader.decode`) works a chunk at a time: decompress, take the message offsets from the
-chunk's MessageIndex records, then gather the CDR fields of all messages of a channel at once with numpy. CDR
-(XCDR1, little endian): a 4-byte encapsulation header ``00 01 00 00``, then the fields, each aligned to its size
-relative to the byte after the header. A ``std_msgs/Header`` is ``int32 sec, uint32 nanosec, uint32 n, n bytes of
-frame_id including the NUL``, so the float64 fields after it start at ``4 + align8(12 + n)``; messages are grouped by
-``n`` so that a changing frame_id is decoded correctly, and each message's length and NUL are checked.
+Bulk decoding (:meth:`BagReader.decode`) works a chunk at a time: decompress, gather the messages of a channel at
+once (:meth:`~.mcapfile.McapFile.chunk_messages`), then decode their CDR fields with numpy
+(:mod:`crane_stiffness.serde.bulk`).
 
 Times are integer nanoseconds since the epoch (``*_ns``); ``stamp_s`` is the header stamp in seconds (float64).
 This module must not import rclpy (the analysis machine may have no ROS).
@@ -21,87 +18,21 @@ from __future__ import annotations
 
 import heapq
 import itertools
-import mmap
 import re
-import struct
 import warnings
-import zlib
-from collections.abc import Collection, Iterable, Iterator, Mapping, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Iterable, Iterator, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
 from typing import Any, NamedTuple
 
 import numpy as np
 
-from crane_stiffness.serde.bulk import SUPPORTED_TYPES, Decoder, gather, new_decoder
+from crane_stiffness.serde.bulk import SUPPORTED_TYPES, Decoder, new_decoder
 
-from .errors import (
-    BagCorruptError, BagDamageWarning, BagFormatError, BagNotFoundError, TopicNotFoundError,
-    UnsupportedTypeError,
-)
+from .errors import BagCorruptError, BagDamageWarning, BagNotFoundError, TopicNotFoundError, UnsupportedTypeError
+from .mcapfile import ChunkRef, McapFile
 from .metadata import METADATA_FILENAME, read_metadata_yaml
-
-MAGIC = b'\x89MCAP0\r\n'
-OP_HEADER, OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK, OP_MESSAGE_INDEX, OP_CHUNK_INDEX = range(1, 9)
-OP_ATTACHMENT, OP_ATTACHMENT_INDEX, OP_STATISTICS, OP_METADATA, OP_METADATA_INDEX = range(9, 14)
-OP_SUMMARY_OFFSET, OP_DATA_END = 14, 15
-MESSAGE_HEADER_SIZE = 31
-"""Bytes of an MCAP Message record before its data: opcode, length, channel, sequence, log and publish time."""
-
-_U16 = struct.Struct('<H')
-_U32 = struct.Struct('<I')
-_U64 = struct.Struct('<Q')
-_RECORD_HEAD = struct.Struct('<BQ')
-_FOOTER = struct.Struct('<QQI')
-_CHUNK_HEAD = struct.Struct('<QQQI')
-_STATS_HEAD = struct.Struct('<QHIIIIQQ')
-
-_MESSAGE_REC = np.dtype({
-    'names': ['op', 'length', 'channel', 'sequence', 'log_time', 'publish_time'],
-    'formats': ['u1', '<u8', '<u2', '<u4', '<u8', '<u8'],
-    'offsets': [0, 1, 9, 11, 15, 23], 'itemsize': MESSAGE_HEADER_SIZE,
-})
-# ------------------------------------------------------------------------------------------------ MCAP records --
-@dataclass(frozen=True)
-class SchemaRecord:
-    """An MCAP Schema: ``name`` is the type (``pkg/msg/Type``), ``data`` its ros2msg text."""
-
-    id: int
-    name: str
-    encoding: str
-    data: bytes
-
-
-@dataclass(frozen=True)
-class ChannelRecord:
-    """An MCAP Channel: one topic; ``metadata`` holds offered_qos_profiles and topic_type_hash."""
-
-    id: int
-    schema_id: int
-    topic: str
-    message_encoding: str
-    metadata: dict[str, str]
-
-
-@dataclass
-class ChunkRef:
-    """Where one chunk's records are in a file; ``index`` maps channel id → offset of its MessageIndex record.
-
-    A run of un-chunked top-level messages is described the same way with ``loose=True`` and no compression.
-    """
-
-    offset: int
-    records_offset: int
-    compressed_size: int
-    uncompressed_size: int
-    crc: int
-    compression: str
-    start_ns: int
-    end_ns: int
-    index: dict[int, int] | None = None
-    counts: dict[int, int] = field(default_factory=dict)
-    loose: bool = False
 
 
 class RawMessage(NamedTuple):
@@ -122,517 +53,6 @@ class TopicInfo:
     offered_qos_profiles: str = ''
     type_description_hash: str = ''
     message_definition: str = ''
-
-
-def _read_str(body: bytes, pos: int) -> tuple[str, int]:
-    (size,) = _U32.unpack_from(body, pos)
-    pos += 4
-    if pos + size > len(body):
-        raise ValueError('string runs past the end of its record')
-    return body[pos:pos + size].decode('utf-8'), pos + size
-
-
-def _read_str_map(body: bytes, pos: int) -> tuple[dict[str, str], int]:
-    (size,) = _U32.unpack_from(body, pos)
-    pos += 4
-    end = pos + size
-    if end > len(body):
-        raise ValueError('map runs past the end of its record')
-    out: dict[str, str] = {}
-    while pos < end:
-        key, pos = _read_str(body, pos)
-        out[key], pos = _read_str(body, pos)
-    return out, end
-
-
-def _read_id_map(body: bytes, pos: int) -> tuple[dict[int, int], int]:
-    (size,) = _U32.unpack_from(body, pos)
-    pos += 4
-    if pos + size > len(body) or size % 10:
-        raise ValueError('index map runs past the end of its record')
-    out = {}
-    for item in range(pos, pos + size, 10):
-        out[_U16.unpack_from(body, item)[0]] = _U64.unpack_from(body, item + 2)[0]
-    return out, pos + size
-
-
-def _parse_schema(body: bytes) -> SchemaRecord:
-    (sid,) = _U16.unpack_from(body, 0)
-    name, pos = _read_str(body, 2)
-    encoding, pos = _read_str(body, pos)
-    (size,) = _U32.unpack_from(body, pos)
-    if pos + 4 + size > len(body):
-        raise ValueError('schema data runs past the end of its record')
-    return SchemaRecord(sid, name, encoding, bytes(body[pos + 4:pos + 4 + size]))
-
-
-def _parse_channel(body: bytes) -> ChannelRecord:
-    cid, sid = struct.unpack_from('<HH', body, 0)
-    topic, pos = _read_str(body, 4)
-    encoding, pos = _read_str(body, pos)
-    meta, _ = _read_str_map(body, pos)
-    return ChannelRecord(cid, sid, topic, encoding, meta)
-
-
-def _parse_metadata(body: bytes) -> tuple[str, dict[str, str]]:
-    name, pos = _read_str(body, 0)
-    data, _ = _read_str_map(body, pos)
-    return name, data
-
-
-def _parse_chunk_head(buf: Any, offset: int, record_length: int) -> ChunkRef:
-    """Chunk record at ``offset`` whose body is ``record_length`` bytes (raises ValueError/struct.error if bad)."""
-    body_start = offset + 9
-    head = bytes(buf[body_start:body_start + min(record_length, 64 + 256)])
-    start_ns, end_ns, usize, crc = _CHUNK_HEAD.unpack_from(head, 0)
-    compression, pos = _read_str(head, _CHUNK_HEAD.size)
-    (csize,) = _U64.unpack_from(head, pos)
-    records_offset = body_start + pos + 8
-    if records_offset + csize > body_start + record_length:
-        raise ValueError('chunk records run past the end of the chunk record')
-    return ChunkRef(offset, records_offset, csize, usize, crc, compression, start_ns, end_ns)
-
-
-def _walk(data: bytes | memoryview, start: int, end: int) -> Iterator[tuple[int, int, int]]:
-    """(opcode, record offset, body length) of the records in ``data[start:end]``; stops at a cut record."""
-    pos = start
-    unpack = _RECORD_HEAD.unpack_from
-    while pos + 9 <= end:
-        opcode, length = unpack(data, pos)
-        if pos + 9 + length > end:
-            return
-        yield opcode, pos, length
-        pos += 9 + length
-
-
-# ------------------------------------------------------------------------------------------------- MCAP file --
-class McapFile:
-    """Structure of one MCAP file: schemas, channels, chunks, metadata records; robust to truncation.
-
-    Args:
-        path: the .mcap file.
-        strict: raise :class:`BagCorruptError` on damage instead of warning (truncation always only warns).
-        verify_crc: check each chunk's CRC32 when it has one.
-    """
-
-    def __init__(self, path: str | Path, *, strict: bool = False, verify_crc: bool = True) -> None:
-        self.path = Path(path)
-        self.strict = strict
-        self.verify_crc = verify_crc
-        self.problems: list[str] = []
-        self.schemas: dict[int, SchemaRecord] = {}
-        self.channels: dict[int, ChannelRecord] = {}
-        self.chunks: list[ChunkRef] = []
-        self.metadata: list[tuple[str, dict[str, str]]] = []
-        self.channel_counts: dict[int, int] = {}
-        self.profile = ''
-        self.library = ''
-        self.complete = False
-        """True when the file has a valid footer (the writer finished it)."""
-        self.readable_end = 0
-        """Offset up to which the file's records could be read."""
-        self.partial_chunk: int | None = None
-        """Offset of a chunk record cut short by the end of the file (its start is on disk)."""
-        self.start_ns: int | None = None
-        self.end_ns: int | None = None
-        self._zstd: Any = None
-        try:
-            self._file = open(self.path, 'rb')
-        except FileNotFoundError:
-            raise BagNotFoundError(f'MCAP file {self.path} does not exist') from None
-        try:
-            size = self.path.stat().st_size
-            if size < len(MAGIC) or self._file.read(len(MAGIC)) != MAGIC:
-                raise BagFormatError(f'{self.path} is not an MCAP file (bad or missing magic bytes)')
-            self._buf: Any = mmap.mmap(self._file.fileno(), 0, access=mmap.ACCESS_READ)
-            self.size = size
-            self._read_header()
-            if not self._read_summary():
-                self._scan()
-        except BaseException:
-            self.close()
-            raise
-
-    # -- lifetime --
-    def close(self) -> None:
-        """Release the file; arrays returned earlier stay valid (they are copies)."""
-        buf = getattr(self, '_buf', None)
-        if buf is not None:
-            try:
-                buf.close()
-            except BufferError:  # a view is still alive somewhere; the GC will release the map
-                pass
-            self._buf = None
-        if getattr(self, '_file', None) is not None:
-            self._file.close()
-            self._file = None
-
-    def __enter__(self) -> McapFile:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
-    # -- problems --
-    def _problem(self, message: str, *, corrupt: bool = True) -> None:
-        text = f'{self.path}: {message}'
-        self.problems.append(text)
-        if corrupt and self.strict:
-            raise BagCorruptError(text)
-        warnings.warn(text, BagDamageWarning, stacklevel=4)
-
-    # -- structure --
-    def _read_header(self) -> None:
-        try:
-            opcode, length = _RECORD_HEAD.unpack_from(self._buf, 8)
-            if opcode == OP_HEADER and 17 + length <= self.size:
-                head = bytes(self._buf[17:17 + length])
-                self.profile, pos = _read_str(head, 0)
-                self.library, _ = _read_str(head, pos)
-        except (struct.error, ValueError, UnicodeDecodeError):
-            pass  # reported by the scan if the file is damaged there
-
-    def _read_summary(self) -> bool:
-        buf, size = self._buf, self.size
-        footer = size - 8 - 29
-        if footer < 8 or buf[size - 8:size] != MAGIC or buf[footer] != OP_FOOTER:
-            return False
-        if _U64.unpack_from(buf, footer + 1)[0] != 20:
-            return False
-        summary_start, _, crc = _FOOTER.unpack_from(buf, footer + 9)
-        if summary_start == 0:
-            return False
-        if not 8 <= summary_start <= footer:
-            self._problem(f'footer points to an impossible summary offset {summary_start}; scanning instead')
-            return False
-        if crc and zlib.crc32(buf[summary_start:footer + 9 + 16]) != crc:
-            self._problem('summary checksum mismatch; scanning the file instead')
-            return False
-        chunk_indexes: list[tuple[int, int, dict[int, int], int]] = []
-        metadata_offsets: list[tuple[int, int]] = []
-        stats = None
-        summary = bytes(buf[summary_start:footer])
-        try:
-            for opcode, pos, length in _walk(summary, 0, len(summary)):
-                body = summary[pos + 9:pos + 9 + length]
-                if opcode == OP_SCHEMA:
-                    schema = _parse_schema(body)
-                    self.schemas[schema.id] = schema
-                elif opcode == OP_CHANNEL:
-                    channel = _parse_channel(body)
-                    self.channels[channel.id] = channel
-                elif opcode == OP_STATISTICS:
-                    stats = _STATS_HEAD.unpack_from(body, 0)
-                    self.channel_counts, _ = _read_id_map(body, _STATS_HEAD.size)
-                elif opcode == OP_CHUNK_INDEX:
-                    start_ns, end_ns, offset, length_ = struct.unpack_from('<QQQQ', body, 0)
-                    index, pos2 = _read_id_map(body, 32)
-                    (index_length,) = _U64.unpack_from(body, pos2)
-                    chunk_indexes.append((offset, length_, index if index_length else {}, index_length))
-                elif opcode == OP_METADATA_INDEX:
-                    offset, length_ = struct.unpack_from('<QQ', body, 0)
-                    metadata_offsets.append((offset, length_))
-        except (struct.error, ValueError, UnicodeDecodeError) as exc:
-            self._problem(f'unreadable summary ({exc}); scanning the file instead')
-            self.schemas.clear()
-            self.channels.clear()
-            self.channel_counts = {}
-            return False
-        if not chunk_indexes and (stats is None or stats[0] > 0):
-            self.schemas.clear()  # un-chunked file, or a summary without chunk indexes: scan
-            self.channels.clear()
-            self.channel_counts = {}
-            return False
-        for offset, length_, index, _ in sorted(chunk_indexes):
-            try:
-                if buf[offset] != OP_CHUNK or offset + length_ > size:
-                    raise ValueError('no chunk record at the indexed offset')
-                chunk = _parse_chunk_head(buf, offset, length_ - 9)
-            except (IndexError, struct.error, ValueError, UnicodeDecodeError) as exc:
-                self._problem(f'chunk at offset {offset} is unreadable ({exc}); its messages are skipped')
-                continue
-            chunk.index = dict(index) if index else None
-            self.chunks.append(chunk)
-        for offset, length_ in metadata_offsets:
-            try:
-                if buf[offset] != OP_METADATA:
-                    raise ValueError('no metadata record at the indexed offset')
-                self.metadata.append(_parse_metadata(bytes(buf[offset + 9:offset + length_])))
-            except (IndexError, struct.error, ValueError, UnicodeDecodeError) as exc:
-                self._problem(f'metadata record at offset {offset} is unreadable ({exc})')
-        if stats is not None:
-            self.start_ns, self.end_ns = (stats[6], stats[7]) if stats[0] else (None, None)
-        else:
-            self._count_from_indexes()
-            self._times_from_chunks()
-        self.complete = True
-        self.readable_end = size
-        return True
-
-    def _scan(self) -> None:
-        buf, size = self._buf, self.size
-        pos = 8
-        loose: list[int] = []  # [start, end] of the current run of top-level messages
-        last_chunk: ChunkRef | None = None
-        stopped = ''
-        in_summary = False
-        while pos < size:
-            if pos + 9 > size:
-                stopped = 'cut'
-                break
-            opcode, length = _RECORD_HEAD.unpack_from(buf, pos)
-            end = pos + 9 + length
-            if opcode == 0 or 0x10 <= opcode < 0x80:
-                stopped = 'corrupt'
-                break
-            if end > size:
-                if opcode == OP_CHUNK:
-                    self.partial_chunk = pos
-                stopped = 'cut'
-                break
-            if opcode in (OP_MESSAGE, OP_SCHEMA, OP_CHANNEL) and not in_summary and (opcode == OP_MESSAGE or loose):
-                if not loose:
-                    loose[:] = [pos, end]
-                loose[1] = end
-            elif loose:
-                self._add_loose(loose)
-                loose = []
-            try:
-                if opcode == OP_HEADER:
-                    head = bytes(buf[pos + 9:end])
-                    self.profile, p2 = _read_str(head, 0)
-                    self.library, _ = _read_str(head, p2)
-                elif opcode == OP_SCHEMA:
-                    schema = _parse_schema(bytes(buf[pos + 9:end]))
-                    self.schemas[schema.id] = schema
-                elif opcode == OP_CHANNEL:
-                    channel = _parse_channel(bytes(buf[pos + 9:end]))
-                    self.channels[channel.id] = channel
-                elif opcode == OP_CHUNK and not in_summary:
-                    last_chunk = _parse_chunk_head(buf, pos, length)
-                    self.chunks.append(last_chunk)
-                elif opcode == OP_MESSAGE_INDEX and last_chunk is not None and not in_summary:
-                    channel_id, records = struct.unpack_from('<HI', buf, pos + 9)
-                    if 6 + records > length or records % 16:
-                        raise ValueError('message index longer than its record')
-                    if last_chunk.index is None:
-                        last_chunk.index = {}
-                    last_chunk.index[channel_id] = pos
-                    last_chunk.counts[channel_id] = records // 16
-                elif opcode == OP_METADATA and not in_summary:
-                    self.metadata.append(_parse_metadata(bytes(buf[pos + 9:end])))
-                elif opcode == OP_DATA_END:
-                    in_summary = True
-                elif opcode == OP_FOOTER:
-                    self.complete = True
-                    pos = end
-                    break
-            except (struct.error, ValueError, UnicodeDecodeError) as exc:
-                if opcode == OP_CHUNK:
-                    self._problem(f'chunk at offset {pos} is unreadable ({exc}); its messages are skipped')
-                else:
-                    self._problem(f'record (opcode {opcode:#04x}) at offset {pos} is unreadable ({exc})')
-            pos = end
-        if loose:
-            self._add_loose(loose)
-        self.readable_end = pos
-        if stopped == 'corrupt':
-            self._problem(f'unreadable bytes at offset {pos} (opcode {buf[pos]:#04x}); the {size - pos} bytes '
-                          f'from there on are ignored')
-        elif stopped == 'cut' or not self.complete:
-            self._problem(
-                f'file is truncated or unfinished (no footer): read {len(self.chunks)} complete chunk(s), '
-                f'ignored the last {size - pos} byte(s) from offset {pos}'
-                '; `python -m crane_stiffness.bag.recover` rewrites it as a valid file', corrupt=False)
-        self._discover_channels()
-        self._times_from_chunks()
-
-    def _add_loose(self, run: list[int]) -> None:
-        start, end = run
-        self.chunks.append(ChunkRef(start, start, end - start, end - start, 0, '', 0, 2**64 - 1, loose=True))
-
-    def _discover_channels(self) -> None:
-        """Find schemas/channels inside chunks (where writers put them) and count messages of un-indexed chunks."""
-        for chunk in self.chunks:
-            if chunk.index is not None and set(chunk.index) <= set(self.channels):
-                continue
-            data = self.chunk_data(chunk)
-            if data is None:
-                continue
-            table, others = self._chunk_layout(chunk, data, None)
-            raw = data.tobytes() if others else b''
-            for opcode, pos, length in others:
-                try:
-                    if opcode == OP_SCHEMA:
-                        schema = _parse_schema(raw[pos + 9:pos + 9 + length])
-                        self.schemas[schema.id] = schema
-                    elif opcode == OP_CHANNEL:
-                        channel = _parse_channel(raw[pos + 9:pos + 9 + length])
-                        self.channels[channel.id] = channel
-                except (struct.error, ValueError, UnicodeDecodeError) as exc:
-                    self._problem(f'record in chunk at offset {chunk.offset} is unreadable ({exc})')
-            if chunk.index is None:
-                chunk.counts = {cid: len(offsets) for cid, offsets in table.items()}
-                if chunk.loose and table:
-                    times = [gather(data, offsets, '<u8') for offsets in
-                             [o + 15 for o in table.values()]]
-                    merged = np.concatenate(times)
-                    chunk.start_ns, chunk.end_ns = int(merged.min()), int(merged.max())
-        self._count_from_indexes()
-
-    def _count_from_indexes(self) -> None:
-        counts: dict[int, int] = {}
-        for chunk in self.chunks:
-            for cid, count in chunk.counts.items():
-                counts[cid] = counts.get(cid, 0) + count
-            if chunk.index is not None and not chunk.counts:
-                for cid, pos in chunk.index.items():
-                    (records,) = _U32.unpack_from(self._buf, pos + 11)
-                    chunk.counts[cid] = records // 16
-                    counts[cid] = counts.get(cid, 0) + records // 16
-        self.channel_counts = counts
-
-    def _times_from_chunks(self) -> None:
-        real = [c for c in self.chunks if c.counts or c.index is None]
-        real = [c for c in real if not (c.loose and c.end_ns == 2**64 - 1)]
-        if real:
-            self.start_ns = min(c.start_ns for c in real)
-            self.end_ns = max(c.end_ns for c in real)
-
-    # -- chunk contents --
-    def chunk_data(self, chunk: ChunkRef) -> np.ndarray | None:
-        """The chunk's uncompressed records as a uint8 array, or None (with a warning) when damaged."""
-        raw = self._buf[chunk.records_offset:chunk.records_offset + chunk.compressed_size]
-        try:
-            if chunk.compression == '':
-                data = raw
-            elif chunk.compression == 'zstd':
-                if self._zstd is None:
-                    import zstandard
-                    self._zstd = zstandard.ZstdDecompressor()
-                data = self._zstd.decompress(raw, max_output_size=chunk.uncompressed_size)
-            elif chunk.compression == 'lz4':
-                import lz4.frame
-                data = lz4.frame.decompress(raw)
-            else:
-                self._problem(f'chunk at offset {chunk.offset} uses unsupported compression '
-                              f'{chunk.compression!r}; skipped')
-                return None
-        except Exception as exc:  # zstd/lz4 raise their own error types on damaged input
-            self._problem(f'chunk at offset {chunk.offset} does not decompress ({exc}); its messages are skipped')
-            return None
-        if len(data) != chunk.uncompressed_size:
-            self._problem(f'chunk at offset {chunk.offset} decompressed to {len(data)} bytes, '
-                          f'expected {chunk.uncompressed_size}; its messages are skipped')
-            return None
-        if self.verify_crc and chunk.crc and zlib.crc32(data) != chunk.crc:
-            self._problem(f'chunk at offset {chunk.offset} fails its CRC check; its messages are skipped')
-            return None
-        return np.frombuffer(data, dtype=np.uint8)
-
-    def _index_offsets(self, pos: int) -> np.ndarray:
-        channel_id, records = struct.unpack_from('<HI', self._buf, pos + 9)
-        raw = self._buf[pos + 15:pos + 15 + records]
-        pairs = np.frombuffer(raw, dtype='<u8').reshape(-1, 2)
-        return np.sort(pairs[:, 1].astype(np.int64))
-
-    def _chunk_layout(self, chunk: ChunkRef, data: np.ndarray, channels: Collection[int] | None
-                      ) -> tuple[dict[int, np.ndarray], list[tuple[int, int, int]]]:
-        """Message offsets per channel in ``data`` (file order), and the other records (opcode, offset, length).
-
-        The other records are only looked for when ``channels`` is None.
-        """
-        size = data.size
-        if chunk.index is not None:
-            table = {cid: self._index_offsets(pos) for cid, pos in chunk.index.items()
-                     if channels is None or cid in channels}
-            if channels is not None:
-                return table, []
-            if not table:
-                return table, list(_walk(data.tobytes(), 0, size))
-            offsets = np.sort(np.concatenate(list(table.values())))
-            offsets = offsets[offsets + 9 <= size]
-            ends = offsets + 9 + gather(data, offsets + 1, '<u8').astype(np.int64)
-            starts = np.concatenate([[0], ends])
-            stops = np.concatenate([offsets, [size]])
-            gaps = [(int(a), int(b)) for a, b in zip(starts, stops) if b > a]
-            others: list[tuple[int, int, int]] = []
-            if gaps:
-                raw = data.tobytes()
-                for a, b in gaps:
-                    others.extend(r for r in _walk(raw, a, b) if r[0] != OP_MESSAGE)
-            return table, others
-        raw = data.tobytes()
-        found: dict[int, list[int]] = {}
-        others = []
-        for opcode, pos, length in _walk(raw, 0, size):
-            if opcode == OP_MESSAGE and length >= 22:
-                cid = _U16.unpack_from(raw, pos + 9)[0]
-                if channels is None or cid in channels:
-                    found.setdefault(cid, []).append(pos)
-            elif channels is None:
-                others.append((opcode, pos, length))
-        return {cid: np.asarray(v, dtype=np.int64) for cid, v in found.items()}, others
-
-    def message_headers(self, chunk: ChunkRef, data: np.ndarray, channels: Collection[int] | None
-                        ) -> dict[int, tuple[np.ndarray, np.ndarray]]:
-        """Per channel: (valid record offsets, their 31-byte MCAP message headers), damaged entries dropped."""
-        table, _ = self._chunk_layout(chunk, data, channels)
-        result = {}
-        for cid, offsets in table.items():
-            inside = (offsets >= 0) & (offsets + MESSAGE_HEADER_SIZE <= data.size)
-            head = gather(data, np.where(inside, offsets, 0), _MESSAGE_REC)
-            ok = (inside & (head['op'] == OP_MESSAGE) & (head['channel'] == cid) & (head['length'] >= 22)
-                  & (offsets + 9 + head['length'].astype(np.int64) <= data.size))
-            if not ok.all():
-                self._problem(f'{int((~ok).sum())} message index entries of channel {cid} in chunk at offset '
-                              f'{chunk.offset} do not point at messages; those messages are skipped')
-                offsets, head = offsets[ok], head[ok]
-            result[cid] = (offsets, head)
-        return result
-
-    def iter_chunk_messages(self, chunk: ChunkRef, data: np.ndarray, channels: Collection[int] | None = None
-                            ) -> Iterator[tuple[int, int, int, int, bytes]]:
-        """(channel id, sequence, log_time_ns, publish_time_ns, data) of a chunk's messages in file order."""
-        heads = self.message_headers(chunk, data, channels)
-        if not heads:
-            return
-        offsets = np.concatenate([o for o, _ in heads.values()])
-        head = np.concatenate([h for _, h in heads.values()])
-        order = np.argsort(offsets, kind='stable')
-        raw = data.tobytes()
-        for off, rec in zip(offsets[order].tolist(), head[order].tolist()):
-            _, length, cid, seq, log, pub = rec
-            yield cid, seq, log, pub, raw[off + MESSAGE_HEADER_SIZE:off + 9 + length]
-
-    def partial_chunk_messages(self) -> list[tuple[int, int, int, int, bytes]]:
-        """Complete messages at the start of a chunk cut short by the end of the file (for recovery)."""
-        if self.partial_chunk is None:
-            return []
-        buf, pos = self._buf, self.partial_chunk
-        try:
-            start_ns, end_ns, usize, _ = _CHUNK_HEAD.unpack_from(buf, pos + 9)
-            compression, p2 = _read_str(bytes(buf[pos + 9 + _CHUNK_HEAD.size:pos + 9 + _CHUNK_HEAD.size + 260]), 0)
-            records_offset = pos + 9 + _CHUNK_HEAD.size + p2 + 8
-            raw = bytes(buf[records_offset:self.size])
-            if compression == '':
-                data = raw
-            elif compression == 'zstd':
-                import zstandard
-                data = zstandard.ZstdDecompressor().decompressobj().decompress(raw)
-            elif compression == 'lz4':
-                import lz4.frame
-                data = lz4.frame.LZ4FrameDecompressor().decompress(raw)
-            else:
-                return []
-        except Exception:  # whatever is left of the chunk is not decodable: nothing to save
-            return []
-        out = []
-        for opcode, p, length in _walk(data, 0, min(len(data), usize)):
-            if opcode == OP_MESSAGE and length >= 22:
-                cid, seq, log, pub = struct.unpack_from('<HIQQ', data, p + 9)
-                out.append((cid, seq, log, pub, data[p + MESSAGE_HEADER_SIZE:p + 9 + length]))
-        return out
 
 
 # -------------------------------------------------------------------------------------------------- bag reader --
@@ -858,12 +278,11 @@ class BagReader:
             data = mcap_file.chunk_data(chunk)
             if data is None:
                 continue
-            for cid, (offsets, head) in mcap_file.message_headers(chunk, data, channels).items():
-                if not offsets.size:
+            for cid, found in mcap_file.chunk_messages(chunk, data, channels).items():
+                if not len(found):
                     continue
                 topic = channels[cid]
-                length = head['length'].astype(np.int64) - 22
-                cols, valid = decoders[topic].decode(data, offsets + MESSAGE_HEADER_SIZE, length)
+                cols, valid = decoders[topic].decode(found.buf, found.data_offset, found.data_length)
                 if not valid.all():
                     text = (f'{mcap_file.path}: {int((~valid).sum())} message(s) of {topic} in chunk at offset '
                             f'{chunk.offset} do not have the {decoders[topic].msg_type} layout; skipped')
@@ -873,7 +292,7 @@ class BagReader:
                     if not valid.any():
                         continue
                 cols = {k: v[valid] for k, v in cols.items()}
-                cols['log_time_ns'] = head['log_time'][valid].astype(np.int64)
+                cols['log_time_ns'] = found.log_time[valid].astype(np.int64)
                 parts[topic].append(cols)
         return {topic: self._assemble(decoders[topic], parts[topic], start_ns, end_ns) for topic in topics}
 
@@ -898,7 +317,4 @@ class BagReader:
         return decoder.to_array(columns)
 
 
-__all__ = [
-    'BagReader', 'ChannelRecord', 'ChunkRef', 'McapFile', 'RawMessage', 'SUPPORTED_TYPES', 'SchemaRecord',
-    'TopicInfo',
-]
+__all__ = ['BagReader', 'RawMessage', 'SUPPORTED_TYPES', 'TopicInfo']

@@ -27,11 +27,12 @@ from pathlib import Path
 from mcap.writer import Writer as McapWriter
 
 from .errors import BagError, BagFormatError, BagNotFoundError
-from .reader import McapFile, _file_order
+from .mcapfile import McapFile
 from .metadata import (
     METADATA_FILENAME, ROSBAG2_METADATA, FileStats, TopicStats, build_bag_metadata, read_metadata_yaml,
     serialized_bag_metadata, write_metadata_yaml,
 )
+from .reader import _file_order
 from .writer import COMPRESSIONS, DEFAULT_CHUNK_SIZE, LIBRARY
 
 
