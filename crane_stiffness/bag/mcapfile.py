@@ -5,121 +5,32 @@ each raw chunk (``StreamReader(..., emit_chunks=True)`` at the chunk's offset) a
 finished (killed by SIGKILL), every record on disk in order up to the library's end-of-data error where the file
 was cut, so such a file still gives every complete chunk. Damage is reported with
 :class:`~.errors.BagDamageWarning` (raised as :class:`~.errors.BagCorruptError` when ``strict``) and the readable
-part is used.
-
-Ours is what makes reading fast and safe: decompression with the chunk's CRC check, and the vectorised gather of the
-messages inside a decompressed chunk. Their offsets come from the chunk's MessageIndex records, each read as one
-numpy array; their 31-byte record headers (length, channel, sequence, log and publish time) are gathered with one
-numpy fancy index per channel. The library's ``MessageIndex.read`` and ``Message.read`` build Python objects at
-about 2 µs per message, more than the whole bulk decode costs; they are used only where a chunk has no message
-index (or for messages outside chunks).
+part is used. What is inside a chunk (decompression, the CRC check, the vectorised gather of its messages) is
+``chunks.py``.
 """
 from __future__ import annotations
 
-import struct
 import warnings
 import zlib
 from collections.abc import Collection, Iterator
-from dataclasses import dataclass, field
 from io import BytesIO
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from mcap.data_stream import ReadDataStream
-from mcap.exceptions import McapError
 from mcap.opcode import Opcode
 from mcap.reader import FOOTER_SIZE, SeekingReader
 from mcap.records import Channel, Chunk, DataEnd, Footer, Header, Message, MessageIndex, Metadata, Schema
-from mcap.stream_reader import MAGIC_SIZE, StreamReader, breakup_chunk, read_magic
+from mcap.stream_reader import MAGIC_SIZE, StreamReader, read_magic
 
-from crane_stiffness.serde.bulk import gather
-
+from .chunks import (
+    COMPRESSIONS, LOOSE_END, READ_ERRORS, ChunkMessages, ChunkRef, decompress, gather_messages, in_file_order,
+    index_offsets, messages_from_records, partial_chunk_messages, records_in,
+)
 from .errors import BagCorruptError, BagDamageWarning, BagFormatError, BagNotFoundError
 
-MESSAGE_HEADER_SIZE = 31
-"""Bytes of an MCAP Message record before its data: opcode, length, channel, sequence, log and publish time."""
-
-_MESSAGE_HEADER = np.dtype({
-    'names': ['op', 'length', 'channel', 'sequence', 'log_time', 'publish_time'],
-    'formats': ['u1', '<u8', '<u2', '<u4', '<u8', '<u8'],
-    'offsets': [0, 1, 9, 11, 15, 23], 'itemsize': MESSAGE_HEADER_SIZE,
-})
-_MESSAGE_INDEX_HEAD = np.dtype({
-    'names': ['op', 'length', 'channel', 'records_length'], 'formats': ['u1', '<u8', '<u2', '<u4'],
-    'offsets': [0, 1, 9, 11], 'itemsize': 15,
-})
-_READ_ERRORS = (McapError, struct.error, ValueError, IndexError, KeyError, ArithmeticError, EOFError, OSError)
-"""What the library (with struct and UTF-8 decoding under it) raises on damaged or cut data."""
 _OPCODES = frozenset(int(op) for op in Opcode)
-_LOOSE_END = 2**64 - 1
-
-
-@dataclass
-class ChunkRef:
-    """Where one chunk is in a file. ``index`` maps channel id → file offset of its MessageIndex record (None when
-    the chunk has no index); ``offsets`` holds the message offsets per channel when a scan already read them.
-
-    A run of messages outside chunks is described the same way with ``loose=True`` and no compression.
-    """
-
-    offset: int
-    records_offset: int
-    compressed_size: int
-    uncompressed_size: int
-    compression: str
-    start_ns: int
-    end_ns: int
-    length: int = 0
-    """Bytes of the whole Chunk record (opcode and length included); its MessageIndex records follow it."""
-    index_length: int = 0
-    """Bytes of the chunk's MessageIndex records."""
-    index: dict[int, int] | None = None
-    counts: dict[int, int] = field(default_factory=dict)
-    offsets: dict[int, np.ndarray] | None = None
-    loose: bool = False
-
-
-@dataclass
-class ChunkMessages:
-    """The messages of one channel in one chunk, in file order: CDR data at ``buf[data_offset:+data_length]``."""
-
-    buf: np.ndarray
-    position: np.ndarray
-    """Order of the messages in the chunk (byte offset of their records, or their rank)."""
-    data_offset: np.ndarray
-    data_length: np.ndarray
-    log_time: np.ndarray
-    publish_time: np.ndarray
-    sequence: np.ndarray
-
-    def __len__(self) -> int:
-        return int(self.position.size)
-
-
-def _raw_chunk(data: bytes) -> Chunk:
-    """Uncompressed chunk records as a Chunk record, for the library's ``breakup_chunk``."""
-    return Chunk(compression='', data=data, message_end_time=0, message_start_time=0, uncompressed_crc=0,
-                 uncompressed_size=len(data))
-
-
-def _from_records(messages: list[Message], channels: Collection[int] | None) -> dict[int, ChunkMessages]:
-    """Per channel, the library's Message records as :class:`ChunkMessages` over one buffer of their data."""
-    wanted: dict[int, list[tuple[int, Message]]] = {}
-    for rank, message in enumerate(messages):
-        if channels is None or message.channel_id in channels:
-            wanted.setdefault(message.channel_id, []).append((rank, message))
-    out = {}
-    for cid, items in wanted.items():
-        lengths = np.array([len(m.data) for _, m in items], dtype=np.int64)
-        starts = np.concatenate([[0], np.cumsum(lengths)[:-1]]).astype(np.int64)
-        out[cid] = ChunkMessages(
-            buf=np.frombuffer(b''.join(m.data for _, m in items) or b'\0', dtype=np.uint8),
-            position=np.array([r for r, _ in items], dtype=np.int64), data_offset=starts, data_length=lengths,
-            log_time=np.array([m.log_time for _, m in items], dtype=np.uint64),
-            publish_time=np.array([m.publish_time for _, m in items], dtype=np.uint64),
-            sequence=np.array([m.sequence for _, m in items], dtype=np.uint32))
-    return out
 
 
 class McapFile:
@@ -162,12 +73,12 @@ class McapFile:
             self.size = self.path.stat().st_size
             try:
                 reader = SeekingReader(self._file)
-            except _READ_ERRORS:
+            except READ_ERRORS:
                 raise BagFormatError(f'{self.path} is not an MCAP file (bad or missing magic bytes)') from None
             try:
                 header = reader.get_header()
                 self.profile, self.library = header.profile, header.library
-            except _READ_ERRORS:
+            except READ_ERRORS:
                 pass  # reported by the scan if the file is damaged there
             if not self._read_summary():
                 self._scan()
@@ -213,7 +124,7 @@ class McapFile:
             read_magic(ReadDataStream(BytesIO(self._read_at(self.size - MAGIC_SIZE, MAGIC_SIZE))))
             self._file.seek(self.size - MAGIC_SIZE - FOOTER_SIZE)
             record = next(StreamReader(self._file, skip_magic=True, record_size_limit=FOOTER_SIZE).records)
-        except (StopIteration, *_READ_ERRORS):
+        except (StopIteration, *READ_ERRORS):
             return None
         return record if isinstance(record, Footer) else None
 
@@ -232,7 +143,7 @@ class McapFile:
         try:
             self._file.seek(0)
             summary = SeekingReader(self._file).get_summary()
-        except _READ_ERRORS as exc:
+        except READ_ERRORS as exc:
             self._problem(f'unreadable summary ({exc}); scanning the file instead')
             return False
         stats = summary.statistics if summary is not None else None
@@ -243,7 +154,7 @@ class McapFile:
             offset, length = entry.chunk_start_offset, entry.chunk_length
             try:
                 head = self._chunk_head(offset, length)
-            except (StopIteration, *_READ_ERRORS) as exc:
+            except (StopIteration, *READ_ERRORS) as exc:
                 self._problem(f'chunk at offset {offset} is unreadable ({exc}); its messages are skipped')
                 continue
             self.chunks.append(ChunkRef(
@@ -257,7 +168,7 @@ class McapFile:
                 if not isinstance(record, Metadata):
                     raise ValueError('no metadata record at the indexed offset')
                 self.metadata.append((record.name, dict(record.metadata)))
-            except (StopIteration, *_READ_ERRORS) as exc:
+            except (StopIteration, *READ_ERRORS) as exc:
                 self._problem(f'metadata record at offset {entry.offset} is unreadable ({exc})')
         if stats is not None:
             self.channel_counts = dict(stats.channel_message_counts)
@@ -304,7 +215,7 @@ class McapFile:
                 record = next(records)
             except StopIteration:
                 break
-            except _READ_ERRORS as exc:
+            except READ_ERRORS as exc:
                 head = self._record_head(pos)
                 if head is None:
                     stopped = 'cut'
@@ -394,8 +305,8 @@ class McapFile:
             if data is None:
                 continue
             try:
-                records = breakup_chunk(_raw_chunk(data.tobytes()))
-            except _READ_ERRORS as exc:
+                records = records_in(data.tobytes())
+            except READ_ERRORS as exc:
                 self._problem(f'record in chunk at offset {chunk.offset} is unreadable ({exc})')
                 continue
             for record in records:
@@ -421,7 +332,7 @@ class McapFile:
 
     def _times_from_chunks(self) -> None:
         real = [c for c in self.chunks if c.counts or c.index is None]
-        real = [c for c in real if not (c.loose and c.end_ns == _LOOSE_END)]
+        real = [c for c in real if not (c.loose and c.end_ns == LOOSE_END)]
         if real:
             self.start_ns = min(c.start_ns for c in real)
             self.end_ns = max(c.end_ns for c in real)
@@ -435,24 +346,18 @@ class McapFile:
             record = next(self._records_from(chunk.offset))
             if not isinstance(record, Chunk):
                 raise ValueError('no chunk record at this offset')
-        except (StopIteration, *_READ_ERRORS) as exc:
+        except (StopIteration, *READ_ERRORS) as exc:
             self._problem(f'chunk at offset {chunk.offset} is unreadable ({exc}); its messages are skipped')
             return None
+        if record.compression not in COMPRESSIONS:
+            self._problem(f'chunk at offset {chunk.offset} uses unsupported compression {record.compression!r}; '
+                          'skipped')
+            return None
         try:
-            if record.compression == '':
-                data = record.data
-            elif record.compression == 'zstd':
-                if self._zstd is None:
-                    import zstandard
-                    self._zstd = zstandard.ZstdDecompressor()
-                data = self._zstd.decompress(record.data, max_output_size=record.uncompressed_size)
-            elif record.compression == 'lz4':
-                import lz4.frame
-                data = lz4.frame.decompress(record.data)
-            else:
-                self._problem(f'chunk at offset {chunk.offset} uses unsupported compression '
-                              f'{record.compression!r}; skipped')
-                return None
+            if record.compression == 'zstd' and self._zstd is None:
+                import zstandard
+                self._zstd = zstandard.ZstdDecompressor()
+            data = decompress(record.compression, record.data, record.uncompressed_size, self._zstd)
         except Exception as exc:  # zstd/lz4 raise their own error types on damaged input
             self._problem(f'chunk at offset {chunk.offset} does not decompress ({exc}); its messages are skipped')
             return None
@@ -472,67 +377,32 @@ class McapFile:
         if not chunk.index:
             return {}
         start = chunk.offset + chunk.length
-        region = self._read_at(start, chunk.index_length)
-        out = {}
-        for cid, pos in chunk.index.items():
-            rel = pos - start
-            head = np.frombuffer(region, _MESSAGE_INDEX_HEAD, count=1, offset=rel)[0] \
-                if 0 <= rel <= len(region) - _MESSAGE_INDEX_HEAD.itemsize else None
-            size = int(head['records_length']) if head is not None else -1
-            if head is None or head['op'] != Opcode.MESSAGE_INDEX or head['channel'] != cid or size % 16 \
-                    or rel + _MESSAGE_INDEX_HEAD.itemsize + size > len(region):
-                self._problem(f'message index of channel {cid} of the chunk at offset {chunk.offset} is unreadable; '
-                              'its messages are skipped')
-                continue
-            entries = np.frombuffer(region, '<u8', count=size // 8, offset=rel + _MESSAGE_INDEX_HEAD.itemsize)
-            out[cid] = np.sort(entries[1::2].astype(np.int64))
-        return out
+        offsets, bad = index_offsets(self._read_at(start, chunk.index_length), start, chunk.index)
+        for cid in bad:
+            self._problem(f'message index of channel {cid} of the chunk at offset {chunk.offset} is unreadable; '
+                          'its messages are skipped')
+        return offsets
 
     def chunk_messages(self, chunk: ChunkRef, data: np.ndarray, channels: Collection[int] | None = None
                        ) -> dict[int, ChunkMessages]:
         """Per channel (all, or those in ``channels``): the chunk's messages; damaged index entries are dropped."""
         if chunk.loose or chunk.index is None:
             try:
-                records = breakup_chunk(_raw_chunk(data.tobytes()))
-            except _READ_ERRORS as exc:
+                return messages_from_records(records_in(data.tobytes()), channels)
+            except READ_ERRORS as exc:
                 self._problem(f'record in chunk at offset {chunk.offset} is unreadable ({exc}); its messages are '
                               'skipped')
                 return {}
-            return _from_records([r for r in records if isinstance(r, Message)], channels)
-        result = {}
-        for cid, offsets in self._index_offsets(chunk).items():
-            if channels is not None and cid not in channels:
-                continue
-            inside = (offsets >= 0) & (offsets + MESSAGE_HEADER_SIZE <= data.size)
-            head = gather(data, np.where(inside, offsets, 0), _MESSAGE_HEADER)
-            ok = (inside & (head['op'] == Opcode.MESSAGE) & (head['channel'] == cid) & (head['length'] >= 22)
-                  & (offsets + 9 + head['length'].astype(np.int64) <= data.size))
-            if not ok.all():
-                self._problem(f'{int((~ok).sum())} message index entries of channel {cid} in chunk at offset '
-                              f'{chunk.offset} do not point at messages; those messages are skipped')
-                offsets, head = offsets[ok], head[ok]
-            result[cid] = ChunkMessages(
-                buf=data, position=offsets, data_offset=offsets + MESSAGE_HEADER_SIZE,
-                data_length=head['length'].astype(np.int64) - 22, log_time=head['log_time'],
-                publish_time=head['publish_time'], sequence=head['sequence'])
+        result, bad = gather_messages(data, self._index_offsets(chunk), channels)
+        for cid, count in bad.items():
+            self._problem(f'{count} message index entries of channel {cid} in chunk at offset {chunk.offset} do not '
+                          'point at messages; those messages are skipped')
         return result
 
     def iter_chunk_messages(self, chunk: ChunkRef, data: np.ndarray, channels: Collection[int] | None = None
                             ) -> Iterator[tuple[int, int, int, int, bytes]]:
         """(channel id, sequence, log_time_ns, publish_time_ns, data) of a chunk's messages in file order."""
-        raws: dict[int, bytes] = {}
-        rows = []
-        for cid, table in self.chunk_messages(chunk, data, channels).items():
-            raw = raws.get(id(table.buf))
-            if raw is None:
-                raw = raws[id(table.buf)] = table.buf.tobytes()
-            for pos, start, size, log, pub, seq in zip(
-                    table.position.tolist(), table.data_offset.tolist(), table.data_length.tolist(),
-                    table.log_time.tolist(), table.publish_time.tolist(), table.sequence.tolist()):
-                rows.append((pos, cid, seq, log, pub, raw[start:start + size]))
-        rows.sort(key=lambda row: row[0])
-        for _, cid, seq, log, pub, payload in rows:
-            yield cid, seq, log, pub, payload
+        yield from in_file_order(self.chunk_messages(chunk, data, channels))
 
     def partial_chunk_messages(self) -> list[tuple[int, int, int, int, bytes]]:
         """Complete messages at the start of a chunk cut short by the end of the file (for recovery)."""
@@ -543,28 +413,9 @@ class McapFile:
             stream.read1()
             stream.read8()
             chunk = Chunk.read(stream)  # its data is what is left of the records on disk
-            if chunk.compression == '':
-                data = chunk.data
-            elif chunk.compression == 'zstd':
-                import zstandard
-                data = zstandard.ZstdDecompressor().decompressobj().decompress(chunk.data)
-            elif chunk.compression == 'lz4':
-                import lz4.frame
-                data = lz4.frame.LZ4FrameDecompressor().decompress(chunk.data)
-            else:
-                return []
-        except Exception:  # whatever is left of the chunk is not decodable: nothing to save
+        except READ_ERRORS:
             return []
-        out = []
-        records = StreamReader(BytesIO(data[:chunk.uncompressed_size]), skip_magic=True).records
-        while True:
-            try:
-                record = next(records)
-            except (StopIteration, *_READ_ERRORS):  # the end of what decompressed: a cut record
-                break
-            if isinstance(record, Message):
-                out.append((record.channel_id, record.sequence, record.log_time, record.publish_time, record.data))
-        return out
+        return partial_chunk_messages(chunk)
 
 
-__all__ = ['ChunkMessages', 'ChunkRef', 'MESSAGE_HEADER_SIZE', 'McapFile']
+__all__ = ['McapFile']

@@ -31,7 +31,8 @@ import numpy as np
 from crane_stiffness.serde.bulk import SUPPORTED_TYPES, Decoder, new_decoder
 
 from .errors import BagCorruptError, BagDamageWarning, BagNotFoundError, TopicNotFoundError, UnsupportedTypeError
-from .mcapfile import ChunkRef, McapFile
+from .chunks import ChunkRef
+from .mcapfile import McapFile
 from .metadata import METADATA_FILENAME, read_metadata_yaml
 
 
