@@ -23,7 +23,7 @@ from mcap.stream_reader import StreamReader, breakup_chunk
 
 from crane_stiffness.serde.bulk import gather
 
-READ_ERRORS = (McapError, struct.error, ValueError, IndexError, KeyError, ArithmeticError, EOFError, OSError)
+READ_ERRORS = (McapError, struct.error, ValueError, IndexError, KeyError, ArithmeticError)
 """What the library (with struct and UTF-8 decoding under it) raises on damaged or cut data."""
 COMPRESSIONS = ('', 'zstd', 'lz4')
 """Chunk compressions that can be read."""
