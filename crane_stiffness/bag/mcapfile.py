@@ -10,6 +10,7 @@ part is used. What is inside a chunk (decompression, the CRC check, the vectoris
 """
 from __future__ import annotations
 
+import os
 import warnings
 import zlib
 from collections.abc import Collection, Iterator
@@ -108,8 +109,9 @@ class McapFile:
         warnings.warn(text, BagDamageWarning, stacklevel=4)
 
     def _read_at(self, offset: int, size: int) -> bytes:
-        self._file.seek(offset)
-        return self._file.read(size)
+        """``size`` bytes (fewer at the end of the file) from ``offset``, without using the file position: chunks
+        are read this way, so a player's thread may read them while another reads the same file."""
+        return os.pread(self._file.fileno(), size, offset)
 
     def _records_from(self, offset: int, *, skip_magic: bool = True) -> Iterator[Any]:
         """The library's records from ``offset`` on (chunks raw)."""
@@ -343,7 +345,8 @@ class McapFile:
         if chunk.loose:
             return np.frombuffer(self._read_at(chunk.records_offset, chunk.compressed_size), dtype=np.uint8)
         try:
-            record = next(self._records_from(chunk.offset))
+            raw = BytesIO(self._read_at(chunk.offset, chunk.length))
+            record = next(StreamReader(raw, skip_magic=True, emit_chunks=True).records)
             if not isinstance(record, Chunk):
                 raise ValueError('no chunk record at this offset')
         except (StopIteration, *READ_ERRORS) as exc:
