@@ -33,7 +33,7 @@ from crane_stiffness.serde.bulk import SUPPORTED_TYPES, Decoder, new_decoder
 from .errors import BagCorruptError, BagDamageWarning, BagNotFoundError, TopicNotFoundError, UnsupportedTypeError
 from .chunks import ChunkRef
 from .mcapfile import McapFile
-from .metadata import METADATA_FILENAME, read_metadata_yaml
+from .metadata import METADATA_FILENAME, ROSBAG2_METADATA, read_metadata_yaml
 
 
 class RawMessage(NamedTuple):
@@ -196,7 +196,7 @@ class BagReader:
         out: dict[str, dict[str, str]] = {}
         for mcap_file in self._files:
             for name, data in mcap_file.metadata:
-                if include_rosbag2 or name != 'rosbag2':
+                if include_rosbag2 or name != ROSBAG2_METADATA:
                     out[name] = dict(data)
         return out
 
