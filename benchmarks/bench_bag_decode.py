@@ -25,7 +25,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from crane_stiffness.analysis.cdr import encode_stamped  # noqa: E402
+from crane_stiffness.serde import encode_stamped  # noqa: E402
 from crane_stiffness.bag import BagReader, BagWriter  # noqa: E402
 
 WRENCH_TOPIC = '/load_cell/wrench'

@@ -50,7 +50,7 @@ def run_rate(rate: float, seconds: float, env: dict, share: Path, log_dir: Path,
     from std_msgs.msg import Float64MultiArray
 
     from crane_stiffness import topics
-    from crane_stiffness.analysis.cdr import decode_stamped
+    from crane_stiffness.serde import decode_stamped
     from crane_stiffness.nodes.common import RELIABLE_QOS, SENSOR_QOS, make_executor
     from crane_stiffness.rig_description import rig_nodes
     from crane_stiffness.testing import rosrun

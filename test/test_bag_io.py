@@ -28,11 +28,11 @@ os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ.setdefault('ROS_DOMAIN_ID', str(random.randint(1, 100)))
 
 from crane_stiffness.bag import (  # noqa: E402
-    SESSION_METADATA, BagCorruptError, BagDamageWarning, BagExistsError, BagFormatError, BagReader, BagWriter,
-    BagWriterError, McapFile, TopicNotFoundError, UnsupportedTypeError, dump_qos_profiles, qos_profile,
-    recover_bag, session_metadata,
+    BagCorruptError, BagDamageWarning, BagExistsError, BagFormatError, BagReader, BagWriter, BagWriterError,
+    McapFile, TopicNotFoundError, UnsupportedTypeError, dump_qos_profiles, qos_profile, recover_bag,
 )
 from crane_stiffness.bag.msgdef import SEPARATOR, message_definition, type_description_hash  # noqa: E402
+from crane_stiffness.session import SESSION_METADATA, read_session, session_metadata  # noqa: E402
 
 rclpy_serialization = pytest.importorskip('rclpy.serialization')
 from builtin_interfaces.msg import Time  # noqa: E402
@@ -208,7 +208,7 @@ def test_raw_messages_topics_and_session_metadata(bag, messages):
         raw = list(reader.messages())
         topics = reader.topics
         records = reader.metadata_records()
-        session = reader.session()
+        session = read_session(reader)
         part = list(reader.messages(['/program/setpoint'], start_ns=T0 + 500_000_000, end_ns=T0 + 900_000_000))
     assert [(m.topic, m.log_time_ns, m.data) for m in raw] == [(t, log, d) for t, log, _, d in messages]
     assert {t: (i.msg_type, i.count) for t, i in topics.items()} == {
@@ -310,7 +310,7 @@ def test_split_by_size_and_duration(tmp_path, messages):
     assert len(timed['files']) == 5  # 1.2 s of data, a new file every 0.25 s
     assert all(f['duration']['nanoseconds'] < 250_000_000 for f in timed['files'])
     with BagReader(by_time) as reader:  # the session record is repeated in every file
-        assert reader.session()['rig'] == RIG
+        assert read_session(reader)['rig'] == RIG
         for path in reader.files:
             with McapFile(path) as f:
                 assert SESSION_METADATA in dict(f.metadata)
@@ -333,7 +333,7 @@ def test_truncated_copy_reads_complete_chunks_and_recovers(tmp_path, bag, messag
     source = bag / 'session_0.mcap'
     with McapFile(source) as f:
         chunks = f.chunks
-        per_chunk = [sum(len(o) for o, _ in f.message_headers(c, f.chunk_data(c), None).values()) for c in chunks]
+        per_chunk = [sum(len(m) for m in f.chunk_messages(c, f.chunk_data(c)).values()) for c in chunks]
     cut_chunk = chunks[len(chunks) // 2]
     cut_at = cut_chunk.records_offset + cut_chunk.compressed_size // 2  # inside that chunk
     damaged = tmp_path / 'crashed'
@@ -347,7 +347,7 @@ def test_truncated_copy_reads_complete_chunks_and_recovers(tmp_path, bag, messag
         with BagReader(damaged) as reader:
             assert not reader.complete and reader.message_count == readable
             assert decoded(reader) == expected
-            assert reader.session()['rig'] == RIG
+            assert read_session(reader)['rig'] == RIG
 
     report = recover_bag(damaged)
     # whole blocks of the cut chunk that are on disk are saved too (none when the chunk is one zstd block)
@@ -363,7 +363,7 @@ def test_truncated_copy_reads_complete_chunks_and_recovers(tmp_path, bag, messag
         warnings.simplefilter('error', BagDamageWarning)
         with BagReader(damaged) as reader:
             assert reader.complete and decoded(reader) == expected
-            assert reader.session()['rig'] == RIG
+            assert read_session(reader)['rig'] == RIG
     assert read_with_rosbags(damaged) == expected
     assert read_with_mcap_ros2([damaged / 'crashed_0.mcap']) == expected
     again = recover_bag(damaged)  # idempotent: the file is now intact

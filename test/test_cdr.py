@@ -8,7 +8,8 @@ from geometry_msgs.msg import PointStamped, WrenchStamped
 from rclpy.serialization import serialize_message
 from std_msgs.msg import Float64
 
-from crane_stiffness.analysis.cdr import CdrError, decode_float64, decode_stamped
+from crane_stiffness.errors import CraneStiffnessError
+from crane_stiffness.serde import CdrError, SerdeError, decode_float64, decode_stamped, header_stamp_ns, stamp_seconds
 
 
 def _wrench(frame: str, sec: int, nanosec: int, values) -> WrenchStamped:
@@ -54,3 +55,13 @@ def test_malformed_messages_raise_cdr_error():
         decode_stamped(nanosec_too_big, 6)
     with pytest.raises(CdrError):
         decode_float64(b'\x00\x01\x00\x00\x00')
+
+
+def test_header_stamp_ns_and_the_error_hierarchy():
+    data = serialize_message(_wrench('load_cell', 1_700_000_000, 123_456_789, (0.0,) * 6))
+    assert header_stamp_ns(data) == 1_700_000_000_123_456_789
+    assert header_stamp_ns(serialize_message(_wrench('load_cell', 0, 0, (0.0,) * 6))) is None  # unset
+    assert header_stamp_ns(data[:8]) is None and header_stamp_ns(b'\x00\x00' + data[2:]) is None
+    assert stamp_seconds(1_700_000_000, 123_456_789) == 1_700_000_000 + 123_456_789 * 1e-9
+    assert issubclass(CdrError, SerdeError) and issubclass(CdrError, CraneStiffnessError)
+    assert issubclass(CdrError, ValueError)  # existing 'except ValueError' keeps catching it

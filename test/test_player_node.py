@@ -23,9 +23,8 @@ from std_msgs.msg import Float64, String
 
 from conftest import spin_until
 from crane_stiffness import topics
-from crane_stiffness.analysis.cdr import decode_float64_multiarray
 from crane_stiffness.analysis.analyze import analyze_session
-from crane_stiffness.bag import NODE_PARAMETERS_METADATA, BagReader, BagWriter, dump_qos_profiles, qos_profile
+from crane_stiffness.bag import BagReader, BagWriter, dump_qos_profiles, qos_profile
 from crane_stiffness.estimation.live import VALUE_FIELDS
 from crane_stiffness.nodes.common import LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS
 from crane_stiffness.nodes.crane_model import CraneModel
@@ -35,6 +34,8 @@ from crane_stiffness.nodes.lvdt import Lvdt
 from crane_stiffness.nodes.session_player import SessionPlayer
 from crane_stiffness.nodes.session_recorder import SessionRecorder
 from crane_stiffness.nodes.stiffness_estimator import StiffnessEstimatorNode
+from crane_stiffness.serde import decode_float64_multiarray
+from crane_stiffness.session import NODE_PARAMETERS_METADATA
 
 NS = 1_000_000_000
 T0 = 1_700_000_000 * NS

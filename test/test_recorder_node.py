@@ -32,6 +32,7 @@ from crane_stiffness.bag import BagDamageWarning, BagReader
 from crane_stiffness.cli import main as cli_main
 from crane_stiffness.nodes.common import LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS
 from crane_stiffness.nodes.session_recorder import SESSION_END_METADATA, SessionRecorder
+from crane_stiffness.session import read_session
 
 NS = 1_000_000_000
 
@@ -152,7 +153,7 @@ def test_records_every_rig_topic_with_metadata_readable_by_independent_readers(r
         assert qos[topics.WRENCH_COMMAND]['reliability'] == 'reliable'
         assert qos[topics.PREDICTED_STIFFNESS]['durability'] == 'transient_local'
         assert info[topics.LOAD_CELL_WRENCH].type_description_hash.startswith('RIHS01_')
-        session = reader.session()
+        session = read_session(reader)
         end = reader.metadata_records()[SESSION_END_METADATA]
         forces = reader.decode(topics.LOAD_CELL_WRENCH)
     assert forces['fy'].tolist() == [m.wrench.force.y for m in sent[topics.LOAD_CELL_WRENCH]]
@@ -302,7 +303,7 @@ def test_sigint_sigterm_close_the_bag_and_sigkill_leaves_a_recoverable_one(insta
             with BagReader(bag) as reader:
                 assert reader.complete
                 assert reader.decode(topics.WRENCH_COMMAND)['fy'].tolist() == [float(i) for i in range(300)]
-                session = reader.session()
+                session = read_session(reader)
                 assert reader.metadata_records()[SESSION_END_METADATA]['stop_reason'] == \
                     ('program done' if name == 'done' else 'shutdown')
         assert session['program']['name'] == 'side_force' and session['notes'] == 'signal test'
@@ -324,7 +325,7 @@ def test_sigint_sigterm_close_the_bag_and_sigkill_leaves_a_recoverable_one(insta
         with BagReader(bag) as reader:
             assert reader.complete
             recovered = {t: i.count for t, i in reader.topics.items()}
-            assert reader.session()['notes'] == 'signal test'
+            assert read_session(reader)['notes'] == 'signal test'
     assert recovered[topics.WRENCH_COMMAND] == 300 and recovered[topics.LOAD_CELL_WRENCH] >= stamps.size
     assert {t: len(v) for t, v in read_rosbags(bag).items()} == recovered
     assert {t: len(v) for t, v in read_mcap_ros2(bag).items()} == recovered

@@ -21,8 +21,6 @@ import pytest
 
 from conftest import REPO
 from crane_stiffness import topics
-from crane_stiffness.analysis.cdr import (decode_diagnostic_array, decode_float64_multiarray, decode_string,
-                                          encode_float64_multiarray, encode_stamped, encode_string)
 from crane_stiffness.analysis.analyze import analyze_session
 from crane_stiffness.analysis.compare import compare_sessions
 from crane_stiffness.analysis.errors import SessionAnalysisError
@@ -32,6 +30,8 @@ from crane_stiffness.bag import (BagDamageWarning, BagFormatError, BagReader, Ba
 from crane_stiffness.cli import main as cli_main
 from crane_stiffness.estimation.live import VALUE_FIELDS
 from crane_stiffness.model import lab_model, paper_coefficients
+from crane_stiffness.serde import (decode_diagnostic_array, decode_float64_multiarray, decode_string,
+                                   encode_float64_multiarray, encode_stamped, encode_string)
 from crane_stiffness.sim.program import LoadProgram, Segment, load_program_file
 
 K_TRUE = 48_000.0  # N/m, the linear truth of the synthetic sessions

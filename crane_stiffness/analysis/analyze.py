@@ -42,7 +42,7 @@ import numpy as np
 from crane_stiffness import __version__, topics
 from crane_stiffness.analysis import report
 from crane_stiffness.analysis.errors import SessionAnalysisError
-from crane_stiffness.analysis.load import SessionData, read_session
+from crane_stiffness.analysis.load import SessionData, load_session
 from crane_stiffness.analysis.progress import Progress
 from crane_stiffness.analysis.results import (COMPARED_FIELDS, WINDOW_FIT_FIELDS, CycleFits, LiveComparison,
                                               ModelSummary, SessionAnalysis, Step)
@@ -355,7 +355,7 @@ def analyze_session(bag_path: str | Path, out_dir: str | Path | None = None, *, 
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter('always', BagDamageWarning)
             bar.stage('open+decode')
-            data = read_session(path, axis, problems, missing)
+            data = load_session(path, axis, problems, missing)
             bar.done()
             bar.stage('pair')
             force, disp, input_counters = _inputs(data)

@@ -13,11 +13,11 @@ from typing import Any
 import numpy as np
 
 from crane_stiffness import topics
-from crane_stiffness.analysis.cdr import (CdrError, decode_diagnostic_array, decode_float64_multiarray,
-                                          decode_string)
 from crane_stiffness.analysis.errors import SessionAnalysisError
-from crane_stiffness.bag import NODE_PARAMETERS_METADATA, BagReader, TopicNotFoundError
+from crane_stiffness.bag import BagReader, TopicNotFoundError
 from crane_stiffness.estimation.live import AXES, VALUE_FIELDS, LiveSettings
+from crane_stiffness.serde import CdrError, decode_diagnostic_array, decode_float64_multiarray, decode_string
+from crane_stiffness.session import read_node_parameters, read_session
 from crane_stiffness.sim.program import LoadProgram
 
 REQUIRED_TOPICS = (topics.LOAD_CELL_WRENCH, topics.LVDT_DISPLACEMENT)
@@ -27,7 +27,7 @@ OPTIONAL_TOPICS = (topics.WRENCH_COMMAND, topics.PROGRAM_STATE, topics.STIFFNESS
 
 @dataclass
 class SessionData:
-    """What :func:`read_session` read from a bag: its records, the recorded settings and the decoded streams."""
+    """What :func:`load_session` read from a bag: its records, the recorded settings and the decoded streams."""
 
     path: Path
     session: dict[str, Any]
@@ -131,20 +131,8 @@ def _live_input_reports(reader: BagReader) -> list[tuple[int, dict[str, str]]]:
     return found
 
 
-def _node_parameters(reader: BagReader) -> dict[str, dict[str, Any]]:
-    """{node: {parameter: value}} of the recorded node-parameters record ({} without one)."""
-    out: dict[str, dict[str, Any]] = {}
-    for node, text in reader.metadata_records().get(NODE_PARAMETERS_METADATA, {}).items():
-        try:
-            values = json.loads(text)
-        except ValueError:
-            continue
-        if isinstance(values, dict):
-            out[node.lstrip('/')] = values
-    return out
 
-
-def read_session(path: Path, axis: str | None, problems: list[str], missing: list[str]) -> SessionData:
+def load_session(path: Path, axis: str | None, problems: list[str], missing: list[str]) -> SessionData:
     """Read a session's bag: records, settings and the streams the analysis needs, decoded in bulk.
 
     ``axis`` overrides the analysed axis (default: the estimator's recorded ``force_axis``, else the program's
@@ -166,8 +154,8 @@ def read_session(path: Path, axis: str | None, problems: list[str], missing: lis
         for topic in OPTIONAL_TOPICS:
             if topic not in known or known[topic].count == 0:
                 missing.append(topic)
-        session = reader.session()
-        nodes = _node_parameters(reader)
+        session = read_session(reader)
+        nodes = read_node_parameters(reader)
         program_record = session.get('program') if isinstance(session.get('program'), dict) else None
         if 'segments.kind' in nodes.get('load_program', {}):  # what the load_program node actually ran
             program_record = {**nodes['load_program'], 'source': 'load_program node parameters'}

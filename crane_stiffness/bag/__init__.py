@@ -1,9 +1,12 @@
 """MCAP / rosbag2 bag reading and writing, pure Python; reading needs no ROS.
 
 - :class:`BagWriter` (``writer.py``): a rosbag2 bag directory of chunked MCAP files plus metadata.yaml (v9),
-  crash-safe chunk by chunk, split by size or duration, session metadata as MCAP Metadata records.
+  crash-safe chunk by chunk, split by size or duration, the caller's metadata as MCAP Metadata records.
 - :class:`BagReader` (``reader.py``): topics, metadata records, raw messages, and a fast bulk decoder of the rig's
-  fixed-layout types into numpy structured arrays.
+  fixed-layout types into numpy structured arrays (the CDR decoders are :mod:`crane_stiffness.serde.bulk`).
+- :class:`McapFile` (``mcapfile.py``): one MCAP file's structure and chunks, its records read by the ``mcap``
+  package; a file cut short gives every complete chunk.
+- ``metadata.py``: metadata.yaml (rosbag2 v9) and MCAP metadata values; ``qos.py``: offered QoS profiles.
 - :func:`recover_bag` (``recover.py``): rewrite files left unfinished by a crash and (re)write metadata.yaml.
 - ``msgdef.py``: ros2msg schema text and type hashes from the installed .msg files.
 - ``errors.py``: the exceptions (all :class:`BagError`) and :class:`BagDamageWarning`.
@@ -13,11 +16,10 @@ from .errors import (
     BagCorruptError, BagDamageWarning, BagError, BagExistsError, BagFormatError, BagNotFoundError, BagWriterError,
     MessageDefinitionError, TopicNotFoundError, UnsupportedTypeError,
 )
-from .reader import SUPPORTED_TYPES, BagReader, McapFile, RawMessage, TopicInfo
-from .writer import (
-    NODE_PARAMETERS_METADATA, SESSION_END_METADATA, SESSION_METADATA, BagWriter, dump_qos_profiles, qos_profile,
-    session_metadata,
-)
+from .mcapfile import McapFile
+from .qos import dump_qos_profiles, normalize_qos_profiles, qos_profile
+from .reader import SUPPORTED_TYPES, BagReader, RawMessage, TopicInfo
+from .writer import BagWriter
 
 
 def __getattr__(name: str) -> object:
@@ -30,7 +32,7 @@ def __getattr__(name: str) -> object:
 
 __all__ = [
     'BagCorruptError', 'BagDamageWarning', 'BagError', 'BagExistsError', 'BagFormatError', 'BagNotFoundError',
-    'BagReader', 'BagWriter', 'BagWriterError', 'McapFile', 'MessageDefinitionError', 'NODE_PARAMETERS_METADATA',
-    'RawMessage', 'RecoveryReport', 'SESSION_END_METADATA', 'SESSION_METADATA', 'SUPPORTED_TYPES', 'TopicInfo',
-    'TopicNotFoundError', 'UnsupportedTypeError', 'dump_qos_profiles', 'qos_profile', 'recover_bag', 'session_metadata',
+    'BagReader', 'BagWriter', 'BagWriterError', 'McapFile', 'MessageDefinitionError', 'RawMessage', 'RecoveryReport',
+    'SUPPORTED_TYPES', 'TopicInfo', 'TopicNotFoundError', 'UnsupportedTypeError', 'dump_qos_profiles',
+    'normalize_qos_profiles', 'qos_profile', 'recover_bag',
 ]

@@ -1,17 +1,14 @@
 """Reading rosbag2 MCAP bags without ROS, with a fast bulk decoder for the rig's fixed-layout message types.
 
 :class:`BagReader` opens a bag directory (through its metadata.yaml, or by scanning ``*.mcap`` when metadata.yaml is
-missing, as after a crash) or a single .mcap file. It parses MCAP itself (:class:`McapFile`): the summary when the
-file was finished, otherwise a scan of the records that are on disk, so a file cut short by SIGKILL gives every
-complete chunk. Damage is reported with :class:`~.errors.BagDamageWarning` (or raised when ``strict=True``) and the
-readable part is used.
+missing, as after a crash) or a single .mcap file. Each file is a :class:`~.mcapfile.McapFile` (its records read by
+the ``mcap`` package): the summary when the file was finished, otherwise the records that are on disk, so a file cut
+short by SIGKILL gives every complete chunk. Damage is reported with :class:`~.errors.BagDamageWarning` (or raised
+when ``strict=True``) and the readable part is used.
 
-Bulk decoding (:meth:`BagReader.decode`) works a chunk at a time: decompress, take the message offsets from the
-chunk's MessageIndex records, then gather the CDR fields of all messages of a channel at once with numpy. CDR
-(XCDR1, little endian): a 4-byte encapsulation header ``00 01 00 00``, then the fields, each aligned to its size
-relative to the byte after the header. A ``std_msgs/Header`` is ``int32 sec, uint32 nanosec, uint32 n, n bytes of
-frame_id including the NUL``, so the float64 fields after it start at ``4 + align8(12 + n)``; messages are grouped by
-``n`` so that a changing frame_id is decoded correctly, and each message's length and NUL are checked.
+Bulk decoding (:meth:`BagReader.decode`) works a chunk at a time: decompress, gather the messages of a channel at
+once (:meth:`~.mcapfile.McapFile.chunk_messages`), then decode their CDR fields with numpy
+(:mod:`crane_stiffness.serde.bulk`).
 
 Times are integer nanoseconds since the epoch (``*_ns``); ``stamp_s`` is the header stamp in seconds (float64).
 This module must not import rclpy (the analysis machine may have no ROS).
@@ -21,92 +18,22 @@ from __future__ import annotations
 
 import heapq
 import itertools
-import json
-import mmap
 import re
-import struct
 import warnings
-import zlib
-from collections.abc import Collection, Iterable, Iterator, Mapping, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Iterable, Iterator, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
 from typing import Any, NamedTuple
 
 import numpy as np
-import yaml
 
-from .errors import (
-    BagCorruptError, BagDamageWarning, BagFormatError, BagNotFoundError, TopicNotFoundError,
-    UnsupportedTypeError,
-)
+from crane_stiffness.serde.bulk import SUPPORTED_TYPES, Decoder, new_decoder
 
-MAGIC = b'\x89MCAP0\r\n'
-OP_HEADER, OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK, OP_MESSAGE_INDEX, OP_CHUNK_INDEX = range(1, 9)
-OP_ATTACHMENT, OP_ATTACHMENT_INDEX, OP_STATISTICS, OP_METADATA, OP_METADATA_INDEX = range(9, 14)
-OP_SUMMARY_OFFSET, OP_DATA_END = 14, 15
-MESSAGE_HEADER_SIZE = 31
-"""Bytes of an MCAP Message record before its data: opcode, length, channel, sequence, log and publish time."""
-
-_U16 = struct.Struct('<H')
-_U32 = struct.Struct('<I')
-_U64 = struct.Struct('<Q')
-_RECORD_HEAD = struct.Struct('<BQ')
-_FOOTER = struct.Struct('<QQI')
-_CHUNK_HEAD = struct.Struct('<QQQI')
-_STATS_HEAD = struct.Struct('<QHIIIIQQ')
-
-_MESSAGE_REC = np.dtype({
-    'names': ['op', 'length', 'channel', 'sequence', 'log_time', 'publish_time'],
-    'formats': ['u1', '<u8', '<u2', '<u4', '<u8', '<u8'],
-    'offsets': [0, 1, 9, 11, 15, 23], 'itemsize': MESSAGE_HEADER_SIZE,
-})
-_CDR_HEADER = np.dtype({
-    'names': ['e0', 'e1', 'sec', 'nanosec', 'slen'], 'formats': ['u1', 'u1', '<i4', '<u4', '<u4'],
-    'offsets': [0, 1, 4, 8, 12], 'itemsize': 16,
-})
-
-
-# ------------------------------------------------------------------------------------------------ MCAP records --
-@dataclass(frozen=True)
-class SchemaRecord:
-    """An MCAP Schema: ``name`` is the type (``pkg/msg/Type``), ``data`` its ros2msg text."""
-
-    id: int
-    name: str
-    encoding: str
-    data: bytes
-
-
-@dataclass(frozen=True)
-class ChannelRecord:
-    """An MCAP Channel: one topic; ``metadata`` holds offered_qos_profiles and topic_type_hash."""
-
-    id: int
-    schema_id: int
-    topic: str
-    message_encoding: str
-    metadata: dict[str, str]
-
-
-@dataclass
-class ChunkRef:
-    """Where one chunk's records are in a file; ``index`` maps channel id → offset of its MessageIndex record.
-
-    A run of un-chunked top-level messages is described the same way with ``loose=True`` and no compression.
-    """
-
-    offset: int
-    records_offset: int
-    compressed_size: int
-    uncompressed_size: int
-    crc: int
-    compression: str
-    start_ns: int
-    end_ns: int
-    index: dict[int, int] | None = None
-    counts: dict[int, int] = field(default_factory=dict)
-    loose: bool = False
+from .errors import BagCorruptError, BagDamageWarning, BagNotFoundError, TopicNotFoundError, UnsupportedTypeError
+from .chunks import ChunkRef
+from .mcapfile import McapFile
+from .metadata import METADATA_FILENAME, ROSBAG2_METADATA, read_metadata_yaml
 
 
 class RawMessage(NamedTuple):
@@ -127,691 +54,6 @@ class TopicInfo:
     offered_qos_profiles: str = ''
     type_description_hash: str = ''
     message_definition: str = ''
-
-
-def _read_str(body: bytes, pos: int) -> tuple[str, int]:
-    (size,) = _U32.unpack_from(body, pos)
-    pos += 4
-    if pos + size > len(body):
-        raise ValueError('string runs past the end of its record')
-    return body[pos:pos + size].decode('utf-8'), pos + size
-
-
-def _read_str_map(body: bytes, pos: int) -> tuple[dict[str, str], int]:
-    (size,) = _U32.unpack_from(body, pos)
-    pos += 4
-    end = pos + size
-    if end > len(body):
-        raise ValueError('map runs past the end of its record')
-    out: dict[str, str] = {}
-    while pos < end:
-        key, pos = _read_str(body, pos)
-        out[key], pos = _read_str(body, pos)
-    return out, end
-
-
-def _read_id_map(body: bytes, pos: int) -> tuple[dict[int, int], int]:
-    (size,) = _U32.unpack_from(body, pos)
-    pos += 4
-    if pos + size > len(body) or size % 10:
-        raise ValueError('index map runs past the end of its record')
-    out = {}
-    for item in range(pos, pos + size, 10):
-        out[_U16.unpack_from(body, item)[0]] = _U64.unpack_from(body, item + 2)[0]
-    return out, pos + size
-
-
-def _parse_schema(body: bytes) -> SchemaRecord:
-    (sid,) = _U16.unpack_from(body, 0)
-    name, pos = _read_str(body, 2)
-    encoding, pos = _read_str(body, pos)
-    (size,) = _U32.unpack_from(body, pos)
-    if pos + 4 + size > len(body):
-        raise ValueError('schema data runs past the end of its record')
-    return SchemaRecord(sid, name, encoding, bytes(body[pos + 4:pos + 4 + size]))
-
-
-def _parse_channel(body: bytes) -> ChannelRecord:
-    cid, sid = struct.unpack_from('<HH', body, 0)
-    topic, pos = _read_str(body, 4)
-    encoding, pos = _read_str(body, pos)
-    meta, _ = _read_str_map(body, pos)
-    return ChannelRecord(cid, sid, topic, encoding, meta)
-
-
-def _parse_metadata(body: bytes) -> tuple[str, dict[str, str]]:
-    name, pos = _read_str(body, 0)
-    data, _ = _read_str_map(body, pos)
-    return name, data
-
-
-def _parse_chunk_head(buf: Any, offset: int, record_length: int) -> ChunkRef:
-    """Chunk record at ``offset`` whose body is ``record_length`` bytes (raises ValueError/struct.error if bad)."""
-    body_start = offset + 9
-    head = bytes(buf[body_start:body_start + min(record_length, 64 + 256)])
-    start_ns, end_ns, usize, crc = _CHUNK_HEAD.unpack_from(head, 0)
-    compression, pos = _read_str(head, _CHUNK_HEAD.size)
-    (csize,) = _U64.unpack_from(head, pos)
-    records_offset = body_start + pos + 8
-    if records_offset + csize > body_start + record_length:
-        raise ValueError('chunk records run past the end of the chunk record')
-    return ChunkRef(offset, records_offset, csize, usize, crc, compression, start_ns, end_ns)
-
-
-def _walk(data: bytes | memoryview, start: int, end: int) -> Iterator[tuple[int, int, int]]:
-    """(opcode, record offset, body length) of the records in ``data[start:end]``; stops at a cut record."""
-    pos = start
-    unpack = _RECORD_HEAD.unpack_from
-    while pos + 9 <= end:
-        opcode, length = unpack(data, pos)
-        if pos + 9 + length > end:
-            return
-        yield opcode, pos, length
-        pos += 9 + length
-
-
-def _gather(buf: np.ndarray, offsets: np.ndarray, dtype: Any) -> np.ndarray:
-    """Copy ``dtype`` items starting at arbitrary byte ``offsets`` of the uint8 array ``buf`` (one numpy gather)."""
-    dt = np.dtype(dtype)
-    if dt.subdtype is not None:  # ('<f8', (k,)): gather records of one field, then unwrap to shape (n, k)
-        return _gather(buf, offsets, np.dtype([('v', dt)]))['v']
-    if buf.size < dt.itemsize:  # only possible when no row is valid: gather zeros at the clamped offsets
-        buf = np.concatenate([buf, np.zeros(dt.itemsize, np.uint8)])
-    count = buf.size - dt.itemsize + 1
-    view = np.ndarray((count,), dtype=dt, buffer=buf, offset=0, strides=(1,))
-    return view[offsets]
-
-
-def _align(value: np.ndarray, alignment: int) -> np.ndarray:
-    return (value + (alignment - 1)) & ~(alignment - 1)
-
-
-# ------------------------------------------------------------------------------------------------- MCAP file --
-class McapFile:
-    """Structure of one MCAP file: schemas, channels, chunks, metadata records; robust to truncation.
-
-    Args:
-        path: the .mcap file.
-        strict: raise :class:`BagCorruptError` on damage instead of warning (truncation always only warns).
-        verify_crc: check each chunk's CRC32 when it has one.
-    """
-
-    def __init__(self, path: str | Path, *, strict: bool = False, verify_crc: bool = True) -> None:
-        self.path = Path(path)
-        self.strict = strict
-        self.verify_crc = verify_crc
-        self.problems: list[str] = []
-        self.schemas: dict[int, SchemaRecord] = {}
-        self.channels: dict[int, ChannelRecord] = {}
-        self.chunks: list[ChunkRef] = []
-        self.metadata: list[tuple[str, dict[str, str]]] = []
-        self.channel_counts: dict[int, int] = {}
-        self.profile = ''
-        self.library = ''
-        self.complete = False
-        """True when the file has a valid footer (the writer finished it)."""
-        self.readable_end = 0
-        """Offset up to which the file's records could be read."""
-        self.partial_chunk: int | None = None
-        """Offset of a chunk record cut short by the end of the file (its start is on disk)."""
-        self.start_ns: int | None = None
-        self.end_ns: int | None = None
-        self._zstd: Any = None
-        try:
-            self._file = open(self.path, 'rb')
-        except FileNotFoundError:
-            raise BagNotFoundError(f'MCAP file {self.path} does not exist') from None
-        try:
-            size = self.path.stat().st_size
-            if size < len(MAGIC) or self._file.read(len(MAGIC)) != MAGIC:
-                raise BagFormatError(f'{self.path} is not an MCAP file (bad or missing magic bytes)')
-            self._buf: Any = mmap.mmap(self._file.fileno(), 0, access=mmap.ACCESS_READ)
-            self.size = size
-            self._read_header()
-            if not self._read_summary():
-                self._scan()
-        except BaseException:
-            self.close()
-            raise
-
-    # -- lifetime --
-    def close(self) -> None:
-        """Release the file; arrays returned earlier stay valid (they are copies)."""
-        buf = getattr(self, '_buf', None)
-        if buf is not None:
-            try:
-                buf.close()
-            except BufferError:  # a view is still alive somewhere; the GC will release the map
-                pass
-            self._buf = None
-        if getattr(self, '_file', None) is not None:
-            self._file.close()
-            self._file = None
-
-    def __enter__(self) -> McapFile:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
-    # -- problems --
-    def _problem(self, message: str, *, corrupt: bool = True) -> None:
-        text = f'{self.path}: {message}'
-        self.problems.append(text)
-        if corrupt and self.strict:
-            raise BagCorruptError(text)
-        warnings.warn(text, BagDamageWarning, stacklevel=4)
-
-    # -- structure --
-    def _read_header(self) -> None:
-        try:
-            opcode, length = _RECORD_HEAD.unpack_from(self._buf, 8)
-            if opcode == OP_HEADER and 17 + length <= self.size:
-                head = bytes(self._buf[17:17 + length])
-                self.profile, pos = _read_str(head, 0)
-                self.library, _ = _read_str(head, pos)
-        except (struct.error, ValueError, UnicodeDecodeError):
-            pass  # reported by the scan if the file is damaged there
-
-    def _read_summary(self) -> bool:
-        buf, size = self._buf, self.size
-        footer = size - 8 - 29
-        if footer < 8 or buf[size - 8:size] != MAGIC or buf[footer] != OP_FOOTER:
-            return False
-        if _U64.unpack_from(buf, footer + 1)[0] != 20:
-            return False
-        summary_start, _, crc = _FOOTER.unpack_from(buf, footer + 9)
-        if summary_start == 0:
-            return False
-        if not 8 <= summary_start <= footer:
-            self._problem(f'footer points to an impossible summary offset {summary_start}; scanning instead')
-            return False
-        if crc and zlib.crc32(buf[summary_start:footer + 9 + 16]) != crc:
-            self._problem('summary checksum mismatch; scanning the file instead')
-            return False
-        chunk_indexes: list[tuple[int, int, dict[int, int], int]] = []
-        metadata_offsets: list[tuple[int, int]] = []
-        stats = None
-        summary = bytes(buf[summary_start:footer])
-        try:
-            for opcode, pos, length in _walk(summary, 0, len(summary)):
-                body = summary[pos + 9:pos + 9 + length]
-                if opcode == OP_SCHEMA:
-                    schema = _parse_schema(body)
-                    self.schemas[schema.id] = schema
-                elif opcode == OP_CHANNEL:
-                    channel = _parse_channel(body)
-                    self.channels[channel.id] = channel
-                elif opcode == OP_STATISTICS:
-                    stats = _STATS_HEAD.unpack_from(body, 0)
-                    self.channel_counts, _ = _read_id_map(body, _STATS_HEAD.size)
-                elif opcode == OP_CHUNK_INDEX:
-                    start_ns, end_ns, offset, length_ = struct.unpack_from('<QQQQ', body, 0)
-                    index, pos2 = _read_id_map(body, 32)
-                    (index_length,) = _U64.unpack_from(body, pos2)
-                    chunk_indexes.append((offset, length_, index if index_length else {}, index_length))
-                elif opcode == OP_METADATA_INDEX:
-                    offset, length_ = struct.unpack_from('<QQ', body, 0)
-                    metadata_offsets.append((offset, length_))
-        except (struct.error, ValueError, UnicodeDecodeError) as exc:
-            self._problem(f'unreadable summary ({exc}); scanning the file instead')
-            self.schemas.clear()
-            self.channels.clear()
-            self.channel_counts = {}
-            return False
-        if not chunk_indexes and (stats is None or stats[0] > 0):
-            self.schemas.clear()  # un-chunked file, or a summary without chunk indexes: scan
-            self.channels.clear()
-            self.channel_counts = {}
-            return False
-        for offset, length_, index, _ in sorted(chunk_indexes):
-            try:
-                if buf[offset] != OP_CHUNK or offset + length_ > size:
-                    raise ValueError('no chunk record at the indexed offset')
-                chunk = _parse_chunk_head(buf, offset, length_ - 9)
-            except (IndexError, struct.error, ValueError, UnicodeDecodeError) as exc:
-                self._problem(f'chunk at offset {offset} is unreadable ({exc}); its messages are skipped')
-                continue
-            chunk.index = dict(index) if index else None
-            self.chunks.append(chunk)
-        for offset, length_ in metadata_offsets:
-            try:
-                if buf[offset] != OP_METADATA:
-                    raise ValueError('no metadata record at the indexed offset')
-                self.metadata.append(_parse_metadata(bytes(buf[offset + 9:offset + length_])))
-            except (IndexError, struct.error, ValueError, UnicodeDecodeError) as exc:
-                self._problem(f'metadata record at offset {offset} is unreadable ({exc})')
-        if stats is not None:
-            self.start_ns, self.end_ns = (stats[6], stats[7]) if stats[0] else (None, None)
-        else:
-            self._count_from_indexes()
-            self._times_from_chunks()
-        self.complete = True
-        self.readable_end = size
-        return True
-
-    def _scan(self) -> None:
-        buf, size = self._buf, self.size
-        pos = 8
-        loose: list[int] = []  # [start, end] of the current run of top-level messages
-        last_chunk: ChunkRef | None = None
-        stopped = ''
-        in_summary = False
-        while pos < size:
-            if pos + 9 > size:
-                stopped = 'cut'
-                break
-            opcode, length = _RECORD_HEAD.unpack_from(buf, pos)
-            end = pos + 9 + length
-            if opcode == 0 or 0x10 <= opcode < 0x80:
-                stopped = 'corrupt'
-                break
-            if end > size:
-                if opcode == OP_CHUNK:
-                    self.partial_chunk = pos
-                stopped = 'cut'
-                break
-            if opcode in (OP_MESSAGE, OP_SCHEMA, OP_CHANNEL) and not in_summary and (opcode == OP_MESSAGE or loose):
-                if not loose:
-                    loose[:] = [pos, end]
-                loose[1] = end
-            elif loose:
-                self._add_loose(loose)
-                loose = []
-            try:
-                if opcode == OP_HEADER:
-                    head = bytes(buf[pos + 9:end])
-                    self.profile, p2 = _read_str(head, 0)
-                    self.library, _ = _read_str(head, p2)
-                elif opcode == OP_SCHEMA:
-                    schema = _parse_schema(bytes(buf[pos + 9:end]))
-                    self.schemas[schema.id] = schema
-                elif opcode == OP_CHANNEL:
-                    channel = _parse_channel(bytes(buf[pos + 9:end]))
-                    self.channels[channel.id] = channel
-                elif opcode == OP_CHUNK and not in_summary:
-                    last_chunk = _parse_chunk_head(buf, pos, length)
-                    self.chunks.append(last_chunk)
-                elif opcode == OP_MESSAGE_INDEX and last_chunk is not None and not in_summary:
-                    channel_id, records = struct.unpack_from('<HI', buf, pos + 9)
-                    if 6 + records > length or records % 16:
-                        raise ValueError('message index longer than its record')
-                    if last_chunk.index is None:
-                        last_chunk.index = {}
-                    last_chunk.index[channel_id] = pos
-                    last_chunk.counts[channel_id] = records // 16
-                elif opcode == OP_METADATA and not in_summary:
-                    self.metadata.append(_parse_metadata(bytes(buf[pos + 9:end])))
-                elif opcode == OP_DATA_END:
-                    in_summary = True
-                elif opcode == OP_FOOTER:
-                    self.complete = True
-                    pos = end
-                    break
-            except (struct.error, ValueError, UnicodeDecodeError) as exc:
-                if opcode == OP_CHUNK:
-                    self._problem(f'chunk at offset {pos} is unreadable ({exc}); its messages are skipped')
-                else:
-                    self._problem(f'record (opcode {opcode:#04x}) at offset {pos} is unreadable ({exc})')
-            pos = end
-        if loose:
-            self._add_loose(loose)
-        self.readable_end = pos
-        if stopped == 'corrupt':
-            self._problem(f'unreadable bytes at offset {pos} (opcode {buf[pos]:#04x}); the {size - pos} bytes '
-                          f'from there on are ignored')
-        elif stopped == 'cut' or not self.complete:
-            self._problem(
-                f'file is truncated or unfinished (no footer): read {len(self.chunks)} complete chunk(s), '
-                f'ignored the last {size - pos} byte(s) from offset {pos}'
-                '; `python -m crane_stiffness.bag.recover` rewrites it as a valid file', corrupt=False)
-        self._discover_channels()
-        self._times_from_chunks()
-
-    def _add_loose(self, run: list[int]) -> None:
-        start, end = run
-        self.chunks.append(ChunkRef(start, start, end - start, end - start, 0, '', 0, 2**64 - 1, loose=True))
-
-    def _discover_channels(self) -> None:
-        """Find schemas/channels inside chunks (where writers put them) and count messages of un-indexed chunks."""
-        for chunk in self.chunks:
-            if chunk.index is not None and set(chunk.index) <= set(self.channels):
-                continue
-            data = self.chunk_data(chunk)
-            if data is None:
-                continue
-            table, others = self._chunk_layout(chunk, data, None)
-            raw = data.tobytes() if others else b''
-            for opcode, pos, length in others:
-                try:
-                    if opcode == OP_SCHEMA:
-                        schema = _parse_schema(raw[pos + 9:pos + 9 + length])
-                        self.schemas[schema.id] = schema
-                    elif opcode == OP_CHANNEL:
-                        channel = _parse_channel(raw[pos + 9:pos + 9 + length])
-                        self.channels[channel.id] = channel
-                except (struct.error, ValueError, UnicodeDecodeError) as exc:
-                    self._problem(f'record in chunk at offset {chunk.offset} is unreadable ({exc})')
-            if chunk.index is None:
-                chunk.counts = {cid: len(offsets) for cid, offsets in table.items()}
-                if chunk.loose and table:
-                    times = [_gather(data, offsets, '<u8') for offsets in
-                             [o + 15 for o in table.values()]]
-                    merged = np.concatenate(times)
-                    chunk.start_ns, chunk.end_ns = int(merged.min()), int(merged.max())
-        self._count_from_indexes()
-
-    def _count_from_indexes(self) -> None:
-        counts: dict[int, int] = {}
-        for chunk in self.chunks:
-            for cid, count in chunk.counts.items():
-                counts[cid] = counts.get(cid, 0) + count
-            if chunk.index is not None and not chunk.counts:
-                for cid, pos in chunk.index.items():
-                    (records,) = _U32.unpack_from(self._buf, pos + 11)
-                    chunk.counts[cid] = records // 16
-                    counts[cid] = counts.get(cid, 0) + records // 16
-        self.channel_counts = counts
-
-    def _times_from_chunks(self) -> None:
-        real = [c for c in self.chunks if c.counts or c.index is None]
-        real = [c for c in real if not (c.loose and c.end_ns == 2**64 - 1)]
-        if real:
-            self.start_ns = min(c.start_ns for c in real)
-            self.end_ns = max(c.end_ns for c in real)
-
-    # -- chunk contents --
-    def chunk_data(self, chunk: ChunkRef) -> np.ndarray | None:
-        """The chunk's uncompressed records as a uint8 array, or None (with a warning) when damaged."""
-        raw = self._buf[chunk.records_offset:chunk.records_offset + chunk.compressed_size]
-        try:
-            if chunk.compression == '':
-                data = raw
-            elif chunk.compression == 'zstd':
-                if self._zstd is None:
-                    import zstandard
-                    self._zstd = zstandard.ZstdDecompressor()
-                data = self._zstd.decompress(raw, max_output_size=chunk.uncompressed_size)
-            elif chunk.compression == 'lz4':
-                import lz4.frame
-                data = lz4.frame.decompress(raw)
-            else:
-                self._problem(f'chunk at offset {chunk.offset} uses unsupported compression '
-                              f'{chunk.compression!r}; skipped')
-                return None
-        except Exception as exc:  # zstd/lz4 raise their own error types on damaged input
-            self._problem(f'chunk at offset {chunk.offset} does not decompress ({exc}); its messages are skipped')
-            return None
-        if len(data) != chunk.uncompressed_size:
-            self._problem(f'chunk at offset {chunk.offset} decompressed to {len(data)} bytes, '
-                          f'expected {chunk.uncompressed_size}; its messages are skipped')
-            return None
-        if self.verify_crc and chunk.crc and zlib.crc32(data) != chunk.crc:
-            self._problem(f'chunk at offset {chunk.offset} fails its CRC check; its messages are skipped')
-            return None
-        return np.frombuffer(data, dtype=np.uint8)
-
-    def _index_offsets(self, pos: int) -> np.ndarray:
-        channel_id, records = struct.unpack_from('<HI', self._buf, pos + 9)
-        raw = self._buf[pos + 15:pos + 15 + records]
-        pairs = np.frombuffer(raw, dtype='<u8').reshape(-1, 2)
-        return np.sort(pairs[:, 1].astype(np.int64))
-
-    def _chunk_layout(self, chunk: ChunkRef, data: np.ndarray, channels: Collection[int] | None
-                      ) -> tuple[dict[int, np.ndarray], list[tuple[int, int, int]]]:
-        """Message offsets per channel in ``data`` (file order), and the other records (opcode, offset, length).
-
-        The other records are only looked for when ``channels`` is None.
-        """
-        size = data.size
-        if chunk.index is not None:
-            table = {cid: self._index_offsets(pos) for cid, pos in chunk.index.items()
-                     if channels is None or cid in channels}
-            if channels is not None:
-                return table, []
-            if not table:
-                return table, list(_walk(data.tobytes(), 0, size))
-            offsets = np.sort(np.concatenate(list(table.values())))
-            offsets = offsets[offsets + 9 <= size]
-            ends = offsets + 9 + _gather(data, offsets + 1, '<u8').astype(np.int64)
-            starts = np.concatenate([[0], ends])
-            stops = np.concatenate([offsets, [size]])
-            gaps = [(int(a), int(b)) for a, b in zip(starts, stops) if b > a]
-            others: list[tuple[int, int, int]] = []
-            if gaps:
-                raw = data.tobytes()
-                for a, b in gaps:
-                    others.extend(r for r in _walk(raw, a, b) if r[0] != OP_MESSAGE)
-            return table, others
-        raw = data.tobytes()
-        found: dict[int, list[int]] = {}
-        others = []
-        for opcode, pos, length in _walk(raw, 0, size):
-            if opcode == OP_MESSAGE and length >= 22:
-                cid = _U16.unpack_from(raw, pos + 9)[0]
-                if channels is None or cid in channels:
-                    found.setdefault(cid, []).append(pos)
-            elif channels is None:
-                others.append((opcode, pos, length))
-        return {cid: np.asarray(v, dtype=np.int64) for cid, v in found.items()}, others
-
-    def message_headers(self, chunk: ChunkRef, data: np.ndarray, channels: Collection[int] | None
-                        ) -> dict[int, tuple[np.ndarray, np.ndarray]]:
-        """Per channel: (valid record offsets, their 31-byte MCAP message headers), damaged entries dropped."""
-        table, _ = self._chunk_layout(chunk, data, channels)
-        result = {}
-        for cid, offsets in table.items():
-            inside = (offsets >= 0) & (offsets + MESSAGE_HEADER_SIZE <= data.size)
-            head = _gather(data, np.where(inside, offsets, 0), _MESSAGE_REC)
-            ok = (inside & (head['op'] == OP_MESSAGE) & (head['channel'] == cid) & (head['length'] >= 22)
-                  & (offsets + 9 + head['length'].astype(np.int64) <= data.size))
-            if not ok.all():
-                self._problem(f'{int((~ok).sum())} message index entries of channel {cid} in chunk at offset '
-                              f'{chunk.offset} do not point at messages; those messages are skipped')
-                offsets, head = offsets[ok], head[ok]
-            result[cid] = (offsets, head)
-        return result
-
-    def iter_chunk_messages(self, chunk: ChunkRef, data: np.ndarray, channels: Collection[int] | None = None
-                            ) -> Iterator[tuple[int, int, int, int, bytes]]:
-        """(channel id, sequence, log_time_ns, publish_time_ns, data) of a chunk's messages in file order."""
-        heads = self.message_headers(chunk, data, channels)
-        if not heads:
-            return
-        offsets = np.concatenate([o for o, _ in heads.values()])
-        head = np.concatenate([h for _, h in heads.values()])
-        order = np.argsort(offsets, kind='stable')
-        raw = data.tobytes()
-        for off, rec in zip(offsets[order].tolist(), head[order].tolist()):
-            _, length, cid, seq, log, pub = rec
-            yield cid, seq, log, pub, raw[off + MESSAGE_HEADER_SIZE:off + 9 + length]
-
-    def partial_chunk_messages(self) -> list[tuple[int, int, int, int, bytes]]:
-        """Complete messages at the start of a chunk cut short by the end of the file (for recovery)."""
-        if self.partial_chunk is None:
-            return []
-        buf, pos = self._buf, self.partial_chunk
-        try:
-            start_ns, end_ns, usize, _ = _CHUNK_HEAD.unpack_from(buf, pos + 9)
-            compression, p2 = _read_str(bytes(buf[pos + 9 + _CHUNK_HEAD.size:pos + 9 + _CHUNK_HEAD.size + 260]), 0)
-            records_offset = pos + 9 + _CHUNK_HEAD.size + p2 + 8
-            raw = bytes(buf[records_offset:self.size])
-            if compression == '':
-                data = raw
-            elif compression == 'zstd':
-                import zstandard
-                data = zstandard.ZstdDecompressor().decompressobj().decompress(raw)
-            elif compression == 'lz4':
-                import lz4.frame
-                data = lz4.frame.LZ4FrameDecompressor().decompress(raw)
-            else:
-                return []
-        except Exception:  # whatever is left of the chunk is not decodable: nothing to save
-            return []
-        out = []
-        for opcode, p, length in _walk(data, 0, min(len(data), usize)):
-            if opcode == OP_MESSAGE and length >= 22:
-                cid, seq, log, pub = struct.unpack_from('<HIQQ', data, p + 9)
-                out.append((cid, seq, log, pub, data[p + MESSAGE_HEADER_SIZE:p + 9 + length]))
-        return out
-
-
-# ---------------------------------------------------------------------------------------------- bulk decoders --
-def _cdr_header(buf: np.ndarray, off: np.ndarray, dlen: np.ndarray
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, np.ndarray]]:
-    """Encapsulation + std_msgs/Header of each message: (valid, header fields, frame_id length n incl. NUL, cols)."""
-    valid = dlen >= 16
-    head = _gather(buf, np.where(valid, off, 0), _CDR_HEADER)
-    slen = head['slen'].astype(np.int64)
-    valid &= (head['e0'] == 0) & (head['e1'] == 1) & (slen >= 1) & (16 + slen <= dlen)
-    nul = buf[np.where(valid, off + 15 + slen, 0)]
-    valid &= nul == 0
-    frame = _gather_strings(buf, off + 16, slen - 1, valid)
-    return valid, head, slen, {'stamp_sec': head['sec'], 'stamp_nanosec': head['nanosec'], 'frame_id': frame}
-
-
-def _gather_strings(buf: np.ndarray, start: np.ndarray, length: np.ndarray, valid: np.ndarray) -> np.ndarray:
-    """Fixed-width bytes array of the strings ``buf[start:start+length]`` (rows not ``valid`` stay empty)."""
-    lengths = np.unique(length[valid]) if valid.any() else np.zeros(0, np.int64)
-    width = max(1, int(lengths.max()) if lengths.size else 1)
-    out = np.zeros(start.shape, dtype=f'S{width}')
-    for size in lengths.tolist():
-        if size <= 0:
-            continue
-        sel = valid & (length == size)
-        out[sel] = _gather(buf, start[sel], f'S{size}')
-    return out
-
-
-class _Decoder:
-    """Bulk decoder of one message type: columns of many messages from their byte offsets."""
-
-    msg_type = ''
-    value_fields: tuple[tuple[str, Any], ...] = ()
-    has_header = True
-
-    def decode(self, buf: np.ndarray, off: np.ndarray, dlen: np.ndarray
-               ) -> tuple[dict[str, np.ndarray], np.ndarray]:
-        raise NotImplementedError
-
-    def dtype(self, columns: Mapping[str, np.ndarray]) -> np.dtype:
-        fields: list[tuple[Any, ...]] = [('log_time_ns', '<i8')]
-        if self.has_header:
-            fields += [('stamp_sec', '<i4'), ('stamp_nanosec', '<u4'), ('stamp_s', '<f8'),
-                       ('frame_id', columns['frame_id'].dtype)]
-        for name, fmt in self.value_fields:
-            col = columns.get(name)
-            fields.append((name, col.dtype, col.shape[1:]) if col is not None and col.ndim > 1 else (name, fmt))
-        return np.dtype(fields)
-
-
-class _StampedDoubles(_Decoder):
-    """A std_msgs/Header followed by float64 fields only (WrenchStamped, PointStamped, PoseStamped)."""
-
-    def __init__(self, msg_type: str, names: Sequence[str]) -> None:
-        self.msg_type = msg_type
-        self.names = tuple(names)
-        self.value_fields = tuple((n, '<f8') for n in names)
-
-    def decode(self, buf: np.ndarray, off: np.ndarray, dlen: np.ndarray
-               ) -> tuple[dict[str, np.ndarray], np.ndarray]:
-        valid, _, slen, cols = _cdr_header(buf, off, dlen)
-        start = 4 + _align(12 + slen, 8)
-        valid &= start + 8 * len(self.names) <= dlen
-        values = _gather(buf, np.where(valid, off + start, 0), ('<f8', (len(self.names),)))
-        for i, name in enumerate(self.names):
-            cols[name] = values[:, i]
-        return cols, valid
-
-
-class _Float64(_Decoder):
-    msg_type = 'std_msgs/msg/Float64'
-    value_fields = (('data', '<f8'),)
-    has_header = False
-
-    def decode(self, buf: np.ndarray, off: np.ndarray, dlen: np.ndarray
-               ) -> tuple[dict[str, np.ndarray], np.ndarray]:
-        valid = dlen >= 12
-        enc = _gather(buf, np.where(valid, off, 0), ('u1', (2,)))
-        valid &= (enc[:, 0] == 0) & (enc[:, 1] == 1)
-        return {'data': _gather(buf, np.where(valid, off + 4, 0), '<f8')}, valid
-
-
-class _JointState(_Decoder):
-    """sensor_msgs/JointState with a fixed number of joints (set by the first chunk; 6 on the rig).
-
-    position/velocity/effort are (n, joints) float64, NaN where the message left the array empty.
-    """
-
-    msg_type = 'sensor_msgs/msg/JointState'
-    value_fields = (('name', 'S1'), ('position', '<f8'), ('velocity', '<f8'), ('effort', '<f8'))
-
-    def __init__(self) -> None:
-        self.joints: int | None = None
-
-    def decode(self, buf: np.ndarray, off: np.ndarray, dlen: np.ndarray
-               ) -> tuple[dict[str, np.ndarray], np.ndarray]:
-        valid, _, slen, cols = _cdr_header(buf, off, dlen)
-        base, limit = off + 4, dlen - 4
-        cur = _align(12 + slen, 4)
-
-        def read_u32(cur: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            valid &= cur + 4 <= limit
-            return _gather(buf, np.where(valid, base + cur, 0), '<u4').astype(np.int64), valid
-
-        count, valid = read_u32(cur, valid)
-        cur = cur + 4
-        if self.joints is None:
-            if not valid.any():
-                return cols, valid
-            values, counts = np.unique(count[valid], return_counts=True)
-            self.joints = int(values[np.argmax(counts)])
-        joints = self.joints
-        valid &= count == joints
-        name_start = np.zeros((off.size, joints), np.int64)
-        name_len = np.zeros((off.size, joints), np.int64)
-        for j in range(joints):
-            cur = np.where(valid, _align(cur, 4), 0)
-            size, valid = read_u32(cur, valid)
-            name_start[:, j] = base + cur + 4
-            name_len[:, j] = size - 1
-            cur = cur + 4 + size
-            valid &= (size >= 1) & (cur <= limit)
-            nul = buf[np.where(valid, base + cur - 1, 0)]
-            valid &= nul == 0
-        for key in ('position', 'velocity', 'effort'):
-            cur = np.where(valid, _align(cur, 4), 0)
-            size, valid = read_u32(cur, valid)
-            cur = cur + 4
-            full = size == joints
-            valid &= full | (size == 0)
-            if joints:
-                at = np.where(full, _align(cur, 8), cur)
-                valid &= ~full | (at + 8 * joints <= limit)
-                vals = _gather(buf, np.where(valid & full, base + at, 0), ('<f8', (joints,)))
-                vals[~full] = np.nan
-                cur = np.where(full, at + 8 * joints, cur)
-            else:
-                vals = np.zeros((off.size, 0))
-            cols[key] = vals
-        names = [_gather_strings(buf, name_start[:, j], name_len[:, j], valid) for j in range(joints)]
-        width = max([n.dtype.itemsize for n in names] + [1])
-        cols['name'] = np.stack([n.astype(f'S{width}') for n in names], axis=1) if names else \
-            np.zeros((off.size, 0), 'S1')
-        return cols, valid
-
-
-_DECODERS: dict[str, Any] = {
-    'geometry_msgs/msg/WrenchStamped': lambda: _StampedDoubles(
-        'geometry_msgs/msg/WrenchStamped', ('fx', 'fy', 'fz', 'mx', 'my', 'mz')),
-    'geometry_msgs/msg/PointStamped': lambda: _StampedDoubles('geometry_msgs/msg/PointStamped', ('x', 'y', 'z')),
-    'geometry_msgs/msg/PoseStamped': lambda: _StampedDoubles(
-        'geometry_msgs/msg/PoseStamped', ('x', 'y', 'z', 'qx', 'qy', 'qz', 'qw')),
-    'std_msgs/msg/Float64': _Float64,
-    'sensor_msgs/msg/JointState': _JointState,
-}
-SUPPORTED_TYPES = tuple(_DECODERS)
-"""Message types :meth:`BagReader.decode` turns into numpy structured arrays."""
 
 
 # -------------------------------------------------------------------------------------------------- bag reader --
@@ -858,11 +100,10 @@ class BagReader:
     def _resolve_files(self, strict: bool) -> list[Path]:
         if self.path.is_file():
             return [self.path]
-        meta_path = self.path / 'metadata.yaml'
+        meta_path = self.path / METADATA_FILENAME
         if meta_path.is_file():
             try:
-                loaded = yaml.safe_load(meta_path.read_text(encoding='utf-8'))
-                info = loaded['rosbag2_bagfile_information']
+                info = read_metadata_yaml(self.path)
                 names = [str(n) for n in info['relative_file_paths']]
                 self.bag_metadata = info
             except Exception as exc:  # any YAML or layout problem: fall back to the files on disk
@@ -955,19 +196,8 @@ class BagReader:
         out: dict[str, dict[str, str]] = {}
         for mcap_file in self._files:
             for name, data in mcap_file.metadata:
-                if include_rosbag2 or name != 'rosbag2':
+                if include_rosbag2 or name != ROSBAG2_METADATA:
                     out[name] = dict(data)
-        return out
-
-    def session(self, name: str = 'crane_stiffness/session') -> dict[str, Any]:
-        """The session metadata record with JSON values decoded ({} when the bag has none)."""
-        out: dict[str, Any] = {}
-        for key, value in self.metadata_records().get(name, {}).items():
-            try:
-                decoded = json.loads(value)
-            except ValueError:
-                decoded = value
-            out[key] = decoded if isinstance(decoded, (dict, list)) else value
         return out
 
     # -- topics --
@@ -1036,24 +266,24 @@ class BagReader:
         """Like :meth:`decode` for several topics in one pass over the file (each chunk decompressed once)."""
         known = self.topics
         per_file = self._channels_for(topics)
-        decoders: dict[str, _Decoder] = {}
+        decoders: dict[str, Decoder] = {}
         for topic in topics:
             msg_type = known[topic].msg_type
-            if msg_type not in _DECODERS:
+            decoder = new_decoder(msg_type)
+            if decoder is None:
                 raise UnsupportedTypeError(f'topic {topic} has type {msg_type}, which the bulk decoder does not '
                                            f'handle (supported: {", ".join(SUPPORTED_TYPES)}); use messages()')
-            decoders[topic] = _DECODERS[msg_type]()
+            decoders[topic] = decoder
         parts: dict[str, list[dict[str, np.ndarray]]] = {t: [] for t in topics}
         for mcap_file, chunk, channels in self._chunks(per_file, start_ns, end_ns):
             data = mcap_file.chunk_data(chunk)
             if data is None:
                 continue
-            for cid, (offsets, head) in mcap_file.message_headers(chunk, data, channels).items():
-                if not offsets.size:
+            for cid, found in mcap_file.chunk_messages(chunk, data, channels).items():
+                if not len(found):
                     continue
                 topic = channels[cid]
-                length = head['length'].astype(np.int64) - 22
-                cols, valid = decoders[topic].decode(data, offsets + MESSAGE_HEADER_SIZE, length)
+                cols, valid = decoders[topic].decode(found.buf, found.data_offset, found.data_length)
                 if not valid.all():
                     text = (f'{mcap_file.path}: {int((~valid).sum())} message(s) of {topic} in chunk at offset '
                             f'{chunk.offset} do not have the {decoders[topic].msg_type} layout; skipped')
@@ -1063,20 +293,15 @@ class BagReader:
                     if not valid.any():
                         continue
                 cols = {k: v[valid] for k, v in cols.items()}
-                cols['log_time_ns'] = head['log_time'][valid].astype(np.int64)
+                cols['log_time_ns'] = found.log_time[valid].astype(np.int64)
                 parts[topic].append(cols)
         return {topic: self._assemble(decoders[topic], parts[topic], start_ns, end_ns) for topic in topics}
 
     @staticmethod
-    def _assemble(decoder: _Decoder, parts: list[dict[str, np.ndarray]], start_ns: int | None,
+    def _assemble(decoder: Decoder, parts: list[dict[str, np.ndarray]], start_ns: int | None,
                   end_ns: int | None) -> np.ndarray:
         if not parts:
-            empty: dict[str, np.ndarray] = {'frame_id': np.zeros(0, 'S1')}
-            if isinstance(decoder, _JointState):
-                joints = decoder.joints or 0
-                empty.update(name=np.zeros((0, joints), 'S1'), position=np.zeros((0, joints)),
-                             velocity=np.zeros((0, joints)), effort=np.zeros((0, joints)))
-            return np.zeros(0, decoder.dtype(empty))
+            return decoder.empty()
         columns = {key: np.concatenate([p[key] for p in parts]) for key in parts[0]}
         log = columns['log_time_ns']
         keep = np.ones(log.size, bool)
@@ -1090,15 +315,7 @@ class BagReader:
         if log.size > 1 and not (np.diff(log) >= 0).all():
             order = np.argsort(log, kind='stable')
             columns = {k: v[order] for k, v in columns.items()}
-        out = np.empty(log.size, decoder.dtype(columns))
-        for key, value in columns.items():
-            out[key] = value
-        if decoder.has_header:
-            out['stamp_s'] = columns['stamp_sec'] + columns['stamp_nanosec'] * 1e-9
-        return out
+        return decoder.to_array(columns)
 
 
-__all__ = [
-    'BagReader', 'ChannelRecord', 'ChunkRef', 'McapFile', 'RawMessage', 'SUPPORTED_TYPES', 'SchemaRecord',
-    'TopicInfo',
-]
+__all__ = ['BagReader', 'RawMessage', 'SUPPORTED_TYPES', 'TopicInfo']

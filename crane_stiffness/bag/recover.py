@@ -24,15 +24,16 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import yaml
 from mcap.writer import Writer as McapWriter
 
 from .errors import BagError, BagFormatError, BagNotFoundError
-from .reader import McapFile, _file_order
-from .writer import (
-    COMPRESSIONS, DEFAULT_CHUNK_SIZE, LIBRARY, METADATA_FILENAME, ROSBAG2_METADATA, FileStats, TopicStats,
-    build_bag_metadata, dump_yaml, write_metadata_yaml,
+from .mcapfile import McapFile
+from .metadata import (
+    METADATA_FILENAME, ROSBAG2_METADATA, FileStats, TopicStats, build_bag_metadata, read_metadata_yaml,
+    serialized_bag_metadata, write_metadata_yaml,
 )
+from .reader import _file_order
+from .writer import COMPRESSIONS, DEFAULT_CHUNK_SIZE, LIBRARY
 
 
 _RECOVER_HINT = '; `python -m crane_stiffness.bag.recover` rewrites it as a valid file'
@@ -179,7 +180,7 @@ def _copy_messages(source: McapFile, result: FileRecovery, stats: FileStats, cou
                              offered_qos_profiles=ch.metadata.get('offered_qos_profiles', ''),
                              type_description_hash=ch.metadata.get('topic_type_hash', ''),
                              message_count=counts.get(cid, 0)) for cid, ch in sorted(source.channels.items())]
-        writer.add_metadata(ROSBAG2_METADATA, {'serialized_metadata': dump_yaml(build_bag_metadata([stats], topics))})
+        writer.add_metadata(ROSBAG2_METADATA, serialized_bag_metadata(build_bag_metadata([stats], topics)))
         writer.finish()
 
 
@@ -283,8 +284,7 @@ def recover_bag(path: str | os.PathLike[str], *, backup: bool = True,
 def _old_custom_data(bag_dir: Path) -> dict[str, str] | None:
     """custom_data of an existing metadata.yaml, to keep it (None when there is none or it is damaged)."""
     try:
-        loaded = yaml.safe_load((bag_dir / METADATA_FILENAME).read_text(encoding='utf-8'))
-        data = loaded['rosbag2_bagfile_information'].get('custom_data')
+        data = read_metadata_yaml(bag_dir).get('custom_data')
     except Exception:  # missing or damaged: nothing to keep
         return None
     return {str(k): str(v) for k, v in data.items()} if isinstance(data, dict) else None

@@ -8,293 +8,39 @@ Layout of ``BagWriter('<dir>/<session>')``::
 Each MCAP file is chunked (zstd, lz4 or none) and written straight to the operating system, one chunk at a time,
 so that a process killed with SIGKILL leaves a file whose complete chunks are all readable (see ``recover.py``).
 Schemas are ``ros2msg`` definitions built from the installed .msg files (``msgdef.py``), channels carry
-``offered_qos_profiles`` (a YAML string) and ``topic_type_hash`` metadata as rosbag2 Jazzy writes them, and the
-session's own description goes into MCAP Metadata records (``add_metadata``).
+``offered_qos_profiles`` (a YAML string, ``qos.py``) and ``topic_type_hash`` metadata as rosbag2 Jazzy writes them,
+the caller's own description of the recording goes into MCAP Metadata records (``add_metadata``), and metadata.yaml
+is laid out and written by ``metadata.py``.
 
 Times are integer nanoseconds since the Unix epoch (``*_ns``); durations in seconds where named ``*_s``.
 """
 
 from __future__ import annotations
 
-import json
 import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from functools import lru_cache
 from pathlib import Path
 from types import TracebackType
 from typing import Any
 
-import yaml
 from mcap.writer import CompressionType, Writer as McapWriter
 
 from crane_stiffness import __version__
 
 from .errors import BagExistsError, BagWriterError
+from .metadata import (
+    ROSBAG2_METADATA, FileStats, TopicStats, build_bag_metadata, encode_metadata, serialized_bag_metadata,
+    write_metadata_yaml,
+)
 from .msgdef import message_definition, normalize_type, type_description_hash
+from .qos import dump_qos_profiles
 
-METADATA_FILENAME = 'metadata.yaml'
-METADATA_VERSION = 9
-ROS_DISTRO = 'jazzy'
-SESSION_METADATA = 'crane_stiffness/session'
-"""Name of the MCAP Metadata record that describes a test session (rig, program, software, notes)."""
-NODE_PARAMETERS_METADATA = 'crane_stiffness/node_parameters'
-"""MCAP metadata record (written by session_recorder) of the parameters the rig's nodes ran with, read from the
-nodes over ROS: {node name: JSON of {parameter: value}}. Preferred to the parameter files of the session record."""
-SESSION_END_METADATA = 'crane_stiffness/session_end'
-"""MCAP metadata record written when the recording is closed: stop reason, end time, message counts."""
-ROSBAG2_METADATA = 'rosbag2'
-"""Name of the MCAP Metadata record in which rosbag2 stores its serialized bag metadata."""
 LIBRARY = f'crane_stiffness/{__version__}'
 DEFAULT_CHUNK_SIZE = 1024 * 1024
 """Default uncompressed chunk size in bytes: about 10,000 rig messages, i.e. ~5 s of a 2 kHz recording."""
 
 COMPRESSIONS = {'zstd': CompressionType.ZSTD, 'lz4': CompressionType.LZ4, 'none': CompressionType.NONE}
-
-DURATION_INFINITE = {'sec': 9223372036, 'nsec': 854775807}
-"""rmw's RMW_DURATION_INFINITE as rosbag2 writes it in QoS profiles."""
-
-_QOS_NAMES = {
-    'history': {0: 'system_default', 1: 'keep_last', 2: 'keep_all', 3: 'unknown'},
-    'reliability': {0: 'system_default', 1: 'reliable', 2: 'best_effort', 3: 'unknown', 4: 'best_available'},
-    'durability': {0: 'system_default', 1: 'transient_local', 2: 'volatile', 3: 'unknown', 4: 'best_available'},
-    'liveliness': {0: 'system_default', 1: 'automatic', 2: 'manual_by_node', 3: 'manual_by_topic', 4: 'unknown',
-                   5: 'best_available'},
-}
-_QOS_KEYS = ('history', 'depth', 'reliability', 'durability', 'deadline', 'lifespan', 'liveliness',
-             'liveliness_lease_duration', 'avoid_ros_namespace_conventions')
-
-
-# --------------------------------------------------------------------------------------------------------- YAML --
-@lru_cache(maxsize=4096)
-def _plain_ok(text: str) -> bool:
-    if not text or text != text.strip() or any(c in text for c in '\n\r\t\0') or text[0] in '-?:,[]{}#&*!|>\'"%@`':
-        return False
-    if ': ' in text or ' #' in text or text.endswith(':'):
-        return False
-    try:
-        return yaml.safe_load(text) == text
-    except yaml.YAMLError:
-        return False
-
-
-def _scalar(value: Any) -> str:
-    if value is None:
-        return '~'
-    if isinstance(value, bool):
-        return 'true' if value else 'false'
-    if isinstance(value, int):
-        return str(value)
-    if isinstance(value, float):
-        return repr(value)
-    if isinstance(value, dict):
-        return '{}'
-    if isinstance(value, (list, tuple)):
-        return '[]'
-    text = str(value)
-    return text if _plain_ok(text) else json.dumps(text)
-
-
-def _is_block(value: Any) -> bool:
-    return isinstance(value, (dict, list, tuple)) and len(value) > 0
-
-
-def _emit(value: Any, indent: int, out: list[str]) -> None:
-    pad = ' ' * indent
-    if isinstance(value, dict):
-        for key, item in value.items():
-            if _is_block(item):
-                out.append(f'{pad}{key}:')
-                _emit(item, indent + 2, out)
-            else:
-                out.append(f'{pad}{key}: {_scalar(item)}')
-        return
-    for item in value:
-        if _is_block(item):
-            sub: list[str] = []
-            _emit(item, indent + 2, sub)
-            sub[0] = f'{pad}- {sub[0][indent + 2:]}'
-            out.extend(sub)
-        else:
-            out.append(f'{pad}- {_scalar(item)}')
-
-
-def dump_yaml(value: Mapping[str, Any] | Sequence[Any]) -> str:
-    """Block-style YAML laid out like yaml-cpp (rosbag2's emitter): 2-space indent, sequences indented under keys.
-
-    Returns text without a trailing newline.
-    """
-    out: list[str] = []
-    if _is_block(value):
-        _emit(value, 0, out)
-    else:
-        out.append(_scalar(value))
-    return '\n'.join(out)
-
-
-# ---------------------------------------------------------------------------------------------------------- QoS --
-def qos_profile(*, history: str = 'keep_last', depth: int = 10, reliability: str = 'reliable',
-                durability: str = 'volatile', deadline: Mapping[str, int] | None = None,
-                lifespan: Mapping[str, int] | None = None, liveliness: str = 'automatic',
-                liveliness_lease_duration: Mapping[str, int] | None = None,
-                avoid_ros_namespace_conventions: bool = False) -> dict[str, Any]:
-    """One offered QoS profile as rosbag2 v9 writes it (policy names lower case; durations {sec, nsec})."""
-    return {
-        'history': history, 'depth': int(depth), 'reliability': reliability, 'durability': durability,
-        'deadline': dict(deadline or DURATION_INFINITE), 'lifespan': dict(lifespan or DURATION_INFINITE),
-        'liveliness': liveliness,
-        'liveliness_lease_duration': dict(liveliness_lease_duration or DURATION_INFINITE),
-        'avoid_ros_namespace_conventions': bool(avoid_ros_namespace_conventions),
-    }
-
-
-def normalize_qos_profiles(profiles: str | Sequence[Mapping[str, Any]] | None) -> list[dict[str, Any]]:
-    """Parse offered QoS profiles (a YAML string, or dicts) into rosbag2 v9 form (integer policies → names)."""
-    if profiles is None:
-        return []
-    if isinstance(profiles, str):
-        if not profiles.strip():
-            return []
-        try:
-            loaded = yaml.safe_load(profiles)
-        except yaml.YAMLError as exc:
-            raise BagWriterError(f'offered QoS profiles are not valid YAML: {exc}') from None
-        profiles = loaded if loaded is not None else []
-    if not isinstance(profiles, (list, tuple)):
-        raise BagWriterError('offered QoS profiles must be a YAML sequence of profiles')
-    result: list[dict[str, Any]] = []
-    for raw in profiles:
-        if not isinstance(raw, Mapping):
-            raise BagWriterError(f'offered QoS profile {raw!r} is not a mapping')
-        profile = qos_profile()
-        profile.update({k: v for k, v in raw.items() if k in _QOS_KEYS})
-        for key, names in _QOS_NAMES.items():
-            value = profile[key]
-            if isinstance(value, int) and not isinstance(value, bool):
-                profile[key] = names.get(value, 'unknown')
-        result.append(profile)
-    return result
-
-
-def dump_qos_profiles(profiles: str | Sequence[Mapping[str, Any]] | None) -> str:
-    """The YAML string rosbag2 Jazzy stores in the MCAP channel metadata ``offered_qos_profiles``.
-
-    yaml-cpp's dump of the profile list; ``[]`` when there are none (unknown), as rosbag2 writes it.
-    """
-    return dump_yaml(normalize_qos_profiles(profiles))
-
-
-# ------------------------------------------------------------------------------------------------ bag metadata --
-@dataclass
-class FileStats:
-    """Counts of one .mcap file of a bag, for metadata.yaml. Times in ns since the epoch."""
-
-    path: str
-    message_count: int = 0
-    start_ns: int | None = None
-    end_ns: int | None = None
-
-    def add(self, log_time_ns: int) -> None:
-        """Count one message logged at ``log_time_ns``."""
-        self.message_count += 1
-        if self.start_ns is None or log_time_ns < self.start_ns:
-            self.start_ns = log_time_ns
-        if self.end_ns is None or log_time_ns > self.end_ns:
-            self.end_ns = log_time_ns
-
-
-@dataclass
-class TopicStats:
-    """One topic of a bag, for metadata.yaml."""
-
-    name: str
-    msg_type: str
-    offered_qos_profiles: str = ''
-    type_description_hash: str = ''
-    message_count: int = 0
-    serialization_format: str = 'cdr'
-
-
-def build_bag_metadata(files: Sequence[FileStats], topics: Sequence[TopicStats], *,
-                       custom_data: Mapping[str, str] | None = None, ros_distro: str = ROS_DISTRO,
-                       compression_format: str = '', compression_mode: str = '') -> dict[str, Any]:
-    """The ``rosbag2_bagfile_information`` mapping (version 9), keys in rosbag2's order.
-
-    ``compression_format``/``compression_mode`` describe rosbag2's own file/message compression and stay empty:
-    MCAP chunk compression is internal to the storage files, as with rosbag2's MCAP storage options.
-    """
-    starts = [f.start_ns for f in files if f.start_ns is not None]
-    ends = [f.end_ns for f in files if f.end_ns is not None]
-    start = min(starts) if starts else 0
-    duration = (max(ends) - start) if ends else 0
-    return {
-        'version': METADATA_VERSION,
-        'storage_identifier': 'mcap',
-        'duration': {'nanoseconds': duration},
-        'starting_time': {'nanoseconds_since_epoch': start},
-        'message_count': sum(f.message_count for f in files),
-        'topics_with_message_count': [
-            {
-                'topic_metadata': {
-                    'name': t.name,
-                    'type': t.msg_type,
-                    'serialization_format': t.serialization_format,
-                    'offered_qos_profiles': normalize_qos_profiles(t.offered_qos_profiles),
-                    'type_description_hash': t.type_description_hash,
-                },
-                'message_count': t.message_count,
-            }
-            for t in topics
-        ],
-        'compression_format': compression_format,
-        'compression_mode': compression_mode,
-        'relative_file_paths': [f.path for f in files],
-        'files': [
-            {
-                'path': f.path,
-                'starting_time': {'nanoseconds_since_epoch': f.start_ns or 0},
-                'duration': {'nanoseconds': (f.end_ns - f.start_ns) if f.start_ns is not None else 0},
-                'message_count': f.message_count,
-            }
-            for f in files
-        ],
-        'custom_data': dict(custom_data) if custom_data else None,
-        'ros_distro': ros_distro,
-    }
-
-
-def write_metadata_yaml(bag_dir: Path, info: Mapping[str, Any]) -> Path:
-    """Write ``<bag_dir>/metadata.yaml`` atomically (temporary file, then rename); return its path."""
-    path = Path(bag_dir) / METADATA_FILENAME
-    tmp = path.with_name(METADATA_FILENAME + '.tmp')
-    tmp.write_text(dump_yaml({'rosbag2_bagfile_information': dict(info)}) + '\n', encoding='utf-8')
-    os.replace(tmp, path)
-    return path
-
-
-def encode_metadata(data: Mapping[str, Any]) -> dict[str, str]:
-    """MCAP metadata values must be strings: keep strings, JSON-encode everything else."""
-    out: dict[str, str] = {}
-    for key, value in data.items():
-        if not isinstance(key, str):
-            raise BagWriterError(f'metadata keys must be strings, got {key!r}')
-        out[key] = value if isinstance(value, str) else json.dumps(value, default=str)
-    return out
-
-
-def session_metadata(*, rig: Mapping[str, Any] | None = None, program: Any = None,
-                     software_version: str = __version__, start_time_ns: int | None = None, notes: str = '',
-                     **extra: Any) -> dict[str, str]:
-    """Record for :data:`SESSION_METADATA`: rig geometry/parameters and program as JSON, version, start, notes."""
-    data: dict[str, Any] = {'software_version': software_version, 'notes': notes}
-    if rig is not None:
-        data['rig'] = rig
-    if program is not None:
-        data['program'] = program
-    if start_time_ns is not None:
-        data['start_time_ns'] = str(int(start_time_ns))
-    data.update(extra)
-    return encode_metadata(data)
 
 
 # ------------------------------------------------------------------------------------------------------- writer --
@@ -572,7 +318,7 @@ class BagWriter:
             return
         try:
             # rosbag2 Jazzy stores the bag metadata known so far in each file it closes.
-            opened.mcap.add_metadata(ROSBAG2_METADATA, {'serialized_metadata': dump_yaml(self._bag_metadata())})
+            opened.mcap.add_metadata(ROSBAG2_METADATA, serialized_bag_metadata(self._bag_metadata()))
             opened.mcap.finish()
         finally:
             opened.stream.close()

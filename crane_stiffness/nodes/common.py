@@ -19,7 +19,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from crane_stiffness import topics
-from crane_stiffness.analysis.cdr import stamp_seconds
+from crane_stiffness.serde import stamp_seconds
 from crane_stiffness.config import ParamSpec
 from crane_stiffness.sim.sampling import SampleClock
 

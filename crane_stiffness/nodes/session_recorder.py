@@ -30,7 +30,6 @@ import json
 import os
 import signal
 import socket
-import struct
 import threading
 from datetime import datetime, timezone
 from pathlib import Path
@@ -46,8 +45,7 @@ from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
 from crane_stiffness import __version__, topics
-from crane_stiffness.bag import (NODE_PARAMETERS_METADATA, SESSION_END_METADATA, SESSION_METADATA, BagWriter,
-                                 dump_qos_profiles, session_metadata)
+from crane_stiffness.bag import BagWriter, dump_qos_profiles
 from crane_stiffness.bag.errors import BagError
 from crane_stiffness.bag.writer import COMPRESSIONS
 from crane_stiffness.config import GEOMETRY_PARAMS, ParamSpec, geometry_from_params
@@ -57,6 +55,8 @@ from crane_stiffness.nodes.load_program import PROGRAM_KEYS
 from crane_stiffness.nodes.session_qos import (adapted_qos, contract_qos, has_header, message_class,
                                                offered_profiles, publisher_types)
 from crane_stiffness.param_files import NodeSections, params_files_from_args, read_params_files
+from crane_stiffness.serde import header_stamp_ns
+from crane_stiffness.session import NODE_PARAMETERS_METADATA, SESSION_END_METADATA, SESSION_METADATA, session_record
 from crane_stiffness.sim.program import LoadProgram
 
 
@@ -97,7 +97,6 @@ PARAMS = GEOMETRY_PARAMS + PROGRAM_PARAMS + (
 RECORDING_KEYS = ('topics', 'session', 'output_dir', 'compression', 'chunk_size', 'flush_interval_s',
                   'split_max_bytes', 'split_max_duration_s', 'fsync')
 
-_STAMP = struct.Struct('<iI')
 # rclpy puts a QoS-event handler into every wait of the executor for each subscription with the default event
 # callbacks (~15 µs each per wait): with a dozen recorded topics at a few kHz that is a large share of a core.
 _NO_EVENTS = SubscriptionEventCallbacks(use_default_callbacks=False)
@@ -116,14 +115,6 @@ def utc_session_name(now_ns: int) -> str:
     return 'session_' + datetime.fromtimestamp(now_ns / 1e9, tz=timezone.utc).strftime('%Y%m%dT%H%M%SZ')
 
 
-def header_stamp_ns(data: bytes) -> int | None:
-    """The header stamp of a serialized stamped message (little-endian CDR), ns; None when unset or unreadable."""
-    if len(data) < 12 or data[1] != 1:
-        return None
-    sec, nanosec = _STAMP.unpack_from(data, 4)
-    if sec < 0 or nanosec >= 1_000_000_000 or (sec == 0 and nanosec == 0):
-        return None
-    return sec * 1_000_000_000 + nanosec
 
 
 class _Channel:
@@ -305,35 +296,18 @@ class SessionRecorder(Node):
     # --- session description ---
     def _session_record(self, session: str, start_ns: int) -> dict[str, str]:
         values = {k: plain(v) for k, v in self.params.values.items()}
-        geometry = self.built['geometry']
         files, sections, problems = read_params_files(self.params_files)
         for problem in problems:
             self.get_logger().warning(f'parameter file not recorded: {problem}')
-        program, source = None, 'none'
-        if self.built.get('program') is not None:
-            program, source = self.built['program'], 'parameters'
-        else:
-            for name, section in sections.items():
-                if name in OWN_SECTIONS or 'segments.kind' not in section:
-                    continue
-                try:
-                    program = LoadProgram.from_params({k: v for k, v in section.items() if k in PROGRAM_KEYS})
-                    source = f'parameter file section {name}'
-                except ValueError as exc:
-                    self.get_logger().warning(f'program in parameter file section {name} is invalid: {exc}')
-                break
-        program_record = None
-        if program is not None:
-            program_record = {**program.to_params(), 'duration_s': program.duration_s, 'source': source}
-        sensors = {name: section for name, section in sections.items()
-                   if name not in OWN_SECTIONS and 'segments.kind' not in section}
-        rig = {'geometry': {k: values[k] for k in values if k.startswith('geometry.')},
-               'l0': geometry.l0, 'k': geometry.k}
-        return session_metadata(
-            rig=rig, program=program_record, start_time_ns=start_ns, notes=values['notes'], session=session,
-            sensors=sensors, config_files=files,
+        record, warnings = session_record(
+            session=session, start_ns=start_ns, parameters=values, geometry=self.built['geometry'],
+            program=self.built.get('program'), param_sections=sections, param_files=files,
+            program_keys=PROGRAM_KEYS, own_sections=OWN_SECTIONS,
             recorder={k: values[k] for k in RECORDING_KEYS} | {'node': self.get_fully_qualified_name()},
             ros_distro=os.environ.get('ROS_DISTRO', 'jazzy'), host=socket.gethostname())
+        for warning in warnings:
+            self.get_logger().warning(warning)
+        return record
 
     # --- subscriptions ---
     def _subscribe_all(self) -> None:

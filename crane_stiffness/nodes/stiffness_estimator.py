@@ -26,7 +26,7 @@ from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension
 from std_srvs.srv import Trigger
 
 from crane_stiffness import topics
-from crane_stiffness.analysis.cdr import CdrError, decode_float64, decode_stamped, stamp_seconds
+from crane_stiffness.serde import CdrError, decode_float64, decode_stamped, stamp_seconds
 from crane_stiffness.config import ParamSpec
 from crane_stiffness.estimation.branch import BRANCHES
 from crane_stiffness.estimation.live import VALUE_FIELDS, LiveSettings, LiveStiffness
@@ -118,7 +118,7 @@ class StiffnessEstimatorNode(Node):
             MultiArrayDimension(label='field', size=n, stride=n)]
         self.sub_command = self.create_subscription(WrenchStamped, topics.WRENCH_COMMAND, self._on_command,
                                                     RELIABLE_QOS)
-        # The sensor streams are taken serialized and decoded here (analysis.cdr): a quarter of the CPU per message.
+        # The sensor streams are taken serialized and decoded here (serde.cdr): a quarter of the CPU per message.
         self.sub_force = self.create_subscription(WrenchStamped, topics.LOAD_CELL_WRENCH,
                                                   self._then_drain(self._on_force), SENSOR_QOS,
                                                   event_callbacks=_NO_EVENTS_SUB, raw=True)

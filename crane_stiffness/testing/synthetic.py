@@ -17,12 +17,13 @@ from typing import Any
 import numpy as np
 
 from crane_stiffness import topics
-from crane_stiffness.analysis.cdr import (encode_float64, encode_float64_multiarray, encode_stamped, encode_string,
-                                         stamp_seconds)
-from crane_stiffness.bag import SESSION_METADATA, BagWriter, dump_qos_profiles, qos_profile, session_metadata
+from crane_stiffness.bag import BagWriter, dump_qos_profiles, qos_profile
 from crane_stiffness.config import geometry_to_params
 from crane_stiffness.estimation.live import AXES, VALUE_FIELDS, LiveSettings, LiveStiffness
 from crane_stiffness.model import CraneGeometry
+from crane_stiffness.serde import (encode_float64, encode_float64_multiarray, encode_stamped, encode_string,
+                                   stamp_seconds)
+from crane_stiffness.session import SESSION_METADATA, session_metadata
 from crane_stiffness.sim.program import LoadProgram
 
 T0_NS = 1_700_000_000_000_000_000
@@ -52,7 +53,7 @@ class SyntheticSession:
 
 
 def _seconds(ns: int) -> float:
-    """A stamp in ns as seconds, computed as the nodes do (cdr.stamp_seconds), bit for bit."""
+    """A stamp in ns as seconds, computed as the nodes do (serde.stamp_seconds), bit for bit."""
     return stamp_seconds(*divmod(ns, 1_000_000_000))
 
 

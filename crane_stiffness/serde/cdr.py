@@ -1,11 +1,11 @@
 """Encoding and decoding of the few small CDR messages the project handles itself, without rosidl.
 
-The bulk decoder in crane_stiffness.bag covers the rig's fixed-layout streams; these are the rest: std_msgs/String
-(program state), std_msgs/Float64MultiArray (the estimator's values), std_msgs/Float64, and stamped messages
-(synthetic sessions; and the stiffness estimator, which takes its 1 kHz sensor streams serialized: decoding the
-header and the floats here costs a few µs, building the rclpy message object about 25 µs). XCDR1: a 4-byte
-encapsulation header (``00 01 00 00`` little endian, ``00 00 ..`` big endian), then the fields, each aligned to its
-size relative to the first byte after the header.
+The bulk decoder (:mod:`crane_stiffness.serde.bulk`) covers the rig's fixed-layout streams; these are the rest:
+std_msgs/String (program state), std_msgs/Float64MultiArray (the estimator's values), std_msgs/Float64, and stamped
+messages (synthetic sessions; the recorder's header stamps; and the stiffness estimator, which takes its 1 kHz sensor
+streams serialized: decoding the header and the floats here costs a few µs, building the rclpy message object about
+25 µs). XCDR1: a 4-byte encapsulation header (``00 01 00 00`` little endian, ``00 00 ..`` big endian), then the
+fields, each aligned to its size relative to the first byte after the header.
 """
 from __future__ import annotations
 
@@ -14,12 +14,10 @@ from typing import Sequence
 
 import numpy as np
 
+from .errors import CdrError
+
 ENCAPSULATION = b'\x00\x01\x00\x00'
 _U32 = struct.Struct('<I')
-
-
-class CdrError(ValueError):
-    """A serialized message that does not have the expected layout."""
 
 
 def _align(pos: int, size: int) -> int:
@@ -68,12 +66,6 @@ def encode_float64(value: float) -> bytes:
     return ENCAPSULATION + struct.pack('<d', float(value))
 
 
-def stamp_seconds(sec: int, nanosec: int) -> float:
-    """A header stamp in seconds, ``sec + nanosec · 1e-9``: the one rounding every node and the offline analysis
-    use, so that live and offline results agree bit for bit."""
-    return sec + nanosec * 1e-9
-
-
 _HEADER = {True: struct.Struct('<iII'), False: struct.Struct('>iII')}
 _DOUBLES: dict[tuple[int, bool], struct.Struct] = {}
 
@@ -98,6 +90,19 @@ def decode_stamped(data: bytes, count: int) -> tuple[int, int, tuple[float, ...]
     if size < 1 or nanosec >= 1_000_000_000 or pos + 8 * count > len(data):
         raise CdrError(f'bad header or fewer than {count} float64 fields after it')
     return sec, nanosec, fmt.unpack_from(data, pos)
+
+
+_STAMP = struct.Struct('<iI')
+
+
+def header_stamp_ns(data: bytes) -> int | None:
+    """The header stamp of a serialized stamped message (little-endian CDR), ns; None when unset or unreadable."""
+    if len(data) < 12 or data[1] != 1:
+        return None
+    sec, nanosec = _STAMP.unpack_from(data, 4)
+    if sec < 0 or nanosec >= 1_000_000_000 or (sec == 0 and nanosec == 0):
+        return None
+    return sec * 1_000_000_000 + nanosec
 
 
 def decode_float64_multiarray(data: bytes) -> tuple[list[tuple[str, int, int]], np.ndarray]:

@@ -1,0 +1,141 @@
+"""The session record: how a recording of the rig describes itself, in MCAP Metadata records of its bag.
+
+Written by the session recorder (and by the synthetic sessions), read by the offline analysis. Three records:
+
+- :data:`SESSION_METADATA`: software version, notes, rig geometry with the derived l0 and k, the test program, start
+  time, and what the recorder knew (session name, the sensor sections and text of its parameter files, its own
+  recording settings, ROS distro, host). Built by :func:`session_metadata` / :func:`session_record`, read by
+  :func:`read_session`.
+- :data:`NODE_PARAMETERS_METADATA`: the parameters the rig's nodes ran with, read from them over ROS,
+  ``{node: JSON of {parameter: value}}``; read by :func:`read_node_parameters`.
+- :data:`SESSION_END_METADATA`: added when the recording is closed (stop reason, end time, message counts).
+
+MCAP metadata values are strings: everything that is not a string is stored as JSON
+(:func:`crane_stiffness.bag.metadata.encode_metadata`). This module imports no ROS.
+"""
+from __future__ import annotations
+
+import json
+from collections.abc import Collection, Mapping, Sequence
+from typing import Any, Protocol, Union
+
+from crane_stiffness import __version__
+from crane_stiffness.bag.metadata import decode_metadata, encode_metadata
+from crane_stiffness.sim.program import LoadProgram
+
+SESSION_METADATA = 'crane_stiffness/session'
+"""Name of the MCAP Metadata record that describes a test session (rig, program, software, notes)."""
+NODE_PARAMETERS_METADATA = 'crane_stiffness/node_parameters'
+"""MCAP metadata record (written by session_recorder) of the parameters the rig's nodes ran with, read from the
+nodes over ROS: {node name: JSON of {parameter: value}}. Preferred to the parameter files of the session record."""
+SESSION_END_METADATA = 'crane_stiffness/session_end'
+"""MCAP metadata record written when the recording is closed: stop reason, end time, message counts."""
+
+
+class _HasMetadataRecords(Protocol):
+    def metadata_records(self) -> dict[str, dict[str, str]]: ...
+
+
+Records = Union[_HasMetadataRecords, Mapping[str, Mapping[str, str]]]
+"""A :class:`~crane_stiffness.bag.BagReader` (anything with ``metadata_records()``), or its metadata records."""
+
+
+class _Geometry(Protocol):
+    l0: Any
+    k: Any
+
+
+# ------------------------------------------------------------------------------------------------------ writing --
+def session_metadata(*, rig: Mapping[str, Any] | None = None, program: Any = None,
+                     software_version: str = __version__, start_time_ns: int | None = None, notes: str = '',
+                     **extra: Any) -> dict[str, str]:
+    """Record for :data:`SESSION_METADATA`: rig geometry/parameters and program as JSON, version, start, notes."""
+    data: dict[str, Any] = {'software_version': software_version, 'notes': notes}
+    if rig is not None:
+        data['rig'] = rig
+    if program is not None:
+        data['program'] = program
+    if start_time_ns is not None:
+        data['start_time_ns'] = str(int(start_time_ns))
+    data.update(extra)
+    return encode_metadata(data)
+
+
+def session_record(*, session: str, start_ns: int, parameters: Mapping[str, Any], geometry: _Geometry,
+                   program: LoadProgram | None, param_sections: Mapping[str, Mapping[str, Any]],
+                   param_files: Sequence[Mapping[str, str]], program_keys: Collection[str],
+                   own_sections: Collection[str], recorder: Mapping[str, Any], ros_distro: str,
+                   host: str) -> tuple[dict[str, str], list[str]]:
+    """The recorder's :data:`SESSION_METADATA` record, and warnings for the operator.
+
+    Args:
+        session: the bag's name.
+        start_ns: start of the recording, ns since the epoch.
+        parameters: the recorder's parameters (plain values): every ``geometry.*`` one, and ``notes``.
+        geometry: the crane geometry built from them (its ``l0`` and ``k`` are recorded).
+        program: the program set by the recorder's own parameters, or None; then the first section of
+            ``param_sections`` that holds ``segments.kind`` (and is not one of ``own_sections``) is the program.
+        param_sections: sections of the parameter files the recorder was started with, {node: flat parameters};
+            those that are neither its own nor a program are recorded as the sensors' parameters.
+        param_files: those files as ``{path, text}``.
+        program_keys: the parameters that make up a program (those of the load_program node).
+        own_sections: section names that hold the recorder's own parameters.
+        recorder: the recorder's recording settings and node name.
+        ros_distro, host: where the recording was made.
+    """
+    warnings: list[str] = []
+    source = 'none'
+    if program is not None:
+        source = 'parameters'
+    else:
+        for name, section in param_sections.items():
+            if name in own_sections or 'segments.kind' not in section:
+                continue
+            try:
+                program = LoadProgram.from_params({k: v for k, v in section.items() if k in program_keys})
+                source = f'parameter file section {name}'
+            except ValueError as exc:
+                warnings.append(f'program in parameter file section {name} is invalid: {exc}')
+            break
+    program_record = None
+    if program is not None:
+        program_record = {**program.to_params(), 'duration_s': program.duration_s, 'source': source}
+    sensors = {name: section for name, section in param_sections.items()
+               if name not in own_sections and 'segments.kind' not in section}
+    rig = {'geometry': {k: parameters[k] for k in parameters if k.startswith('geometry.')},
+           'l0': geometry.l0, 'k': geometry.k}
+    record = session_metadata(
+        rig=rig, program=program_record, start_time_ns=start_ns, notes=parameters['notes'], session=session,
+        sensors=sensors, config_files=list(param_files), recorder=dict(recorder), ros_distro=ros_distro, host=host)
+    return record, warnings
+
+
+# ------------------------------------------------------------------------------------------------------ reading --
+def _records(source: Records) -> Mapping[str, Mapping[str, str]]:
+    reader = getattr(source, 'metadata_records', None)
+    return reader() if callable(reader) else source  # type: ignore[return-value]
+
+
+def read_session(source: Records) -> dict[str, Any]:
+    """The :data:`SESSION_METADATA` record with its JSON objects and arrays decoded ({} when the bag has none)."""
+    return decode_metadata(_records(source).get(SESSION_METADATA, {}))
+
+
+def read_node_parameters(source: Records) -> dict[str, dict[str, Any]]:
+    """{node: {parameter: value}} of the :data:`NODE_PARAMETERS_METADATA` record ({} without one); node names
+    without their leading slash."""
+    out: dict[str, dict[str, Any]] = {}
+    for node, text in _records(source).get(NODE_PARAMETERS_METADATA, {}).items():
+        try:
+            values = json.loads(text)
+        except ValueError:
+            continue
+        if isinstance(values, dict):
+            out[node.lstrip('/')] = values
+    return out
+
+
+__all__ = [
+    'NODE_PARAMETERS_METADATA', 'SESSION_END_METADATA', 'SESSION_METADATA', 'read_node_parameters', 'read_session',
+    'session_metadata', 'session_record',
+]
