@@ -279,24 +279,14 @@ class RdtPipeline:
     def __init__(self, calibration: rdt.Calibration, sample_rate_hz: float, publish_rate_hz: float = 0.0,
                  tare_samples: int = 100, drop_status_mask: int = 0xFFFFFFFF,
                  clock: CounterClock | None = None) -> None:
-        if not (isinstance(publish_rate_hz, (int, float)) and math.isfinite(publish_rate_hz) and publish_rate_hz >= 0):
-            raise ParameterError('publish_rate_hz', publish_rate_hz, 'must be 0 (every record) or a rate > 0 [Hz]')
-        if isinstance(tare_samples, bool) or not isinstance(tare_samples, int) or tare_samples < 1:
-            raise ParameterError('tare_samples', tare_samples, 'must be an integer >= 1')
-        if not isinstance(drop_status_mask, int) or not 0 <= drop_status_mask <= 0xFFFFFFFF:
-            raise ParameterError('drop_status_mask', drop_status_mask, 'must be in 0..0xFFFFFFFF')
         self.calibration = calibration
         self.clock = clock or CounterClock(sample_rate_hz)
         self.tracker = rdt.SequenceTracker()
-        self.publish_period_ns = round(1e9 / publish_rate_hz) if publish_rate_hz > 0 else 0
-        self.drop_status_mask = drop_status_mask
         self.offset = np.zeros(6)                       # software tare [N, N·m]
-        self._recent = deque(maxlen=tare_samples)       # last raw SI readings, for the software tare
+        self._recent: deque[NDArray[np.float64]] = deque(maxlen=1)  # last raw SI readings, for the software tare
         self._generation: int | None = None
         self._last_stamp = -1
-        self._block: int | None = None                  # averaging: the open interval and its samples
-        self._block_stamps: list[NDArray[np.int64]] = []
-        self._block_wrench: list[NDArray[np.float64]] = []
+        self.configure(publish_rate_hz, tare_samples, drop_status_mask)
         self.malformed_datagrams = 0
         self.status_records = 0                         # records with a non-zero status word
         self.dropped_status = 0                         # of those, not delivered (drop_status_mask)
@@ -305,6 +295,22 @@ class RdtPipeline:
         self.delivered_records = 0
         self._out_stamps: list[NDArray[np.int64]] = []
         self._out_wrench: list[NDArray[np.float64]] = []
+
+    def configure(self, publish_rate_hz: float, tare_samples: int, drop_status_mask: int) -> None:
+        """Change the output rate, the tare length and the status mask; the stream's accounting, clock and tare
+        stay (an open averaging interval is dropped)."""
+        if not (isinstance(publish_rate_hz, (int, float)) and math.isfinite(publish_rate_hz) and publish_rate_hz >= 0):
+            raise ParameterError('publish_rate_hz', publish_rate_hz, 'must be 0 (every record) or a rate > 0 [Hz]')
+        if isinstance(tare_samples, bool) or not isinstance(tare_samples, int) or tare_samples < 1:
+            raise ParameterError('tare_samples', tare_samples, 'must be an integer >= 1')
+        if not isinstance(drop_status_mask, int) or not 0 <= drop_status_mask <= 0xFFFFFFFF:
+            raise ParameterError('drop_status_mask', drop_status_mask, 'must be in 0..0xFFFFFFFF')
+        self.publish_period_ns = round(1e9 / publish_rate_hz) if publish_rate_hz > 0 else 0
+        self.drop_status_mask = drop_status_mask
+        self._recent = deque(self._recent, maxlen=tare_samples)
+        self._block: int | None = None                  # averaging: the open interval and its samples
+        self._block_stamps: list[NDArray[np.int64]] = []
+        self._block_wrench: list[NDArray[np.float64]] = []
 
     def process(self, datagrams: list[tuple[bytes, int, int]]) -> Batch:
         """Decode, account, stamp, convert, tare and (optionally) average ``datagrams`` from
