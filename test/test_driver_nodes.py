@@ -34,21 +34,11 @@ from crane_stiffness.drivers import rdt
 from crane_stiffness.drivers.modbus import Channel
 from crane_stiffness.nodes import modbus_emulator, modbus_lvdt, netft, rdt_emulator
 from crane_stiffness.nodes.common import RELIABLE_QOS, SENSOR_QOS
+from test_sensor_nodes import isolated  # noqa: E402 (one way to isolate a node's topics in every test)
 
 NS = 1_000_000_000
 _ids = itertools.count()
 BIAS = np.array([0.05, -0.03, 0.08, 0.001, -0.001, 0.0005])
-
-
-def isolated(base: str) -> tuple[str, str, list[str]]:
-    """A unique node name, a topic prefix and the --ros-args remapping the rig's topics under it."""
-    name = f'{base}_{os.getpid()}_{next(_ids)}'
-    prefix = f'/{name}_t'
-    args = ['--ros-args', '-r', f'__node:={name}']
-    for topic in (topics.WRENCH_COMMAND, topics.PLATFORM_POSE, topics.LOAD_CELL_WRENCH, topics.LVDT_DISPLACEMENT,
-                  topics.DIAGNOSTICS):
-        args += ['-r', f'{topic}:={prefix}{topic}']
-    return name, prefix, args
 
 
 def free_port(kind: int) -> int:

@@ -11,7 +11,7 @@ import pytest
 
 from crane_stiffness.devices.rdt_device import RdtDevice
 from crane_stiffness.drivers import rdt
-from crane_stiffness.drivers.errors import DeviceAddressError, DeviceResponseError, DeviceSilentError
+from crane_stiffness.drivers.errors import DeviceAddressError, DeviceSilentError
 from crane_stiffness.drivers.rdt_client import RdtPipeline, RdtReceiver, fetch_netftapi2
 
 WRENCH = np.array([1.5, -2.25, 30.0, 0.125, -0.0625, 0.01])

@@ -22,6 +22,7 @@ from crane_stiffness.devices.modbus_device import ModbusDevice
 from crane_stiffness.drivers.errors import ParameterError
 from crane_stiffness.nodes import lvdt
 from crane_stiffness.nodes.common import OK, RELIABLE_QOS, Counters, Diagnostics, Params, check, run
+from crane_stiffness.nodes.device_params import check_address, check_start_only
 from crane_stiffness.nodes.modbus_lvdt import CHANNEL_PARAMS, channel_from
 from crane_stiffness.sim.sensors import LvdtModel
 
@@ -39,8 +40,7 @@ REST_POSE = np.concatenate([np.zeros(3), np.eye(3).ravel()])
 
 
 def _validate(values: dict[str, Any]):
-    check(isinstance(values['host'], str) and values['host'] != '', 'host', values['host'], 'must be an address')
-    check(0 <= values['port'] < 65536, 'port', values['port'], 'must be in 0..65535 (0 = a free port)')
+    check_address(values, allow_zero=True)
     check(1 <= values['unit_id'] <= 247, 'unit_id', values['unit_id'], 'must be in 1..247')
     check(values['seed'] >= -1, 'seed', values['seed'], 'must be -1 (random) or a seed >= 0')
     try:
@@ -71,10 +71,7 @@ class ModbusEmulator(Node):
         if self.device is not None:
             check(built[0].register + built[0].count <= self.device.registers, 'register', values['register'],
                   f'must lie in the {self.device.registers} registers served')
-        if self.settings:
-            for name in START_ONLY:
-                check(values[name] == self.settings[name], name, values[name],
-                      f'is read at start only (now {self.settings[name]!r}): restart the node to change it')
+        check_start_only(values, self.settings, START_ONLY)
         return built
 
     def _apply(self, built, values: dict[str, Any]) -> None:

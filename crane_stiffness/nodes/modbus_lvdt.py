@@ -28,6 +28,7 @@ from crane_stiffness.drivers.errors import DeviceResponseError, DeviceSilentErro
 from crane_stiffness.drivers.modbus import DATA_TYPES, MODBUS_TCP_PORT, REGISTER_TYPES, Channel, ModbusPoller
 from crane_stiffness.nodes.common import (ERROR, OK, SENSOR_QOS, WARN, Counters, Diagnostics, Params, check,
                                           create_grid_timer, positive, run)
+from crane_stiffness.nodes.device_params import check_address, check_start_only
 from crane_stiffness.sim.sampling import NS_PER_S
 
 #: Parameters of the channel, shared with modbus_emulator so one parameter file describes both sides.
@@ -66,9 +67,7 @@ def channel_from(values: dict[str, Any]) -> Channel:
 
 
 def _validate(values: dict[str, Any]) -> Channel:
-    check(isinstance(values['host'], str) and values['host'] != '', 'host', values['host'],
-          'must be a non-empty address or host name')
-    check(0 < values['port'] < 65536, 'port', values['port'], 'must be in 1..65535')
+    check_address(values)
     check(0 <= values['unit_id'] <= 255, 'unit_id', values['unit_id'], 'must be in 0..255')
     positive(values, 'poll_rate_hz', 'timeout_s', 'reconnect_interval_s')
     check(values['zero_samples'] >= 1, 'zero_samples', values['zero_samples'], 'must be >= 1')
@@ -116,10 +115,7 @@ class ModbusLvdt(Node):
 
     def _validate(self, values: dict[str, Any]) -> Channel:
         channel = _validate(values)
-        if self.settings:
-            for name in START_ONLY:
-                check(values[name] == self.settings[name], name, values[name],
-                      f'is read at start only (now {self.settings[name]!r}): restart the node to change it')
+        check_start_only(values, self.settings, START_ONLY)
         return channel
 
     def _apply(self, channel: Channel, values: dict[str, Any]) -> None:

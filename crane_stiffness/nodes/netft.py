@@ -33,6 +33,7 @@ from crane_stiffness.drivers.errors import DriverError
 from crane_stiffness.drivers.rdt_client import RdtPipeline, RdtReceiver, fetch_netftapi2
 from crane_stiffness.nodes.common import (ERROR, OK, SENSOR_QOS, WARN, Counters, Diagnostics, Params, check,
                                           create_grid_timer, positive, run)
+from crane_stiffness.nodes.device_params import check_address, check_start_only
 from crane_stiffness.sim.sampling import NS_PER_S
 
 DEVICES = ('ati', 'onrobot')
@@ -72,10 +73,7 @@ START_ONLY = ('host', 'port', 'device', 'http_port', 'counts_per_force', 'counts
 
 
 def _validate(values: dict[str, Any]) -> dict[str, Any]:
-    check(isinstance(values['host'], str) and values['host'] != '', 'host', values['host'], 'must be a non-empty '
-          'address or host name')
-    for name in ('port', 'http_port'):
-        check(0 < values[name] < 65536, name, values[name], 'must be in 1..65535')
+    check_address(values, ports=('port', 'http_port'))
     check(values['device'] in DEVICES, 'device', values['device'], f'must be one of {", ".join(DEVICES)}')
     check(values['command'] in rdt.STREAM_COMMANDS, 'command', values['command'],
           f'must be one of {", ".join(rdt.STREAM_COMMANDS)}')
@@ -129,10 +127,7 @@ class NetFt(Node):
 
     def _validate(self, values: dict[str, Any]) -> dict[str, Any]:
         _validate(values)
-        if self.settings:
-            for name in START_ONLY:
-                check(values[name] == self.settings[name], name, values[name],
-                      f'is read at start only (now {self.settings[name]!r}): restart the node to change it')
+        check_start_only(values, self.settings, START_ONLY)
         return values
 
     def _calibration(self, v: dict[str, Any]) -> rdt.Calibration:

@@ -25,6 +25,7 @@ from crane_stiffness.drivers import rdt
 from crane_stiffness.nodes import load_cell
 from crane_stiffness.nodes.common import (ERROR, OK, RELIABLE_QOS, Counters, Diagnostics, Params, check, finite,
                                           positive, run)
+from crane_stiffness.nodes.device_params import check_address, check_start_only
 from crane_stiffness.sim.sensors import LoadCellModel
 
 MODEL_PARAMS = tuple(s for s in load_cell.PARAMS if s.name in load_cell.MODEL_KEYS + ('seed',))
@@ -45,8 +46,7 @@ START_ONLY = ('host', 'port', 'http_port', 'sample_rate_hz', 'clock_ppm', 'count
 
 
 def _validate(values: dict[str, Any]) -> LoadCellModel:
-    check(isinstance(values['host'], str) and values['host'] != '', 'host', values['host'], 'must be an address')
-    check(0 <= values['port'] < 65536, 'port', values['port'], 'must be in 0..65535 (0 = a free port)')
+    check_address(values, allow_zero=True)
     check(-1 <= values['http_port'] < 65536, 'http_port', values['http_port'], 'must be -1 (none), 0 (free) or a port')
     positive(values, 'sample_rate_hz', 'counts_per_force', 'counts_per_torque')
     check(abs(values['clock_ppm']) < 1e5, 'clock_ppm', values['clock_ppm'], 'must be within ±100000 ppm')
@@ -82,10 +82,7 @@ class RdtEmulator(Node):
 
     def _validate(self, values: dict[str, Any]) -> LoadCellModel:
         model = _validate(values)
-        if self.settings:
-            for name in START_ONLY:
-                check(values[name] == self.settings[name], name, values[name],
-                      f'is read at start only (now {self.settings[name]!r}): restart the node to change it')
+        check_start_only(values, self.settings, START_ONLY)
         return model
 
     def _apply(self, model: LoadCellModel, values: dict[str, Any]) -> None:
