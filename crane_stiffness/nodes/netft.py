@@ -50,7 +50,7 @@ PARAMS = (
     ParamSpec('command', 'realtime', "'realtime' (RDT 0x0002, one record per datagram) or 'buffered' (0x0003, the "
               "box's output buffer of several records per datagram) [-]"),
     ParamSpec('sample_rate_hz', 7000.0, "rate of the sensor's sample counter ft_sequence, its internal sample rate "
-              '(Net F/T 7000, Axia 7800; see the manual) [Hz]'),
+              '(Net F/T 7000; an Axia or OnRobot box: see its manual) [Hz]'),
     ParamSpec('publish_rate_hz', 0.0, '0 = publish every record; > 0 = publish the mean of the records in each '
               'interval 1/publish_rate_hz of the host clock, stamped at the mean of their stamps [Hz]'),
     ParamSpec('flush_rate_hz', 500.0, 'rate of the timer that publishes what arrived since its last tick; ticks on '
