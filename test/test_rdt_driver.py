@@ -108,10 +108,10 @@ def test_hardware_bias_and_software_tare():
             assert np.abs(w[-50:]).max() < 1e-6              # software tare: zero at the tare load
             pipe.clear_tare()
             rx.bias()                                          # hardware: the device zeroes itself
-            _, w = collect(rx, pipe, lambda s: s.size >= 1 and np.abs(pipe._recent[-1]).max() < 1e-6)
+            _, w = collect(rx, pipe, lambda s: s.size >= 1 and np.abs(pipe.latest_raw).max() < 1e-6)
             assert np.abs(w[-1]).max() < 1e-6
             load['w'] = WRENCH + [1.0, 0, 0, 0, 0, 0]          # 1 N more reads 1 N
-            _, w = collect(rx, pipe, lambda s: s.size >= 1 and pipe._recent[-1][0] > 0.5)
+            _, w = collect(rx, pipe, lambda s: s.size >= 1 and pipe.latest_raw[0] > 0.5)
             assert w[-1][0] == pytest.approx(1.0, abs=1e-6)
     assert (rdt.CMD_BIAS, 0) in dev.requests
 

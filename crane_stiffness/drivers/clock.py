@@ -93,10 +93,15 @@ class CounterClock:
         """Unwrapped counters of ``raw`` and the index of the first step too large to belong to the stream (or
         len(raw))."""
         prev = raw[0] if self._raw_last is None else self._raw_last
-        steps = np.diff(raw, prepend=prev)
-        steps = (steps + _HALF) % _MOD - _HALF
-        big = np.flatnonzero(np.abs(steps) > self.max_step)
-        cut = int(big[0]) if big.size else raw.size
+        steps = np.empty(raw.size, dtype=np.int64)
+        steps[0] = raw[0] - prev
+        np.subtract(raw[1:], raw[:-1], out=steps[1:])
+        steps += _HALF
+        steps %= _MOD
+        steps -= _HALF
+        cut = raw.size
+        if steps.max() > self.max_step or steps.min() < -self.max_step:
+            cut = int(np.flatnonzero(np.abs(steps) > self.max_step)[0])
         base = self._unwrapped_last if self._raw_last is not None else 0
         unwrapped = base + np.cumsum(steps[:cut])
         return unwrapped, cut
@@ -139,22 +144,30 @@ class CounterClock:
 
     def _add_to_bins(self, x: NDArray[np.int64], residual: NDArray[np.float64]) -> None:
         bins = x // self.bin_counts
-        order = np.lexsort((residual, bins))           # by bin, then by residual: first of each bin is its minimum
-        first = np.ones(order.size, dtype=bool)
-        sorted_bins = bins[order]
-        first[1:] = sorted_bins[1:] != sorted_bins[:-1]
-        for i in order[first].tolist():
-            key = int(bins[i])
+        first, last = int(bins.min()), int(bins.max())
+        if first == last:  # the common case: a batch within one bin
+            i = int(residual.argmin())
+            minima = [(first, i)]
+        else:
+            order = np.lexsort((residual, bins))           # by bin, then residual: first of each bin is its minimum
+            sorted_bins = bins[order]
+            head = np.ones(order.size, dtype=bool)
+            head[1:] = sorted_bins[1:] != sorted_bins[:-1]
+            minima = [(int(bins[i]), i) for i in order[head].tolist()]
+        opened = False
+        for key, i in minima:
             held = self._bins.get(key)
+            if held is None:
+                opened = True
             if held is None or residual[i] < held[1]:
                 self._bins[key] = (int(x[i]), float(residual[i]))
-        if len(self._bins) > 1 and next(reversed(self._bins)) != max(self._bins):
+        if opened and len(self._bins) > 1 and next(reversed(self._bins)) != max(self._bins):
             self._bins = OrderedDict(sorted(self._bins.items()))  # a late record opened an older bin
         while len(self._bins) > self.window_bins + 1:
             self._bins.popitem(last=False)
         complete = len(self._bins) - 1                  # the newest bin may still fill
         if complete >= 3:
-            if complete != self._fitted_bins or self._newest_complete() != self._fitted_until:
+            if opened and (complete != self._fitted_bins or self._newest_complete() != self._fitted_until):
                 self._fit()
         else:
             self._min_residual = min(self._min_residual, float(residual.min()))

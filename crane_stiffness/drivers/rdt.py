@@ -125,11 +125,14 @@ class Calibration:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
                 raise ParameterError(name, v, 'must be a finite number > 0 [counts per N or N·m]')
+        divisors = np.array([self.counts_per_force] * 3 + [self.counts_per_torque] * 3)
+        divisors.flags.writeable = False
+        object.__setattr__(self, '_divisors', divisors)
 
     @property
     def divisors(self) -> NDArray[np.float64]:
-        """[cpf, cpf, cpf, cpt, cpt, cpt]."""
-        return np.array([self.counts_per_force] * 3 + [self.counts_per_torque] * 3)
+        """[cpf, cpf, cpf, cpt, cpt, cpt] (read-only)."""
+        return self._divisors
 
     def to_si(self, counts: ArrayLike) -> NDArray[np.float64]:
         """Counts (…, 6) → [Fx Fy Fz] N, [Tx Ty Tz] N·m."""
@@ -239,6 +242,7 @@ class SequenceTracker:
         self._shift = 0                      # unwrapped ≡ raw + shift (mod 2^32)
         self._resume_after: int | None = None
         self._missing: set[int] = set()
+        self.in_order = True  #: the last update's records were all delivered, in order, with no gap
 
     def reset(self) -> None:
         """Expect a new stream (after a new stream request the device restarts rdt_sequence): the next record
@@ -265,12 +269,18 @@ class SequenceTracker:
             self._last = start
         floor = self._last  # highest number delivered by earlier batches
         # Steps from the previous record, wrapped into [-2^31, 2^31).
-        steps = np.diff(seq, prepend=(self._last - self._shift) % SEQUENCE_MODULUS)
-        steps = (steps + (1 << 31)) % SEQUENCE_MODULUS - (1 << 31)
-        if np.all(steps == 1):  # the common case: in order, nothing missing
+        steps = np.empty(n, dtype=np.int64)
+        steps[0] = seq[0] - (self._last - self._shift) % SEQUENCE_MODULUS
+        np.subtract(seq[1:], seq[:-1], out=steps[1:])
+        steps += 1 << 31
+        steps %= SEQUENCE_MODULUS
+        steps -= 1 << 31
+        if steps.min() == 1 and steps.max() == 1:  # the common case: in order, nothing missing
             unwrapped = self._last + np.arange(1, n + 1, dtype=np.int64)
             self._last = int(unwrapped[-1])
+            self.in_order = True
             return np.ones(n, dtype=bool), unwrapped
+        self.in_order = False
         deliver = np.zeros(n, dtype=bool)
         unwrapped = np.empty(n, dtype=np.int64)
         for i, s in enumerate(seq.tolist()):
