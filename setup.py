@@ -17,6 +17,11 @@ NODES = {
     'stiffness_estimator': 'crane_stiffness.nodes.stiffness_estimator:main',
     'session_recorder': 'crane_stiffness.nodes.session_recorder:main',
     'session_player': 'crane_stiffness.nodes.session_player:main',
+    # Real-hardware drivers and the device emulators that serve the simulated physics through the same protocols.
+    'netft': 'crane_stiffness.nodes.netft:main',
+    'modbus_lvdt': 'crane_stiffness.nodes.modbus_lvdt:main',
+    'rdt_emulator': 'crane_stiffness.nodes.rdt_emulator:main',
+    'modbus_emulator': 'crane_stiffness.nodes.modbus_emulator:main',
 }
 
 setup(

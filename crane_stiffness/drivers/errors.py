@@ -1,0 +1,29 @@
+"""Errors raised by the hardware drivers (RDT F/T sensors, Modbus DAQs) and the device emulators."""
+from __future__ import annotations
+
+from crane_stiffness.errors import CraneStiffnessError, FieldError
+
+
+class DriverError(CraneStiffnessError):
+    """Base class of the drivers' errors."""
+
+
+class ParameterError(DriverError, FieldError):
+    """An invalid driver setting. Names the field, the value and the rule it breaks."""
+
+
+class ProtocolError(DriverError, ValueError):
+    """Bytes that are not a valid message of the protocol (wrong length, wrong header, unknown command)."""
+
+
+class DeviceAddressError(DriverError, ConnectionError):
+    """The device's address is wrong: the host name does not resolve, nothing listens at the port (ICMP port
+    unreachable / TCP connection refused) or there is no route to it."""
+
+
+class DeviceSilentError(DriverError, TimeoutError):
+    """The address is reachable but the device did not answer within the time allowed."""
+
+
+class DeviceResponseError(DriverError):
+    """The device answered with an error (a Modbus exception response, an unreadable configuration)."""

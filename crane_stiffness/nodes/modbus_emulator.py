@@ -1,0 +1,126 @@
+"""modbus_emulator: the simulated LVDT served as a Modbus TCP analog input (a thin adapter around
+crane_stiffness.devices.modbus_device and sim.sensors.LvdtModel), so the real driver ``modbus_lvdt`` can read it.
+
+Subscribes /crane/platform_pose (PoseStamped, crane_base), held from arrival on, like ``lvdt``. Serves Modbus TCP
+on ``host:port`` (port 0 = a free port, logged and on /diagnostics): every read of the channel's registers is the
+LVDT model's reading of the held pose (axis, contact point, noise, resolution, stroke: the ``lvdt`` parameters of
+the same names), encoded as the channel parameters say (``register``, ``data_type``, ``word_order``, raw =
+(metres − ``offset``) / ``gain``: the same parameters ``modbus_lvdt`` decodes with). Before the first pose it reads
+the rest pose. ``zero_on_first_pose`` zeroes the model at the first pose received.
+"""
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from geometry_msgs.msg import PoseStamped
+from rclpy.node import Node
+
+from crane_stiffness import topics
+from crane_stiffness.config import ParamSpec
+from crane_stiffness.devices.modbus_device import ModbusDevice
+from crane_stiffness.drivers.errors import ParameterError
+from crane_stiffness.nodes import lvdt
+from crane_stiffness.nodes.common import OK, RELIABLE_QOS, Counters, Diagnostics, Params, check, run
+from crane_stiffness.nodes.device_params import check_address, check_start_only
+from crane_stiffness.nodes.modbus_lvdt import CHANNEL_PARAMS, channel_from
+from crane_stiffness.sim.sensors import LvdtModel
+
+MODEL_PARAMS = tuple(s for s in lvdt.PARAMS if s.name in lvdt.MODEL_KEYS + ('seed', 'zero_on_first_pose'))
+PARAMS = (
+    ParamSpec('host', '127.0.0.1', 'address to serve Modbus TCP on (keep it on loopback or a test network '
+              'namespace) [-]'),
+    ParamSpec('port', 5020, 'TCP port; 0 = a free port (logged and on /diagnostics). 502, the Modbus port, needs '
+              'root [-]'),
+    *CHANNEL_PARAMS,
+    *MODEL_PARAMS,
+)
+START_ONLY = ('host', 'port', 'unit_id')
+REST_POSE = np.concatenate([np.zeros(3), np.eye(3).ravel()])
+
+
+def _validate(values: dict[str, Any]):
+    check_address(values, allow_zero=True)
+    check(1 <= values['unit_id'] <= 247, 'unit_id', values['unit_id'], 'must be in 1..247')
+    check(values['seed'] >= -1, 'seed', values['seed'], 'must be -1 (random) or a seed >= 0')
+    try:
+        channel = channel_from(values)
+    except ParameterError as exc:
+        raise ValueError(str(exc)) from None
+    seed = None if values['seed'] < 0 else values['seed']
+    return channel, LvdtModel.from_params({**{k: values[k] for k in lvdt.MODEL_KEYS}, 'seed': seed})
+
+
+class ModbusEmulator(Node):
+    """Holds the platform pose; every Modbus read measures it with the LVDT model."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__('modbus_emulator', **kwargs)
+        self.counters = Counters()   # received = poses; published = register reads served
+        self.pose = REST_POSE.copy()
+        self.zero_pose: np.ndarray | None = None
+        self.model: LvdtModel | None = None
+        self.device: ModbusDevice | None = None
+        self.settings: dict[str, Any] = {}
+        self.params = Params(self, PARAMS, self._validate, self._apply)
+        self.create_subscription(PoseStamped, topics.PLATFORM_POSE, self._on_pose, RELIABLE_QOS)
+        self.diagnostics = Diagnostics(self, self._report)
+
+    def _validate(self, values: dict[str, Any]):
+        built = _validate(values)
+        if self.device is not None:
+            check(built[0].register + built[0].count <= self.device.registers, 'register', values['register'],
+                  f'must lie in the {self.device.registers} registers served')
+        check_start_only(values, self.settings, START_ONLY)
+        return built
+
+    def _apply(self, built, values: dict[str, Any]) -> None:
+        channel, model = built
+        if self.zero_pose is not None:
+            model.zero(self.zero_pose[:3], self.zero_pose[3:].reshape(3, 3))  # a new set-up keeps the zero
+        self.model = model
+        if self.device is None:
+            self.device = ModbusDevice(self._reading, channel=channel, host=values['host'], port=values['port'],
+                                       unit_id=values['unit_id'], registers=max(64, channel.register + 2))
+            self.device.start()  # DriverError (cannot listen) stops the start with the reason
+            self.get_logger().info(f'serving Modbus TCP on {self.device.host}:{self.device.port}, unit '
+                                   f'{values["unit_id"]}, {channel.data_type} at register {channel.register}')
+        else:
+            self.device.channel = channel
+        self.settings = values
+
+    def _reading(self) -> float:
+        """The LVDT model's reading of the held pose [m] (the server thread calls this on every read)."""
+        pose = self.pose
+        reading, _ = self.model.measure(pose[:3], pose[3:].reshape(3, 3))
+        return reading
+
+    def _on_pose(self, msg: PoseStamped) -> None:
+        self.counters.received += 1
+        pose = lvdt._pose_vector(msg)
+        if pose is None:
+            self.counters.dropped_non_finite += 1
+            return
+        if self.zero_pose is None and self.settings['zero_on_first_pose']:
+            self.model.zero(pose[:3], pose[3:].reshape(3, 3))
+            self.zero_pose = pose
+        self.pose = pose
+
+    def _report(self):
+        self.counters.published = self.device.reads
+        pairs = self.counters.as_pairs() + [('port', str(self.device.port)),
+                                            ('zeroed', str(self.zero_pose is not None).lower())]
+        return OK, f'serving Modbus TCP on {self.device.host}:{self.device.port}, {self.device.reads} reads', pairs
+
+    def close(self) -> None:
+        if self.device is not None:
+            self.counters.published = self.device.reads
+            self.device.stop()
+
+
+def main(args=None) -> int:
+    return run(ModbusEmulator, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

@@ -1,0 +1,138 @@
+"""rdt_emulator: the simulated load cell served as an RDT F/T sensor on UDP (a thin adapter around
+crane_stiffness.devices.rdt_device and sim.sensors.LoadCellModel), so the real driver ``netft`` can read it.
+
+Subscribes /crane/wrench_command (WrenchStamped, reliable) = the wrench applied, held from arrival on, like
+``load_cell``. Serves RDT on ``host:port`` (port 0 = a free port, logged and on /diagnostics): every sample of the
+internal counter (``sample_rate_hz``, oscillator error ``clock_ppm``) is the load-cell model's reading of the held
+wrench (noise, bias, drift, cross-talk, quantization, overload: the ``load_cell`` parameters of the same names) in
+counts (``counts_per_force`` [counts/N], ``counts_per_torque`` [counts/(N·m)]). With ``http_port`` >= 0 it also
+serves /netftapi2.xml like an ATI box (0 = a free port). The hardware bias command zeroes it like the real one.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from geometry_msgs.msg import WrenchStamped
+from rclpy.node import Node
+
+from crane_stiffness import topics
+from crane_stiffness.config import ParamSpec
+from crane_stiffness.devices.rdt_device import RdtDevice
+from crane_stiffness.drivers import rdt
+from crane_stiffness.nodes import load_cell
+from crane_stiffness.nodes.common import (ERROR, OK, RELIABLE_QOS, Counters, Diagnostics, Params, check, finite,
+                                          positive, run)
+from crane_stiffness.nodes.device_params import check_address, check_start_only
+from crane_stiffness.sim.sensors import LoadCellModel
+
+MODEL_PARAMS = tuple(s for s in load_cell.PARAMS if s.name in load_cell.MODEL_KEYS + ('seed',))
+PARAMS = (
+    ParamSpec('host', '127.0.0.1', 'address to serve RDT on (keep it on loopback or a test network namespace) [-]'),
+    ParamSpec('port', rdt.RDT_PORT, 'UDP port; 0 = a free port (logged and reported on /diagnostics) [-]'),
+    ParamSpec('http_port', -1, 'serve /netftapi2.xml on this TCP port like an ATI box; 0 = a free port, -1 = no '
+              'HTTP [-]'),
+    ParamSpec('sample_rate_hz', 7000.0, 'internal sample rate: the rate of ft_sequence [Hz]'),
+    ParamSpec('clock_ppm', 0.0, "rate error of the device's oscillator, > 0 = fast [ppm]"),
+    ParamSpec('counts_per_force', 1.0e6, 'counts per newton [counts/N]'),
+    ParamSpec('counts_per_torque', 1.0e6, 'counts per newton-metre [counts/(N·m)]'),
+    ParamSpec('records_per_packet', 10, 'records per datagram when a client asks for a buffered stream [-]'),
+    *MODEL_PARAMS,
+)
+START_ONLY = ('host', 'port', 'http_port', 'sample_rate_hz', 'clock_ppm', 'counts_per_force', 'counts_per_torque',
+              'records_per_packet')
+
+
+def _validate(values: dict[str, Any]) -> LoadCellModel:
+    check_address(values, allow_zero=True)
+    check(-1 <= values['http_port'] < 65536, 'http_port', values['http_port'], 'must be -1 (none), 0 (free) or a port')
+    positive(values, 'sample_rate_hz', 'counts_per_force', 'counts_per_torque')
+    check(abs(values['clock_ppm']) < 1e5, 'clock_ppm', values['clock_ppm'], 'must be within ±100000 ppm')
+    check(1 <= values['records_per_packet'] <= 40, 'records_per_packet', values['records_per_packet'],
+          'must be in 1..40')
+    check(values['seed'] >= -1, 'seed', values['seed'], 'must be -1 (random) or a seed >= 0')
+    seed = None if values['seed'] < 0 else values['seed']
+    return LoadCellModel.from_params({**{k: values[k] for k in load_cell.MODEL_KEYS}, 'seed': seed})
+
+
+@dataclass
+class EmulatorCounters(Counters):
+    """``received`` = commands; ``published`` = RDT records sent."""
+
+    stream_requests: int = 0
+    bias_commands: int = 0
+
+
+class RdtEmulator(Node):
+    """Holds the commanded wrench; the device thread measures it with the model for every sample it sends."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__('rdt_emulator', **kwargs)
+        self.counters = EmulatorCounters()
+        self.applied = np.zeros(6)
+        self.model: LoadCellModel | None = None
+        self.device: RdtDevice | None = None
+        self.settings: dict[str, Any] = {}
+        self.t0 = time.monotonic()
+        self.params = Params(self, PARAMS, self._validate, self._apply)
+        self.create_subscription(WrenchStamped, topics.WRENCH_COMMAND, self._on_command, RELIABLE_QOS)
+        self.diagnostics = Diagnostics(self, self._report)
+
+    def _validate(self, values: dict[str, Any]) -> LoadCellModel:
+        model = _validate(values)
+        check_start_only(values, self.settings, START_ONLY)
+        return model
+
+    def _apply(self, model: LoadCellModel, values: dict[str, Any]) -> None:
+        self.model = model  # the device thread picks the new model up at its next burst
+        if self.device is None:
+            self.device = RdtDevice(self._samples, host=values['host'], port=values['port'],
+                                    sample_rate_hz=values['sample_rate_hz'],
+                                    calibration=rdt.Calibration(values['counts_per_force'],
+                                                                values['counts_per_torque']),
+                                    records_per_packet=values['records_per_packet'], clock_ppm=values['clock_ppm'],
+                                    http_port=None if values['http_port'] < 0 else values['http_port'], batch=True)
+            self.device.start()
+            http = f', /netftapi2.xml on port {self.device.http_port}' if values['http_port'] >= 0 else ''
+            self.get_logger().info(f'serving RDT on {self.device.host}:{self.device.port}{http}')
+        self.settings = values
+
+    def _samples(self, n: int) -> np.ndarray:
+        """The model's readings of the held wrench for the n samples of a burst (the device thread calls this)."""
+        readings, _ = self.model.measure(np.tile(self.applied, (n, 1)), time.monotonic() - self.t0)
+        return readings
+
+    def _on_command(self, msg: WrenchStamped) -> None:
+        self.counters.received += 1
+        f, m = msg.wrench.force, msg.wrench.torque
+        wrench = (f.x, f.y, f.z, m.x, m.y, m.z)
+        if not finite(wrench):
+            self.counters.dropped_non_finite += 1
+            return
+        self.applied = np.array(wrench)
+
+    def _report(self):
+        dev = self.device
+        self.counters.published = dev.records_sent
+        self.counters.stream_requests = sum(1 for c, _ in dev.requests if c in rdt.STREAM_COMMANDS.values())
+        self.counters.bias_commands = sum(1 for c, _ in dev.requests if c == rdt.CMD_BIAS)
+        pairs = self.counters.as_pairs() + [('port', str(dev.port)), ('http_port', str(dev.http_port)),
+                                            ('streaming', str(dev.streaming).lower())]
+        if dev.bad_requests:
+            return ERROR, f'{dev.bad_requests} malformed RDT requests received', pairs
+        return OK, f'serving RDT on {dev.host}:{dev.port}, {"streaming" if dev.streaming else "idle"}', pairs
+
+    def close(self) -> None:
+        if self.device is not None:
+            self.device.stop()
+            self.counters.published = self.device.records_sent
+
+
+def main(args=None) -> int:
+    return run(RdtEmulator, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

@@ -1,0 +1,377 @@
+"""Driver and emulator nodes on real DDS (loopback): ``rdt_emulator`` → ``netft`` and ``modbus_emulator`` →
+``modbus_lvdt`` as the installed console scripts in their own processes, and the nodes in-process against the
+emulator classes for the faults (lost records, status word, a device that goes away), the services and the clear
+start-up errors.
+
+Every test remaps the rig's topics under its own prefix and gets its own DDS domain (conftest).
+"""
+from __future__ import annotations
+
+import itertools
+import json
+import math
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PointStamped, PoseStamped, WrenchStamped
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+
+from conftest import call_trigger, spin_until
+from crane_stiffness import topics
+from crane_stiffness.devices.modbus_device import ModbusDevice
+from crane_stiffness.devices.rdt_device import RdtDevice
+from crane_stiffness.drivers import rdt
+from crane_stiffness.drivers.modbus import Channel
+from crane_stiffness.nodes import modbus_emulator, modbus_lvdt, netft, rdt_emulator
+from crane_stiffness.nodes.common import RELIABLE_QOS, SENSOR_QOS
+from test_sensor_nodes import isolated  # noqa: E402 (one way to isolate a node's topics in every test)
+
+NS = 1_000_000_000
+_ids = itertools.count()
+BIAS = np.array([0.05, -0.03, 0.08, 0.001, -0.001, 0.0005])
+
+
+def free_port(kind: int) -> int:
+    with socket.socket(socket.AF_INET, kind) as s:
+        s.bind(('127.0.0.1', 0))
+        return s.getsockname()[1]
+
+
+def stamp_ns(stamp) -> int:
+    return stamp.sec * NS + stamp.nanosec
+
+
+class Probe:
+    """Publishes the rig's inputs and records the sensor topics and /diagnostics under a prefix."""
+
+    def __init__(self, ctx, prefix: str):
+        self.node = Node(f'probe_{next(_ids)}_{os.getpid()}', context=ctx)
+        self.wrenches: list[tuple[int, str, np.ndarray]] = []
+        self.points: list[tuple[int, str, float]] = []
+        self.diagnostics: list = []
+        self.cmd = self.node.create_publisher(WrenchStamped, prefix + topics.WRENCH_COMMAND, RELIABLE_QOS)
+        self.pose = self.node.create_publisher(PoseStamped, prefix + topics.PLATFORM_POSE, RELIABLE_QOS)
+        self.node.create_subscription(WrenchStamped, prefix + topics.LOAD_CELL_WRENCH, self._on_wrench, SENSOR_QOS)
+        self.node.create_subscription(
+            PointStamped, prefix + topics.LVDT_DISPLACEMENT,
+            lambda m: self.points.append((stamp_ns(m.header.stamp), m.header.frame_id, m.point.x)), SENSOR_QOS)
+        self.node.create_subscription(DiagnosticArray, prefix + topics.DIAGNOSTICS,
+                                      lambda m: self.diagnostics.extend(m.status), 100)
+
+    def _on_wrench(self, msg: WrenchStamped) -> None:
+        f, m = msg.wrench.force, msg.wrench.torque
+        self.wrenches.append((stamp_ns(msg.header.stamp), msg.header.frame_id,
+                              np.array([f.x, f.y, f.z, m.x, m.y, m.z])))
+
+    def command(self, wrench) -> None:
+        msg = WrenchStamped()
+        msg.header.stamp = self.node.get_clock().now().to_msg()
+        msg.header.frame_id = topics.FRAME_BASE
+        f, m = msg.wrench.force, msg.wrench.torque
+        f.x, f.y, f.z, m.x, m.y, m.z = (float(v) for v in wrench)
+        self.cmd.publish(msg)
+
+    def publish_pose(self, u) -> None:
+        msg = PoseStamped()
+        msg.header.stamp = self.node.get_clock().now().to_msg()
+        msg.header.frame_id = topics.FRAME_BASE
+        msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = (float(v) for v in u)
+        msg.pose.orientation.w = 1.0
+        self.pose.publish(msg)
+
+    def wrench_after(self, t_ns: int) -> np.ndarray:
+        return np.array([w for s, _, w in self.wrenches if s > t_ns]).reshape(-1, 6)
+
+    def points_after(self, t_ns: int) -> np.ndarray:
+        return np.array([x for s, _, x in self.points if s > t_ns])
+
+    def status(self, hardware_id: str, level: bytes | None = None):
+        """The newest diagnostic status of a node (at ``level`` if given), as (status, {key: value}) or None."""
+        for s in reversed(self.diagnostics):
+            if s.hardware_id == hardware_id and (level is None or s.level == level):
+                return s, {kv.key: kv.value for kv in s.values}
+        return None
+
+
+def start_node(executable: str, args: list[str], log: Path) -> subprocess.Popen:
+    """The installed console script (what `ros2 run crane_stiffness <executable>` runs), in its own process."""
+    exe = Path(sys.prefix) / 'bin' / executable
+    assert exe.exists(), f'{exe} missing: run `make install` first'
+    with open(log, 'w') as out:
+        return subprocess.Popen([str(exe), *args], stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+                                start_new_session=True)
+
+
+def stop_node(proc: subprocess.Popen, log: Path) -> tuple[int, str]:
+    if proc.poll() is None:
+        os.killpg(proc.pid, signal.SIGINT)
+        try:
+            proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    return proc.returncode, log.read_text(errors='replace')
+
+
+def final_counters(log: str, node: str) -> dict:
+    for line in reversed(log.splitlines()):
+        if line.startswith(f'FINAL_COUNTERS {node} '):
+            return json.loads(line.split(' ', 2)[2])
+    raise AssertionError(f'no FINAL_COUNTERS {node} in:\n{log[-2000:]}')
+
+
+def test_netft_reads_the_rdt_emulator_across_processes(rclpy_context, tmp_path):
+    """rig wrench command → rdt_emulator (load-cell physics, RDT on 127.0.0.1) → netft → /load_cell/wrench: the
+    commanded wrench plus the sensor's bias, 7 kHz averaged to 1 kHz, stamped on the host clock; ~/tare; counters."""
+    port = free_port(socket.SOCK_DGRAM)
+    emu_name, prefix, emu_args = isolated('rdt_emulator')
+    ft_name = f'netft_{os.getpid()}_{next(_ids)}'
+    ft_args = [a if not a.startswith('__node:=') else f'__node:={ft_name}' for a in emu_args]
+    emu = start_node('rdt_emulator', emu_args + [
+        '-p', f'port:={port}', '-p', 'noise_std:=[0.0, 0.0, 0.0, 0.0, 0.0, 0.0]', '-p',
+        f'bias:={BIAS.tolist()}', '-p', 'resolution:=[0.0, 0.0, 0.0, 0.0, 0.0, 0.0]', '-p', 'seed:=1'],
+        tmp_path / 'emu.log')
+    probe = Probe(rclpy_context, prefix)
+    ex = SingleThreadedExecutor(context=rclpy_context)
+    ex.add_node(probe.node)
+    t_start = time.time_ns()
+    ft = None
+    try:
+        assert spin_until(ex, lambda: probe.cmd.get_subscription_count() >= 1, 20.0), (tmp_path / 'emu.log').read_text()
+        ft = start_node('netft', ft_args + [
+            '-p', 'host:=127.0.0.1', '-p', f'port:={port}', '-p', 'counts_per_force:=1000000.0', '-p',
+            'counts_per_torque:=1000000.0', '-p', 'publish_rate_hz:=1000.0', '-p', 'frame_id:=ft_test',
+            '-p', 'tare_samples:=200'], tmp_path / 'netft.log')
+        assert spin_until(ex, lambda: len(probe.wrenches) > 500, 20.0), (tmp_path / 'netft.log').read_text()
+        # No command yet: the sensor reads its bias.
+        np.testing.assert_allclose(probe.wrench_after(0)[-100:], np.tile(BIAS, (100, 1)), atol=1e-6)
+        applied = np.array([0.5, 2.0, 50.0, 0.01, -0.02, 0.1])
+        probe.command(applied)
+        assert spin_until(ex, lambda: np.abs(probe.wrench_after(0)[-1] - (applied + BIAS)).max() < 1e-6, 10.0)
+        t_cmd = probe.wrenches[-1][0]
+        spin_until(ex, lambda: len(probe.wrench_after(t_cmd)) >= 300, 10.0)
+        np.testing.assert_allclose(probe.wrench_after(t_cmd), np.tile(applied + BIAS, (len(probe.wrench_after(t_cmd)),
+                                                                                      1)), atol=1e-6)
+        stamps = np.array([s for s, _, _ in probe.wrenches])
+        assert {f for _, f, _ in probe.wrenches} == {'ft_test'}
+        assert np.all(np.diff(stamps) > 0)
+        assert np.median(np.diff(stamps)) == pytest.approx(1e6, abs=5e4)   # 1 kHz out of 7 kHz
+        assert t_start < stamps[0] and stamps[-1] < time.time_ns()         # on the host clock
+        # Software tare at the load: the reading becomes zero.
+        reply = call_trigger(ex, probe.node, f'/{ft_name}/tare')
+        assert reply.success and 'tared on 200 samples' in reply.message
+        # Samples stamped after the reply were sampled, so received and processed, after the tare.
+        t_tare = time.time_ns() + 5_000_000
+        assert spin_until(ex, lambda: len(probe.wrench_after(t_tare)) >= 100, 10.0)
+        assert np.abs(probe.wrench_after(t_tare)).max() < 1e-6
+        # Diagnostics: records counted, nothing lost on loopback.
+        assert spin_until(ex, lambda: probe.status(ft_name) is not None, 5.0)
+        status, values = probe.status(ft_name)
+        assert int(values['received']) > 1000 and values['streaming'] == 'true'
+        assert values['last_status'] == '0x00000000'
+    finally:
+        ft_code, ft_log = stop_node(ft, tmp_path / 'netft.log') if ft is not None else (None, '')
+        emu_code, emu_log = stop_node(emu, tmp_path / 'emu.log')
+    assert ft_code == 0, ft_log[-3000:]
+    assert emu_code == 0, emu_log[-3000:]
+    counters = final_counters(ft_log, ft_name)
+    sent = final_counters(emu_log, emu_name)
+    print('netft', counters, 'emulator', sent)
+    assert counters['published'] > 1000 and counters['received'] >= 6 * counters['published']
+    assert counters['malformed_datagrams'] == 0 and counters['status_records'] == 0
+    assert sent['received'] == 1 and sent['stream_requests'] >= 1 and sent['published'] >= counters['received']
+
+
+def test_modbus_lvdt_reads_the_modbus_emulator_across_processes(rclpy_context, tmp_path):
+    """platform pose → modbus_emulator (LVDT physics, float32 volts little-endian words on 127.0.0.1) → modbus_lvdt
+    → /lvdt/displacement: the displacement from the first pose in metres; ~/zero; jitter on /diagnostics."""
+    port = free_port(socket.SOCK_STREAM)
+    emu_name, prefix, emu_args = isolated('modbus_emulator')
+    lv_name = f'modbus_lvdt_{os.getpid()}_{next(_ids)}'
+    lv_args = [a if not a.startswith('__node:=') else f'__node:={lv_name}' for a in emu_args]
+    channel = ['-p', 'register:=4', '-p', 'data_type:=float32', '-p', 'word_order:=little', '-p', 'gain:=0.002',
+               '-p', 'offset:=-0.001', '-p', 'unit_id:=2']
+    emu = start_node('modbus_emulator', emu_args + channel + [
+        '-p', f'port:={port}', '-p', 'noise_std:=0.0', '-p', 'resolution:=0.0'], tmp_path / 'emu.log')
+    probe = Probe(rclpy_context, prefix)
+    ex = SingleThreadedExecutor(context=rclpy_context)
+    ex.add_node(probe.node)
+    lv = None
+    try:
+        assert spin_until(ex, lambda: probe.pose.get_subscription_count() >= 1, 20.0), (tmp_path / 'emu.log').read_text()
+        rest = np.array([0.0, 0.0, 2.4e-5])
+        probe.publish_pose(rest)  # the first pose: the emulator's LVDT zeroes on it
+        lv = start_node('modbus_lvdt', lv_args + channel + [
+            '-p', 'host:=127.0.0.1', '-p', f'port:={port}', '-p', 'poll_rate_hz:=200.0', '-p', 'frame_id:=lvdt_mb'],
+            tmp_path / 'lvdt.log')
+        assert spin_until(ex, lambda: len(probe.points) > 50, 20.0), (tmp_path / 'lvdt.log').read_text()
+        assert np.abs(probe.points_after(0)).max() < 1e-9
+        probe.publish_pose(rest + [0.0, 5e-5, 0.0])  # 50 µm along the LVDT's axis (y)
+        assert spin_until(ex, lambda: abs(probe.points[-1][2] - 5e-5) < 1e-9, 10.0)
+        t_move = probe.points[-1][0]
+        spin_until(ex, lambda: len(probe.points_after(t_move)) >= 20, 5.0)
+        np.testing.assert_allclose(probe.points_after(t_move), 5e-5, atol=1e-9)  # float32 volts: ~1e-10 m
+        stamps = np.array([s for s, _, _ in probe.points])
+        assert np.all(np.diff(stamps) > 0) and {f for _, f, _ in probe.points} == {'lvdt_mb'}
+        reply = call_trigger(ex, probe.node, f'/{lv_name}/zero')
+        assert reply.success and 'zeroed on 10 readings' in reply.message
+        t_zero = time.time_ns() + 5_000_000  # polled after the reply
+        assert spin_until(ex, lambda: len(probe.points_after(t_zero)) >= 10, 5.0)
+        assert np.abs(probe.points_after(t_zero)).max() < 1e-9
+        assert spin_until(ex, lambda: probe.status(lv_name) is not None, 5.0)
+        status, values = probe.status(lv_name)
+        assert status.level == b'\x00' and values['failures'] == '0'
+        assert math.isfinite(float(values['poll_jitter_p99_us']))
+    finally:
+        lv_code, lv_log = stop_node(lv, tmp_path / 'lvdt.log') if lv is not None else (None, '')
+        emu_code, emu_log = stop_node(emu, tmp_path / 'emu.log')
+    assert lv_code == 0, lv_log[-3000:]
+    assert emu_code == 0, emu_log[-3000:]
+    counters = final_counters(lv_log, lv_name)
+    assert counters['published'] > 50 and counters['failures'] == 0
+    assert final_counters(emu_log, emu_name)['published'] >= counters['published']
+
+
+# --- in-process: faults, services, parameters ---------------------------------------------------------------------
+
+def spin_node(ctx, node, prefix):
+    probe = Probe(ctx, prefix)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+    ex.add_node(probe.node)
+    return probe, ex
+
+
+def test_netft_reports_lost_records_status_word_and_a_device_that_goes_away(rclpy_context):
+    wrench = np.array([1.0, 2.0, 3.0, 0.1, 0.2, 0.3])
+    dev = RdtDevice(lambda: wrench, sample_rate_hz=2000.0, http_port=0,
+                    calibration=rdt.Calibration(2e5, 5e6)).start()
+    name, prefix, args = isolated('netft')
+    node = netft.NetFt(context=rclpy_context, cli_args=args, parameter_overrides=[
+        Parameter('host', value='127.0.0.1'), Parameter('port', value=dev.port),
+        Parameter('http_port', value=dev.http_port), Parameter('sample_rate_hz', value=2000.0),
+        Parameter('tare_mode', value='hardware'), Parameter('timeout_s', value=0.3),
+        Parameter('reconnect_interval_s', value=0.3)])
+    probe, ex = spin_node(rclpy_context, node, prefix)
+    try:
+        # Calibration from the box's netftapi2.xml (2e5 counts/N, 5e6 counts/N·m).
+        assert spin_until(ex, lambda: len(probe.wrenches) > 200, 10.0)
+        np.testing.assert_allclose(probe.wrenches[-1][2], wrench, atol=1e-5)
+        # Lost records → WARN with the count.
+        dev.drop = lambda seq: seq % 100 == 0
+        assert spin_until(ex, lambda: (s := probe.status(name, b'\x01')) is not None and 'records lost' in
+                          s[0].message, 5.0)
+        assert node.counters.records_lost > 0
+        dev.drop = None
+        # A status word → ERROR naming it; those records are not published.
+        dev.status = 0x80000000
+        assert spin_until(ex, lambda: (s := probe.status(name, b'\x02')) is not None and '0x80000000' in
+                          s[0].message, 5.0)
+        assert node.counters.status_dropped > 0
+        dev.status = 0
+        # Hardware tare: the bias command reaches the device, readings become zero.
+        reply = call_trigger(ex, probe.node, f'/{name}/tare')
+        assert reply.success and '0x0042' in reply.message
+        assert spin_until(ex, lambda: np.abs(probe.wrenches[-1][2]).max() < 1e-5, 5.0)
+        assert (rdt.CMD_BIAS, 0) in dev.requests
+        # The device goes away: ERROR while silent, then it comes back and the stream is requested again.
+        dev.stop()
+        assert spin_until(ex, lambda: (s := probe.status(name, b'\x02')) is not None and 'no record' in
+                          s[0].message, 5.0)
+        dev.start()
+        # The bias went with the power: the readings are the wrench again (the probe may still be working through
+        # zeros published before the device went away: wait for the newest).
+        assert spin_until(ex, lambda: np.abs(probe.wrenches[-1][2] - wrench).max() < 1e-5, 10.0)
+        assert node.counters.reconnects >= 1 and node.receiver.streaming
+    finally:
+        ex.shutdown()
+        node.close()
+        dev.stop()
+
+
+def test_netft_parameters_checked_at_start_and_on_change(rclpy_context):
+    with RdtDevice(lambda: np.zeros(6), sample_rate_hz=1000.0) as dev:
+        name, prefix, args = isolated('netft')
+        node = netft.NetFt(context=rclpy_context, cli_args=args, parameter_overrides=[
+            Parameter('host', value='127.0.0.1'), Parameter('port', value=dev.port), Parameter('device',
+                                                                                               value='onrobot'),
+            Parameter('sample_rate_hz', value=1000.0)])
+        try:
+            assert node.pipeline.calibration == rdt.ONROBOT
+            bad = node.set_parameters([Parameter('host', value='10.0.0.5')])[0]
+            assert not bad.successful and 'host' in bad.reason and 'restart the node' in bad.reason
+            bad = node.set_parameters([Parameter('tare_mode', value='magic')])[0]
+            assert not bad.successful and 'tare_mode' in bad.reason
+            bad = node.set_parameters([Parameter('publish_rate_hz', value=5000.0)])[0]
+            assert not bad.successful and 'up to sample_rate_hz' in bad.reason
+            assert node.set_parameters([Parameter('publish_rate_hz', value=100.0)])[0].successful
+            assert node.pipeline.publish_period_ns == 10_000_000
+        finally:
+            node.close()
+            node.destroy_node()
+
+
+def test_driver_mains_exit_2_with_a_clear_reason(capsys):
+    udp = free_port(socket.SOCK_DGRAM)
+    assert netft.main(['--ros-args', '-p', 'host:=127.0.0.1', '-p', f'port:={udp}', '-p', 'counts_per_force:=1e6',
+                       '-p', 'counts_per_torque:=1e6', '-p', 'wait_for_device_s:=1.0']) == 2
+    assert 'port unreachable' in capsys.readouterr().err
+    with RdtDevice(lambda: np.zeros(6)) as dev:
+        dev.silent = True
+        assert netft.main(['--ros-args', '-p', 'host:=127.0.0.1', '-p', f'port:={dev.port}', '-p',
+                           'device:=onrobot', '-p', 'wait_for_device_s:=1.0']) == 2
+    assert 'sent no record within 1.0 s' in capsys.readouterr().err
+    assert netft.main(['--ros-args', '-p', 'counts_per_force:=1e6']) == 2
+    assert 'set counts_per_force and counts_per_torque together' in capsys.readouterr().err
+    tcp = free_port(socket.SOCK_STREAM)
+    assert modbus_lvdt.main(['--ros-args', '-p', 'host:=127.0.0.1', '-p', f'port:={tcp}']) == 2
+    assert f'no Modbus TCP device at 127.0.0.1:{tcp}' in capsys.readouterr().err
+    assert modbus_lvdt.main(['--ros-args', '-p', 'data_type:=float64']) == 2
+    assert 'data_type' in capsys.readouterr().err
+    assert rdt_emulator.main(['--ros-args', '-p', 'full_scale:=[1.0]']) == 2
+    assert 'full_scale' in capsys.readouterr().err
+    assert modbus_emulator.main(['--ros-args', '-p', 'range_m:=[0.001, -0.001]']) == 2
+    assert 'range_m' in capsys.readouterr().err
+
+
+def test_modbus_lvdt_reports_failures_and_recovers(rclpy_context):
+    ch = Channel(register=0, data_type='int16', gain=1e-6)
+    reading = {'m': 0.00123}
+    with ModbusDevice(lambda: reading['m'], channel=ch) as dev:
+        name, prefix, args = isolated('modbus_lvdt')
+        node = modbus_lvdt.ModbusLvdt(context=rclpy_context, cli_args=args, parameter_overrides=[
+            Parameter('host', value='127.0.0.1'), Parameter('port', value=dev.port),
+            Parameter('data_type', value='int16'), Parameter('gain', value=1e-6), Parameter('offset', value=0.0),
+            Parameter('poll_rate_hz', value=100.0)])
+        probe, ex = spin_node(rclpy_context, node, prefix)
+        try:
+            assert spin_until(ex, lambda: len(probe.points) > 10, 5.0)
+            assert probe.points[-1][2] == pytest.approx(0.00123, abs=1e-12)
+            dev.fail_with = 4
+            assert spin_until(ex, lambda: (s := probe.status(name, b'\x02')) is not None and
+                              'exception 4 (server device failure)' in s[0].message, 5.0)
+            assert node.counters.exception_responses > 0
+            dev.fail_with = 0
+            reading['m'] = -0.0005
+            assert spin_until(ex, lambda: probe.points[-1][2] == pytest.approx(-0.0005, abs=1e-12), 5.0)
+            assert spin_until(ex, lambda: (s := probe.status(name)) is not None and s[0].level == b'\x00', 5.0)
+            # Runtime change of the scaling: accepted (the device still sends -500 counts, now read as 2 µm each);
+            # of the address: refused with the reason.
+            assert node.set_parameters([Parameter('gain', value=2e-6)])[0].successful
+            assert spin_until(ex, lambda: probe.points[-1][2] == pytest.approx(-0.001, abs=1e-12), 5.0)
+            bad = node.set_parameters([Parameter('port', value=1)])[0]
+            assert not bad.successful and 'restart the node' in bad.reason
+        finally:
+            ex.shutdown()
+            node.close()
+            node.destroy_node()
