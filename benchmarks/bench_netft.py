@@ -75,7 +75,7 @@ def run(rate: float, publish_rate: float, seconds: float, log_dir: Path, command
     from geometry_msgs.msg import WrenchStamped
 
     from crane_stiffness import topics
-    from crane_stiffness.analysis.cdr import decode_stamped
+    from crane_stiffness.serde import decode_stamped
     from crane_stiffness.nodes.common import SENSOR_QOS, make_executor
 
     log_dir.mkdir(parents=True, exist_ok=True)
