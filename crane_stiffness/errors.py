@@ -20,3 +20,8 @@ class FieldError(CraneStiffnessError, ValueError):
         self.value = value
         self.rule = rule
         super().__init__(f'{field} = {value!r}: {rule}')
+
+
+class ParameterError(FieldError):
+    """An invalid constructor or configuration value of a pure core (sensor model, load program, estimator,
+    driver); the same class whichever subpackage raises it, re-exported by each subpackage's ``errors``."""

@@ -9,8 +9,8 @@ import pytest
 from crane_stiffness.estimation.branch import BranchTracker
 from crane_stiffness.estimation.errors import ParameterError
 from crane_stiffness.estimation.fit import fit_line
-from crane_stiffness.estimation.live import (OK, STALE, VALUE_FIELDS, WARN, LagHistogram, LiveSettings,
-                                            LiveStiffness)
+from crane_stiffness.estimation.live import VALUE_FIELDS, LagHistogram, LiveSettings, LiveStiffness
+from crane_stiffness.status import OK, STALE, WARN
 
 K = 2000.0      # N/m
 C = 0.1         # N

@@ -14,6 +14,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from crane_stiffness.analysis.sweep import ForceDisplacement, StiffnessRow  # noqa: E402
+from crane_stiffness.axes import FORCE_AXES  # noqa: E402
 from crane_stiffness.estimation.branch import BRANCHES, LOADING, UNLOADING  # noqa: E402
 
 if TYPE_CHECKING:
@@ -22,7 +23,6 @@ if TYPE_CHECKING:
     from crane_stiffness.estimation.inputs import CommandSeries
     from crane_stiffness.estimation.live import LivePairs
 
-_FORCE_AXES = ('fx', 'fy', 'fz')
 #: Largest number of points drawn per series in a figure.
 PLOT_POINTS = 20_000
 
@@ -44,7 +44,7 @@ def _finish(fig, ax, xlabel: str, ylabel: str, title: str, path: str | Path, *, 
 
 def _labels(axis: str) -> tuple[str, str, float]:
     """(load label, displacement label, displacement scale to plotted unit)."""
-    if axis in _FORCE_AXES:
+    if axis in FORCE_AXES:
         return f'external force {axis} [N]', f'displacement δu_{axis[1]} [mm]', 1e3
     return f'external moment {axis} [N·m]', f'rotation δθ_{axis[1]} [mrad]', 1e3
 
@@ -79,7 +79,7 @@ def plot_force_displacement(curves: ForceDisplacement, path: str | Path, title: 
 
 def plot_stiffness_vs_weight(rows: Sequence[StiffnessRow], axis: str, path: str | Path, title: str = '') -> Path:
     """Stiffness to a small load against W, one line per wire length (Figs. 10 and 13); eq. (18) as markers."""
-    unit = 'N/m' if axis in _FORCE_AXES else 'N·m/rad'
+    unit = 'N/m' if axis in FORCE_AXES else 'N·m/rad'
     fig, ax = plt.subplots(figsize=(6.4, 4.8), dpi=110)
     heights = sorted({r.height for r in rows})
     for h in heights:

@@ -15,9 +15,10 @@ import sys
 import warnings
 from typing import Any, Callable
 
+from crane_stiffness.axes import AXES
+
 EXIT_OK = 0
 EXIT_USAGE = 2  # crane_stiffness.cli.EXIT_USAGE
-AXES = ('fx', 'fy', 'fz', 'mx', 'my', 'mz')
 
 
 def _fail(exc: BaseException) -> int:

@@ -1,15 +1,11 @@
 """Errors raised by the hardware drivers (RDT F/T sensors, Modbus DAQs) and the device emulators."""
 from __future__ import annotations
 
-from crane_stiffness.errors import CraneStiffnessError, FieldError
+from crane_stiffness.errors import CraneStiffnessError, ParameterError
 
 
 class DriverError(CraneStiffnessError):
     """Base class of the drivers' errors."""
-
-
-class ParameterError(DriverError, FieldError):
-    """An invalid driver setting. Names the field, the value and the rule it breaks."""
 
 
 class ProtocolError(DriverError, ValueError):
@@ -27,3 +23,4 @@ class DeviceSilentError(DriverError, TimeoutError):
 
 class DeviceResponseError(DriverError):
     """The device answered with an error (a Modbus exception response, an unreadable configuration)."""
+__all__ = ['DeviceAddressError', 'DeviceResponseError', 'DeviceSilentError', 'DriverError', 'ParameterError', 'ProtocolError']

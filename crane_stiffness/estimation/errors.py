@@ -1,16 +1,11 @@
 """Errors raised by the estimation package (fits, branch tracking, time pairing)."""
 from __future__ import annotations
 
-
-from crane_stiffness.errors import CraneStiffnessError, FieldError
+from crane_stiffness.errors import CraneStiffnessError, ParameterError
 
 
 class EstimationError(CraneStiffnessError):
     """Base class of the estimation package's errors."""
-
-
-class ParameterError(EstimationError, FieldError):
-    """An invalid constructor or configuration value. Names the field, the value and the rule it breaks."""
 
 
 class DataError(EstimationError, ValueError):
@@ -19,3 +14,6 @@ class DataError(EstimationError, ValueError):
 
 class SyncError(EstimationError, ValueError):
     """Misuse of the time pairing, for example a sample pushed on an unknown stream."""
+
+
+__all__ = ['DataError', 'EstimationError', 'ParameterError', 'SyncError']

@@ -37,17 +37,17 @@ from typing import Any
 
 import numpy as np
 
+from crane_stiffness.axes import AXES
 from crane_stiffness.estimation.branch import BRANCHES, LOADING, Branch, branch_labels
 from crane_stiffness.estimation.errors import ParameterError
 from crane_stiffness.estimation.estimator import Estimate, StiffnessEstimator
 from crane_stiffness.estimation.fit import t_quantile
 from crane_stiffness.estimation.inputs import (CommandHold, CommandSeries, InputCounters, Samples, command_inputs,
                                                input_faults)
+from crane_stiffness.status import ERROR, OK, STALE, WARN
 from crane_stiffness.estimation.sync import (DISPLACEMENT, FORCE, ApproximateTimeSync, Pair, SyncCounters,
                                              pair_by_stamp, pair_stamp)
 
-#: Load axes, in the order of a wrench [fx, fy, fz, mx, my, mz].
-AXES = ('fx', 'fy', 'fz', 'mx', 'my', 'mz')
 BRANCH_SOURCES = ('auto', 'force')
 
 #: Columns of one row of :meth:`LiveStiffness.values` (one row per branch, in the order of ``BRANCHES``).
@@ -61,8 +61,6 @@ VALUE_FIELDS = ('stiffness', 'intercept', 'stderr', 'ci95_low', 'ci95_high', 'r2
 # Student-t quantiles computed ahead when a fit starts (t_quantile's cache holds 1024).
 _T_CACHE = 1000
 
-# Diagnostic levels (the values of diagnostic_msgs/DiagnosticStatus).
-OK, WARN, ERROR, STALE = 0, 1, 2, 3
 
 
 def _number(values: Mapping[str, Any], name: str, *, minimum: float | None = None, above: float | None = None,

@@ -10,20 +10,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from crane_stiffness.axes import AXES, axis_index
 from crane_stiffness.model.equilibrium import Equilibrium, wrench_jacobian
 from crane_stiffness.model.errors import GeometryError
 from crane_stiffness.model.geometry import CraneGeometry
 
 #: Unit load directions by axis name (a force axis in N, a moment axis in N·m).
-AXES = ('fx', 'fy', 'fz', 'mx', 'my', 'mz')
 
-
-def axis_index(axis: str) -> int:
-    """Index 0..5 of an axis name fx fy fz mx my mz (the load component and the matching displacement)."""
-    try:
-        return AXES.index(axis)
-    except ValueError:
-        raise ValueError(f'axis = {axis!r}: must be one of {", ".join(AXES)}') from None
 
 
 def tangent_stiffness(geometry: CraneGeometry, equilibrium: Equilibrium) -> np.ndarray:

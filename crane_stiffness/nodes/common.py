@@ -130,7 +130,6 @@ class Diagnostics:
         self._pub.publish(msg)
 
 
-OK, WARN, ERROR = 0, 1, 2
 
 #: Longest a node waits at start (or on a rate change) to put its timer on the clock grid [s].
 MAX_ALIGN_WAIT_S = 0.05

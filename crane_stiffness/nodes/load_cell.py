@@ -19,13 +19,14 @@ from rclpy.node import Node
 from std_srvs.srv import Trigger
 
 from crane_stiffness import topics
+from crane_stiffness.axes import AXES
 from crane_stiffness.config import ParamSpec
-from crane_stiffness.nodes.common import (OK, RELIABLE_QOS, SENSOR_QOS, WARN, Counters, Diagnostics, Params,
-                                          SampleSchedule, check, check_sensor_params, finite, run)
+from crane_stiffness.nodes.common import (RELIABLE_QOS, SENSOR_QOS, Counters, Diagnostics, Params, SampleSchedule,
+                                          check, check_sensor_params, finite, run)
 from crane_stiffness.sim.sampling import NS_PER_S, SampleClock, StampedHold
 from crane_stiffness.sim.sensors import LoadCellModel
+from crane_stiffness.status import OK, WARN
 
-AXES = ('fx', 'fy', 'fz', 'mx', 'my', 'mz')
 IDENTITY_6X6 = [1.0 if i == j else 0.0 for i in range(6) for j in range(6)]
 
 PARAMS = (

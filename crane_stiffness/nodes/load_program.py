@@ -18,8 +18,9 @@ from std_srvs.srv import Trigger
 
 from crane_stiffness import topics
 from crane_stiffness.config import ParamSpec
-from crane_stiffness.nodes.common import LATCHED_QOS, OK, RELIABLE_QOS, WARN, Diagnostics, Params, check, run
+from crane_stiffness.nodes.common import LATCHED_QOS, RELIABLE_QOS, Diagnostics, Params, check, run
 from crane_stiffness.sim.program import LoadProgram
+from crane_stiffness.status import OK, WARN
 
 PARAMS = (
     ParamSpec('name', 'hold_zero', 'program name, recorded with the session'),

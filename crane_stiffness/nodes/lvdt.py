@@ -22,10 +22,11 @@ from std_srvs.srv import Trigger
 from crane_stiffness import topics
 from crane_stiffness.config import ParamSpec
 from crane_stiffness.model.rotation import quaternion_to_matrix
-from crane_stiffness.nodes.common import (OK, RELIABLE_QOS, SENSOR_QOS, WARN, Counters, Diagnostics, Params,
-                                          SampleSchedule, check_sensor_params, finite, run)
+from crane_stiffness.nodes.common import (RELIABLE_QOS, SENSOR_QOS, Counters, Diagnostics, Params, SampleSchedule,
+                                          check_sensor_params, finite, run)
 from crane_stiffness.sim.sampling import NS_PER_S, SampleClock, StampedHold
 from crane_stiffness.sim.sensors import LvdtModel
+from crane_stiffness.status import OK, WARN
 
 PARAMS = (
     ParamSpec('sample_rate_hz', 1000.0, 'sample rate; stamps are 1/sample_rate_hz apart on a grid of the node '

@@ -23,10 +23,10 @@ from crane_stiffness.config import ParamSpec
 from crane_stiffness.devices.rdt_device import RdtDevice
 from crane_stiffness.drivers import rdt
 from crane_stiffness.nodes import load_cell
-from crane_stiffness.nodes.common import (ERROR, OK, RELIABLE_QOS, Counters, Diagnostics, Params, check, finite,
-                                          positive, run)
+from crane_stiffness.nodes.common import RELIABLE_QOS, Counters, Diagnostics, Params, check, finite, positive, run
 from crane_stiffness.nodes.device_params import check_address, check_start_only
 from crane_stiffness.sim.sensors import LoadCellModel
+from crane_stiffness.status import ERROR, OK
 
 MODEL_PARAMS = tuple(s for s in load_cell.PARAMS if s.name in load_cell.MODEL_KEYS + ('seed',))
 PARAMS = (

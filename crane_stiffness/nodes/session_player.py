@@ -37,8 +37,9 @@ from std_srvs.srv import Trigger
 from crane_stiffness.bag import BagReader
 from crane_stiffness.bag.errors import BagDamageWarning, BagError
 from crane_stiffness.config import ParamSpec
-from crane_stiffness.nodes.common import ERROR, OK, WARN, Diagnostics, Params, check, positive, run
+from crane_stiffness.nodes.common import Diagnostics, Params, check, positive, run
 from crane_stiffness.nodes.session_qos import message_class, playback_qos
+from crane_stiffness.status import ERROR, OK, WARN
 
 CLOCK_TOPIC = '/clock'
 _NO_EVENTS = PublisherEventCallbacks(use_default_callbacks=False)  # no QoS-event handler in every executor wait

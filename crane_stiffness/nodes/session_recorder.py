@@ -49,7 +49,7 @@ from crane_stiffness.bag import BagWriter, dump_qos_profiles
 from crane_stiffness.bag.errors import BagError
 from crane_stiffness.bag.writer import COMPRESSIONS
 from crane_stiffness.config import GEOMETRY_PARAMS, ParamSpec, geometry_from_params
-from crane_stiffness.nodes.common import ERROR, OK, Diagnostics, Params, check, run
+from crane_stiffness.nodes.common import Diagnostics, Params, check, run
 from crane_stiffness.nodes.load_program import PARAMS as PROGRAM_NODE_PARAMS
 from crane_stiffness.nodes.load_program import PROGRAM_KEYS
 from crane_stiffness.nodes.session_qos import (adapted_qos, contract_qos, has_header, message_class,
@@ -58,6 +58,7 @@ from crane_stiffness.param_files import NodeSections, params_files_from_args, re
 from crane_stiffness.serde import header_stamp_ns
 from crane_stiffness.session import NODE_PARAMETERS_METADATA, SESSION_END_METADATA, SESSION_METADATA, session_record
 from crane_stiffness.sim.program import LoadProgram
+from crane_stiffness.status import ERROR, OK
 
 
 PROGRAM_PARAMS = tuple(p for p in PROGRAM_NODE_PARAMS if p.name in PROGRAM_KEYS)

@@ -19,6 +19,8 @@ from typing import Any, Callable
 
 import numpy as np
 
+from crane_stiffness.axes import AXES
+
 from .stamps import stamp_seconds
 
 _CDR_HEADER = np.dtype({
@@ -211,7 +213,7 @@ class _JointState(Decoder):
 
 _DECODERS: dict[str, Callable[[], Decoder]] = {
     'geometry_msgs/msg/WrenchStamped': lambda: _StampedDoubles(
-        'geometry_msgs/msg/WrenchStamped', ('fx', 'fy', 'fz', 'mx', 'my', 'mz')),
+        'geometry_msgs/msg/WrenchStamped', AXES),
     'geometry_msgs/msg/PointStamped': lambda: _StampedDoubles('geometry_msgs/msg/PointStamped', ('x', 'y', 'z')),
     'geometry_msgs/msg/PoseStamped': lambda: _StampedDoubles(
         'geometry_msgs/msg/PoseStamped', ('x', 'y', 'z', 'qx', 'qy', 'qz', 'qw')),

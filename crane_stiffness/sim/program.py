@@ -38,10 +38,10 @@ import numpy as np
 import yaml
 from numpy.typing import NDArray
 
+from crane_stiffness.axes import AXES
 from crane_stiffness.param_files import ParamFile, applicable_sections
 from crane_stiffness.sim.errors import ParameterError, ProgramFileError
 
-AXES = ('fx', 'fy', 'fz', 'mx', 'my', 'mz')
 KINDS = ('ramp', 'hold', 'step')
 Phase = Literal['loading', 'unloading', 'hold']
 PARAM_NAMES = ('name', 'rate_hz', 'repeats', 'segments.kind', 'segments.axis', 'segments.target',
