@@ -23,6 +23,8 @@ install: $(STAMP)
 $(STAMP): requirements.txt requirements-test.txt $(SOURCES)
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --disable-pip-version-check -r requirements-test.txt
+	@# setuptools reuses build/lib: a module moved or deleted in the tree would stay installed from it.
+	rm -rf build/lib build/bdist.* crane_stiffness.egg-info
 	$(BIN)/python -m pip install --quiet --disable-pip-version-check --no-deps --force-reinstall .
 	@touch $(STAMP)
 

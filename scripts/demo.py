@@ -14,6 +14,7 @@ import argparse
 import json
 import os
 import random
+import shutil
 import sys
 import time
 from datetime import datetime, timezone
@@ -44,6 +45,9 @@ def main(argv=None) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     print(f'[1/3] colcon build into {REPO / "install"} ...', flush=True)
+    # A fresh build of the package: setuptools would otherwise keep installing modules since moved or deleted.
+    for stale in (REPO / 'build' / 'crane_stiffness', REPO / 'install' / 'crane_stiffness'):
+        shutil.rmtree(stale, ignore_errors=True)
     rosrun.colcon_build(REPO, REPO / 'build', REPO / 'install', REPO / 'log')
     env = rosrun.install_environment(REPO / 'install')
     share = REPO / 'install' / 'crane_stiffness' / 'share' / 'crane_stiffness' / 'config'
