@@ -228,3 +228,32 @@ def test_player_refuses_a_remap_to_a_bad_topic_name_so_start_cannot_crash(rclpy_
     assert client.trigger('start').success
     ex.shutdown()
     player.destroy_node()
+
+
+# ----------------------------------------------------------------------------------------- the rule, in-process --
+
+def test_the_shared_config_files_hold_only_keys_some_node_knows():
+    """The unknown-key rule accepts every config file of the package for every node (geometry under /** is fine
+    for nodes that do not declare it) and names the closest key for a misspelt one."""
+    import importlib
+
+    from crane_stiffness.config import share_dir
+    from crane_stiffness.nodes.common import NODE_MODULES, RCLPY_PARAMS, check_params_files
+    files = sorted(str(p) for p in (share_dir() / 'config').glob('*.yaml'))
+    assert files
+    for module in NODE_MODULES:
+        mod = importlib.import_module(f'crane_stiffness.nodes.{module}')
+        own = {s.name for s in mod.PARAMS} | set(getattr(mod, 'LIST_PARAMS', {})) | set(RCLPY_PARAMS)
+        check_params_files(files, f'/{module}', own)
+
+
+def test_main_exits_2_for_a_missing_params_file_without_traceback(tmp_path, capsys):
+    from crane_stiffness.nodes import lvdt
+    missing = tmp_path / 'nope.yaml'
+    assert lvdt.main(['--ros-args', '--params-file', str(missing)]) == 2
+    err = capsys.readouterr().err
+    assert f'{missing}: no such parameter file' in err and 'Traceback' not in err
+    bad = write(tmp_path / 'bad.yaml', 'lvdt:\n  ros__parameters:\n    nois_std: 1.0e-7\n')
+    assert lvdt.main(['--ros-args', '--params-file', str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert str(bad) in err and "'nois_std'" in err and "did you mean 'noise_std'" in err
