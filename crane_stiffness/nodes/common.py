@@ -15,14 +15,14 @@ from typing import Any, Callable, Iterable, Mapping, Sequence
 import rclpy
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-import yaml
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
 from rclpy.exceptions import InvalidTopicNameException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.validate_topic_name import validate_topic_name
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.validate_topic_name import validate_topic_name
+import yaml
 
 from crane_stiffness import topics
 from crane_stiffness.serde import stamp_seconds
@@ -50,7 +50,6 @@ NODE_MODULES = ('load_program', 'crane_model', 'load_cell', 'lvdt', 'stiffness_e
                 'session_player', 'netft', 'modbus_lvdt', 'rdt_emulator', 'modbus_emulator')
 #: Parameters rclpy declares on every node (plus the ``qos_overrides.`` family).
 RCLPY_PARAMS = ('use_sim_time', 'start_type_description_service')
-_INT32_MAX = 2**31 - 1
 
 
 def show(value: Any) -> str:
@@ -60,18 +59,16 @@ def show(value: Any) -> str:
     return repr(value)
 
 
+_KINDS = ((bool, 'true or false', 'booleans'), (float, 'a number', 'numbers'), (int, 'an integer', 'integers'),
+          (str, 'a string', 'strings'))
+
+
 def _kind(default: Any) -> str:
-    if isinstance(default, bool):
-        return 'true or false'
-    if isinstance(default, float):
-        return 'a number'
-    if isinstance(default, int):
-        return 'an integer'
-    if isinstance(default, str):
-        return 'a string'
-    if isinstance(default, (list, tuple)) and default:
-        return f'a list of {_kind(default[0]).replace("a number", "numbers").replace("an integer", "integers")}'
-    return 'a list'
+    """What a value of the type of ``default`` is, in words ('a number', 'a list of strings')."""
+    if isinstance(default, (list, tuple)):
+        plural = next((p for t, _, p in _KINDS if default and isinstance(default[0], t)), None)
+        return f'a list of {plural}' if plural else 'a list'
+    return next((one for t, one, _ in _KINDS if isinstance(default, t)), 'a value')
 
 
 def _is_number(v: Any) -> bool:
