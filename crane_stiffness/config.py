@@ -26,26 +26,40 @@ class ConfigError(CraneStiffnessError, ValueError):
 
 @dataclass(frozen=True)
 class ParamSpec:
-    """One ROS parameter: name, default (its type is the parameter's type), description with the unit."""
+    """One ROS parameter: name, default (its type is the parameter's type), description with the unit.
+
+    ``low``/``high`` bound a number (inclusive; they become the descriptor's ``floating_point_range`` or
+    ``integer_range``, which rclpy enforces too); ``rule`` is the remaining rule in words (the descriptor's
+    ``additional_constraints``, e.g. '> 0'), checked by the node's own validation.
+    """
 
     name: str
     default: Any
     description: str
+    low: float | int | None = None
+    high: float | int | None = None
+    rule: str = ''
 
 
 #: Geometry parameters shared by crane_model, stiffness_estimator and the CLI. wire_stiffness = 0 means "derive k
 #: from wire_diameter and youngs_modulus" (ROS parameters cannot be null).
 GEOMETRY_PARAMS: tuple[ParamSpec, ...] = (
-    ParamSpec('geometry.a', LAB_A, 'half side of the platform triangle [m]'),
-    ParamSpec('geometry.b', LAB_B, 'half side of the overhead triangle [m]'),
-    ParamSpec('geometry.height', 0.5, 'height h between the triangles at the unloaded rest pose [m]'),
-    ParamSpec('geometry.weight', 50.0, 'total suspended weight W, acting along +z (down) [N]'),
-    ParamSpec('geometry.wire_stiffness', 0.0, 'wire stiffness k [N/m]; 0 = k = A*E/l0 from diameter and modulus'),
-    ParamSpec('geometry.wire_diameter', LAB_WIRE_DIAMETER, 'wire diameter d [m] (used when wire_stiffness is 0)'),
-    ParamSpec('geometry.youngs_modulus', LAB_YOUNGS_MODULUS, "wire Young's modulus E [Pa]"),
-    ParamSpec('geometry.com_offset', [0.0, 0.0, 0.0], 'centre of mass from the platform centre, body frame [m]'),
-    ParamSpec('geometry.load_point', [0.0, 0.0, 0.0], 'external force application point, body frame [m]'),
-    ParamSpec('geometry.length_offsets', [0.0] * 6, 'change of unstretched length of wires 1..6 [m]'),
+    ParamSpec('geometry.a', LAB_A, 'half side of the platform triangle [m]', rule='> 0'),
+    ParamSpec('geometry.b', LAB_B, 'half side of the overhead triangle [m]', rule='> 0'),
+    ParamSpec('geometry.height', 0.5, 'height h between the triangles at the unloaded rest pose [m]',
+              rule='> 0'),
+    ParamSpec('geometry.weight', 50.0, 'total suspended weight W, acting along +z (down) [N]', low=0.0),
+    ParamSpec('geometry.wire_stiffness', 0.0, 'wire stiffness k [N/m]; 0 = k = A*E/l0 from diameter and modulus',
+              low=0.0),
+    ParamSpec('geometry.wire_diameter', LAB_WIRE_DIAMETER, 'wire diameter d [m] (used when wire_stiffness is 0)',
+              rule='> 0'),
+    ParamSpec('geometry.youngs_modulus', LAB_YOUNGS_MODULUS, "wire Young's modulus E [Pa]", rule='> 0'),
+    ParamSpec('geometry.com_offset', [0.0, 0.0, 0.0], 'centre of mass from the platform centre, body frame [m]',
+              rule='3 finite numbers'),
+    ParamSpec('geometry.load_point', [0.0, 0.0, 0.0], 'external force application point, body frame [m]',
+              rule='3 finite numbers'),
+    ParamSpec('geometry.length_offsets', [0.0] * 6, 'change of unstretched length of wires 1..6 [m]',
+              rule='6 finite numbers'),
 )
 
 

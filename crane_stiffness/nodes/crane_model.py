@@ -29,8 +29,10 @@ MODEL_STATUS = topics.MODEL_STATUS
 PARAMS = GEOMETRY_PARAMS + (
     ParamSpec('prediction_axis', 'auto', "axis of the predicted stiffness: fx fy fz mx my mz, or 'auto' = the "
               'largest component of the command (fy until a load arrives)'),
-    ParamSpec('max_abs_force', 1.0e4, 'commands with a force component above this are absurd and dropped [N]'),
-    ParamSpec('max_abs_moment', 1.0e3, 'commands with a moment component above this are absurd and dropped [N·m]'),
+    ParamSpec('max_abs_force', 1.0e4, 'commands with a force component above this are absurd and dropped [N]',
+              rule='> 0'),
+    ParamSpec('max_abs_moment', 1.0e3, 'commands with a moment component above this are absurd and dropped [N·m]',
+              rule='> 0'),
 )
 
 

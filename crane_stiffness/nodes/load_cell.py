@@ -31,10 +31,10 @@ IDENTITY_6X6 = [1.0 if i == j else 0.0 for i in range(6) for j in range(6)]
 
 PARAMS = (
     ParamSpec('sample_rate_hz', 1000.0, 'sample rate; stamps are 1/sample_rate_hz apart on a grid of the node '
-              'clock [Hz]'),
+              'clock [Hz]', rule='> 0'),
     ParamSpec('publish_rate_hz', 500.0, 'rate of the timer that publishes the samples taken since its last tick '
               '(a DAQ buffer); its ticks fall on multiples of its period of the node clock, so sensors at the same '
-              'rate deliver together. Higher: lower latency, more CPU [Hz]'),
+              'rate deliver together. Higher: lower latency, more CPU [Hz]', rule='> 0'),
     ParamSpec('frame_id', 'load_cell', 'header.frame_id of the published wrench; axes aligned with crane_base [-]'),
     ParamSpec('noise_std', [0.01, 0.01, 0.01, 0.0005, 0.0005, 0.0005],
               'white-noise standard deviation per axis fx fy fz mx my mz [N, N, N, N·m, N·m, N·m]'),
@@ -47,8 +47,8 @@ PARAMS = (
               'quantization step per axis, 0 = none [N, N, N, N·m, N·m, N·m]'),
     ParamSpec('full_scale', [40.0, 40.0, 120.0, 2.0, 2.0, 2.0],
               'overload limit per axis; readings saturate at +-full_scale [N, N, N, N·m, N·m, N·m]'),
-    ParamSpec('tare_samples', 100, 'readings averaged by the ~/tare service [samples]'),
-    ParamSpec('seed', -1, 'seed of the noise generator, -1 = random [-]'),
+    ParamSpec('tare_samples', 100, 'readings averaged by the ~/tare service [samples]', low=1),
+    ParamSpec('seed', -1, 'seed of the noise generator, -1 = random [-]', low=-1),
 )
 MODEL_KEYS = ('noise_std', 'bias', 'drift_per_s', 'crosstalk', 'resolution', 'full_scale')
 

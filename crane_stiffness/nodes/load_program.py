@@ -24,16 +24,17 @@ from crane_stiffness.status import OK, WARN
 
 PARAMS = (
     ParamSpec('name', 'hold_zero', 'program name, recorded with the session'),
-    ParamSpec('rate_hz', 100.0, 'command publication rate [Hz]'),
-    ParamSpec('repeats', 1, 'how many times the segment list is played (>= 1)'),
+    ParamSpec('rate_hz', 100.0, 'command publication rate [Hz]', rule='> 0'),
+    ParamSpec('repeats', 1, 'how many times the segment list is played (>= 1)', low=1),
     ParamSpec('segments.kind', ['hold'], 'segment kinds: ramp | hold | step'),
     ParamSpec('segments.axis', ['fy'], 'segment axes: fx fy fz [N] or mx my mz [N·m], fixed frame (z down)'),
     ParamSpec('segments.target', [0.0], 'segment end values [N or N·m]'),
-    ParamSpec('segments.duration', [1.0], 'segment durations [s]'),
+    ParamSpec('segments.duration', [1.0], 'segment durations [s]',
+              rule='one per segment; kind, axis, target and duration lists have the same length'),
     ParamSpec('autostart', True, 'start the program by itself (after start_delay_s)'),
-    ParamSpec('start_delay_s', 1.0, 'wait before an automatic start [s]'),
+    ParamSpec('start_delay_s', 1.0, 'wait before an automatic start [s]', low=0.0, high=86400.0),
     ParamSpec('min_subscribers', 1, 'an automatic start also waits until /crane/wrench_command has this many '
-              'subscribers, so no command is lost while DDS discovery runs [-]'),
+              'subscribers, so no command is lost while DDS discovery runs [-]', low=0),
     ParamSpec('exit_on_done', False, 'shut the node down when the program has finished'),
 )
 PROGRAM_KEYS = ('name', 'rate_hz', 'repeats', 'segments.kind', 'segments.axis', 'segments.target',

@@ -30,21 +30,21 @@ from crane_stiffness.status import OK, WARN
 
 PARAMS = (
     ParamSpec('sample_rate_hz', 1000.0, 'sample rate; stamps are 1/sample_rate_hz apart on a grid of the node '
-              'clock [Hz]'),
+              'clock [Hz]', rule='> 0'),
     ParamSpec('publish_rate_hz', 500.0, 'rate of the timer that publishes the samples taken since its last tick '
               '(a DAQ buffer); its ticks fall on multiples of its period of the node clock, so sensors at the same '
-              'rate deliver together. Higher: lower latency, more CPU [Hz]'),
+              'rate deliver together. Higher: lower latency, more CPU [Hz]', rule='> 0'),
     ParamSpec('frame_id', 'lvdt', 'header.frame_id of the published reading [-]'),
     ParamSpec('axis', [0.0, 1.0, 0.0], 'measuring direction in crane_base (normalised; default along y) [-]'),
     ParamSpec('contact_point', [0.0, 0.0, 0.0], 'contact point on the platform, body frame (default: its centre) '
               '[m]'),
-    ParamSpec('noise_std', 2.0e-7, 'white-noise standard deviation of the reading [m]'),
-    ParamSpec('resolution', 1.0e-7, 'quantization step of the reading, 0 = none [m]'),
+    ParamSpec('noise_std', 2.0e-7, 'white-noise standard deviation of the reading [m]', low=0.0),
+    ParamSpec('resolution', 1.0e-7, 'quantization step of the reading, 0 = none [m]', low=0.0),
     ParamSpec('range_m', [-2.5e-3, 2.5e-3], 'stroke [min, max] relative to the zero; the reading saturates '
               'outside [m]'),
     ParamSpec('zero_on_first_pose', True, 'zero at the first pose received, so the reading is the displacement '
               'from the loaded rest pose [-]'),
-    ParamSpec('seed', -1, 'seed of the noise generator, -1 = random [-]'),
+    ParamSpec('seed', -1, 'seed of the noise generator, -1 = random [-]', low=-1),
 )
 MODEL_KEYS = ('axis', 'contact_point', 'noise_std', 'resolution', 'range_m')
 

@@ -32,7 +32,7 @@ PARAMS = (
     ParamSpec('host', '127.0.0.1', 'address to serve Modbus TCP on (keep it on loopback or a test network '
               'namespace) [-]'),
     ParamSpec('port', 5020, 'TCP port; 0 = a free port (logged and on /diagnostics). 502, the Modbus port, needs '
-              'root [-]'),
+              'root [-]', low=0, high=65535),
     *CHANNEL_PARAMS,
     *MODEL_PARAMS,
 )

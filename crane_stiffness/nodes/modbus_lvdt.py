@@ -34,7 +34,7 @@ from crane_stiffness.status import ERROR, OK, WARN
 
 #: Parameters of the channel, shared with modbus_emulator so one parameter file describes both sides.
 CHANNEL_PARAMS = (
-    ParamSpec('unit_id', 1, 'Modbus unit (device) id; LabJack: 1 [-]'),
+    ParamSpec('unit_id', 1, 'Modbus unit (device) id; LabJack: 1 [-]', low=0, high=255),
     ParamSpec('register', 0, 'address of the first register of the channel, 0-based as on the wire (LabJack AINn: '
               '2·n) [-]'),
     ParamSpec('register_type', 'holding', f"register table: {' or '.join(REGISTER_TYPES)} (function 3 or 4) [-]"),
@@ -49,14 +49,14 @@ CHANNEL_PARAMS = (
 
 PARAMS = (
     ParamSpec('host', '192.168.1.10', "the DAQ's IP address or host name [-]"),
-    ParamSpec('port', MODBUS_TCP_PORT, 'Modbus TCP port [-]'),
+    ParamSpec('port', MODBUS_TCP_PORT, 'Modbus TCP port [-]', low=1, high=65535),
     *CHANNEL_PARAMS,
     ParamSpec('poll_rate_hz', 500.0, 'requests per second; ticks on the clock grid with the other sensors. One '
               'request takes a round trip (~0.2 ms on loopback, 1-2 ms to a LabJack) [Hz]'),
     ParamSpec('timeout_s', 0.1, 'longest wait for an answer before the poll counts as failed [s]'),
     ParamSpec('reconnect_interval_s', 1.0, 'after a failure, interval between attempts to reach the device [s]'),
     ParamSpec('frame_id', 'lvdt', 'header.frame_id of the published reading [-]'),
-    ParamSpec('zero_samples', 10, 'readings averaged by the ~/zero service [samples]'),
+    ParamSpec('zero_samples', 10, 'readings averaged by the ~/zero service [samples]', low=1),
 )
 START_ONLY = ('host', 'port', 'unit_id', 'timeout_s')
 CHANNEL_KEYS = ('register', 'register_type', 'data_type', 'word_order', 'gain', 'offset')

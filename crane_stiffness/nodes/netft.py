@@ -42,10 +42,10 @@ TARE_MODES = ('software', 'hardware')
 
 PARAMS = (
     ParamSpec('host', '192.168.1.1', "the sensor's IP address or host name (ATI factory default 192.168.1.1) [-]"),
-    ParamSpec('port', rdt.RDT_PORT, 'RDT UDP port of the sensor [-]'),
+    ParamSpec('port', rdt.RDT_PORT, 'RDT UDP port of the sensor [-]', low=1, high=65535),
     ParamSpec('device', 'ati', "'ati' (Net F/T, Axia: counts per unit from the box's /netftapi2.xml) or 'onrobot' "
               '(HEX: 10000 counts/N, 100000 counts/N·m); counts_per_force/torque > 0 override both [-]'),
-    ParamSpec('http_port', 80, "port of the ATI box's web server that serves /netftapi2.xml [-]"),
+    ParamSpec('http_port', 80, "port of the ATI box's web server that serves /netftapi2.xml [-]", low=1, high=65535),
     ParamSpec('counts_per_force', 0.0, 'counts per newton; 0 = from the device [counts/N]'),
     ParamSpec('counts_per_torque', 0.0, 'counts per newton-metre; 0 = from the device [counts/(N·m)]'),
     ParamSpec('command', 'realtime', "'realtime' (RDT 0x0002, one record per datagram) or 'buffered' (0x0003, the "
@@ -60,9 +60,9 @@ PARAMS = (
               'wrench to the platform centre) [-]'),
     ParamSpec('tare_mode', 'software', "~/tare: 'software' = subtract the mean of the last tare_samples readings in "
               "the driver; 'hardware' = the device's bias command 0x0042 (and clear the software tare) [-]"),
-    ParamSpec('tare_samples', 100, 'readings averaged by a software tare [samples]'),
+    ParamSpec('tare_samples', 100, 'readings averaged by a software tare [samples]', low=1),
     ParamSpec('drop_status_mask', 0xFFFFFFFF, 'records whose status word has any of these bits set are counted and '
-              'not published; 0 = publish every record [-]'),
+              'not published; 0 = publish every record [-]', low=0, high=0xFFFFFFFF),
     ParamSpec('timeout_s', 0.5, 'silence after which the sensor counts as gone [s]'),
     ParamSpec('reconnect_interval_s', 1.0, 'interval between stream requests while the sensor is gone [s]'),
     ParamSpec('wait_for_device_s', 3.0, 'at start, time to wait for the first record before stopping with an error '

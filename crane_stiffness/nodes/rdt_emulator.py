@@ -31,9 +31,10 @@ from crane_stiffness.status import ERROR, OK
 MODEL_PARAMS = tuple(s for s in load_cell.PARAMS if s.name in load_cell.MODEL_KEYS + ('seed',))
 PARAMS = (
     ParamSpec('host', '127.0.0.1', 'address to serve RDT on (keep it on loopback or a test network namespace) [-]'),
-    ParamSpec('port', rdt.RDT_PORT, 'UDP port; 0 = a free port (logged and reported on /diagnostics) [-]'),
+    ParamSpec('port', rdt.RDT_PORT, 'UDP port; 0 = a free port (logged and reported on /diagnostics) [-]',
+              low=0, high=65535),
     ParamSpec('http_port', -1, 'serve /netftapi2.xml on this TCP port like an ATI box; 0 = a free port, -1 = no '
-              'HTTP [-]'),
+              'HTTP [-]', low=-1, high=65535),
     ParamSpec('sample_rate_hz', 7000.0, 'internal sample rate: the rate of ft_sequence [Hz]'),
     ParamSpec('clock_ppm', 0.0, "rate error of the device's oscillator, > 0 = fast [ppm]"),
     ParamSpec('counts_per_force', 1.0e6, 'counts per newton [counts/N]'),

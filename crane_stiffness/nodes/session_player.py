@@ -37,7 +37,7 @@ from std_srvs.srv import Trigger
 from crane_stiffness.bag import BagReader
 from crane_stiffness.bag.errors import BagDamageWarning, BagError
 from crane_stiffness.config import ParamSpec
-from crane_stiffness.nodes.common import Diagnostics, Params, check, positive, run
+from crane_stiffness.nodes.common import Diagnostics, Params, check, positive, run, valid_topic_name
 from crane_stiffness.nodes.session_qos import message_class, playback_qos
 from crane_stiffness.status import ERROR, OK, WARN
 
@@ -49,14 +49,16 @@ END_LINGER_S = 1.0
 
 PARAMS = (
     ParamSpec('bag', '', 'bag directory (with or without metadata.yaml) or .mcap file to play [-]'),
-    ParamSpec('rate', 1.0, 'playback speed factor: 2.0 plays twice as fast [-]'),
+    ParamSpec('rate', 1.0, 'playback speed factor: 2.0 plays twice as fast [-]', rule='> 0'),
     ParamSpec('loop', False, 'play the bag again when it ends [-]'),
-    ParamSpec('start_offset_s', 0.0, 'start this far into the bag, from its first message (log time) [s]'),
+    ParamSpec('start_offset_s', 0.0, 'start this far into the bag, from its first message (log time) [s]',
+              low=0.0),
     ParamSpec('publish_clock', False, "publish the bag's log time on /clock (rosgraph_msgs/Clock) for nodes "
               'running with use_sim_time [-]'),
-    ParamSpec('clock_rate_hz', 100.0, 'rate of /clock messages [Hz]'),
+    ParamSpec('clock_rate_hz', 100.0, 'rate of /clock messages [Hz]', rule='> 0'),
     ParamSpec('autostart', True, 'start playing when the node starts (after start_delay_s); else call ~/start [-]'),
-    ParamSpec('start_delay_s', 1.0, 'wait before playing so subscribers can connect [s]'),
+    ParamSpec('start_delay_s', 1.0, 'wait before playing so subscribers can connect [s]', low=0.0,
+              high=86400.0),
     ParamSpec('exit_on_end', True, 'shut the node down when the bag has been played (ignored with loop) [-]'),
 )
 #: String-array parameters, empty by default (declared with their type, see SessionPlayer._declare_lists).
@@ -74,6 +76,8 @@ def parse_remap(entries: list[str]) -> dict[str, str]:
         source, sep, target = entry.partition(':=')
         check(bool(sep) and bool(source.strip()) and bool(target.strip()), 'remap', entry,
               "each entry must read 'from:=to'")
+        for name in (source.strip(), target.strip()):  # a bad name would stop ~/start later
+            check(valid_topic_name(name), 'remap', entry, f'{name!r} is not a valid topic name')
         out[source.strip()] = target.strip()
     return out
 

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import array
 import json
+import math
 import os
 import signal
 import socket
@@ -49,7 +50,7 @@ from crane_stiffness.bag import BagWriter, dump_qos_profiles
 from crane_stiffness.bag.errors import BagError
 from crane_stiffness.bag.writer import COMPRESSIONS
 from crane_stiffness.config import GEOMETRY_PARAMS, ParamSpec, geometry_from_params
-from crane_stiffness.nodes.common import Diagnostics, Params, check, run
+from crane_stiffness.nodes.common import Diagnostics, Params, check, run, valid_topic_name
 from crane_stiffness.nodes.load_program import PARAMS as PROGRAM_NODE_PARAMS
 from crane_stiffness.nodes.load_program import PROGRAM_KEYS
 from crane_stiffness.nodes.session_qos import (adapted_qos, contract_qos, has_header, message_class,
@@ -66,23 +67,29 @@ PROGRAM_DEFAULTS = {p.name: p.default for p in PROGRAM_PARAMS}
 #: Sections of a parameter file that hold this node's own parameters (not recorded as another node's): ROS's rule.
 OWN_SECTIONS = NodeSections('session_recorder')
 
+#: Longest flush interval, split duration and stop delay [s]: finite (a timer period and a duration in ns must be
+#: integers) and longer than any session.
+MAX_INTERVAL_S = 86400.0
+
 PARAMS = GEOMETRY_PARAMS + PROGRAM_PARAMS + (
     ParamSpec('topics', list(topics.RIG_TOPICS), 'topics to record; rig topics use their contract type and QoS, '
               'others are subscribed once a publisher appears [-]'),
     ParamSpec('session', '', "bag name: the bag is <output_dir>/<session>/; '' = session_<UTC time> [-]"),
     ParamSpec('output_dir', 'bags', 'directory the session bags are written to [-]'),
     ParamSpec('compression', 'zstd', 'MCAP chunk compression: zstd, lz4 or none [-]'),
-    ParamSpec('chunk_size', 262144, 'uncompressed MCAP chunk size; a chunk is on disk once full [bytes]'),
+    ParamSpec('chunk_size', 262144, 'uncompressed MCAP chunk size; a chunk is on disk once full [bytes]', low=1),
     ParamSpec('flush_interval_s', 0.5, 'also write the current chunk once it is this old, so a crash (SIGKILL) loses '
-              'at most this much; 0 = by size only [s]'),
-    ParamSpec('split_max_bytes', 0, 'start a new .mcap file at this size, 0 = never [bytes]'),
-    ParamSpec('split_max_duration_s', 0.0, 'start a new .mcap file after this much time, 0 = never [s]'),
+              'at most this much; 0 = by size only [s]', low=0.0, high=MAX_INTERVAL_S),
+    ParamSpec('split_max_bytes', 0, 'start a new .mcap file at this size, 0 = never [bytes]', low=0,
+              rule='0 (never) or >= 1024'),
+    ParamSpec('split_max_duration_s', 0.0, 'start a new .mcap file after this much time, 0 = never [s]', low=0.0,
+              high=MAX_INTERVAL_S),
     ParamSpec('fsync', False, 'fsync every write (survives power loss too; slower) [-]'),
     ParamSpec('autostart', True, 'start recording when the node starts (else call ~/start) [-]'),
     ParamSpec('stop_on_program_done', True, "stop and close the bag when /load_program/state reports 'done' after "
               'the program ran [-]'),
     ParamSpec('stop_delay_s', 1.0, "keep recording this long after 'done' so the last samples and estimates "
-              'arrive [s]'),
+              'arrive [s]', low=0.0, high=MAX_INTERVAL_S),
     ParamSpec('exit_on_program_done', False, 'shut the node down once the bag closed at the program end is '
               'written [-]'),
     ParamSpec('executor', 'events', "executor of the recorder process: 'events' (rclpy's EventsExecutor, in C++: "
@@ -140,8 +147,9 @@ def _validate(values: dict[str, Any]) -> dict[str, Any]:
     check(values['chunk_size'] > 0, 'chunk_size', values['chunk_size'], 'must be > 0 bytes')
     check(values['split_max_bytes'] == 0 or values['split_max_bytes'] >= 1024, 'split_max_bytes',
           values['split_max_bytes'], 'must be 0 (no split) or >= 1024 bytes')
-    for name in ('flush_interval_s', 'split_max_duration_s', 'stop_delay_s'):
-        check(values[name] >= 0, name, values[name], 'must be >= 0 s')
+    for name in ('flush_interval_s', 'split_max_duration_s', 'stop_delay_s'):  # also the spec ranges (Params)
+        check(math.isfinite(values[name]) and 0 <= values[name] <= MAX_INTERVAL_S, name, values[name],
+              f'must be 0 .. {MAX_INTERVAL_S} s')
     session = values['session']
     check(session == '' or (session not in ('.', '..') and '/' not in session), 'session', session,
           "must be '' or a directory name without '/'")
@@ -150,6 +158,8 @@ def _validate(values: dict[str, Any]) -> dict[str, Any]:
     names = list(values['topics'])
     check(bool(names) and all(isinstance(t, str) and t for t in names), 'topics', names,
           'must be a non-empty list of topic names')
+    for t in names:
+        check(valid_topic_name(t), 'topics', names, f'{t!r} is not a valid topic name')
     geometry = geometry_from_params(values)  # GeometryError (a ValueError) names the field
     program_values = {k: plain(values[k]) for k in PROGRAM_KEYS}
     program = None

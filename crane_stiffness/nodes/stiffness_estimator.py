@@ -71,7 +71,8 @@ PARAMS = (
     ParamSpec('dropout_factor', _D.dropout_factor, 'a stamp gap above this many periods counts as a dropout, '
               '0 = not detected [-]'),
     ParamSpec('window', _D.window, 'pairs per windowed least-squares fit; span several load levels [pairs]'),
-    ParamSpec('forgetting', _D.forgetting, 'RLS forgetting factor in (0, 1], memory ~ 1/(1 - forgetting) [-]'),
+    ParamSpec('forgetting', _D.forgetting, 'RLS forgetting factor in (0, 1], memory ~ 1/(1 - forgetting) [-]',
+              rule='0 < forgetting <= 1'),
     ParamSpec('hysteresis', _D.hysteresis, 'dead band of the loading/unloading switch; above the force noise when '
               'the branch follows the measured force [N or N·m]'),
     ParamSpec('branch_source', _D.branch_source, "'auto': branch from /crane/wrench_command once a command is "
@@ -82,7 +83,8 @@ PARAMS = (
               'absurd and dropped [m or rad]'),
     ParamSpec('nonlinearity_warn', _D.nonlinearity_warn, 'a branch whose nonlinearity (1 - k_upper/k_lower) '
               'exceeds this is reported WARN: slack wires [-]'),
-    ParamSpec('diagnostics_rate_hz', 5.0, 'rate of /stiffness/estimate and of the nonlinearity update [Hz]'),
+    ParamSpec('diagnostics_rate_hz', 5.0, 'rate of /stiffness/estimate and of the nonlinearity update [Hz]',
+              rule='> 0'),
 )
 
 
