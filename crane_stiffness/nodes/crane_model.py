@@ -21,7 +21,8 @@ from crane_stiffness.config import GEOMETRY_PARAMS, ParamSpec, geometry_from_par
 from crane_stiffness.model import (AXES, WIRE_NAMES, CraneGeometry, Equilibrium, ModelError, axis_stiffness,
                                    rest_pose, solve_equilibrium, tangent_stiffness)
 from crane_stiffness.model.rotation import matrix_to_quaternion
-from crane_stiffness.nodes.common import LATCHED_QOS, RELIABLE_QOS, Counters, Diagnostics, Params, check, finite, run
+from crane_stiffness.nodes.common import LATCHED_QOS, RELIABLE_QOS, Counters, Diagnostics, finite, run
+from crane_stiffness.nodes.parameters import Params, check
 from crane_stiffness.status import ERROR, OK
 
 MODEL_STATUS = topics.MODEL_STATUS

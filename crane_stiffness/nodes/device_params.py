@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Any, Mapping, Sequence
 
-from crane_stiffness.nodes.common import check
+from crane_stiffness.nodes.parameters import check
 
 
 def check_address(values: Mapping[str, Any], host: str = 'host', ports: Sequence[str] = ('port',),

@@ -21,8 +21,9 @@ from std_srvs.srv import Trigger
 from crane_stiffness import topics
 from crane_stiffness.axes import AXES
 from crane_stiffness.config import ParamSpec
-from crane_stiffness.nodes.common import (RELIABLE_QOS, SENSOR_QOS, Counters, Diagnostics, Params, SampleSchedule,
-                                          check, check_sensor_params, finite, run)
+from crane_stiffness.nodes.common import (RELIABLE_QOS, SENSOR_QOS, Counters, Diagnostics, SampleSchedule,
+                                          check_sensor_params, finite, run)
+from crane_stiffness.nodes.parameters import Params, check
 from crane_stiffness.sim.sampling import NS_PER_S, SampleClock, StampedHold
 from crane_stiffness.sim.sensors import LoadCellModel
 from crane_stiffness.status import OK, WARN

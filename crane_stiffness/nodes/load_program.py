@@ -18,7 +18,8 @@ from std_srvs.srv import Trigger
 
 from crane_stiffness import topics
 from crane_stiffness.config import ParamSpec
-from crane_stiffness.nodes.common import LATCHED_QOS, RELIABLE_QOS, Diagnostics, Params, check, run
+from crane_stiffness.nodes.common import LATCHED_QOS, RELIABLE_QOS, Diagnostics, run
+from crane_stiffness.nodes.parameters import Params, check
 from crane_stiffness.sim.program import LoadProgram
 from crane_stiffness.status import OK, WARN
 

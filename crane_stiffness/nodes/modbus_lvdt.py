@@ -26,8 +26,8 @@ from crane_stiffness import topics
 from crane_stiffness.config import ParamSpec
 from crane_stiffness.drivers.errors import DeviceResponseError, DeviceSilentError, DriverError, ParameterError
 from crane_stiffness.drivers.modbus import DATA_TYPES, MODBUS_TCP_PORT, REGISTER_TYPES, Channel, ModbusPoller
-from crane_stiffness.nodes.common import (SENSOR_QOS, Counters, Diagnostics, Params, check, create_grid_timer,
-                                          positive, run)
+from crane_stiffness.nodes.common import SENSOR_QOS, Counters, Diagnostics, create_grid_timer, run
+from crane_stiffness.nodes.parameters import Params, check, positive
 from crane_stiffness.nodes.device_params import check_address, check_start_only
 from crane_stiffness.sim.sampling import NS_PER_S
 from crane_stiffness.status import ERROR, OK, WARN

@@ -23,7 +23,8 @@ from crane_stiffness.config import ParamSpec
 from crane_stiffness.devices.rdt_device import RdtDevice
 from crane_stiffness.drivers import rdt
 from crane_stiffness.nodes import load_cell
-from crane_stiffness.nodes.common import RELIABLE_QOS, Counters, Diagnostics, Params, check, finite, positive, run
+from crane_stiffness.nodes.common import RELIABLE_QOS, Counters, Diagnostics, finite, run
+from crane_stiffness.nodes.parameters import Params, check, positive
 from crane_stiffness.nodes.device_params import check_address, check_start_only
 from crane_stiffness.sim.sensors import LoadCellModel
 from crane_stiffness.status import ERROR, OK

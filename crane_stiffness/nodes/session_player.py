@@ -37,7 +37,8 @@ from std_srvs.srv import Trigger
 from crane_stiffness.bag import BagReader
 from crane_stiffness.bag.errors import BagDamageWarning, BagError
 from crane_stiffness.config import ParamSpec
-from crane_stiffness.nodes.common import Diagnostics, Params, check, positive, run, valid_topic_name
+from crane_stiffness.nodes.common import Diagnostics, run
+from crane_stiffness.nodes.parameters import Params, check, positive, valid_topic_name
 from crane_stiffness.nodes.session_qos import message_class, playback_qos
 from crane_stiffness.status import ERROR, OK, WARN
 

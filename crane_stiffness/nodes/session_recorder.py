@@ -50,7 +50,8 @@ from crane_stiffness.bag import BagWriter, dump_qos_profiles
 from crane_stiffness.bag.errors import BagError
 from crane_stiffness.bag.writer import COMPRESSIONS
 from crane_stiffness.config import GEOMETRY_PARAMS, ParamSpec, geometry_from_params
-from crane_stiffness.nodes.common import Diagnostics, Params, check, run, valid_topic_name
+from crane_stiffness.nodes.common import Diagnostics, run
+from crane_stiffness.nodes.parameters import Params, check, valid_topic_name
 from crane_stiffness.nodes.load_program import PARAMS as PROGRAM_NODE_PARAMS
 from crane_stiffness.nodes.load_program import PROGRAM_KEYS
 from crane_stiffness.nodes.session_qos import (adapted_qos, contract_qos, has_header, message_class,

@@ -31,8 +31,8 @@ from crane_stiffness.config import ParamSpec
 from crane_stiffness.estimation.branch import BRANCHES
 from crane_stiffness.estimation.live import VALUE_FIELDS, LiveSettings, LiveStiffness
 from crane_stiffness.estimation.sync import DISPLACEMENT, FORCE
-from crane_stiffness.nodes.common import (LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS, Diagnostics, Params, check,
-                                          positive, run, stamp_to_s)
+from crane_stiffness.nodes.common import LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS, Diagnostics, run, stamp_to_s
+from crane_stiffness.nodes.parameters import Params, check, positive
 
 __all__ = ['VALUE_FIELDS', 'PARAMS', 'StiffnessEstimatorNode', 'main']
 

@@ -1,0 +1,299 @@
+"""A node's parameters: declared with descriptions, ranges and rules (visible to ``ros2 param describe``), checked
+on start and on every change by the same code, integers taken where floats are declared, errors naming the full
+parameter and the value as written; and the --params-file checks (a missing or malformed file, a key no node knows)
+that ``run`` makes before a node starts.
+"""
+from __future__ import annotations
+
+import difflib
+import math
+import sys
+from array import array
+from contextlib import contextmanager
+from typing import Any, Callable, Iterator, Mapping, Sequence
+
+import yaml
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
+from rclpy.exceptions import InvalidTopicNameException
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.validate_topic_name import validate_topic_name
+
+from crane_stiffness.config import ParamSpec
+from crane_stiffness.param_files import ParamFile, applicable_sections, params_files_from_args
+
+
+#: Modules of the package's nodes (crane_stiffness.nodes.<module>.PARAMS): the parameter names a ``/**`` section of a
+#: parameter file may hold.
+NODE_MODULES = ('load_program', 'crane_model', 'load_cell', 'lvdt', 'stiffness_estimator', 'session_recorder',
+                'session_player', 'netft', 'modbus_lvdt', 'rdt_emulator', 'modbus_emulator')
+#: Parameters rclpy declares on every node (plus the ``qos_overrides.`` family).
+RCLPY_PARAMS = ('use_sim_time', 'start_type_description_service')
+
+
+def show(value: Any) -> str:
+    """A parameter value as the user wrote it: lists (rclpy hands arrays back as array('d', ...)) as [...]."""
+    if isinstance(value, (array, tuple)):
+        value = list(value)
+    return repr(value)
+
+
+_KINDS = ((bool, 'true or false', 'booleans'), (float, 'a number', 'numbers'), (int, 'an integer', 'integers'),
+          (str, 'a string', 'strings'))
+
+
+def _kind(default: Any) -> str:
+    """What a value of the type of ``default`` is, in words ('a number', 'a list of strings')."""
+    if isinstance(default, (list, tuple)):
+        plural = next((p for t, _, p in _KINDS if default and isinstance(default[0], t)), None)
+        return f'a list of {plural}' if plural else 'a list'
+    return next((one for t, one, _ in _KINDS if isinstance(default, t)), 'a value')
+
+
+def _is_number(v: Any) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def coerce(spec: ParamSpec, value: Any) -> Any:
+    """``value`` in the type of ``spec``'s default: an integer where a float is declared becomes a float (also in
+    lists); any other mismatch raises ValueError('name = value: must be ...')."""
+    d = spec.default
+    if isinstance(value, (array, tuple)):
+        value = list(value)
+    if isinstance(d, bool):
+        ok = isinstance(value, bool)
+    elif isinstance(d, float):
+        ok = _is_number(value)
+        value = float(value) if ok else value
+    elif isinstance(d, int):
+        ok = isinstance(value, int) and not isinstance(value, bool)
+    elif isinstance(d, str):
+        ok = isinstance(value, str)
+    elif isinstance(d, (list, tuple)):
+        ok = isinstance(value, list)
+        if ok and d and isinstance(d[0], float):
+            ok = all(_is_number(v) for v in value)
+            value = [float(v) for v in value] if ok else value
+        elif ok and d:
+            ok = all(type(v) is type(d[0]) for v in value)
+    else:
+        ok = True
+    check(ok, spec.name, value, f'must be {_kind(d)}')
+    return value
+
+
+def descriptor(spec: ParamSpec) -> ParameterDescriptor:
+    """The descriptor ``ros2 param describe`` shows: description, range (where the rule is an inclusive range of a
+    scalar) and the rule in words."""
+    d = ParameterDescriptor(description=spec.description)
+    rules = []
+    if spec.low is not None or spec.high is not None:
+        if isinstance(spec.default, float):
+            d.floating_point_range = [FloatingPointRange(
+                from_value=float(spec.low if spec.low is not None else -sys.float_info.max),
+                to_value=float(spec.high if spec.high is not None else sys.float_info.max), step=0.0)]
+        elif isinstance(spec.default, int) and not isinstance(spec.default, bool):
+            d.integer_range = [IntegerRange(from_value=int(spec.low if spec.low is not None else -2**63),
+                                            to_value=int(spec.high if spec.high is not None else 2**63 - 1),
+                                            step=1)]
+        rules.append(_range_text(spec))
+    if spec.rule:
+        rules.append(spec.rule)
+    d.additional_constraints = '; '.join(rules)
+    return d
+
+
+def _range_text(spec: ParamSpec) -> str:
+    if spec.low is not None and spec.high is not None:
+        return f'{spec.low} .. {spec.high}'
+    return f'>= {spec.low}' if spec.low is not None else f'<= {spec.high}'
+
+
+def check_range(spec: ParamSpec, value: Any) -> None:
+    """The inclusive range of ``spec`` (low/high), in our words (rclpy enforces the same range at runtime)."""
+    if (spec.low is None and spec.high is None) or not _is_number(value):
+        return
+    ok = math.isfinite(value) and (spec.low is None or value >= spec.low) and (spec.high is None or value <= spec.high)
+    check(ok, spec.name, value, f'must be {_range_text(spec)}')
+
+
+class Params:
+    """A node's parameters: declared with descriptions, ranges and rules, validated as a whole on start and on every
+    change, by the same code.
+
+    ``validate(values) -> Any`` raises ValueError naming the bad value; its return value (e.g. a built geometry)
+    is handed to ``apply``. A rejected change leaves every value as it was and tells the caller why. Integers are
+    accepted where a float is declared, at start (``-p name:=1``, parameter files) and at runtime (a pre-set
+    callback converts them before rclpy's type check). Errors name the full parameter name.
+    """
+
+    def __init__(self, node: Node, specs: Sequence[ParamSpec], validate: Callable[[dict[str, Any]], Any],
+                 apply: Callable[[Any, dict[str, Any]], None]) -> None:
+        self._node = node
+        self._specs = {s.name: s for s in specs}
+        self._names = list(self._specs)
+        self._validate = validate
+        self._apply = apply
+        if _start_args is not None:  # started by run(): every key of a --params-file must be known
+            check_params_files(params_files_from_args(_start_args), node.get_fully_qualified_name(),
+                               set(self._names) | set(node._parameters))
+        overrides = node._parameter_overrides
+        values = {}
+        for spec in specs:
+            values[spec.name] = coerce(spec, overrides[spec.name].value) if spec.name in overrides else spec.default
+        # Invalid start-up values stop the node with the reason (raised to ``run``), before anything is declared.
+        built = self._checked(values)
+        for spec in specs:
+            node.declare_parameter(spec.name, values[spec.name], descriptor(spec), ignore_override=True)
+        self.values = {n: node.get_parameter(n).value for n in self._names}
+        self._apply(built, dict(self.values))
+        node.add_pre_set_parameters_callback(self._pre_set)
+        node.add_on_set_parameters_callback(self._on_set)
+
+    def __getitem__(self, name: str) -> Any:
+        return self.values[name]
+
+    def _checked(self, values: dict[str, Any]) -> Any:
+        """validate(values) after the ranges; an error names the parameter by its full name."""
+        try:
+            for name, spec in self._specs.items():
+                check_range(spec, values[name])
+            return self._validate(dict(values))
+        except ValueError as exc:
+            raise ValueError(self._qualify(str(exc))) from exc
+
+    def _qualify(self, message: str) -> str:
+        """'height = 0.0: ...' (a model error naming a field) as 'geometry.height = 0.0: ...'."""
+        head, sep, rest = message.partition(' = ')
+        if sep and head not in self._specs:
+            full = [n for n in self._names if n.endswith('.' + head)]
+            if len(full) == 1:
+                return f'{full[0]} = {rest}'
+        return message
+
+    def _pre_set(self, params: list[Parameter]) -> list[Parameter]:
+        """Integers where a float is declared become floats before rclpy checks the type."""
+        out = []
+        for p in params:
+            spec = self._specs.get(p.name)
+            if spec is not None and p.type_ in (Parameter.Type.INTEGER, Parameter.Type.INTEGER_ARRAY):
+                try:
+                    p = Parameter(p.name, value=coerce(spec, p.value))
+                except ValueError:
+                    pass  # rclpy rejects the type
+            out.append(p)
+        return out
+
+    def _on_set(self, params) -> SetParametersResult:
+        new = dict(self.values)
+        try:
+            for p in params:
+                if p.name in self._specs:
+                    new[p.name] = coerce(self._specs[p.name], p.value)
+            built = self._checked(new)
+        except (ValueError, TypeError) as exc:
+            self._node.get_logger().warning(f'parameter change rejected: {exc}')
+            return SetParametersResult(successful=False, reason=str(exc))
+        self.values = new
+        self._apply(built, new)
+        return SetParametersResult(successful=True)
+
+
+def check(condition: bool, name: str, value: Any, rule: str) -> None:
+    """Raise ValueError('name = value: rule') unless condition (the value shown as written, see :func:`show`)."""
+    if not condition:
+        raise ValueError(f'{name} = {show(value)}: {rule}')
+
+
+def positive(values: Mapping[str, Any], *names: str) -> None:
+    for n in names:
+        v = values[n]
+        check(_is_number(v) and math.isfinite(v) and v > 0, n, v, 'must be a finite number > 0')
+
+
+# --- parameter files -------------------------------------------------------------------------------------------
+
+#: The command line of the node run() is building (None otherwise): Params checks its --params-file keys.
+_start_args: list[str] | None = None
+
+
+@contextmanager
+def started_with(argv: Sequence[str]) -> Iterator[None]:
+    """While ``run`` builds a node from this command line, its :class:`Params` check the --params-file keys."""
+    global _start_args
+    _start_args = list(argv)
+    try:
+        yield
+    finally:
+        _start_args = None
+
+
+def package_parameter_names() -> set[str]:
+    """Every parameter some node of the package declares (what a ``/**`` section may hold)."""
+    import importlib
+    names = set(RCLPY_PARAMS)
+    for module in NODE_MODULES:
+        mod = importlib.import_module(f'crane_stiffness.nodes.{module}')
+        names.update(s.name for s in getattr(mod, 'PARAMS', ()))
+        names.update(getattr(mod, 'LIST_PARAMS', {}))
+    return names
+
+
+def one_line(text: str) -> str:
+    """``text`` on one line (white space folded)."""
+    return ' '.join(str(text).split())
+
+
+def params_file_problem(path: str) -> str | None:
+    """Why ``path`` is not a usable parameter file (one line naming it), or None."""
+    try:
+        file = ParamFile.read(path)
+    except FileNotFoundError:
+        return f'{path}: no such parameter file'
+    except (OSError, UnicodeDecodeError) as exc:
+        return f'{path}: cannot read: {one_line(exc)}'
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, 'problem_mark', None)
+        where = f' (line {mark.line + 1}, column {mark.column + 1})' if mark is not None else ''
+        return f"{path}: not valid YAML: {one_line(getattr(exc, 'problem', None) or exc)}{where}"
+    if not file.is_mapping:
+        return f'{path}: expected "<node>: ros__parameters: ..." at the top level'
+    for key, params in file.sections.items():
+        if params is None:
+            return f'{path}: section {key!r} has no ros__parameters mapping'
+    return None
+
+
+def check_params_files(paths: Sequence[str], node: str, own: set[str]) -> None:
+    """Raise ValueError (one line naming the file and the key, with the closest known name) for a key of a section
+    applying to ``node`` (fully qualified name) that it does not know: a section naming the node may hold only
+    ``own`` parameters, a wildcard section (``/**``) those of any node of the package."""
+    package = None
+    for path in paths:
+        problem = params_file_problem(path)
+        if problem:
+            raise ValueError(problem)
+        file = ParamFile.read(path)
+        for section in applicable_sections(file.sections, node):
+            known = own | set(RCLPY_PARAMS)
+            for key in file.sections[section] or {}:
+                if key in known or key.startswith('qos_overrides.'):
+                    continue
+                if '*' in section:  # another node's parameter is fine in a section for every node
+                    package = package_parameter_names() | known if package is None else package
+                    if key in package:
+                        continue
+                    known = package
+                close = difflib.get_close_matches(key, sorted(known), n=1)
+                hint = f" (did you mean '{close[0]}'?)" if close else ''
+                whose = 'any node of the package' if '*' in section else node
+                raise ValueError(f"{path}: unknown parameter '{key}' in section '{section}' for {whose}{hint}")
+
+
+def valid_topic_name(name: Any) -> bool:
+    """Whether rclpy would accept ``name`` as a topic name (relative, absolute or ``~/``; before remapping)."""
+    try:
+        validate_topic_name(name)
+    except (InvalidTopicNameException, TypeError, ValueError):
+        return False
+    return isinstance(name, str)
