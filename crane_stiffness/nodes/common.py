@@ -5,7 +5,9 @@ from __future__ import annotations
 
 import json
 import math
+import signal
 import sys
+import threading
 import time
 from dataclasses import dataclass
 from typing import Any, Callable, Iterable, Mapping, Sequence
@@ -17,6 +19,7 @@ from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
 
 from crane_stiffness import topics
 from crane_stiffness.serde import stamp_seconds
@@ -210,15 +213,55 @@ def make_executor(kind: str, context: Any):
     return SingleThreadedExecutor(context=context)
 
 
+class ShutdownRequest:
+    """SIGINT/SIGTERM as a flag the spin loop of :func:`run` reads: the handler only records the signal.
+
+    rclpy's own handlers raise KeyboardInterrupt wherever the main thread is, also inside a callback that the C++
+    EventsExecutor called (pybind11 then aborts the process: ``terminate called after throwing ...
+    error_already_set``), and shut the context down under callbacks that are still running (``Exception in 'timers'
+    callback``). Here a signal, once or repeated (Ctrl-C reaches every node and ``ros2 launch`` forwards it once
+    more), sets :attr:`signum`; the running callback finishes, the loop ends, and the node closes its files and
+    exits with status 0. The handlers stay installed until the process exits, so a signal during the clean-up is
+    harmless too.
+    """
+
+    SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+    def __init__(self) -> None:
+        self.signum: int | None = None
+        self.count = 0
+
+    def __bool__(self) -> bool:
+        return self.signum is not None
+
+    def handle(self, signum: int, frame: Any = None) -> None:
+        self.count += 1
+        if self.signum is None:
+            self.signum = signum
+
+    def install(self) -> bool:
+        """Install the handlers (main thread only: Python runs signal handlers there); False if not possible."""
+        if threading.current_thread() is not threading.main_thread():
+            return False
+        for sig in self.SIGNALS:
+            signal.signal(sig, self.handle)
+        return True
+
+
 def run(node_factory: Callable[[], Node], args: Sequence[str] | None = None,
         executor: str | Callable[[Node], str] = 'events') -> int:
-    """The ``main`` of every node: init, build, spin until Ctrl-C, SIGTERM or ``node.exit_requested``, clean up.
+    """The ``main`` of every node: init, build, spin until SIGINT (Ctrl-C), SIGTERM or ``node.exit_requested``,
+    clean up; returns the exit status (``node.exit_status``, default 0).
 
-    A node that cannot start (bad parameter) exits with status 2 and the reason on stderr. ``close()`` (if the node
-    has one) runs on every exit, then the node's final counters are printed.
+    Signals only set a flag (:class:`ShutdownRequest`; rclpy's handlers are not installed), so every exit takes
+    the same path: the spin loop ends, ``close()`` (if the node has one) runs, the node's final counters are
+    printed, the node is destroyed and rclpy shut down. A node that cannot start (bad parameter) exits with
+    status 2 and the reason on stderr.
     """
     name = getattr(node_factory, '__name__', 'node')
-    rclpy.init(args=args)
+    request = ShutdownRequest()
+    installed = request.install()
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     try:
         node = node_factory()
     except (ValueError, TypeError) as exc:
@@ -232,9 +275,9 @@ def run(node_factory: Callable[[], Node], args: Sequence[str] | None = None,
     ex = make_executor(executor(node) if callable(executor) else executor, node.context)
     ex.add_node(node)
     try:
-        while rclpy.ok(context=node.context) and not getattr(node, 'exit_requested', False):
+        while not request and rclpy.ok(context=node.context) and not getattr(node, 'exit_requested', False):
             ex.spin_once(timeout_sec=0.1)
-    except (KeyboardInterrupt, ExternalShutdownException):
+    except ExternalShutdownException:
         pass
     finally:
         close = getattr(node, 'close', None)
@@ -242,9 +285,15 @@ def run(node_factory: Callable[[], Node], args: Sequence[str] | None = None,
             close()
         final_counters(node)
         ex.remove_node(node)
+        ex.shutdown()
         node.destroy_node()
         rclpy.try_shutdown()
-    return 0
+        if installed:
+            # The process ends now. Python's finalization resets its signal handlers to SIG_DFL, so a signal then
+            # (launch forwarding Ctrl-C, a second SIGTERM) would kill it with -2/-15 after a clean exit: ignore them.
+            for sig in ShutdownRequest.SIGNALS:
+                signal.signal(sig, signal.SIG_IGN)
+    return int(getattr(node, 'exit_status', 0) or 0)
 
 
 def final_counters(node: Node) -> None:
