@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import signal
 import sys
 import threading
@@ -214,15 +215,16 @@ def make_executor(kind: str, context: Any):
 
 
 class ShutdownRequest:
-    """SIGINT/SIGTERM as a flag the spin loop of :func:`run` reads: the handler only records the signal.
+    """SIGINT/SIGTERM as a flag the spin loop of :func:`run` reads.
 
     rclpy's own handlers raise KeyboardInterrupt wherever the main thread is, also inside a callback that the C++
     EventsExecutor called (pybind11 then aborts the process: ``terminate called after throwing ...
     error_already_set``), and shut the context down under callbacks that are still running (``Exception in 'timers'
-    callback``). Here a signal, once or repeated (Ctrl-C reaches every node and ``ros2 launch`` forwards it once
-    more), sets :attr:`signum`; the running callback finishes, the loop ends, and the node closes its files and
-    exits with status 0. The handlers stay installed until the process exits, so a signal during the clean-up is
-    harmless too.
+    callback``). Here the Python handler only sets :attr:`signum`, and the signal's number, written by Python to a
+    wake-up pipe whichever thread the kernel chose, is read by a thread of its own that also wakes the executor
+    (``wake``): a main thread waiting in C++ sees the flag at once. A signal, once or repeated (Ctrl-C reaches every
+    node and ``ros2 launch`` forwards it once more), ends the spin loop after the running callback; the node closes
+    its files and exits with status 0. :meth:`ignore` keeps a late signal from killing the finished process.
     """
 
     SIGNALS = (signal.SIGINT, signal.SIGTERM)
@@ -230,6 +232,7 @@ class ShutdownRequest:
     def __init__(self) -> None:
         self.signum: int | None = None
         self.count = 0
+        self.wake: Callable[[], None] | None = None
 
     def __bool__(self) -> bool:
         return self.signum is not None
@@ -238,14 +241,38 @@ class ShutdownRequest:
         self.count += 1
         if self.signum is None:
             self.signum = signum
+        wake = self.wake
+        if wake is not None:
+            try:
+                wake()
+            except Exception:  # an executor already shut down: the flag is enough
+                pass
 
     def install(self) -> bool:
-        """Install the handlers (main thread only: Python runs signal handlers there); False if not possible."""
+        """Install the handlers and the wake-up thread (main thread only: Python runs signal handlers there);
+        False if not possible."""
         if threading.current_thread() is not threading.main_thread():
             return False
+        read_fd, write_fd = os.pipe()
+        os.set_blocking(write_fd, False)
         for sig in self.SIGNALS:
-            signal.signal(sig, self.handle)
+            signal.signal(sig, lambda signum, frame: None)  # the flag is set by the thread; never an exception
+        signal.set_wakeup_fd(write_fd, warn_on_full_buffer=False)
+        threading.Thread(target=self._wait, args=(read_fd,), name='shutdown_signals', daemon=True).start()
         return True
+
+    def _wait(self, read_fd: int) -> None:
+        while True:
+            for signum in os.read(read_fd, 64):
+                if signum in self.SIGNALS:
+                    self.handle(signum)
+
+    def ignore(self) -> None:
+        """From now on SIGINT/SIGTERM do nothing: the process is ending, and Python's finalization would reset its
+        handlers to the default (a signal then, e.g. launch forwarding Ctrl-C, would kill it with -2/-15)."""
+        if threading.current_thread() is threading.main_thread():
+            for sig in self.SIGNALS:
+                signal.signal(sig, signal.SIG_IGN)
 
 
 def run(node_factory: Callable[[], Node], args: Sequence[str] | None = None,
@@ -256,11 +283,11 @@ def run(node_factory: Callable[[], Node], args: Sequence[str] | None = None,
     Signals only set a flag (:class:`ShutdownRequest`; rclpy's handlers are not installed), so every exit takes
     the same path: the spin loop ends, ``close()`` (if the node has one) runs, the node's final counters are
     printed, the node is destroyed and rclpy shut down. A node that cannot start (bad parameter) exits with
-    status 2 and the reason on stderr.
+    status 2 and the reason on stderr. It is a process's main: SIGINT and SIGTERM are ignored after it returns.
     """
     name = getattr(node_factory, '__name__', 'node')
     request = ShutdownRequest()
-    installed = request.install()
+    request.install()
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     try:
         node = node_factory()
@@ -274,6 +301,7 @@ def run(node_factory: Callable[[], Node], args: Sequence[str] | None = None,
         return 2
     ex = make_executor(executor(node) if callable(executor) else executor, node.context)
     ex.add_node(node)
+    request.wake = ex.wake
     try:
         while not request and rclpy.ok(context=node.context) and not getattr(node, 'exit_requested', False):
             ex.spin_once(timeout_sec=0.1)
@@ -286,13 +314,10 @@ def run(node_factory: Callable[[], Node], args: Sequence[str] | None = None,
         final_counters(node)
         ex.remove_node(node)
         ex.shutdown()
+        request.wake = None
         node.destroy_node()
         rclpy.try_shutdown()
-        if installed:
-            # The process ends now. Python's finalization resets its signal handlers to SIG_DFL, so a signal then
-            # (launch forwarding Ctrl-C, a second SIGTERM) would kill it with -2/-15 after a clean exit: ignore them.
-            for sig in ShutdownRequest.SIGNALS:
-                signal.signal(sig, signal.SIG_IGN)
+        request.ignore()
     return int(getattr(node, 'exit_status', 0) or 0)
 
 
