@@ -174,6 +174,11 @@ class LoadProgramNode(Node):
         response.success, response.message = True, 'stopped; zero wrench commanded'
         return response
 
+    @property
+    def counters(self) -> dict:
+        """What ``run`` prints at exit (FINAL_COUNTERS): where the program stood."""
+        return {'program': self.program.name, 'state': self.state, 'time_s': round(self._program_time(), 6)}
+
     def _report(self):
         level = WARN if self.state == 'stopped' else OK
         return level, self.state, [('program', self.program.name), ('time_s', f'{self._program_time():.3f}'),

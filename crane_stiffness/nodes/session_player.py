@@ -191,6 +191,8 @@ class SessionPlayer(Node):
         self.reader: BagReader | None = None
         self.playing_topics: dict[str, Any] = {}
         self._prepared_key: tuple | None = None
+        self.exit_requested = False  # read by common.run: ends the node with exit_status (exit_on_end)
+        self.exit_status = 0
         self._declare_lists()
         self.params = Params(self, PARAMS, _validate, lambda built, values: None)
         self.prepare()  # publishers exist from the start, so subscribers can connect before playing
@@ -365,14 +367,14 @@ class SessionPlayer(Node):
                 self.state = 'error'
                 self._problem(f'cannot play: {exc}')
                 if self.params['exit_on_end']:
-                    raise SystemExit(2)
+                    self._request_exit(2)
 
     def _watch(self) -> None:
         playback = self.playback
         if playback is None or playback.is_alive():
             if self.finished_at is not None and self.params['exit_on_end'] and \
                     time.monotonic() - self.finished_at >= END_LINGER_S:
-                raise SystemExit(0)
+                self._request_exit(0)
             return
         self.playback = None
         if playback.error is not None:
@@ -383,6 +385,12 @@ class SessionPlayer(Node):
             self.state = 'finished'
             self.get_logger().info(f'finished: {self.stats["published"]} messages published')
             self.finished_at = time.monotonic()
+
+    def _request_exit(self, status: int) -> None:
+        # A flag, not SystemExit: an exception out of a callback is reported by the executor as FATAL (and the C++
+        # EventsExecutor cannot pass it through cleanly); common.run ends the spin and exits with this status.
+        self.exit_status = status
+        self.exit_requested = True
 
     # --- services ---
     def _srv_start(self, request, response):
@@ -402,6 +410,12 @@ class SessionPlayer(Node):
         response.success = self.stop()
         response.message = 'stopped' if response.success else f'not playing (state {self.state})'
         return response
+
+    @property
+    def counters(self) -> dict:
+        """What ``run`` prints at exit (FINAL_COUNTERS)."""
+        return {'state': self.state, 'published': self.stats['published'], 'loops': self.stats['loops'],
+                'problems': len(self.problems)}
 
     def _report(self):
         s = self.stats

@@ -19,7 +19,7 @@ added on close (stop reason, end time, counts). The offline analysis prefers the
 Recording starts by itself (``autostart``) or with ~/start; ~/stop closes the bag and replies with its path and
 message count (both std_srvs/Trigger). With ``stop_on_program_done`` the recording stops ``stop_delay_s`` after
 /load_program/state reports 'done' following a run, so it covers the whole program. Ctrl-C (SIGINT) and SIGTERM
-close the bag cleanly (rclpy turns both into a context shutdown; see crane_stiffness.nodes.common.run). After
+close the bag cleanly, also when repeated (they only end the spin loop; see crane_stiffness.nodes.common.run). After
 SIGKILL every chunk written so far is readable (chunks go to the OS as they are finished, at most
 ``flush_interval_s`` apart) and ``crane-stiffness recover BAG`` rewrites the files and metadata.yaml.
 """
@@ -29,7 +29,6 @@ import array
 import json
 import math
 import os
-import signal
 import socket
 import threading
 from datetime import datetime, timezone
@@ -284,26 +283,11 @@ class SessionRecorder(Node):
             return self.last_bag, count
 
     def close(self) -> None:
-        """Called by ``run`` on shutdown (Ctrl-C, SIGTERM, end of spin): close the bag, writing metadata.yaml.
+        """Called by ``run`` on every exit (Ctrl-C, SIGTERM, end of spin): close the bag, writing metadata.yaml.
 
-        SIGINT/SIGTERM are ignored meanwhile (when called from the main thread), so that a second Ctrl-C cannot cut
-        the closing short.
+        A repeated Ctrl-C cannot cut the closing short: ``run``'s signal handlers only set a flag.
         """
-        previous = {}
-        if threading.current_thread() is threading.main_thread():
-            for sig in (signal.SIGINT, signal.SIGTERM):
-                try:
-                    previous[sig] = signal.signal(sig, signal.SIG_IGN)
-                except (ValueError, OSError):
-                    pass
-        try:
-            self.stop('shutdown')
-        finally:
-            for sig, handler in previous.items():
-                try:
-                    signal.signal(sig, handler if handler is not None else signal.SIG_DFL)
-                except (ValueError, OSError, TypeError):
-                    pass
+        self.stop('shutdown')
 
     # --- session description ---
     def _session_record(self, session: str, start_ns: int) -> dict[str, str]:
@@ -504,6 +488,14 @@ class SessionRecorder(Node):
         path, count = self.stop('service')
         response.success, response.message = True, f'closed {path}: {count} messages'
         return response
+
+    @property
+    def counters(self) -> dict:
+        """What ``run`` prints at exit (FINAL_COUNTERS, after ``close``): the recordings and the last bag."""
+        writer = self.writer
+        return {'recordings': self.recordings, 'errors': self.errors,
+                'messages': writer.message_count if writer is not None else self.last_count,
+                'bag': str(self.bag_path or self.last_bag or '')}
 
     def _report(self):
         writer = self.writer

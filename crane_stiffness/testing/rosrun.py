@@ -79,19 +79,50 @@ def colcon_build(source: str | os.PathLike, build_base: str | os.PathLike, insta
 
 class Processes:
     """Nodes started as separate processes; ``stop()`` (or leaving the ``with``) sends SIGINT like Ctrl-C, then
-    SIGTERM, then SIGKILL to what is still running. stdout and stderr go to ``<log_dir>/<name>.log``."""
+    SIGTERM, then SIGKILL to what is still running. stdout and stderr go to ``<log_dir>/<name>.log``.
 
-    def __init__(self, env: Mapping[str, str], log_dir: str | os.PathLike) -> None:
+    By default every node runs in a session of its own. With ``process_group=True`` all of them join one process
+    group, as the nodes of ``ros2 launch`` in a terminal do: its leader is a stand-in for the launch process (a
+    ``sleep``), and :meth:`signal_group` sends a signal to the whole group like Ctrl-C in that terminal.
+    """
+
+    def __init__(self, env: Mapping[str, str], log_dir: str | os.PathLike, process_group: bool = False) -> None:
         self.env = dict(env)
         self.log_dir = Path(log_dir)
         self.log_dir.mkdir(parents=True, exist_ok=True)
         self.procs: dict[str, subprocess.Popen] = {}
+        self.leader: subprocess.Popen | None = None
+        if process_group:
+            self.leader = subprocess.Popen(['sleep', 'infinity'], stdin=subprocess.DEVNULL,
+                                           stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                                           process_group=0)  # a new group in this session: others may join it
+
+    @property
+    def pgid(self) -> int | None:
+        """The shared process group (``process_group=True``), else None."""
+        return None if self.leader is None else self.leader.pid
+
+    def signal_group(self, sig: int) -> None:
+        """``sig`` to every process of the shared group at once (the launch stand-in included), like Ctrl-C."""
+        if self.pgid is None:
+            raise RosRunError('signal_group needs Processes(..., process_group=True)')
+        os.killpg(self.pgid, sig)
+
+    def _signal(self, proc: subprocess.Popen, sig: int) -> None:
+        try:
+            if self.leader is None:
+                os.killpg(proc.pid, sig)  # the node's own session: the node and anything it started
+            else:
+                proc.send_signal(sig)
+        except ProcessLookupError:
+            pass
 
     def start(self, name: str, package: str, executable: str, args: Sequence[str] = ()) -> subprocess.Popen:
         argv = command(package, executable, args, self.env)
         log = open(self.log_dir / f'{name}.log', 'w')
+        group = {'start_new_session': True} if self.leader is None else {'process_group': self.leader.pid}
         proc = subprocess.Popen(argv, env=self.env, stdout=log, stderr=subprocess.STDOUT,
-                                stdin=subprocess.DEVNULL, start_new_session=True)
+                                stdin=subprocess.DEVNULL, **group)
         log.close()
         self.procs[name] = proc
         return proc
@@ -111,13 +142,13 @@ class Processes:
         for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGKILL):
             running = [p for p in chosen if p.poll() is None]
             for p in running:
-                try:
-                    os.killpg(p.pid, sig)
-                except ProcessLookupError:
-                    pass
+                self._signal(p, sig)
             deadline = time.monotonic() + timeout_s
             while any(p.poll() is None for p in running) and time.monotonic() < deadline:
                 time.sleep(0.05)
+        if self.leader is not None and names is None and self.leader.poll() is None:
+            self.leader.kill()
+            self.leader.wait()
         return {name: p.returncode for name, p in self.procs.items()}
 
     def __enter__(self) -> 'Processes':

@@ -1,0 +1,200 @@
+"""Shutdown as the genuine tools cause it (issue #11): every node ends on SIGINT or SIGTERM, once or repeated, with
+exit status 0, no traceback, no FATAL line, its FINAL_COUNTERS line, and its files closed.
+
+The rig is started the way ``ros2 launch`` starts it: every node at the same instant (no start order, no waiting for
+readiness) from the colcon install tree, as ``ros2 run`` executes it, all in one process group with a stand-in for
+the launch process. Ctrl-C in that terminal is SIGINT to the whole group; launch then forwards SIGINT once more to
+every node (the second signal 50 ms later here).
+"""
+from __future__ import annotations
+
+import json
+import re
+import signal
+import time
+from pathlib import Path
+
+import pytest
+import yaml
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.serialization import serialize_message
+from std_msgs.msg import Float64, String
+
+from conftest import spin_until
+from crane_stiffness import topics
+from crane_stiffness.bag import BagWriter, dump_qos_profiles, qos_profile
+from crane_stiffness.rig_description import PACKAGE, rig_nodes
+from crane_stiffness.testing import rosrun
+from crane_stiffness.testing.rig import Observer, start_node
+
+SESSION = 'shutdown'
+#: Signs of an unclean end in a node's output (rclpy's FATAL callback report, pybind11's abort, faulthandler).
+UNCLEAN = ('Traceback', 'FATAL', 'terminate called', 'Fatal Python error', 'KeyboardInterrupt')
+#: How long the rig runs (program playing, recording on) before the signal [s].
+RUN_S = 3.0
+#: How long a node may take to end after the signal [s].
+EXIT_TIMEOUT_S = 30.0
+
+
+def assert_clean_exit(name: str, code: int | None, log: str) -> dict:
+    """Exit status 0, nothing unclean in the output, and the FINAL_COUNTERS line (returned, decoded)."""
+    assert code == 0, f'{name} exited with status {code}:\n{log[-3000:]}'
+    for sign in UNCLEAN:
+        assert sign not in log, f'{name} printed {sign!r}:\n{log[-3000:]}'
+    match = re.search(rf'^FINAL_COUNTERS {re.escape(name)} (\{{.*\}})$', log, re.M)
+    assert match, f'{name} printed no FINAL_COUNTERS line:\n{log[-3000:]}'
+    return json.loads(match.group(1))
+
+
+def assert_bag_complete(bag: Path) -> int:
+    """The bag as independent readers see it: metadata.yaml written and counting what the MCAP files hold, every
+    file finished (summary section present). Returns the message count."""
+    from mcap.reader import make_reader
+    from rosbags.rosbag2 import Reader
+
+    meta_file = bag / 'metadata.yaml'
+    assert meta_file.is_file(), f'no metadata.yaml in {bag}: {sorted(p.name for p in bag.iterdir())}'
+    info = yaml.safe_load(meta_file.read_text())['rosbag2_bagfile_information']
+    total = info['message_count']
+    assert total > 0, info
+    per_topic = {t['topic_metadata']['name']: t['message_count'] for t in info['topics_with_message_count']}
+    assert sum(per_topic.values()) == total
+    # rosbags: reads metadata.yaml and the MCAP storage
+    with Reader(bag) as reader:
+        assert reader.message_count == total
+        counted: dict[str, int] = {}
+        for connection, _, _ in reader.messages():
+            counted[connection.topic] = counted.get(connection.topic, 0) + 1
+    assert counted == {t: n for t, n in per_topic.items() if n}
+    # mcap: every file closed (summary and footer written), its messages those metadata.yaml counts
+    in_files = 0
+    for name in info['relative_file_paths']:
+        with open(bag / name, 'rb') as f:
+            reader = make_reader(f)
+            summary = reader.get_summary()
+            assert summary is not None and summary.statistics is not None, f'{name} has no summary: not closed'
+            n = sum(1 for _ in reader.iter_messages())
+            assert n == summary.statistics.message_count
+            in_files += n
+    assert in_files == total
+    return total
+
+
+def start_rig_at_once(procs: rosrun.Processes, share: Path, bags: Path) -> None:
+    """Every rig node at the same instant, as ``ros2 launch crane_stiffness rig.launch.py record:=true`` does."""
+    for node in rig_nodes(share, {'program': 'side_force', 'record': True, 'session': SESSION}):
+        start_node(procs, node, {'output_dir': bags} if node.name == 'session_recorder' else None)
+
+
+def wait_until_running(ctx, procs: rosrun.Processes, timeout_s: float = 90.0) -> Observer:
+    """Until every node is up (in the ROS graph) and the program plays, then RUN_S more (the sensors stream, the
+    estimator fits, the recorder records)."""
+    observer = Observer(context=ctx)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(observer)
+    deadline = time.monotonic() + timeout_s
+    while not (observer.progress > 0 and set(procs.procs) <= set(observer.get_node_names())):
+        assert time.monotonic() < deadline, {n: procs.log(n)[-1500:] for n in procs.procs}
+        procs.check_alive()
+        spin_until(ex, lambda: False, 0.1)
+    spin_until(ex, lambda: False, RUN_S)
+    procs.check_alive()
+    ex.shutdown()
+    observer.destroy_node()
+    return observer
+
+
+def wait_all(procs: rosrun.Processes, names=None) -> dict[str, int | None]:
+    deadline = time.monotonic() + EXIT_TIMEOUT_S
+    chosen = {n: p for n, p in procs.procs.items() if names is None or n in names}
+    while any(p.poll() is None for p in chosen.values()) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    return {n: p.poll() for n, p in chosen.items()}
+
+
+def config_dir(install: Path) -> Path:
+    return install / PACKAGE / 'share' / PACKAGE / 'config'
+
+
+@pytest.mark.parametrize('how', ['sigint', 'sigint_twice', 'sigterm'])
+def test_rig_ends_cleanly_on_signals_to_the_process_group(install_tree, rclpy_context, tmp_path, how):
+    install, env = install_tree
+    bags = tmp_path / 'bags'
+    bags.mkdir()
+    with rosrun.Processes(env, tmp_path / 'logs', process_group=True) as procs:
+        start_rig_at_once(procs, config_dir(install), bags)
+        assert len(procs.procs) == 6
+        wait_until_running(rclpy_context, procs)
+        if how == 'sigterm':
+            procs.signal_group(signal.SIGTERM)
+        else:
+            procs.signal_group(signal.SIGINT)  # Ctrl-C: launch and every node
+            if how == 'sigint_twice':
+                time.sleep(0.05)
+                try:
+                    procs.signal_group(signal.SIGINT)  # launch forwards it once more to each node
+                except ProcessLookupError:
+                    pass  # every process already gone
+        codes = wait_all(procs)
+        logs = {n: procs.log(n) for n in procs.procs}
+    for name in procs.procs:
+        assert_clean_exit(name, codes[name], logs[name])
+    total = assert_bag_complete(bags / SESSION)
+    recorder = assert_clean_exit('session_recorder', codes['session_recorder'], logs['session_recorder'])
+    assert recorder['messages'] == total and recorder['recordings'] == 1 and recorder['errors'] == 0
+    assert 'messages (shutdown)' in logs['session_recorder']  # closed by the signal, not by the program's end
+
+
+def test_estimator_alone_ends_cleanly_on_sigint_while_it_receives_data(install_tree, rclpy_context, tmp_path):
+    """SIGINT to the estimator only, while the sensors stream at 1 kHz and it fits the program's load steps."""
+    install, env = install_tree
+    bags = tmp_path / 'bags'
+    bags.mkdir()
+    with rosrun.Processes(env, tmp_path / 'logs', process_group=True) as procs:
+        start_rig_at_once(procs, config_dir(install), bags)
+        wait_until_running(rclpy_context, procs)
+        procs.procs['stiffness_estimator'].send_signal(signal.SIGINT)
+        codes = wait_all(procs, ['stiffness_estimator'])
+        others_alive = all(p.poll() is None for n, p in procs.procs.items() if n != 'stiffness_estimator')
+        log = procs.log('stiffness_estimator')
+    counters = assert_clean_exit('stiffness_estimator', codes['stiffness_estimator'], log)
+    assert counters['force_received'] > 0 and counters['pairs_fitted'] > 0, counters
+    assert others_alive
+
+
+@pytest.fixture
+def short_bag(tmp_path) -> Path:
+    """/a Float64 × 101 over 1 s (best effort), /b String × 11 (reliable)."""
+    path = tmp_path / 'short'
+    t0 = 1_700_000_000 * 1_000_000_000
+    with BagWriter(path) as w:
+        w.add_topic('/a', 'std_msgs/msg/Float64', dump_qos_profiles([qos_profile(reliability='best_effort')]))
+        w.add_topic('/b', 'std_msgs/msg/String', dump_qos_profiles([qos_profile(depth=10)]))
+        for i in range(101):
+            log = t0 + i * 10_000_000
+            w.write('/a', serialize_message(Float64(data=float(i))), log)
+            if i % 10 == 0:
+                w.write('/b', serialize_message(String(data=f'b{i}')), log + 1)
+    return path
+
+
+def test_player_ends_cleanly_after_playback_and_on_repeated_sigint(install_tree, tmp_path, short_bag):
+    """exit_on_end: the player ends by itself after playing the bag, status 0, no FATAL (it raised SystemExit in a
+    timer callback before). A looping player given SIGINT twice ends the same way."""
+    _, env = install_tree
+    args = ['--ros-args', '-p', f'bag:={short_bag}', '-p', 'start_delay_s:=0.2', '-p', 'rate:=2.0']
+    with rosrun.Processes(env, tmp_path / 'logs') as procs:
+        procs.start('to_the_end', PACKAGE, 'session_player', args)
+        procs.start('looping', PACKAGE, 'session_player', args + ['-p', 'loop:=true'])
+        codes = wait_all(procs, ['to_the_end'])
+        procs.check_alive(allow_exit=['to_the_end'])
+        procs.procs['looping'].send_signal(signal.SIGINT)
+        time.sleep(0.05)
+        procs.procs['looping'].send_signal(signal.SIGINT)
+        codes = wait_all(procs)
+        logs = {n: procs.log(n) for n in procs.procs}
+    end = assert_clean_exit('session_player', codes['to_the_end'], logs['to_the_end'])
+    assert end == {'state': 'finished', 'published': 112, 'loops': 1, 'problems': 0}, logs['to_the_end']
+    assert 'finished: 112 messages published' in logs['to_the_end']
+    looping = assert_clean_exit('session_player', codes['looping'], logs['looping'])
+    assert looping['state'] == 'stopped' and looping['published'] > 0, looping
