@@ -71,7 +71,7 @@ def main(argv=None) -> int:
             return observer.done or procs.procs['load_program'].poll() == 0
 
         while not finished() and time.monotonic() < deadline:
-            rclpy.spin_once(observer, timeout_sec=0.1)
+            observer.spin_once(0.1)
             percent = int(100 * observer.progress)
             if percent != bar.n:
                 bar.update(percent - bar.n)
@@ -83,7 +83,7 @@ def main(argv=None) -> int:
             return 1
         end = time.monotonic() + 1.5  # let the last samples reach the estimator
         while time.monotonic() < end:
-            rclpy.spin_once(observer, timeout_sec=0.05)
+            observer.spin_once(0.05)
         codes = procs.stop()
     observer.destroy_node()
     rclpy.shutdown()

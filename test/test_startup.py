@@ -90,11 +90,11 @@ def _run_rig(install: Path, env: dict, tmp_path: Path, program: str = 'side_forc
             deadline = time.monotonic() + prog.duration_s + 60
             while procs.procs['load_program'].poll() is None and time.monotonic() < deadline:
                 procs.check_alive(allow_exit=('load_program',))
-                rclpy.spin_once(observer, timeout_sec=0.1)
+                observer.spin_once(0.1)
             assert procs.procs['load_program'].poll() == 0, procs.log('load_program')[-3000:]
             end = time.monotonic() + 1.5  # the last samples reach the estimator
             while time.monotonic() < end:
-                rclpy.spin_once(observer, timeout_sec=0.05)
+                observer.spin_once(0.05)
             codes = procs.stop()
             logs = {name: procs.log(name) for name in procs.procs}
         summary = summarize(share, program, 'startup', tmp_path / 'bags', observer, codes)
@@ -148,12 +148,12 @@ def test_ros2_run_in_any_order_model_last(install_tree, tmp_path):
                 if name == 'load_cell':
                     end = time.monotonic() + 4.0  # the model comes late: nothing may start meanwhile
                     while time.monotonic() < end:
-                        rclpy.spin_once(observer, timeout_sec=0.05)
+                        observer.spin_once(0.05)
                     assert observer.running_at is None and not observer.state
             wait_for_program_start(observer, procs, 90)
             deadline = time.monotonic() + 60
             while procs.procs['load_program'].poll() is None and time.monotonic() < deadline:
-                rclpy.spin_once(observer, timeout_sec=0.1)
+                observer.spin_once(0.1)
             codes = procs.stop()
             logs = {name: procs.log(name) for name in order}
     finally:

@@ -186,7 +186,7 @@ class LoadProgramNode(Node):
                                          wanted_subscribers(self.params['wait_for_subscribers']),
                                          self.params['min_subscribers'], self.pub_cmd.get_subscription_count)
             self._wait_started = time.monotonic()
-            self._next_report = self._wait_started
+            self._next_report = self._wait_started + self.params['ready_log_period_s']  # the line below says it all
             self._ready_at: float | None = None
             what = '; '.join(w for w, _ in self._readiness.items) or 'nothing'
             timeout = self.params['ready_timeout_s']

@@ -64,15 +64,29 @@ class Observer(Node):
     def done(self) -> bool:
         return self.state.get('state') == 'done'
 
+    def spin_once(self, timeout_sec: float = 0.05) -> None:
+        """One spin in the node's own context (the default one or a test's)."""
+        if getattr(self, '_executor', None) is None:
+            from rclpy.executors import SingleThreadedExecutor
+            self._executor = SingleThreadedExecutor(context=self.context)
+            self._executor.add_node(self)
+        self._executor.spin_once(timeout_sec=timeout_sec)
+
     def spin_until(self, predicate, timeout_s: float, what: str, procs: Processes | None = None) -> None:
-        import rclpy
         deadline = time.monotonic() + timeout_s
         while not predicate():
             if time.monotonic() > deadline:
                 raise RosRunError(f'timed out after {timeout_s:.0f} s waiting for {what}')
             if procs is not None:
                 procs.check_alive()
-            rclpy.spin_once(self, timeout_sec=0.05)
+            self.spin_once(0.05)
+
+    def destroy_node(self) -> None:
+        if getattr(self, '_executor', None) is not None:
+            self._executor.remove_node(self)
+            self._executor.shutdown()
+            self._executor = None
+        super().destroy_node()
 
 
 def ros_args(node: NodeStart, overrides: Mapping[str, Any] | None = None) -> list[str]:
