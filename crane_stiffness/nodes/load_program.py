@@ -143,7 +143,12 @@ class _Readiness:
         for topic in list(self._pending_types):
             types = {t for name, ts in self.node.get_topic_names_and_types() if name == topic for t in ts}
             if len(types) == 1:
-                self._subscribe(topic, message_class(types.pop()))
+                try:
+                    msg_class = message_class(types.pop())
+                except ValueError as exc:  # a type this machine does not have: the item stays missing
+                    self.node.get_logger().warning(f'cannot wait for {topic}: {exc}', throttle_duration_sec=30.0)
+                    continue
+                self._subscribe(topic, msg_class)
                 self._pending_types.remove(topic)
         for topic, sub in list(self._subscriptions.items()):
             if self._received[topic] and sub is not None:
@@ -198,7 +203,8 @@ class LoadProgramNode(Node):
     def _validate(self, values: dict[str, Any]) -> LoadProgram:
         check(values['start_delay_s'] >= 0, 'start_delay_s', values['start_delay_s'], 'must be >= 0')
         check(values['min_subscribers'] >= 0, 'min_subscribers', values['min_subscribers'], 'must be >= 0')
-        check(values['ready_timeout_s'] >= 0, 'ready_timeout_s', values['ready_timeout_s'], 'must be >= 0 (0: no limit)')
+        check(values['ready_timeout_s'] >= 0, 'ready_timeout_s', values['ready_timeout_s'],
+              'must be >= 0 (0: no limit)')
         check(values['ready_log_period_s'] > 0, 'ready_log_period_s', values['ready_log_period_s'], 'must be > 0')
         wanted_subscribers(values['wait_for_subscribers'])  # raises naming a malformed entry
         if self.state in ('running', 'paused') and self.program is not None:
