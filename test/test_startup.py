@@ -144,7 +144,8 @@ def test_ros2_run_in_any_order_model_last(install_tree, tmp_path):
         with rosrun.Processes(env, tmp_path / 'logs') as procs:
             order = ['load_program', 'stiffness_estimator', 'lvdt', 'load_cell', 'crane_model']
             for name in order:
-                start_node(procs, nodes[name], {'exit_on_done': True} if name == 'load_program' else None)
+                start_node(procs, nodes[name], {'exit_on_done': True, 'ready_log_period_s': 1.0}
+                           if name == 'load_program' else None)
                 if name == 'load_cell':
                     end = time.monotonic() + 4.0  # the model comes late: nothing may start meanwhile
                     while time.monotonic() < end:
