@@ -111,7 +111,8 @@ def _check_run(summary: dict, observer: Observer, logs: dict) -> None:
     # ... crane_model received every command ...
     sent = _final_counters(logs['load_program'])['published']
     received = _final_counters(logs['crane_model'])['received']
-    assert sent > 2000 and received == sent, (sent, received)
+    # (The program's 100 Hz timer skips ticks when the machine is starved of CPU: ~1,650-2,100 commands in 21 s.)
+    assert sent > 1000 and received == sent, (sent, received)
     # ... and the estimate is the model's.
     assert abs(summary['relative_error']) < 0.02, summary['estimate']['loading']
     assert all(code == 0 for code in summary['node_exit_codes'].values()), summary['node_exit_codes']
