@@ -26,6 +26,9 @@ $(STAMP): requirements.txt requirements-test.txt $(SOURCES)
 	@# setuptools reuses build/lib: a module moved or deleted in the tree would stay installed from it.
 	rm -rf build/lib build/bdist.* crane_stiffness.egg-info
 	$(BIN)/python -m pip install --quiet --disable-pip-version-check --no-deps --force-reinstall .
+	@# Compile the model's numba kernels into their cache beside the installed modules (numba keys it by the
+	@# installed files' times): no node or CLI call compiles them at run time (colcon does this in setup.py).
+	cd $(VENV) && bin/python -m crane_stiffness.model.kernel_cache
 	@touch $(STAMP)
 
 demo: $(STAMP)

@@ -15,6 +15,7 @@ BENCHMARKS = [
     ('bench_bag_decode.py', []),
     ('bench_analyze.py', []),
     ('bench_rig.py', []),
+    ('bench_startup.py', []),
 ]
 
 
@@ -24,7 +25,7 @@ def main() -> int:
     for script, args in BENCHMARKS:
         print(f'=== {script}', flush=True)
         argv = [sys.executable, str(HERE / script), *args]
-        if script in ('bench_solver.py', 'bench_rig.py'):
+        if script in ('bench_solver.py', 'bench_rig.py', 'bench_startup.py'):
             argv += ['--json', str(OUT / script.replace('.py', '.json'))]
         if subprocess.run(argv).returncode != 0:
             failed.append(script)

@@ -9,6 +9,11 @@ Arguments (:data:`ARGUMENTS`): program (side_force | side_force_slack | moment_z
 YAML), crane (a geometry YAML; default the lab model), sensors (sensor YAML), sim_sensors and record (true/false),
 session (bag name). To use real sensors, set sim_sensors:=false and remap the drivers' topics onto /load_cell/wrench
 and /lvdt/displacement (see README, "Real drivers").
+
+Every node starts at the same instant (as ``ros2 launch`` starts them); load_program starts the program only when
+the rig is ready. What "ready" means follows from the nodes started (:func:`readiness`): a message on the model's
+prediction and on both sensor streams, and each started node subscribed to the topics it reads. An unknown program
+or a missing parameter file raises :class:`RigError` naming the file before anything starts.
 """
 from __future__ import annotations
 
@@ -16,10 +21,15 @@ import os
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
-from crane_stiffness import PACKAGE
+from crane_stiffness import PACKAGE, topics
+from crane_stiffness.errors import CraneStiffnessError
 
-__all__ = ['ARGUMENTS', 'NODES', 'PACKAGE', 'Argument', 'NodeStart', 'RigNode', 'argument_values', 'config_files',
-           'flag', 'program_file', 'rig_nodes']
+__all__ = ['ARGUMENTS', 'NODES', 'PACKAGE', 'Argument', 'NodeStart', 'RigError', 'RigNode', 'argument_values',
+           'config_files', 'flag', 'known_programs', 'program_file', 'readiness', 'rig_nodes']
+
+
+class RigError(CraneStiffnessError, ValueError):
+    """The rig cannot start as asked: an unknown program, a missing parameter file, an unknown argument."""
 
 
 @dataclass(frozen=True)
@@ -49,8 +59,8 @@ class RigNode:
     ``files``: the parameter files it reads, in order, by role: 'crane', 'sensors' (the arguments of those names)
     or 'program' (the program's file). ``arguments``: parameters set from arguments, {parameter: argument}.
     ``condition``: the true/false argument that starts it (None: always). ``remappings``: (from, to) topic pairs.
-    ``runs_program``: the node that plays the program; crane_stiffness.testing.rig starts it once every other node
-    is connected (``ros2 launch`` starts it with the others; it waits for its subscribers).
+    ``runs_program``: the node that plays the program; it starts with the others and waits until the rig is ready.
+    ``reads``: topics the program must not start before this node subscribes to (nothing of them may be lost).
     """
 
     executable: str
@@ -59,21 +69,27 @@ class RigNode:
     condition: str | None = None
     remappings: tuple[tuple[str, str], ...] = ()
     runs_program: bool = False
+    reads: tuple[str, ...] = ()
 
     @property
     def name(self) -> str:
         return self.executable
 
 
+_STREAMS = (topics.LOAD_CELL_WRENCH, topics.LVDT_DISPLACEMENT)
+
 NODES: tuple[RigNode, ...] = (
-    RigNode('crane_model', ('crane',)),
-    RigNode('load_cell', ('sensors',), condition='sim_sensors'),
-    RigNode('lvdt', ('sensors',), condition='sim_sensors'),
-    RigNode('stiffness_estimator', ('crane', 'sensors')),
+    RigNode('crane_model', ('crane',), reads=(topics.WRENCH_COMMAND,)),
+    RigNode('load_cell', ('sensors',), condition='sim_sensors', reads=(topics.WRENCH_COMMAND,)),
+    RigNode('lvdt', ('sensors',), condition='sim_sensors', reads=(topics.PLATFORM_POSE,)),
+    RigNode('stiffness_estimator', ('crane', 'sensors'), reads=(topics.WRENCH_COMMAND, *_STREAMS)),
     RigNode('session_recorder', ('crane', 'sensors', 'program'), arguments={'session': 'session'},
-            condition='record'),
+            condition='record', reads=(topics.WRENCH_COMMAND, topics.PLATFORM_POSE, *_STREAMS)),
     RigNode('load_program', ('program',), runs_program=True),
 )
+#: Topics a message must have arrived on before the program starts: the model's prediction (latched) and both
+#: sensor streams (from the simulated sensors, or from real drivers remapped onto them).
+READY_MESSAGES: tuple[str, ...] = (topics.PREDICTED_AXIS_STIFFNESS, *_STREAMS)
 
 
 @dataclass(frozen=True)
@@ -83,7 +99,7 @@ class NodeStart:
     name: str
     executable: str
     parameter_files: tuple[str, ...]
-    parameters: dict[str, str]
+    parameters: dict[str, Any]
     remappings: tuple[tuple[str, str], ...]
     runs_program: bool
 
@@ -91,6 +107,15 @@ class NodeStart:
 def program_file(program: str, config_dir: str | os.PathLike) -> str:
     """The parameter file of a program: a path ending in .yaml as it is, else ``<config_dir>/program_<name>.yaml``."""
     return program if program.endswith('.yaml') else os.path.join(config_dir, f'program_{program}.yaml')
+
+
+def known_programs(config_dir: str | os.PathLike) -> list[str]:
+    """The program names ``config_dir`` holds files for (program_<name>.yaml)."""
+    try:
+        names = os.listdir(config_dir)
+    except OSError:
+        return []
+    return sorted(n[len('program_'):-len('.yaml')] for n in names if n.startswith('program_') and n.endswith('.yaml'))
 
 
 def flag(value: str | bool) -> bool:
@@ -109,24 +134,44 @@ def argument_values(config_dir: str | os.PathLike, given: Mapping[str, str | boo
     given = dict(given or {})
     unknown = set(given) - {a.name for a in ARGUMENTS}
     if unknown:
-        raise ValueError(f'unknown rig argument(s) {", ".join(sorted(unknown))}; known: '
+        raise RigError(f'unknown rig argument(s) {", ".join(sorted(unknown))}; known: '
                          f'{", ".join(a.name for a in ARGUMENTS)}')
     return {a.name: given[a.name] if a.name in given else
             os.path.join(config_dir, a.default) if a.config_file else a.default for a in ARGUMENTS}
 
 
 def config_files(config_dir: str | os.PathLike, given: Mapping[str, str | bool] | None = None) -> dict[str, str]:
-    """The parameter file of each role ('crane', 'sensors', 'program') for the arguments ``given``."""
+    """The parameter file of each role ('crane', 'sensors', 'program') for the arguments ``given``; RigError names
+    a file that does not exist (for a program name, with the programs there are)."""
     values = argument_values(config_dir, given)
-    return {'crane': str(values['crane']), 'sensors': str(values['sensors']),
-            'program': program_file(str(values['program']), config_dir)}
+    files = {'crane': str(values['crane']), 'sensors': str(values['sensors']),
+             'program': program_file(str(values['program']), config_dir)}
+    for role, path in files.items():
+        if os.path.isfile(path):
+            continue
+        if role == 'program' and not str(values['program']).endswith('.yaml'):
+            raise RigError(f"unknown program {values['program']!r}: no file {path}; known programs: "
+                           f"{', '.join(known_programs(config_dir)) or 'none'} (or give a program YAML file)")
+        raise RigError(f'{role} file {path} not found ({role}:=...)')
+    return files
+
+
+def readiness(started: list[RigNode]) -> dict[str, list[str]]:
+    """load_program's wait_for_messages and wait_for_subscribers for the nodes ``started`` (see load_program)."""
+    readers: dict[str, list[str]] = {}
+    for node in started:
+        for topic in node.reads:
+            readers.setdefault(topic, []).append(node.name)
+    return {'wait_for_messages': list(READY_MESSAGES),
+            'wait_for_subscribers': [f'{topic}: {" ".join(names)}' for topic, names in readers.items()] or ['']}
 
 
 def rig_nodes(config_dir: str | os.PathLike, given: Mapping[str, str | bool] | None = None) -> list[NodeStart]:
     """The nodes the rig starts for the arguments ``given`` (the rest at their defaults), in start order."""
     values = argument_values(config_dir, given)
     files = config_files(config_dir, values)
+    started = [node for node in NODES if node.condition is None or flag(values[node.condition])]
     return [NodeStart(node.name, node.executable, tuple(files[f] for f in node.files),
-                      {param: str(values[arg]) for param, arg in node.arguments.items()}, node.remappings,
-                      node.runs_program)
-            for node in NODES if node.condition is None or flag(values[node.condition])]
+                      {**{param: str(values[arg]) for param, arg in node.arguments.items()},
+                       **(readiness(started) if node.runs_program else {})}, node.remappings, node.runs_program)
+            for node in started]

@@ -1,6 +1,8 @@
 """The whole simulated rig: crane model, load program, simulated load cell and LVDT, stiffness estimator, and the
 session recorder, as crane_stiffness.rig_description describes it (its nodes, their parameter files and parameters,
-the arguments; the demo and the tests start the same nodes).
+the arguments; the demo and the tests start the same nodes). All nodes start at once; load_program starts the
+program when the rig is ready (it is told what to wait for: the nodes started here). An unknown program or a missing
+parameter file stops the launch at once with an error naming the file (rig_description.RigError).
 
     ros2 launch crane_stiffness rig.launch.py program:=side_force record:=true
     ros2 launch crane_stiffness rig.launch.py --show-args

@@ -2,7 +2,8 @@
 
 1. colcon-builds the package into build/ and install/ (as a ROS workspace would);
 2. starts every node as its own process the way `ros2 run crane_stiffness <node>` starts it, from that install
-   tree: crane_model, load_cell, lvdt, stiffness_estimator, session_recorder, then load_program;
+   tree, all at the same instant as `ros2 launch` does: crane_model, load_cell, lvdt, stiffness_estimator,
+   session_recorder and load_program, which starts the program once the rig is ready;
 3. follows the program with a progress bar, then prints the estimated side stiffness beside the model's
    prediction and writes out/demo/summary.json; the session is recorded to bags/<session>/.
 
@@ -40,7 +41,7 @@ def main(argv=None) -> int:
     from tqdm import tqdm
 
     from crane_stiffness.testing import rosrun
-    from crane_stiffness.testing.rig import Observer, start_rig, summarize
+    from crane_stiffness.testing.rig import Observer, start_rig, summarize, wait_for_program_start
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -57,7 +58,11 @@ def main(argv=None) -> int:
     rclpy.init()
     observer = Observer()
     with rosrun.Processes(env, out / 'logs') as procs:
-        program = start_rig(procs, share, args.program, session, Path(args.bags), observer)
+        launched = time.monotonic()
+        program = start_rig(procs, share, args.program, session, Path(args.bags))
+        print(f'  started {len(procs.procs)} nodes at once; load_program waits for the rig ...', flush=True)
+        wait_for_program_start(observer, procs, 90)
+        print(f'  program started {observer.running_at - launched:.1f} s after launch', flush=True)
         bar = tqdm(total=100, desc=f'program {program.name}', unit='%', mininterval=0.5,
                    bar_format='{l_bar}{bar}| {n:.0f}/{total}% [{elapsed}<{remaining}]')
         deadline = time.monotonic() + program.duration_s + 90
@@ -66,7 +71,7 @@ def main(argv=None) -> int:
             return observer.done or procs.procs['load_program'].poll() == 0
 
         while not finished() and time.monotonic() < deadline:
-            rclpy.spin_once(observer, timeout_sec=0.1)
+            observer.spin_once(0.1)
             percent = int(100 * observer.progress)
             if percent != bar.n:
                 bar.update(percent - bar.n)
@@ -78,7 +83,7 @@ def main(argv=None) -> int:
             return 1
         end = time.monotonic() + 1.5  # let the last samples reach the estimator
         while time.monotonic() < end:
-            rclpy.spin_once(observer, timeout_sec=0.05)
+            observer.spin_once(0.05)
         codes = procs.stop()
     observer.destroy_node()
     rclpy.shutdown()

@@ -213,7 +213,8 @@ def test_launch_file_starts_every_rig_node_with_existing_config(monkeypatch):
     # The arguments choose the nodes and their files as rig_description says, the way the process rig starts them.
     nodes = _launch(monkeypatch, program='moment_z', sim_sensors='false', record='False', session='s1')
     assert [n.kwargs['executable'] for n in nodes] == ['crane_model', 'stiffness_estimator', 'load_program']
-    assert nodes[-1].kwargs['parameters'] == [str(REPO / 'config/program_moment_z.yaml')]
+    assert nodes[-1].kwargs['parameters'][0] == str(REPO / 'config/program_moment_z.yaml')
+    assert set(nodes[-1].kwargs['parameters'][1]) == {'wait_for_messages', 'wait_for_subscribers'}
     recorder = next(n for n in _launch(monkeypatch, session='s1') if n.kwargs['name'] == 'session_recorder')
     assert recorder.kwargs['parameters'][-1] == {'session': 's1'}
     started = {n.kwargs['name']: n.kwargs['parameters'] for n in _launch(monkeypatch)}

@@ -142,7 +142,9 @@ def test_load_program_plays_pauses_and_stops(rclpy_context):
               Parameter('segments.target', value=[2.0, 2.0, 0.0]),
               Parameter('segments.duration', value=[0.5, 0.5, 0.5]),
               Parameter('rate_hz', value=200.0), Parameter('name', value='tri'),
-              Parameter('start_delay_s', value=0.5)]
+              Parameter('start_delay_s', value=0.5),
+              # Only the probe runs here: wait for no rig node (the default waits for the whole rig).
+              Parameter('wait_for_messages', value=['']), Parameter('wait_for_subscribers', value=[''])]
     prog = LoadProgramNode(context=rclpy_context, parameter_overrides=params)
     probe = Probe(rclpy_context)
     ex.add_node(prog)

@@ -217,7 +217,11 @@ def test_replay_through_the_estimator_reproduces_the_live_estimates(rclpy_contex
                Parameter('segments.axis', value=['fy'] * 5), Parameter('segments.target', value=[0.0, 2.0, 2.0, 0.0,
                                                                                                   0.0]),
                Parameter('segments.duration', value=[0.4, 1.2, 0.4, 1.2, 0.4]),
-               Parameter('start_delay_s', value=1.5)]
+               Parameter('start_delay_s', value=1.5),
+               # This recorder records no pose: load_program is told what this partial rig reads.
+               Parameter('wait_for_subscribers', value=[f'{topics.WRENCH_COMMAND}: crane_model load_cell '
+                                                        'stiffness_estimator session_recorder',
+                                                        f'{topics.PLATFORM_POSE}: lvdt'])]
     inputs = [topics.LOAD_CELL_WRENCH, topics.LVDT_DISPLACEMENT, topics.WRENCH_COMMAND,
               topics.PREDICTED_AXIS_STIFFNESS]
     recorder = SessionRecorder(context=ctx, parameter_overrides=[

@@ -5,6 +5,10 @@ frame crane_base = the paper's frame, z down; stamped with the command's stamp),
 wire_1..wire_6, position = length [m], effort = tension [N]), /crane/predicted_stiffness (Float64MultiArray 6×6
 tangent) and /crane/predicted_axis_stiffness (Float64 along the commanded axis), and /crane/model_status (String:
 'ok …' or 'no_equilibrium …'). Geometry from the geometry.* parameters, changeable at run time.
+
+The stiffness topics and the status are latched. The pose is not (it is a stream), so a reader that joins late (the
+simulated LVDT started after this node, in any order) is sent the current pose when it matches: it can publish
+before the first command, and load_program waits for that (crane_stiffness.nodes.load_program).
 """
 from __future__ import annotations
 
@@ -12,6 +16,7 @@ from typing import Any
 
 import numpy as np
 from geometry_msgs.msg import PoseStamped, WrenchStamped
+from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension, String
@@ -61,7 +66,8 @@ class CraneModel(Node):
         self.axis = 'fy'
         self.stamp = None
         self.solved: tuple | None = None  # the load the published pose and stiffness belong to (None: re-solve)
-        self.pub_pose = self.create_publisher(PoseStamped, topics.PLATFORM_POSE, RELIABLE_QOS)
+        self.pub_pose = self.create_publisher(PoseStamped, topics.PLATFORM_POSE, RELIABLE_QOS,
+                                              event_callbacks=PublisherEventCallbacks(matched=self._on_pose_matched))
         self.pub_wires = self.create_publisher(JointState, topics.WIRE_STATES, RELIABLE_QOS)
         self.pub_k = self.create_publisher(Float64MultiArray, topics.PREDICTED_STIFFNESS, LATCHED_QOS)
         self.pub_axis = self.create_publisher(Float64, topics.PREDICTED_AXIS_STIFFNESS, LATCHED_QOS)
@@ -106,6 +112,13 @@ class CraneModel(Node):
             self.counters.published += 1
             return
         self._solve_and_publish()
+
+    def _on_pose_matched(self, status) -> None:
+        """A new pose reader: send it the current pose (stamped now), as a latched topic would."""
+        if status.current_count_change > 0 and self.equilibrium is not None:
+            stamp, self.stamp = self.stamp, None
+            self._publish_pose(self.equilibrium)
+            self.stamp = stamp
 
     # --- work ---
     def _solve_and_publish(self) -> None:

@@ -5,11 +5,21 @@ one of config/program_*.yaml. Publishes the commanded wrench on /crane/wrench_co
 frame crane_base), progress on /load_program/progress (Float64 in [0, 1]) and state on /load_program/state (String,
 JSON). Services (std_srvs/Trigger): ~/start (start, resume after pause, or restart when finished), ~/pause (hold the
 current wrench), ~/stop (abort: command zero). Times follow the node clock, so use_sim_time works.
+
+An automatic start waits until the rig is ready, however it was started (``ros2 launch`` starts every node at the
+same instant; ``ros2 run`` in any order): a message has arrived on each topic of ``wait_for_messages`` (by default
+crane_model's latched prediction and both sensor streams), and each node named in ``wait_for_subscribers`` is
+subscribed to its topic (by default crane_model, the simulated load cell, the estimator and the recorder to the
+command; the commands are published only once DDS has matched those readers). While it waits it logs one line per
+missing item every ``ready_log_period_s``; after ``ready_timeout_s`` it logs an error naming what never came and
+exits with status 1. A user running part of the rig lists only what runs (the launch file does that for its
+arguments, see crane_stiffness.rig_description).
 """
 from __future__ import annotations
 
 import json
-from typing import Any
+import time
+from typing import Any, Callable
 
 from geometry_msgs.msg import WrenchStamped
 from rclpy.node import Node
@@ -18,10 +28,22 @@ from std_srvs.srv import Trigger
 
 from crane_stiffness import topics
 from crane_stiffness.config import ParamSpec
-from crane_stiffness.nodes.common import LATCHED_QOS, RELIABLE_QOS, Diagnostics, run
+from crane_stiffness.nodes.common import LATCHED_QOS, RELIABLE_QOS, Counters, Diagnostics, rclpy_qos, run
 from crane_stiffness.nodes.parameters import Params, check
+from crane_stiffness.rig_description import NODES as RIG_NODES
+from crane_stiffness.rig_description import readiness
 from crane_stiffness.sim.program import LoadProgram
 from crane_stiffness.status import OK, WARN
+
+#: What the program waits for by default: the whole simulated rig with the recorder, as crane_stiffness.rig_description
+#: describes it (the launch file passes the lists for the nodes it starts): a message on the model's latched
+#: prediction and on both sensor streams, and every node subscribed to the topics it reads.
+_FULL_RIG = readiness(list(RIG_NODES))
+DEFAULT_WAIT_FOR_MESSAGES = tuple(_FULL_RIG['wait_for_messages'])
+DEFAULT_WAIT_FOR_SUBSCRIBERS = tuple(_FULL_RIG['wait_for_subscribers'])
+#: How the log names the source of a topic waited for.
+SOURCES = {topics.PREDICTED_AXIS_STIFFNESS: "crane_model's prediction", topics.LOAD_CELL_WRENCH: 'the load cell',
+           topics.LVDT_DISPLACEMENT: 'the LVDT'}
 
 PARAMS = (
     ParamSpec('name', 'hold_zero', 'program name, recorded with the session'),
@@ -32,14 +54,116 @@ PARAMS = (
     ParamSpec('segments.target', [0.0], 'segment end values [N or N·m]'),
     ParamSpec('segments.duration', [1.0], 'segment durations [s]',
               rule='one per segment; kind, axis, target and duration lists have the same length'),
-    ParamSpec('autostart', True, 'start the program by itself (after start_delay_s)'),
-    ParamSpec('start_delay_s', 1.0, 'wait before an automatic start [s]', low=0.0, high=86400.0),
+    ParamSpec('autostart', True, 'start the program by itself once the rig is ready (see wait_for_*), '
+              'start_delay_s after that'),
+    ParamSpec('start_delay_s', 0.5, 'wait between the rig being ready and an automatic start [s]', low=0.0,
+              high=86400.0),
     ParamSpec('min_subscribers', 1, 'an automatic start also waits until /crane/wrench_command has this many '
-              'subscribers, so no command is lost while DDS discovery runs [-]', low=0),
+              'subscribers in all, so no command is lost while DDS discovery runs [-]', low=0),
+    ParamSpec('wait_for_messages', list(DEFAULT_WAIT_FOR_MESSAGES),
+              'an automatic start waits for a message on each of these topics (default: the model\'s latched '
+              'prediction and both sensor streams); empty entries are ignored, so [\'\'] waits for none'),
+    ParamSpec('wait_for_subscribers', list(DEFAULT_WAIT_FOR_SUBSCRIBERS),
+              "an automatic start waits until each listed node subscribes to the topic: entries "
+              "'TOPIC: NODE [NODE ...]' (default: the whole rig with the recorder); empty entries are ignored"),
+    ParamSpec('ready_timeout_s', 60.0, 'an automatic start gives up when the rig is not ready after this long: the '
+              'node logs what never came and exits with status 1; 0 = wait forever [s]', low=0.0,
+              high=86400.0),
+    ParamSpec('ready_log_period_s', 5.0, 'while waiting for the rig, log what is still missing this often [s]'),
     ParamSpec('exit_on_done', False, 'shut the node down when the program has finished'),
 )
 PROGRAM_KEYS = ('name', 'rate_hz', 'repeats', 'segments.kind', 'segments.axis', 'segments.target',
                 'segments.duration')
+
+
+def wanted_subscribers(entries: list[str]) -> list[tuple[str, str]]:
+    """(topic, node) pairs of ``wait_for_subscribers`` entries 'TOPIC: NODE [NODE ...]' (empty entries skipped);
+    ValueError names a malformed entry."""
+    pairs = []
+    for entry in entries:
+        if not entry.strip():
+            continue
+        topic, sep, nodes = entry.partition(':')
+        check(bool(sep and topic.strip() and nodes.split()), 'wait_for_subscribers', entry,
+              "entries must read 'TOPIC: NODE [NODE ...]'")
+        pairs += [(topic.strip(), node) for node in nodes.split()]
+    return pairs
+
+
+class _Readiness:
+    """What an automatic start waits for: each item is (description, is it there now?). Messages are awaited with
+    a subscription of the topic's contract QoS (crane_stiffness.topics), dropped once a message has come."""
+
+    def __init__(self, node: Node, messages: list[str], subscribers: list[tuple[str, str]],
+                 min_subscribers: int, matched: Callable[[], int]) -> None:
+        from crane_stiffness.nodes.session_qos import message_class
+        self.node = node
+        self.items: list[tuple[str, Callable[[], bool]]] = []
+        self._received: dict[str, bool] = {}
+        self._subscriptions = {}
+        for name in dict.fromkeys(m.strip() for m in messages if m.strip()):
+            topic = node.resolve_topic_name(name)
+            msg_type = topics.RIG_TOPICS.get(topic)
+            if msg_type is None:  # a topic outside the contract: its type comes from the graph
+                types = {t for _, ts in node.get_topic_names_and_types() if _ == topic for t in ts}
+                msg_type = next(iter(types)) if len(types) == 1 else None
+            self._received[topic] = False
+            if msg_type is not None:
+                self._subscribe(topic, message_class(msg_type))
+            self.items.append((f'a message on {topic}' + (f' ({SOURCES[topic]})' if topic in SOURCES else ''),
+                               lambda t=topic: self._received[t]))
+        self._pending_types = [t for t in self._received if t not in self._subscriptions]
+        command_readers = set()
+        for name, reader in subscribers:
+            topic = node.resolve_topic_name(name)
+            if topic == topics.WRENCH_COMMAND:
+                command_readers.add(reader)
+            self.items.append((f'{reader} subscribed to {topic}', lambda t=topic, r=reader: self._subscribed(t, r)))
+        # The graph can show a reader before our publisher has matched it: count the matches of the command too.
+        need = max(min_subscribers, len(command_readers))
+        if need:
+            self.items.append((f'{need} subscriber(s) matched to {topics.WRENCH_COMMAND}',
+                               lambda: matched() >= need))
+
+    def _subscribe(self, topic: str, msg_class) -> None:
+        contract = topics.TOPIC_QOS.get(topic)
+        qos = rclpy_qos(contract) if contract is not None else rclpy_qos(topics.SENSOR_DATA, depth=1)
+
+        def received(_msg, t=topic):
+            self._received[t] = True
+        self._subscriptions[topic] = self.node.create_subscription(msg_class, topic, received, qos, raw=True)
+
+    def _subscribed(self, topic: str, reader: str) -> bool:
+        for info in self.node.get_subscriptions_info_by_topic(topic):
+            full = f"{info.node_namespace.rstrip('/')}/{info.node_name}"
+            if reader in (info.node_name, full):
+                return True
+        return False
+
+    def missing(self) -> list[str]:
+        """Descriptions of what is not there yet (and tidies up: a subscription whose message came is dropped)."""
+        from crane_stiffness.nodes.session_qos import message_class
+        for topic in list(self._pending_types):
+            types = {t for name, ts in self.node.get_topic_names_and_types() if name == topic for t in ts}
+            if len(types) == 1:
+                try:
+                    msg_class = message_class(types.pop())
+                except ValueError as exc:  # a type this machine does not have: the item stays missing
+                    self.node.get_logger().warning(f'cannot wait for {topic}: {exc}', throttle_duration_sec=30.0)
+                    continue
+                self._subscribe(topic, msg_class)
+                self._pending_types.remove(topic)
+        for topic, sub in list(self._subscriptions.items()):
+            if self._received[topic] and sub is not None:
+                self.node.destroy_subscription(sub)
+                self._subscriptions[topic] = None
+        return [what for what, there in self.items if not there()]
+
+    def close(self) -> None:
+        for sub in self._subscriptions.values():
+            if sub is not None:
+                self.node.destroy_subscription(sub)
+        self._subscriptions = {}
 
 
 class LoadProgramNode(Node):
@@ -53,6 +177,8 @@ class LoadProgramNode(Node):
         self.last = None
         self.program: LoadProgram | None = None
         self.timer = None
+        self.counters = Counters()  # published = commands published (FINAL_COUNTERS at exit)
+        self.exit_status = 0
         self.pub_cmd = self.create_publisher(WrenchStamped, topics.WRENCH_COMMAND, RELIABLE_QOS)
         self.pub_progress = self.create_publisher(Float64, topics.PROGRAM_PROGRESS, LATCHED_QOS)
         self.pub_state = self.create_publisher(String, topics.PROGRAM_STATE, LATCHED_QOS)
@@ -62,14 +188,28 @@ class LoadProgramNode(Node):
         self.create_service(Trigger, '~/stop', self._srv_stop)
         self.diagnostics = Diagnostics(self, self._report)
         self._autostart = None
+        self._readiness: _Readiness | None = None
         if self.params['autostart']:
-            self._not_before = self._now() + self.params['start_delay_s']
+            self._readiness = _Readiness(self, self.params['wait_for_messages'],
+                                         wanted_subscribers(self.params['wait_for_subscribers']),
+                                         self.params['min_subscribers'], self.pub_cmd.get_subscription_count)
+            self._wait_started = time.monotonic()
+            self._next_report = self._wait_started + self.params['ready_log_period_s']  # the line below says it all
+            self._ready_at: float | None = None
+            what = '; '.join(w for w, _ in self._readiness.items) or 'nothing'
+            timeout = self.params['ready_timeout_s']
+            self.get_logger().info(f'waiting for the rig before starting {self.program.name!r} '
+                                   f'({f"at most {timeout:g} s" if timeout > 0 else "no time limit"}): {what}')
             self._autostart = self.create_timer(0.05, self._auto)
 
     # --- parameters ---
     def _validate(self, values: dict[str, Any]) -> LoadProgram:
         check(values['start_delay_s'] >= 0, 'start_delay_s', values['start_delay_s'], 'must be >= 0')
         check(values['min_subscribers'] >= 0, 'min_subscribers', values['min_subscribers'], 'must be >= 0')
+        check(values['ready_timeout_s'] >= 0, 'ready_timeout_s', values['ready_timeout_s'],
+              'must be >= 0 (0: no limit)')
+        check(values['ready_log_period_s'] > 0, 'ready_log_period_s', values['ready_log_period_s'], 'must be > 0')
+        wanted_subscribers(values['wait_for_subscribers'])  # raises naming a malformed entry
         if self.state in ('running', 'paused') and self.program is not None:
             if any(values[k] != self.params[k] for k in PROGRAM_KEYS):
                 raise ValueError('the program cannot change while it runs: call ~/stop first')
@@ -93,13 +233,33 @@ class LoadProgramNode(Node):
         return self.elapsed
 
     def _auto(self) -> None:
-        if self._now() < self._not_before:
-            return
-        if self.count_subscribers(topics.WRENCH_COMMAND) < self.params['min_subscribers']:
-            self.get_logger().info(f'waiting for {self.params["min_subscribers"]} subscriber(s) of '
-                                   f'{topics.WRENCH_COMMAND}', throttle_duration_sec=5.0)
+        now = time.monotonic()
+        if self._ready_at is None:
+            missing = self._readiness.missing()
+            waited = now - self._wait_started
+            if not missing:
+                self._ready_at = now
+                self._readiness.close()
+                self.get_logger().info(f'rig ready after {waited:.1f} s; starting {self.program.name!r} in '
+                                       f'{self.params["start_delay_s"]:g} s')
+            elif 0 < self.params['ready_timeout_s'] <= waited:
+                self.destroy_timer(self._autostart)
+                self._readiness.close()
+                self.get_logger().error(f'gave up after {waited:.0f} s (ready_timeout_s): the program did not start; '
+                                        f'never came: {"; ".join(missing)}')
+                self.exit_status = 1
+                self.exit_requested = True  # common.run ends the spin; main returns exit_status
+                return
+            else:
+                if now >= self._next_report:
+                    self._next_report = now + self.params['ready_log_period_s']
+                    for what in missing:
+                        self.get_logger().info(f'waiting ({waited:.0f} s) for {what}')
+                return
+        if now < self._ready_at + self.params['start_delay_s']:
             return
         self.destroy_timer(self._autostart)
+        self._autostart = None
         if self.state == 'idle':
             self._start()
 
@@ -125,6 +285,7 @@ class LoadProgramNode(Node):
         cmd.wrench.force.x, cmd.wrench.force.y, cmd.wrench.force.z = w[:3]
         cmd.wrench.torque.x, cmd.wrench.torque.y, cmd.wrench.torque.z = w[3:]
         self.pub_cmd.publish(cmd)
+        self.counters.published += 1
         self.pub_progress.publish(Float64(data=float(st.progress)))
         if st.done and self.state == 'running':
             self.state = 'done'
@@ -170,14 +331,10 @@ class LoadProgramNode(Node):
         cmd.header.stamp = self.get_clock().now().to_msg()
         cmd.header.frame_id = topics.FRAME_BASE
         self.pub_cmd.publish(cmd)  # abort: take the load off
+        self.counters.published += 1
         self._publish_state()
         response.success, response.message = True, 'stopped; zero wrench commanded'
         return response
-
-    @property
-    def counters(self) -> dict:
-        """What ``run`` prints at exit (FINAL_COUNTERS): where the program stood."""
-        return {'program': self.program.name, 'state': self.state, 'time_s': round(self._program_time(), 6)}
 
     def _report(self):
         level = WARN if self.state == 'stopped' else OK
@@ -186,7 +343,15 @@ class LoadProgramNode(Node):
 
 
 def main(args=None) -> int:
-    return run(LoadProgramNode, args)
+    """Runs the node (common.run); exits with status 1 when an automatic start gave up waiting for the rig."""
+    built: list[LoadProgramNode] = []
+
+    def load_program_node() -> LoadProgramNode:
+        built.append(LoadProgramNode())
+        return built[0]
+    load_program_node.__name__ = LoadProgramNode.__name__
+    status = run(load_program_node, args)
+    return status or (built[0].exit_status if built else 0)
 
 
 if __name__ == '__main__':

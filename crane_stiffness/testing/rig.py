@@ -1,8 +1,9 @@
-"""The simulated rig as separate node processes: start order, readiness, and the run's summary.
+"""The simulated rig as separate node processes, started the way ``ros2 launch`` starts them, and the run's summary.
 
-Used by ``make demo`` (scripts/demo.py), the tests and the rig benchmark. Every node is started the way ``ros2 run``
+Used by ``make demo`` (scripts/demo.py), the tests and the benchmarks. Every node is started the way ``ros2 run``
 starts it (crane_stiffness.testing.rosrun) with what the launch file gives it (crane_stiffness.rig_description:
-parameter files from the install tree's config/ directory, parameters, remappings).
+parameter files from the install tree's config/ directory, parameters, remappings), all at the same instant: there
+is no start order to keep, load_program waits until the rig is ready (crane_stiffness.nodes.load_program).
 """
 from __future__ import annotations
 
@@ -35,6 +36,8 @@ class Observer(Node):
         self.values: Float64MultiArray | None = None
         self.values_count = 0
         self.predicted: float | None = None
+        self.running_at: float | None = None  # time.monotonic() when the state first said 'running'
+        self.predicted_at: float | None = None  # ... when the model's prediction first arrived
         self.create_subscription(Float64, topics.PROGRAM_PROGRESS, self._on_progress, LATCHED_QOS)
         self.create_subscription(String, topics.PROGRAM_STATE, self._on_state, LATCHED_QOS)
         self.create_subscription(Float64MultiArray, topics.STIFFNESS_VALUES, self._on_values, RELIABLE_QOS)
@@ -45,6 +48,8 @@ class Observer(Node):
 
     def _on_state(self, msg: String) -> None:
         self.state = json.loads(msg.data)
+        if self.running_at is None and self.state.get('state') == 'running':
+            self.running_at = time.monotonic()
 
     def _on_values(self, msg: Float64MultiArray) -> None:
         self.values = msg
@@ -52,27 +57,48 @@ class Observer(Node):
 
     def _on_predicted(self, msg: Float64) -> None:
         self.predicted = msg.data
+        if self.predicted_at is None:
+            self.predicted_at = time.monotonic()
 
     @property
     def done(self) -> bool:
         return self.state.get('state') == 'done'
 
+    def spin_once(self, timeout_sec: float = 0.05) -> None:
+        """One spin in the node's own context (the default one or a test's)."""
+        if getattr(self, '_executor', None) is None:
+            from rclpy.executors import SingleThreadedExecutor
+            self._executor = SingleThreadedExecutor(context=self.context)
+            self._executor.add_node(self)
+        self._executor.spin_once(timeout_sec=timeout_sec)
+
     def spin_until(self, predicate, timeout_s: float, what: str, procs: Processes | None = None) -> None:
-        import rclpy
         deadline = time.monotonic() + timeout_s
         while not predicate():
             if time.monotonic() > deadline:
                 raise RosRunError(f'timed out after {timeout_s:.0f} s waiting for {what}')
             if procs is not None:
                 procs.check_alive()
-            rclpy.spin_once(self, timeout_sec=0.05)
+            self.spin_once(0.05)
+
+    def destroy_node(self) -> None:
+        if getattr(self, '_executor', None) is not None:
+            self._executor.remove_node(self)
+            self._executor.shutdown()
+            self._executor = None
+        super().destroy_node()
 
 
 def ros_args(node: NodeStart, overrides: Mapping[str, Any] | None = None) -> list[str]:
     """The ROS arguments that give ``node`` what the launch file gives it, ``overrides`` set on top (``-p``)."""
     args = ['--ros-args', *(a for f in node.parameter_files for a in ('--params-file', str(f)))]
     for name, value in {**node.parameters, **(overrides or {})}.items():
-        text = ('true' if value else 'false') if isinstance(value, bool) else str(value)
+        if isinstance(value, bool):
+            text = 'true' if value else 'false'
+        elif isinstance(value, (list, tuple)):
+            text = json.dumps([str(v) if isinstance(v, Path) else v for v in value])  # a YAML flow sequence
+        else:
+            text = str(value)
         args += ['-p', f'{name}:={text}']
     return args + [a for old, new in node.remappings for a in ('-r', f'{old}:={new}')]
 
@@ -83,41 +109,36 @@ def start_node(procs: Processes, node: NodeStart, overrides: Mapping[str, Any] |
 
 
 def config_files(share: Path, program: str) -> dict[str, Path]:
-    files = {role: Path(path) for role, path in rig_config_files(share, {'program': program}).items()}
-    for name, path in files.items():
-        if not path.is_file():
-            raise RosRunError(f'{name} config {path} not found')
-    return files
+    """The rig's parameter files for ``program``; RigError names a missing one (as the launch file does)."""
+    return {role: Path(path) for role, path in rig_config_files(share, {'program': program}).items()}
 
 
-def start_rig(procs: Processes, share: Path, program: str, session: str, bags: Path, observer: Observer,
-              record: bool = True, ready_timeout_s: float = 60.0) -> LoadProgram:
-    """Start crane_model, sensors, estimator and recorder; when all are connected, start load_program."""
+def start_rig(procs: Processes, share: Path, program: str, session: str, bags: Path, record: bool = True,
+              ready_timeout_s: float = 60.0, overrides: Mapping[str, Mapping[str, Any]] | None = None) -> LoadProgram:
+    """Start every node of the rig at the same instant, as ``ros2 launch crane_stiffness rig.launch.py`` does:
+    load_program waits until the rig is ready (at most ``ready_timeout_s``) and exits when the program is done.
+    ``overrides``: extra parameters by node name. Returns the program."""
     prog = load_program_file(config_files(share, program)['program'])
     nodes = rig_nodes(share, {'program': program, 'record': record, 'session': session})
-    readers = 1
+    if record:
+        bags.mkdir(parents=True, exist_ok=True)
     for node in nodes:
-        if node.name == 'session_recorder':
-            bags.mkdir(parents=True, exist_ok=True)
-            readers += 1
-        if not node.runs_program:
-            start_node(procs, node, {'output_dir': bags} if node.name == 'session_recorder' else None)
-    # Ready when the model has published its prediction and every sensor stream has all its readers.
-    print(f'  waiting for {len(procs.procs)} nodes to connect ...', flush=True)
-    t0 = time.monotonic()
-    observer.spin_until(
-        lambda: observer.predicted is not None
-        and observer.count_subscribers(topics.LOAD_CELL_WRENCH) >= readers
-        and observer.count_subscribers(topics.LVDT_DISPLACEMENT) >= readers
-        and observer.count_publishers(topics.STIFFNESS_VALUES) >= 1
-        and observer.count_subscribers(topics.WRENCH_COMMAND) >= 2 + (readers - 1),
-        ready_timeout_s, 'the rig nodes to connect', procs)
-    print(f'  connected in {time.monotonic() - t0:.1f} s; starting load_program', flush=True)
-    n_cmd = observer.count_subscribers(topics.WRENCH_COMMAND)
-    for node in nodes:
+        extra = {'output_dir': bags} if node.name == 'session_recorder' else {}
         if node.runs_program:
-            start_node(procs, node, {'start_delay_s': 0.5, 'min_subscribers': n_cmd, 'exit_on_done': True})
+            extra = {'exit_on_done': True, 'ready_timeout_s': ready_timeout_s}
+        start_node(procs, node, {**extra, **(overrides or {}).get(node.name, {})})
     return prog
+
+
+def wait_for_program_start(observer: Observer, procs: Processes, timeout_s: float) -> None:
+    """Spin ``observer`` until load_program reports 'running'; RosRunError with its log if it exits first."""
+    def started() -> bool:
+        program = procs.procs.get('load_program')
+        if observer.running_at is None and program is not None and program.poll() is not None:
+            raise RosRunError(f'load_program exited with status {program.returncode} before starting the program:\n'
+                              f'{procs.log("load_program")[-3000:]}')
+        return observer.running_at is not None
+    observer.spin_until(started, timeout_s, 'the program to start', procs=None)
 
 
 def estimate_fields() -> tuple[str, ...]:
