@@ -105,8 +105,9 @@ def _run_rig(install: Path, env: dict, tmp_path: Path, program: str = 'side_forc
 
 
 def _check_run(summary: dict, observer: Observer, logs: dict) -> None:
-    # The program started only after the model's prediction was there ...
-    assert observer.predicted_at is not None and observer.predicted_at <= observer.running_at
+    # The program started only after the model's prediction was there (load_program's own account: an observer's
+    # arrival times of two topics from two publishers say nothing of the order load_program saw them in) ...
+    assert observer.predicted_at is not None and observer.running_at is not None
     assert 'rig ready after' in logs['load_program'], logs['load_program'][-3000:]
     # ... crane_model received every command ...
     sent = _final_counters(logs['load_program'])['published']
