@@ -35,7 +35,6 @@ NODES = {
 }
 
 
-
 class InstallAndCompileKernels(install):
     """``install``, then compile the kernels once in the installed package (see the module docstring)."""
 

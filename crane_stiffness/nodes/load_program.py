@@ -103,10 +103,7 @@ class _Readiness:
         self._subscriptions = {}
         for name in dict.fromkeys(m.strip() for m in messages if m.strip()):
             topic = node.resolve_topic_name(name)
-            msg_type = topics.RIG_TOPICS.get(topic)
-            if msg_type is None:  # a topic outside the contract: its type comes from the graph
-                types = {t for _, ts in node.get_topic_names_and_types() if _ == topic for t in ts}
-                msg_type = next(iter(types)) if len(types) == 1 else None
+            msg_type = topics.RIG_TOPICS.get(topic)  # a topic outside the contract: missing() finds its type
             self._received[topic] = False
             if msg_type is not None:
                 self._subscribe(topic, message_class(msg_type))
@@ -343,15 +340,8 @@ class LoadProgramNode(Node):
 
 
 def main(args=None) -> int:
-    """Runs the node (common.run); exits with status 1 when an automatic start gave up waiting for the rig."""
-    built: list[LoadProgramNode] = []
-
-    def load_program_node() -> LoadProgramNode:
-        built.append(LoadProgramNode())
-        return built[0]
-    load_program_node.__name__ = LoadProgramNode.__name__
-    status = run(load_program_node, args)
-    return status or (built[0].exit_status if built else 0)
+    """Runs the node (common.run, which returns its exit_status: 1 when an automatic start gave up waiting)."""
+    return run(LoadProgramNode, args)
 
 
 if __name__ == '__main__':

@@ -19,7 +19,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.validate_topic_name import validate_topic_name
 
-from crane_stiffness.config import ParamSpec
+from crane_stiffness.config import GEOMETRY_PARAMS, ParamSpec
 from crane_stiffness.param_files import ParamFile, applicable_sections, params_files_from_args
 
 
@@ -27,6 +27,9 @@ from crane_stiffness.param_files import ParamFile, applicable_sections, params_f
 #: parameter file may hold.
 NODE_MODULES = ('load_program', 'crane_model', 'load_cell', 'lvdt', 'stiffness_estimator', 'session_recorder',
                 'session_player', 'netft', 'modbus_lvdt', 'rdt_emulator', 'modbus_emulator')
+#: Parameters the package's files share across nodes under ``/**`` (the geometry): known to be some node's without
+#: importing every node module (package_parameter_names costs ~1.4 s at each start).
+SHARED_PARAMS = frozenset(spec.name for spec in GEOMETRY_PARAMS)
 #: Parameters rclpy declares on every node (plus the ``qos_overrides.`` family).
 RCLPY_PARAMS = ('use_sim_time', 'start_type_description_service')
 
@@ -278,6 +281,8 @@ def check_params_files(paths: Sequence[str], node: str, own: set[str]) -> None:
             known = own | set(RCLPY_PARAMS)
             for key in file.sections[section] or {}:
                 if key in known or key.startswith('qos_overrides.'):
+                    continue
+                if '*' in section and key in SHARED_PARAMS:  # the common case, without importing every node
                     continue
                 if '*' in section:  # another node's parameter is fine in a section for every node
                     package = package_parameter_names() | known if package is None else package
