@@ -137,11 +137,13 @@ class SyntheticRig:
             first = self.load((int(times[0]) - self.start_ns) / NS)
             if first is not None:
                 self.pub_cmd.publish(self.wrench_msg(int(times[0]), first))
+        newest: int | None = None
         for t_ns in times.tolist():
             f = self.load((t_ns - self.start_ns) / NS)
             if f is None:
+                # The program ended inside this burst: its newest sample is the last one sent, not times[-1].
                 self.done = True
-                return
+                break
             if self.inject is not None:
                 self.inject(self, self.sent, t_ns)
             x = (f - C) / K + self.rng.normal(0.0, self.x_noise)
@@ -151,7 +153,9 @@ class SyntheticRig:
             else:
                 self.pub_volts.publish(Float64(data=(x - self.offset) / self.gain))
             self.sent += 1
-        self.burst_newest.append(int(times[-1]))
+            newest = int(t_ns)
+        if newest is not None:
+            self.burst_newest.append(newest)
 
 
 class Probe:
