@@ -10,6 +10,13 @@ from dataclasses import dataclass
 
 # Commanded wrench on the platform [N, N·m], geometry_msgs/WrenchStamped, frame crane_base, reliable.
 WRENCH_COMMAND = '/crane/wrench_command'
+# The load the model has in force after each command it received, geometry_msgs/WrenchStamped [N, N·m], frame
+# crane_base, reliable, stamped with that command's stamp: the command itself when accepted, the previous load when
+# the model rejected it. The simulated sensors apply this, never the raw command.
+APPLIED_WRENCH = '/crane/applied_wrench'
+# Every command the model rejected (absurd, or no equilibrium), republished unchanged (its stamp too), reliable;
+# the reason is on MODEL_STATUS and /diagnostics. The estimator excludes the time such a command was in force.
+REJECTED_COMMAND = '/crane/rejected_command'
 # Platform pose, geometry_msgs/PoseStamped, frame crane_base (z down), reliable.
 PLATFORM_POSE = '/crane/platform_pose'
 # Wire lengths [m] and tensions [N], sensor_msgs/JointState (names wire_1..wire_6; position, effort).
@@ -41,6 +48,8 @@ FRAME_PLATFORM = 'platform'
 #: Every topic the rig publishes, with its type: what the recorder records by default.
 RIG_TOPICS: dict[str, str] = {
     WRENCH_COMMAND: 'geometry_msgs/msg/WrenchStamped',
+    APPLIED_WRENCH: 'geometry_msgs/msg/WrenchStamped',
+    REJECTED_COMMAND: 'geometry_msgs/msg/WrenchStamped',
     PLATFORM_POSE: 'geometry_msgs/msg/PoseStamped',
     WIRE_STATES: 'sensor_msgs/msg/JointState',
     PREDICTED_STIFFNESS: 'std_msgs/msg/Float64MultiArray',
@@ -82,6 +91,8 @@ LATCHED = QoS('reliable', 'transient_local', 1)
 #: offered QoS a synthetic session records (crane_stiffness.testing.synthetic).
 TOPIC_QOS: dict[str, QoS] = {
     WRENCH_COMMAND: RELIABLE,
+    APPLIED_WRENCH: RELIABLE,
+    REJECTED_COMMAND: RELIABLE,
     PLATFORM_POSE: RELIABLE,
     WIRE_STATES: RELIABLE,
     PREDICTED_STIFFNESS: LATCHED,
