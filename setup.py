@@ -19,19 +19,20 @@ from setuptools.command.install import install
 
 PACKAGE = 'crane_stiffness'
 
+# Each console script starts in crane_stiffness.entry, which holds SIGINT/SIGTERM while the node's module imports.
 NODES = {
-    'load_program': 'crane_stiffness.nodes.load_program:main',
-    'crane_model': 'crane_stiffness.nodes.crane_model:main',
-    'load_cell': 'crane_stiffness.nodes.load_cell:main',
-    'lvdt': 'crane_stiffness.nodes.lvdt:main',
-    'stiffness_estimator': 'crane_stiffness.nodes.stiffness_estimator:main',
-    'session_recorder': 'crane_stiffness.nodes.session_recorder:main',
-    'session_player': 'crane_stiffness.nodes.session_player:main',
+    'load_program': 'crane_stiffness.entry:load_program',
+    'crane_model': 'crane_stiffness.entry:crane_model',
+    'load_cell': 'crane_stiffness.entry:load_cell',
+    'lvdt': 'crane_stiffness.entry:lvdt',
+    'stiffness_estimator': 'crane_stiffness.entry:stiffness_estimator',
+    'session_recorder': 'crane_stiffness.entry:session_recorder',
+    'session_player': 'crane_stiffness.entry:session_player',
     # Real-hardware drivers and the device emulators that serve the simulated physics through the same protocols.
-    'netft': 'crane_stiffness.nodes.netft:main',
-    'modbus_lvdt': 'crane_stiffness.nodes.modbus_lvdt:main',
-    'rdt_emulator': 'crane_stiffness.nodes.rdt_emulator:main',
-    'modbus_emulator': 'crane_stiffness.nodes.modbus_emulator:main',
+    'netft': 'crane_stiffness.entry:netft',
+    'modbus_lvdt': 'crane_stiffness.entry:modbus_lvdt',
+    'rdt_emulator': 'crane_stiffness.entry:rdt_emulator',
+    'modbus_emulator': 'crane_stiffness.entry:modbus_emulator',
 }
 
 

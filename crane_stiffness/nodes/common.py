@@ -22,7 +22,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 
-from crane_stiffness import topics
+from crane_stiffness import entry, topics
 from crane_stiffness.serde import stamp_seconds
 from crane_stiffness.nodes import parameters
 from crane_stiffness.nodes.parameters import check, positive
@@ -207,10 +207,13 @@ class ShutdownRequest:
             return False
         read_fd, write_fd = os.pipe()
         os.set_blocking(write_fd, False)
+        # The pipe first, then the handlers: a signal in between still reaches the pipe.
+        signal.set_wakeup_fd(write_fd, warn_on_full_buffer=False)
         for sig in self.SIGNALS:
             signal.signal(sig, lambda signum, frame: None)  # the flag is set by the thread; never an exception
-        signal.set_wakeup_fd(write_fd, warn_on_full_buffer=False)
         threading.Thread(target=self._wait, args=(read_fd,), name='shutdown_signals', daemon=True).start()
+        for signum in entry.pending():  # arrived while the node's module was being imported
+            self.handle(signum)
         return True
 
     def _wait(self, read_fd: int) -> None:
