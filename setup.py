@@ -19,21 +19,15 @@ from setuptools.command.install import install
 
 PACKAGE = 'crane_stiffness'
 
-# Each console script starts in crane_stiffness.entry, which holds SIGINT/SIGTERM while the node's module imports.
-NODES = {
-    'load_program': 'crane_stiffness.entry:load_program',
-    'crane_model': 'crane_stiffness.entry:crane_model',
-    'load_cell': 'crane_stiffness.entry:load_cell',
-    'lvdt': 'crane_stiffness.entry:lvdt',
-    'stiffness_estimator': 'crane_stiffness.entry:stiffness_estimator',
-    'session_recorder': 'crane_stiffness.entry:session_recorder',
-    'session_player': 'crane_stiffness.entry:session_player',
+# The node executables: plain scripts in nodes_bin/ (installed to lib/crane_stiffness, see setup.cfg), each three
+# lines into crane_stiffness.entry, which holds SIGINT/SIGTERM while the node's module imports. Not console_scripts:
+# the script setuptools generates for those spends 0.1 s (seconds on a loaded machine) in importlib.metadata before
+# any code of ours runs, and Ctrl-C in that time ended the node with a KeyboardInterrupt traceback.
+NODES = (
+    'load_program', 'crane_model', 'load_cell', 'lvdt', 'stiffness_estimator', 'session_recorder', 'session_player',
     # Real-hardware drivers and the device emulators that serve the simulated physics through the same protocols.
-    'netft': 'crane_stiffness.entry:netft',
-    'modbus_lvdt': 'crane_stiffness.entry:modbus_lvdt',
-    'rdt_emulator': 'crane_stiffness.entry:rdt_emulator',
-    'modbus_emulator': 'crane_stiffness.entry:modbus_emulator',
-}
+    'netft', 'modbus_lvdt', 'rdt_emulator', 'modbus_emulator',
+)
 
 
 class InstallAndCompileKernels(install):
@@ -69,8 +63,8 @@ setup(
     maintainer_email='crane-stiffness@example.org',
     description='Stiffness test rig for the six-wire parallel-link robot crane (ROS 2 Jazzy).',
     license='Apache-2.0',
+    scripts=[f'nodes_bin/{name}' for name in NODES],
     entry_points={
-        'console_scripts': [f'{name} = {target}' for name, target in NODES.items()]
-        + ['crane-stiffness = crane_stiffness.cli:main'],
+        'console_scripts': ['crane-stiffness = crane_stiffness.cli:main'],
     },
 )

@@ -5,9 +5,8 @@ A node's module takes a second or more to import (rclpy, numpy, numba). ``ros2 l
 and Ctrl-C reaches all of them, so a signal often arrives during that import; with Python's default handler it would
 end the node with a KeyboardInterrupt traceback. Here the signal is only noted, the import finishes, and
 :class:`crane_stiffness.nodes.common.ShutdownRequest` takes it over: the node ends at once, cleanly, with status 0.
-This module imports nothing heavy; ``setup.py`` points every node's console script at one of its functions.
-What remains is the script setuptools generates around it (about 0.1 s finding this entry point through
-importlib.metadata): a signal in that first moment still ends the process with Python's KeyboardInterrupt.
+This module imports nothing heavy; each node's executable (``nodes_bin/<node>`` in the source tree) is three lines
+calling one of its functions, so only the interpreter's own start-up (some 20 ms) comes before it.
 """
 from __future__ import annotations
 

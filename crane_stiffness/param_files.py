@@ -138,6 +138,22 @@ def params_files_from_args(args: Sequence[str] | None) -> list[str]:
     return files
 
 
+def param_names_from_args(args: Sequence[str] | None) -> list[str]:
+    """The parameter names set by ``-p``/``--param name:=value`` in the ROS arguments of a command line (sys.argv
+    when None), in order."""
+    argv = list(sys.argv if args is None else args)
+    names: list[str] = []
+    in_ros = False
+    for i, arg in enumerate(argv):
+        if arg == '--ros-args':
+            in_ros = True
+        elif arg == '--':
+            in_ros = False
+        elif in_ros and arg in ('-p', '--param') and i + 1 < len(argv) and ':=' in argv[i + 1]:
+            names.append(argv[i + 1].partition(':=')[0])
+    return names
+
+
 def read_params_files(paths: Sequence[str]) -> tuple[list[dict[str, str]], dict[str, dict[str, Any]], list[str]]:
     """(files as {path, text}, sections {key: flat params} merged in file order, problems) of parameter files:
     what a recorder stores with a session. A file that cannot be read is a problem, not an error."""

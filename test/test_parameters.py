@@ -55,9 +55,13 @@ def test_bad_values_on_the_command_line_exit_2_naming_the_full_parameter(install
     _, env = install_tree
     line = refused(run_node(env, 'crane_model', '--ros-args', '-p', 'geometry.height:=abc'))
     assert "geometry.height = 'abc': must be a number" in line
-    # An integer where a float is declared is a float; the model's own rule names the full parameter.
+    # An integer where a float is declared is a float; the model's own rule names the full parameter and shows the
+    # value as written.
     line = refused(run_node(env, 'crane_model', '--ros-args', '-p', 'geometry.a:=-1'))
-    assert 'geometry.a = -1.0: must be > 0' in line
+    assert 'geometry.a = -1: must be > 0' in line
+    # A misspelt name would be ignored by rclpy (the node would run with the default weight): refused, with a hint.
+    line = refused(run_node(env, 'crane_model', '--ros-args', '-p', 'geometry.wieght:=80.0'))
+    assert "-p geometry.wieght:=...: unknown parameter for crane_model (did you mean 'geometry.weight'?)" in line
     line = refused(run_node(env, 'crane_model', '--ros-args', '-p', 'geometry.com_offset:=[0.0, 0.0]'))
     assert 'geometry.com_offset = [0.0, 0.0]' in line and 'array(' not in line
     line = refused(run_node(env, 'load_cell', '--ros-args', '-p', 'tare_samples:=0'))
@@ -143,6 +147,9 @@ def test_crane_model_over_services_integers_ranges_and_full_names(rclpy_context)
     assert model.geometry.weight == 80.0
     ok, reason = client.set('geometry.a', -0.1)
     assert not ok and 'geometry.a = -0.1: must be > 0' in reason
+    ok, reason = client.set_int('geometry.a', -1)  # `ros2 param set /crane_model geometry.a -1`: shown as sent
+    assert not ok and 'geometry.a = -1: must be > 0' in reason, reason
+    assert model.get_parameter('geometry.a').value > 0
     ok, reason = client.set('geometry.weight', -1.0)
     assert not ok and 'geometry.weight' in reason
     ok, reason = client.set('geometry.com_offset', [0.0, 0.0])

@@ -257,6 +257,11 @@ def run(node_factory: Callable[[], Node], args: Sequence[str] | None = None,
     try:
         with parameters.started_with(argv):
             node = node_factory()
+        try:  # a misspelt -p name would be ignored by rclpy: the node would run with the default
+            parameters.check_command_line_params(argv, node.get_name(), set(node._parameters))
+        except ValueError:
+            node.destroy_node()
+            raise
     except (ValueError, TypeError) as exc:
         print(f'[{name}] cannot start: {exc}', file=sys.stderr)
         rclpy.try_shutdown()

@@ -20,7 +20,7 @@ from rclpy.parameter import Parameter
 from rclpy.validate_topic_name import validate_topic_name
 
 from crane_stiffness.config import GEOMETRY_PARAMS, ParamSpec
-from crane_stiffness.param_files import ParamFile, applicable_sections, params_files_from_args
+from crane_stiffness.param_files import ParamFile, applicable_sections, param_names_from_args, params_files_from_args
 
 
 #: Modules of the package's nodes (crane_stiffness.nodes.<module>.PARAMS): the parameter names a ``/**`` section of a
@@ -141,11 +141,13 @@ class Params:
             check_params_files(params_files_from_args(_start_args), node.get_fully_qualified_name(),
                                set(self._names) | set(node._parameters))
         overrides = node._parameter_overrides
+        written = {s.name: overrides[s.name].value for s in specs if s.name in overrides}
+        self._written: dict[str, Any] = {}  # the values of a runtime change as sent, before _pre_set converted them
         values = {}
         for spec in specs:
-            values[spec.name] = coerce(spec, overrides[spec.name].value) if spec.name in overrides else spec.default
+            values[spec.name] = coerce(spec, written[spec.name]) if spec.name in written else spec.default
         # Invalid start-up values stop the node with the reason (raised to ``run``), before anything is declared.
-        built = self._checked(values)
+        built = self._checked(values, written)
         for spec in specs:
             node.declare_parameter(spec.name, values[spec.name], descriptor(spec), ignore_override=True)
         self.values = {n: node.get_parameter(n).value for n in self._names}
@@ -156,14 +158,25 @@ class Params:
     def __getitem__(self, name: str) -> Any:
         return self.values[name]
 
-    def _checked(self, values: dict[str, Any]) -> Any:
-        """validate(values) after the ranges; an error names the parameter by its full name."""
+    def _checked(self, values: dict[str, Any], written: Mapping[str, Any]) -> Any:
+        """validate(values) after the ranges; an error names the parameter by its full name and shows the value as
+        ``written`` (-1, not the -1.0 it became)."""
         try:
             for name, spec in self._specs.items():
                 check_range(spec, values[name])
             return self._validate(dict(values))
         except ValueError as exc:
-            raise ValueError(self._qualify(str(exc))) from exc
+            raise ValueError(self._as_written(self._qualify(str(exc)), values, written)) from exc
+
+    @staticmethod
+    def _as_written(message: str, values: Mapping[str, Any], written: Mapping[str, Any]) -> str:
+        """'geometry.a = -1.0: must be > 0' as 'geometry.a = -1: must be > 0' when the user wrote -1."""
+        name, sep, rest = message.partition(' = ')
+        if sep and name in written and name in values:
+            shown = show(values[name])
+            if rest.startswith(shown + ':'):
+                return f'{name} = {show(written[name])}{rest[len(shown):]}'
+        return message
 
     def _qualify(self, message: str) -> str:
         """'height = 0.0: ...' (a model error naming a field) as 'geometry.height = 0.0: ...'."""
@@ -180,6 +193,7 @@ class Params:
         for p in params:
             spec = self._specs.get(p.name)
             if spec is not None and p.type_ in (Parameter.Type.INTEGER, Parameter.Type.INTEGER_ARRAY):
+                self._written[p.name] = p.value
                 try:
                     p = Parameter(p.name, value=coerce(spec, p.value))
                 except ValueError:
@@ -189,11 +203,13 @@ class Params:
 
     def _on_set(self, params) -> SetParametersResult:
         new = dict(self.values)
+        written, self._written = self._written, {}
+        written = {p.name: written.get(p.name, p.value) for p in params}
         try:
             for p in params:
                 if p.name in self._specs:
                     new[p.name] = coerce(self._specs[p.name], p.value)
-            built = self._checked(new)
+            built = self._checked(new, written)
         except (ValueError, TypeError) as exc:
             self._node.get_logger().warning(f'parameter change rejected: {exc}')
             return SetParametersResult(successful=False, reason=str(exc))
@@ -293,6 +309,18 @@ def check_params_files(paths: Sequence[str], node: str, own: set[str]) -> None:
                 hint = f" (did you mean '{close[0]}'?)" if close else ''
                 whose = 'any node of the package' if '*' in section else node
                 raise ValueError(f"{path}: unknown parameter '{key}' in section '{section}' for {whose}{hint}")
+
+
+def check_command_line_params(argv: Sequence[str], node: str, declared: set[str]) -> None:
+    """Raise ValueError (one line, with the closest known name) for a ``-p name:=value`` of the command line that the
+    node (``node``, its name) does not declare: rclpy would ignore it and the node would run with the default."""
+    known = set(declared) | set(RCLPY_PARAMS)
+    for name in param_names_from_args(argv):
+        if name in known or name.startswith('qos_overrides.'):
+            continue
+        close = difflib.get_close_matches(name, sorted(known), n=1)
+        hint = f" (did you mean '{close[0]}'?)" if close else ''
+        raise ValueError(f"--ros-args -p {name}:=...: unknown parameter for {node}{hint}")
 
 
 def valid_topic_name(name: Any) -> bool:
