@@ -10,8 +10,9 @@ Every command is either accepted or rejected, and said so (crane_stiffness.topic
 publishes /crane/applied_wrench (WrenchStamped, frame crane_base, the command's stamp) = the load in force after it:
 the command when accepted, the previous load when rejected; a rejected command (non-finite, absurd, no equilibrium)
 is also republished unchanged on /crane/rejected_command. The simulated sensors apply /crane/applied_wrench, never
-the raw command, so a command the model rejects reaches no sensor. A reader of /crane/applied_wrench that joins
-late (a load cell started after this node) is sent the load in force at once (stamped now), as for the pose.
+the raw command, so a command the model rejects reaches no sensor. A reader of /crane/applied_wrench or of the pose
+that joins late (a sensor started after this node) is sent the load in force and the pose, stamped now, on matching
+and again RESEND_AFTER_MATCH_S later (a message sent on matching alone is often lost across processes).
 
 Solving is cached on the wrench: the current equilibrium answers a repeated command (a hold), and a command that
 failed is answered from a bounded cache of failures keyed on (load in force, command), since the continuation
@@ -50,6 +51,9 @@ from crane_stiffness.status import ERROR, OK
 MODEL_STATUS = topics.MODEL_STATUS
 #: Most failed (load in force, command) pairs remembered; the oldest is forgotten first.
 FAILURE_CACHE_SIZE = 256
+#: After a reader of the applied wrench or the pose matches, the values in force are sent again this long after
+#: the match [s] (see CraneModel._late_joiner).
+RESEND_AFTER_MATCH_S = (0.2, 0.6, 1.5, 3.0)
 
 
 @dataclass
@@ -58,13 +62,15 @@ class ModelCounters(Counters):
 
     ``used``: commands accepted (their load is in force); ``dropped_no_equilibrium``: commands without an
     equilibrium (solved or from the cache); ``solves``: equilibria computed for commands; ``cache_hits``: commands
-    answered without a solve (the current equilibrium, or a cached failure); ``published``: poses published.
+    answered without a solve (the current equilibrium, or a cached failure); ``published``: poses published for
+    commands; ``resent``: times the load in force and the pose were sent again for readers that joined.
     """
 
     used: int = 0
     dropped_no_equilibrium: int = 0
     solves: int = 0
     cache_hits: int = 0
+    resent: int = 0  # the load in force and the pose sent again for readers that joined (not commands)
 
 PARAMS = GEOMETRY_PARAMS + (
     ParamSpec('prediction_axis', 'auto', "axis of the predicted stiffness: fx fy fz mx my mz, or 'auto' = the "
@@ -102,6 +108,11 @@ class CraneModel(Node):
         self.solved: tuple | None = None  # the load the published pose and stiffness belong to (None: re-solve)
         # (load in force, command) -> the no-equilibrium reason, newest last (see the module docstring).
         self.failed: OrderedDict[tuple[tuple, tuple], str] = OrderedDict()
+        self._resends: list[float] = []
+        self._resend_kinds: set[str] = set()
+        self._readers: dict[str, int] = {}  # matched readers by kind, as last reported
+        self._resend_from = 0
+        self._resend_timer = None
         self.pub_applied = self.create_publisher(
             WrenchStamped, topics.APPLIED_WRENCH, RELIABLE_QOS,
             event_callbacks=PublisherEventCallbacks(matched=self._on_applied_matched))
@@ -213,16 +224,58 @@ class CraneModel(Node):
 
     def _on_applied_matched(self, status) -> None:
         """A new reader of the applied wrench (a sensor started after this node): send it the load in force,
-        stamped now, so it can start measuring before the first command."""
-        if status.current_count_change > 0:
+        stamped now, so it can start measuring before the first command (and again, see :meth:`_late_joiner`)."""
+        if self._new_reader('applied', status):
             self._publish_applied(self.get_clock().now().to_msg())
+            self._late_joiner('applied')
 
     def _on_pose_matched(self, status) -> None:
         """A new pose reader: send it the current pose (stamped now), as a latched topic would."""
-        if status.current_count_change > 0 and self.equilibrium is not None:
+        if self._new_reader('pose', status):
+            self._publish_current_pose()
+            self._late_joiner('pose')
+
+    def _new_reader(self, kind: str, status) -> bool:
+        """Whether a matched event brings a new reader. rmw_fastrtps reports a reader that was already there when
+        the publisher was created (a sensor started first) with current_count_change 0: the count tells."""
+        before = self._readers.get(kind, 0)
+        self._readers[kind] = status.current_count
+        return status.current_count_change > 0 or status.current_count > before
+
+    def _publish_current_pose(self) -> None:
+        if self.equilibrium is not None:
             stamp, self.stamp = self.stamp, None
             self._publish_pose(self.equilibrium)
             self.stamp = stamp
+
+    def _late_joiner(self, kind: str) -> None:
+        """Send the load in force ('applied') or the pose ('pose') again, stamped now, RESEND_AFTER_MATCH_S after a
+        reader of it matched.
+
+        The writer sees a new reader before that reader has matched the writer (discovery runs both ways, on its
+        own timing in each process); a volatile reader drops what was published in between, so the message sent
+        on matching alone is often lost across processes. Re-sending the same values is harmless to a hold."""
+        self._resend_kinds.add(kind)
+        self._resends = list(RESEND_AFTER_MATCH_S)
+        self._resend_from = self.get_clock().now().nanoseconds
+        if self._resend_timer is None:
+            self._resend_timer = self.create_timer(0.05, self._resend)
+        else:
+            self._resend_timer.reset()
+
+    def _resend(self) -> None:
+        elapsed = (self.get_clock().now().nanoseconds - self._resend_from) * 1e-9
+        if self._resends and elapsed >= self._resends[0]:
+            while self._resends and elapsed >= self._resends[0]:
+                self._resends.pop(0)
+            self.counters.resent += 1
+            if 'applied' in self._resend_kinds:
+                self._publish_applied(self.get_clock().now().to_msg())
+            if 'pose' in self._resend_kinds:
+                self._publish_current_pose()
+        if not self._resends:
+            self._resend_kinds.clear()
+            self._resend_timer.cancel()
 
     # --- work ---
     def _solve_and_publish(self) -> None:
