@@ -28,6 +28,7 @@ before the first command, and load_program waits for that (crane_stiffness.nodes
 """
 from __future__ import annotations
 
+import math
 from collections import OrderedDict
 from dataclasses import dataclass
 from typing import Any
@@ -40,6 +41,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension, String
 
 from crane_stiffness import topics
+from crane_stiffness.commands import CommandLimits, command_fault
 from crane_stiffness.config import GEOMETRY_PARAMS, ParamSpec, geometry_from_params
 from crane_stiffness.model import (AXES, WIRE_NAMES, CraneGeometry, Equilibrium, ModelError, axis_stiffness,
                                    rest_pose, solve_equilibrium, tangent_stiffness)
@@ -86,7 +88,7 @@ def _validate(values: dict[str, Any]) -> CraneGeometry:
     check(values['prediction_axis'] in ('auto',) + AXES, 'prediction_axis', values['prediction_axis'],
           f"must be 'auto' or one of {', '.join(AXES)}")
     for name in ('max_abs_force', 'max_abs_moment'):
-        check(values[name] > 0, name, values[name], 'must be > 0')
+        check(values[name] > 0 and math.isfinite(values[name]), name, values[name], 'must be finite and > 0')
     geometry = geometry_from_params(values)  # raises GeometryError (a ValueError) naming the field
     rest_pose(geometry)  # a geometry whose rest pose cannot be found is rejected too
     return geometry
@@ -133,6 +135,7 @@ class CraneModel(Node):
         changed = geometry != self.geometry
         self.geometry = geometry
         self.settings = values
+        self.limits = CommandLimits(float(values['max_abs_force']), float(values['max_abs_moment']))
         self.solved = None  # any parameter change: solve and publish everything again
         self.failed.clear()  # ... and a command that failed may now have an equilibrium
         if changed:
@@ -186,14 +189,12 @@ class CraneModel(Node):
         self._publish_solution(eq)
 
     def _command_fault(self, load: np.ndarray) -> tuple[str, str] | None:
-        """(counter, reason) when the command is not a load to apply, else None."""
-        if not finite(load):
-            return 'dropped_non_finite', 'not finite'
-        if (np.abs(load[:3]).max() > self.settings['max_abs_force']
-                or np.abs(load[3:]).max() > self.settings['max_abs_moment']):
-            return 'dropped_absurd', (f'absurd: beyond max_abs_force {self.settings["max_abs_force"]} N or '
-                                      f'max_abs_moment {self.settings["max_abs_moment"]} N·m')
-        return None
+        """(counter, reason) when the command is not a load to apply, else None: the rule the estimator applies
+        too (crane_stiffness.commands)."""
+        reason = command_fault(load, self.limits)
+        if reason is None:
+            return None
+        return ('dropped_non_finite' if not finite(load) else 'dropped_absurd'), reason
 
     def _accept(self, msg: WrenchStamped, load: np.ndarray, stamp) -> None:
         """The command's load is in force from its stamp on: say so on /crane/applied_wrench."""
