@@ -16,6 +16,7 @@ BENCHMARKS = [
     ('bench_analyze.py', []),
     ('bench_rig.py', []),
     ('bench_startup.py', []),
+    ('bench_soak.py', []),   # 10 minutes of the whole rig: every node's memory growth
 ]
 
 
@@ -25,7 +26,7 @@ def main() -> int:
     for script, args in BENCHMARKS:
         print(f'=== {script}', flush=True)
         argv = [sys.executable, str(HERE / script), *args]
-        if script in ('bench_solver.py', 'bench_rig.py', 'bench_startup.py'):
+        if script in ('bench_solver.py', 'bench_rig.py', 'bench_startup.py', 'bench_soak.py'):
             argv += ['--json', str(OUT / script.replace('.py', '.json'))]
         if subprocess.run(argv).returncode != 0:
             failed.append(script)

@@ -80,7 +80,7 @@ _STREAMS = (topics.LOAD_CELL_WRENCH, topics.LVDT_DISPLACEMENT)
 
 NODES: tuple[RigNode, ...] = (
     RigNode('crane_model', ('crane',), reads=(topics.WRENCH_COMMAND,)),
-    RigNode('load_cell', ('sensors',), condition='sim_sensors', reads=(topics.WRENCH_COMMAND,)),
+    RigNode('load_cell', ('sensors',), condition='sim_sensors', reads=(topics.APPLIED_WRENCH,)),
     RigNode('lvdt', ('sensors',), condition='sim_sensors', reads=(topics.PLATFORM_POSE,)),
     RigNode('stiffness_estimator', ('crane', 'sensors'), reads=(topics.WRENCH_COMMAND, *_STREAMS)),
     RigNode('session_recorder', ('crane', 'sensors', 'program'), arguments={'session': 'session'},

@@ -59,7 +59,8 @@ class Probe:
         self.wrenches: list[tuple[int, str, np.ndarray]] = []
         self.points: list[tuple[int, str, float]] = []
         self.diagnostics: list = []
-        self.cmd = self.node.create_publisher(WrenchStamped, prefix + topics.WRENCH_COMMAND, RELIABLE_QOS)
+        # What crane_model publishes after each command: the load in force, which the simulated sensors apply.
+        self.cmd = self.node.create_publisher(WrenchStamped, prefix + topics.APPLIED_WRENCH, RELIABLE_QOS)
         self.pose = self.node.create_publisher(PoseStamped, prefix + topics.PLATFORM_POSE, RELIABLE_QOS)
         self.node.create_subscription(WrenchStamped, prefix + topics.LOAD_CELL_WRENCH, self._on_wrench, SENSOR_QOS)
         self.node.create_subscription(
@@ -131,7 +132,7 @@ def final_counters(log: str, node: str) -> dict:
 
 
 def test_netft_reads_the_rdt_emulator_across_processes(rclpy_context, tmp_path):
-    """rig wrench command → rdt_emulator (load-cell physics, RDT on 127.0.0.1) → netft → /load_cell/wrench: the
+    """applied wrench → rdt_emulator (load-cell physics, RDT on 127.0.0.1) → netft → /load_cell/wrench: the
     commanded wrench plus the sensor's bias, 7 kHz averaged to 1 kHz, stamped on the host clock; ~/tare; counters."""
     port = free_port(socket.SOCK_DGRAM)
     emu_name, prefix, emu_args = isolated('rdt_emulator')
@@ -148,6 +149,7 @@ def test_netft_reads_the_rdt_emulator_across_processes(rclpy_context, tmp_path):
     ft = None
     try:
         assert spin_until(ex, lambda: probe.cmd.get_subscription_count() >= 1, 20.0), (tmp_path / 'emu.log').read_text()
+        probe.command(np.zeros(6))  # the load in force at rest (crane_model sends it to a reader that joins)
         ft = start_node('netft', ft_args + [
             '-p', 'host:=127.0.0.1', '-p', f'port:={port}', '-p', 'counts_per_force:=1000000.0', '-p',
             'counts_per_torque:=1000000.0', '-p', 'publish_rate_hz:=1000.0', '-p', 'frame_id:=ft_test',
@@ -189,7 +191,7 @@ def test_netft_reads_the_rdt_emulator_across_processes(rclpy_context, tmp_path):
     print('netft', counters, 'emulator', sent)
     assert counters['published'] > 1000 and counters['received'] >= 6 * counters['published']
     assert counters['malformed_datagrams'] == 0 and counters['status_records'] == 0
-    assert sent['received'] == 1 and sent['stream_requests'] >= 1 and sent['published'] >= counters['received']
+    assert sent['received'] == 2 and sent['stream_requests'] >= 1 and sent['published'] >= counters['received']
 
 
 def test_modbus_lvdt_reads_the_modbus_emulator_across_processes(rclpy_context, tmp_path):

@@ -88,11 +88,13 @@ def test_crane_model_solves_commands_and_reports_no_equilibrium(rclpy_context, m
     n1 = len(probe.poses)
     probe.command(fz=-80.0)
     assert spin_until(ex, lambda: any(s.startswith('no_equilibrium') for s in probe.status), 10)
-    assert len(probe.poses) == n1
+    # (the pose may be sent again for a reader that joined: the same pose, restamped)
+    assert all(p.pose == probe.poses[n1 - 1].pose for p in probe.poses[n1:])
     probe.command(fy=1.0)
     assert spin_until(ex, lambda: len(probe.poses) > n1 and probe.status[-1].startswith('ok'), 10)
     # A repeated command (a hold at the program's rate) restamps the same pose without solving again and does not
-    # repeat the latched prediction; after a failed solve the same load is solved again.
+    # repeat the latched prediction; after a failed command the load still in force is answered from the cache too
+    # (the pose was kept), and the status returns to ok.
     solves = []
     real_solve = crane_model.solve_equilibrium
     monkeypatch.setattr(crane_model, 'solve_equilibrium', lambda *a, **k: solves.append(1) or real_solve(*a, **k))
@@ -108,7 +110,7 @@ def test_crane_model_solves_commands_and_reports_no_equilibrium(rclpy_context, m
     assert spin_until(ex, lambda: probe.status[-1].startswith('no_equilibrium'), 10)
     probe.command(fy=1.0)
     assert spin_until(ex, lambda: probe.status[-1].startswith('ok'), 10)
-    assert len(solves) == 2
+    assert len(solves) == 1
     # NaN and absurd commands are dropped and counted.
     probe.command(fy=float('nan'))
     probe.command(fy=1e9)

@@ -219,8 +219,9 @@ def test_replay_through_the_estimator_reproduces_the_live_estimates(rclpy_contex
                Parameter('segments.duration', value=[0.4, 1.2, 0.4, 1.2, 0.4]),
                Parameter('start_delay_s', value=1.5),
                # This recorder records no pose: load_program is told what this partial rig reads.
-               Parameter('wait_for_subscribers', value=[f'{topics.WRENCH_COMMAND}: crane_model load_cell '
+               Parameter('wait_for_subscribers', value=[f'{topics.WRENCH_COMMAND}: crane_model '
                                                         'stiffness_estimator session_recorder',
+                                                        f'{topics.APPLIED_WRENCH}: load_cell',
                                                         f'{topics.PLATFORM_POSE}: lvdt'])]
     inputs = [topics.LOAD_CELL_WRENCH, topics.LVDT_DISPLACEMENT, topics.WRENCH_COMMAND,
               topics.PREDICTED_AXIS_STIFFNESS]
@@ -242,7 +243,8 @@ def test_replay_through_the_estimator_reproduces_the_live_estimates(rclpy_contex
     probe = Node('probe', context=ctx)
     ex.add_node(probe)
     assert spin_until(ex, lambda: probe.count_subscribers(topics.LOAD_CELL_WRENCH) >= 2
-                      and probe.count_subscribers(topics.WRENCH_COMMAND) >= 4, 15)
+                      and probe.count_subscribers(topics.WRENCH_COMMAND) >= 3
+                      and probe.count_subscribers(topics.APPLIED_WRENCH) >= 1, 15)
     loader = LoadProgramNode(context=ctx, parameter_overrides=program)
     ex.add_node(loader)
     assert spin_until(ex, lambda: not recorder.recording, 30), recorder.status

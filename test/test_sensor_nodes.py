@@ -42,8 +42,8 @@ def isolated(base: str) -> tuple[str, str, list[str]]:
     name = f'{base}_{os.getpid()}_{next(_ids)}'
     prefix = f'/{name}_t'
     args = ['--ros-args', '-r', f'__node:={name}']
-    for topic in (topics.WRENCH_COMMAND, topics.PLATFORM_POSE, topics.LOAD_CELL_WRENCH, topics.LVDT_DISPLACEMENT,
-                  topics.DIAGNOSTICS):
+    for topic in (topics.WRENCH_COMMAND, topics.APPLIED_WRENCH, topics.REJECTED_COMMAND, topics.PLATFORM_POSE,
+                  topics.LOAD_CELL_WRENCH, topics.LVDT_DISPLACEMENT, topics.MODEL_STATUS, topics.DIAGNOSTICS):
         args += ['-r', f'{topic}:={prefix}{topic}']
     return name, prefix, args
 
@@ -59,14 +59,15 @@ def collect_for(ex, seconds: float) -> None:
 
 
 class LoadCellProbe:
-    """Commands a wrench and records the load cell's samples and diagnostics."""
+    """Applies a wrench (publishes what crane_model publishes on /crane/applied_wrench) and records the load cell's
+    samples and diagnostics."""
 
     def __init__(self, ctx, prefix: str):
         self.node = Node(f'probe{prefix.replace("/", "_")}', context=ctx)
         self.samples: list[tuple[float, str, np.ndarray]] = []  # (stamp, frame, wrench)
         self.arrivals: list[float] = []
         self.diagnostics: list = []
-        self.cmd = self.node.create_publisher(WrenchStamped, prefix + topics.WRENCH_COMMAND, RELIABLE_QOS)
+        self.cmd = self.node.create_publisher(WrenchStamped, prefix + topics.APPLIED_WRENCH, RELIABLE_QOS)
         self.node.create_subscription(WrenchStamped, prefix + topics.LOAD_CELL_WRENCH, self._on_sample, SENSOR_QOS)
         self.node.create_subscription(DiagnosticArray, prefix + topics.DIAGNOSTICS,
                                       lambda m: self.diagnostics.extend(m.status), 10)
@@ -102,6 +103,12 @@ def test_load_cell_rate_stamps_noise_and_applied_wrench(rclpy_context):
     ex.add_node(node)
     ex.add_node(probe.node)
     wait_connected(ex, probe.cmd)
+    # Nothing is measured before the first applied wrench, and the load cell says what it waits for.
+    collect_for(ex, 0.3)
+    assert probe.samples == [] and node.counters.waiting_samples > 100
+    assert spin_until(ex, lambda: any(s.hardware_id == name and '/crane/applied_wrench' in s.message
+                                      for s in probe.diagnostics), 3.0)
+    probe.command(np.zeros(6))
     assert spin_until(ex, lambda: len(probe.samples) > 50, 5.0)
     applied = np.array([0.0, 2.0, 0.0, 0.0, 0.0, 0.1])
     t_cmd = probe.command(applied)
@@ -128,7 +135,7 @@ def test_load_cell_rate_stamps_noise_and_applied_wrench(rclpy_context):
     assert np.all(np.abs(w.mean(axis=0) - applied) < 4 * noise / math.sqrt(len(w)))
     before = np.array([w for s, _, w in probe.samples if s < t_cmd - MS])
     assert np.all(np.abs(before.mean(axis=0)) < 4 * noise / math.sqrt(len(before)))
-    assert node.counters.received == 1 and node.clock.skipped == 0
+    assert node.counters.received == node.counters.used == 2 and node.clock.skipped == 0
     ex.shutdown()
 
 
@@ -148,6 +155,9 @@ def test_load_cell_tare_crosstalk_and_overload(rclpy_context):
     ex.add_node(node)
     ex.add_node(probe.node)
     wait_connected(ex, probe.cmd)
+    reply = call(ex, probe.node, f'/{name}/tare')
+    assert not reply.success and 'waiting for /crane/applied_wrench' in reply.message  # no load known yet
+    probe.command(np.zeros(6))
     assert spin_until(ex, lambda: len(probe.samples) > 300, 5.0)
     raw = np.array([w for _, _, w in probe.samples])
     tol = 4 * noise / math.sqrt(len(raw))

@@ -1,16 +1,24 @@
 """load_cell: a simulated six-axis force/torque sensor (a thin adapter around sim.sensors.LoadCellModel).
 
-Subscribes /crane/wrench_command (WrenchStamped, reliable) = the wrench the actuator applies, held from its header
-stamp on. Publishes /load_cell/wrench (WrenchStamped [N, N·m], sensor QoS, frame ``frame_id``) sampled at
+Subscribes /crane/applied_wrench (WrenchStamped, reliable) = the load crane_model has in force after each command
+(never the raw command: a command the model rejects reaches no sensor), held from its header stamp on. Nothing is
+published before the first applied wrench (crane_model sends the load in force to a reader that joins, so a load
+cell started before crane_model waits for it, says so on /diagnostics and in its log, and starts then). Publishes /load_cell/wrench (WrenchStamped [N, N·m], sensor QoS, frame ``frame_id``) sampled at
 ``sample_rate_hz`` with noise, bias, drift, cross-talk, quantization and overload saturation; a timer at
 ``publish_rate_hz`` publishes the samples taken since its last tick, each stamped with its own sample instant on the
 grid k/sample_rate_hz of the node clock (like a DAQ delivering buffers; the timer ticks on the grid
 k/publish_rate_hz, see nodes.common.create_grid_timer). Service ~/tare (std_srvs/Trigger) zeroes
 the sensor on the mean of ``tare_samples`` readings at the current load; the reply states the offsets. Overload is
 reported on /diagnostics (WARN).
+
+A re-zero is visible to a consumer (issue 9, case 3): /diagnostics carries the tare ``offset``, ``tare_count`` and
+``tared_at`` (node-clock stamp of the last tare [ns], 0 = none) and ``started_at`` (the node's start [ns]), so a
+restart or a tare shows as a new start time or a new count. Counters: received = used + dropped_non_finite
+(applied wrenches); published = samples; waiting_samples = sample instants passed before the first applied wrench.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -52,6 +60,17 @@ PARAMS = (
     ParamSpec('seed', -1, 'seed of the noise generator, -1 = random [-]', low=-1),
 )
 MODEL_KEYS = ('noise_std', 'bias', 'drift_per_s', 'crosstalk', 'resolution', 'full_scale')
+#: What a simulated force sensor waits for before it measures anything.
+WAITING_FOR = f'waiting for {topics.APPLIED_WRENCH} (the load crane_model has in force)'
+
+
+@dataclass
+class SensorCounters(Counters):
+    """``received`` = ``used`` + ``dropped_non_finite`` (input messages); ``published`` = samples published;
+    ``waiting_samples``: sample instants that passed before there was an input to measure (none published)."""
+
+    used: int = 0
+    waiting_samples: int = 0
 
 
 def _validate(values: dict[str, Any]) -> LoadCellModel:
@@ -65,19 +84,22 @@ class LoadCell(Node):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('load_cell', **kwargs)
-        self.counters = Counters()
+        self.counters = SensorCounters()
         self.saturated = np.zeros(6, dtype=np.int64)    # saturated samples per axis, since start
         self._saturated_reported = np.zeros(6, dtype=np.int64)
-        self.applied = StampedHold(6, initial=np.zeros(6))
+        self.applied = StampedHold(6)  # no value until crane_model says which load is in force
+        self.tare_count = 0
+        self.tared_at_ns = 0
         self.model: LoadCellModel | None = None
         self.schedule = SampleSchedule(self, self._tick)
         self.settings: dict[str, Any] = {}
-        self.t0_ns = self.get_clock().now().nanoseconds  # drift time origin
+        self.t0_ns = self.get_clock().now().nanoseconds  # drift time origin; also the start reported
         self.pub = self.create_publisher(WrenchStamped, topics.LOAD_CELL_WRENCH, SENSOR_QOS)
         self.params = Params(self, PARAMS, _validate, self._apply)
-        self.create_subscription(WrenchStamped, topics.WRENCH_COMMAND, self._on_command, RELIABLE_QOS)
+        self.create_subscription(WrenchStamped, topics.APPLIED_WRENCH, self._on_applied, RELIABLE_QOS)
         self.create_service(Trigger, '~/tare', self._srv_tare)
         self.diagnostics = Diagnostics(self, self._report)
+        self.get_logger().info(f'{WAITING_FOR} before publishing')
 
     @property
     def clock(self) -> SampleClock:
@@ -91,21 +113,31 @@ class LoadCell(Node):
         self.schedule.configure(values['sample_rate_hz'], values['publish_rate_hz'])
         self.settings = values
 
-    def _on_command(self, msg: WrenchStamped) -> None:
+    def _on_applied(self, msg: WrenchStamped) -> None:
         self.counters.received += 1
         f, m = msg.wrench.force, msg.wrench.torque
         wrench = (f.x, f.y, f.z, m.x, m.y, m.z)
-        if not finite(wrench):
+        if not finite(wrench):  # crane_model never sends one; another publisher might
             self.counters.dropped_non_finite += 1
+            self.get_logger().warning(f'non-finite applied wrench dropped: {list(wrench)}', throttle_duration_sec=2.0)
             return
+        first = not self.applied.has_value
         stamp_ns = msg.header.stamp.sec * NS_PER_S + msg.header.stamp.nanosec
         self.applied.update(wrench, stamp_ns, self.get_clock().now().nanoseconds)
+        self.counters.used += 1
+        if first:
+            self.get_logger().info(f'first applied wrench {list(wrench)}: publishing')
 
     def _tick(self) -> None:
         times = self.schedule.due()
         if times.size == 0:
             return
-        true_wrench, _ = self.applied.read(times)
+        true_wrench, valid = self.applied.read(times)
+        if not valid.all():  # instants before the first applied wrench: nothing to measure
+            self.counters.waiting_samples += int((~valid).sum())
+            times, true_wrench = times[valid], true_wrench[valid]
+            if times.size == 0:
+                return
         readings, saturated = self.model.measure(true_wrench, (times - self.t0_ns) * 1e-9)
         if saturated.any():
             self.saturated += saturated.sum(axis=0)
@@ -126,8 +158,13 @@ class LoadCell(Node):
         n = self.params['tare_samples']
         now_ns = self.get_clock().now().nanoseconds
         load = self.applied.latest
+        if load is None:
+            response.success, response.message = False, f'cannot tare: {WAITING_FOR}'
+            return response
         readings, _ = self.model.measure(np.tile(load, (n, 1)), np.full(n, (now_ns - self.t0_ns) * 1e-9))
         offset = self.model.tare(readings)
+        self.tare_count += 1
+        self.tared_at_ns = now_ns
         response.success = True
         response.message = (f'tared on {n} samples: offset [fx fy fz] = {[round(v, 6) for v in offset[:3].tolist()]} '
                             f'N, [mx my mz] = {[round(v, 7) for v in offset[3:].tolist()]} N·m')
@@ -140,10 +177,14 @@ class LoadCell(Node):
         pairs = self.counters.as_pairs() + [
             ('skipped_samples', str(self.clock.skipped)),
             ('offset', str([round(v, 7) for v in self.model.offset.tolist()])),
+            ('tare_count', str(self.tare_count)), ('tared_at', str(self.tared_at_ns)),
+            ('started_at', str(self.t0_ns)),
         ] + [(f'saturated_{a}', str(int(n))) for a, n in zip(AXES, self.saturated)]
         if new.any():
             axes = ', '.join(f'{a} ({int(n)} samples)' for a, n in zip(AXES, new) if n)
             return WARN, f'overload: {axes} saturated at full scale since the last report', pairs
+        if not self.applied.has_value:
+            return OK, WAITING_FOR, pairs
         return OK, f'{self.counters.published} samples published', pairs
 
 

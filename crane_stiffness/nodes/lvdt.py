@@ -8,6 +8,11 @@ contact point ``contact_point`` (body frame) relative to the zero, with noise, r
 on the grid k/publish_rate_hz, together with the load cell's).
 Nothing is published before the first pose. Service ~/zero (std_srvs/Trigger) zeroes at the current pose;
 ``zero_on_first_pose`` zeroes at the first pose received (the loaded rest pose).
+
+A re-zero is visible to a consumer (issue 9, case 3): /diagnostics carries ``zero_offset_m`` (where the zero lies
+along the axis from the rest pose [m]; a re-zero at another pose steps it), ``zero_count``, ``zeroed_at`` (node-clock
+stamp of the last zero [ns], 0 = none) and ``started_at`` (the node's start [ns]): a restarted LVDT, which zeroes
+itself again, shows a new start time. Counters: received = used + dropped_non_finite (poses); published = samples.
 """
 from __future__ import annotations
 
@@ -22,8 +27,9 @@ from std_srvs.srv import Trigger
 from crane_stiffness import topics
 from crane_stiffness.config import ParamSpec
 from crane_stiffness.model.rotation import quaternion_to_matrix
-from crane_stiffness.nodes.common import (RELIABLE_QOS, SENSOR_QOS, Counters, Diagnostics, SampleSchedule,
+from crane_stiffness.nodes.common import (RELIABLE_QOS, SENSOR_QOS, Diagnostics, SampleSchedule,
                                           check_sensor_params, finite, run)
+from crane_stiffness.nodes.load_cell import SensorCounters
 from crane_stiffness.nodes.parameters import Params
 from crane_stiffness.sim.sampling import NS_PER_S, SampleClock, StampedHold
 from crane_stiffness.sim.sensors import LvdtModel
@@ -69,7 +75,10 @@ class Lvdt(Node):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('lvdt', **kwargs)
-        self.counters = Counters()
+        self.counters = SensorCounters()
+        self.started_at_ns = self.get_clock().now().nanoseconds
+        self.zero_count = 0
+        self.zeroed_at_ns = 0
         self.out_of_range = 0       # saturated samples since start
         self._out_of_range_reported = 0
         self.zero_pose: np.ndarray | None = None  # [u, Q] of the pose the sensor was zeroed at
@@ -91,13 +100,17 @@ class Lvdt(Node):
     def _apply(self, model: LvdtModel, values: dict[str, Any]) -> None:
         self.model = model
         if self.zero_pose is not None:
-            self._zero(self.zero_pose)  # the new sensor set-up keeps the zero
+            self._zero(self.zero_pose, new=False)  # the new sensor set-up keeps the zero
         self.schedule.configure(values['sample_rate_hz'], values['publish_rate_hz'])
         self.settings = values
 
-    def _zero(self, pose: np.ndarray) -> None:
+    def _zero(self, pose: np.ndarray, *, new: bool = True) -> None:
+        """Zero the model at ``pose``; ``new``: a zero of its own (counted), not one carried over to a new model."""
         self.model.zero(pose[:3], pose[3:].reshape(3, 3))
         self.zero_pose = pose
+        if new:
+            self.zero_count += 1
+            self.zeroed_at_ns = self.get_clock().now().nanoseconds
 
     def _on_pose(self, msg: PoseStamped) -> None:
         self.counters.received += 1
@@ -108,15 +121,18 @@ class Lvdt(Node):
         first = not self.pose.has_value
         stamp_ns = msg.header.stamp.sec * NS_PER_S + msg.header.stamp.nanosec
         self.pose.update(pose, stamp_ns, self.get_clock().now().nanoseconds)
+        self.counters.used += 1
         if first and self.settings['zero_on_first_pose']:
             self._zero(pose)
-            self.get_logger().info(f'zeroed at the first pose: u = {pose[:3].tolist()} m')
+            self.get_logger().info(f'zeroed at the first pose: u = {pose[:3].tolist()} m, zero offset '
+                                   f'{self.model.zero_offset:.9g} m')
 
     def _tick(self) -> None:
         times = self.schedule.due()
         if times.size == 0:
             return
         poses, valid = self.pose.read(times)
+        self.counters.waiting_samples += int((~valid).sum())  # instants before the first pose
         if not valid.any():
             return
         times, poses = times[valid], poses[valid]
@@ -141,7 +157,8 @@ class Lvdt(Node):
             return response
         self._zero(pose)
         response.success = True
-        response.message = f'zeroed at u = {[round(v, 9) for v in pose[:3].tolist()]} m'
+        response.message = (f'zeroed at u = {[round(v, 9) for v in pose[:3].tolist()]} m, zero offset '
+                            f'{self.model.zero_offset:.9g} m')
         self.get_logger().info(response.message)
         return response
 
@@ -150,7 +167,11 @@ class Lvdt(Node):
         self._out_of_range_reported = self.out_of_range
         pairs = self.counters.as_pairs() + [('out_of_range', str(self.out_of_range)),
                                             ('skipped_samples', str(self.clock.skipped)),
-                                            ('zeroed', str(self.zero_pose is not None).lower())]
+                                            ('zeroed', str(self.zero_pose is not None).lower()),
+                                            ('zero_offset_m', repr(self.model.zero_offset)),
+                                            ('zero_count', str(self.zero_count)),
+                                            ('zeroed_at', str(self.zeroed_at_ns)),
+                                            ('started_at', str(self.started_at_ns))]
         if new:
             return WARN, f'out of range: {new} samples saturated at the stroke {self.model.range_m} m', pairs
         if not self.pose.has_value:

@@ -21,7 +21,8 @@ from crane_stiffness.config import ParamSpec
 from crane_stiffness.devices.modbus_device import ModbusDevice
 from crane_stiffness.drivers.errors import ParameterError
 from crane_stiffness.nodes import lvdt
-from crane_stiffness.nodes.common import RELIABLE_QOS, Counters, Diagnostics, run
+from crane_stiffness.nodes.common import RELIABLE_QOS, Diagnostics, run
+from crane_stiffness.nodes.load_cell import SensorCounters
 from crane_stiffness.nodes.parameters import Params, check
 from crane_stiffness.nodes.device_params import check_address, check_start_only
 from crane_stiffness.nodes.modbus_lvdt import CHANNEL_PARAMS, channel_from
@@ -58,7 +59,8 @@ class ModbusEmulator(Node):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('modbus_emulator', **kwargs)
-        self.counters = Counters()   # received = poses; published = register reads served
+        # received = poses = used + dropped_non_finite; published = register reads served
+        self.counters = SensorCounters()
         self.pose = REST_POSE.copy()
         self.zero_pose: np.ndarray | None = None
         self.model: LvdtModel | None = None
@@ -107,11 +109,13 @@ class ModbusEmulator(Node):
             self.model.zero(pose[:3], pose[3:].reshape(3, 3))
             self.zero_pose = pose
         self.pose = pose
+        self.counters.used += 1
 
     def _report(self):
         self.counters.published = self.device.reads
         pairs = self.counters.as_pairs() + [('port', str(self.device.port)),
-                                            ('zeroed', str(self.zero_pose is not None).lower())]
+                                            ('zeroed', str(self.zero_pose is not None).lower()),
+                                            ('zero_offset_m', repr(self.model.zero_offset))]
         return OK, f'serving Modbus TCP on {self.device.host}:{self.device.port}, {self.device.reads} reads', pairs
 
     def close(self) -> None:

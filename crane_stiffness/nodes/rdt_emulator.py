@@ -1,8 +1,11 @@
 """rdt_emulator: the simulated load cell served as an RDT F/T sensor on UDP (a thin adapter around
 crane_stiffness.devices.rdt_device and sim.sensors.LoadCellModel), so the real driver ``netft`` can read it.
 
-Subscribes /crane/wrench_command (WrenchStamped, reliable) = the wrench applied, held from arrival on, like
-``load_cell``. Serves RDT on ``host:port`` (port 0 = a free port, logged and on /diagnostics): every sample of the
+Subscribes /crane/applied_wrench (WrenchStamped, reliable) = the load crane_model has in force (never the raw
+command: a command the model rejects reaches no sensor), held from arrival on, like ``load_cell``. Until the first
+applied wrench arrives every record carries the status word :data:`STATUS_NOT_READY` (so the driver ``netft``
+drops and reports them instead of publishing a reading of no known load), and /diagnostics says what it waits for.
+Serves RDT on ``host:port`` (port 0 = a free port, logged and on /diagnostics): every sample of the
 internal counter (``sample_rate_hz``, oscillator error ``clock_ppm``) is the load-cell model's reading of the held
 wrench (noise, bias, drift, cross-talk, quantization, overload: the ``load_cell`` parameters of the same names) in
 counts (``counts_per_force`` [counts/N], ``counts_per_torque`` [counts/(N·m)]). With ``http_port`` >= 0 it also
@@ -28,6 +31,10 @@ from crane_stiffness.nodes.parameters import Params, check, positive
 from crane_stiffness.nodes.device_params import check_address, check_start_only
 from crane_stiffness.sim.sensors import LoadCellModel
 from crane_stiffness.status import ERROR, OK
+
+#: Status word of the records served before the first applied wrench: bit 31, the summary error bit of an RDT
+#: status word (crane_stiffness.drivers.rdt: 0 = healthy), and bit 16, this emulator's "no load known yet".
+STATUS_NOT_READY = 0x80010000
 
 MODEL_PARAMS = tuple(s for s in load_cell.PARAMS if s.name in load_cell.MODEL_KEYS + ('seed',))
 PARAMS = (
@@ -61,7 +68,11 @@ def _validate(values: dict[str, Any]) -> LoadCellModel:
 
 @dataclass
 class EmulatorCounters(Counters):
-    """``received`` = commands; ``published`` = RDT records sent."""
+    """``received`` = applied wrenches = ``used`` + ``dropped_non_finite``; ``published`` = RDT records sent;
+    ``not_ready_records``: records sent with :data:`STATUS_NOT_READY` (before the first applied wrench)."""
+
+    used: int = 0
+    not_ready_records: int = 0
 
     stream_requests: int = 0
     bias_commands: int = 0
@@ -73,14 +84,16 @@ class RdtEmulator(Node):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('rdt_emulator', **kwargs)
         self.counters = EmulatorCounters()
-        self.applied = np.zeros(6)
+        self.applied: np.ndarray | None = None  # the load in force [N, N·m]; None until crane_model says
         self.model: LoadCellModel | None = None
         self.device: RdtDevice | None = None
         self.settings: dict[str, Any] = {}
         self.t0 = time.monotonic()
         self.params = Params(self, PARAMS, self._validate, self._apply)
-        self.create_subscription(WrenchStamped, topics.WRENCH_COMMAND, self._on_command, RELIABLE_QOS)
+        self.create_subscription(WrenchStamped, topics.APPLIED_WRENCH, self._on_applied, RELIABLE_QOS)
         self.diagnostics = Diagnostics(self, self._report)
+        self.get_logger().info(f'{load_cell.WAITING_FOR}: until then every record has status '
+                               f'0x{STATUS_NOT_READY:08x}')
 
     def _validate(self, values: dict[str, Any]) -> LoadCellModel:
         model = _validate(values)
@@ -102,18 +115,29 @@ class RdtEmulator(Node):
         self.settings = values
 
     def _samples(self, n: int) -> np.ndarray:
-        """The model's readings of the held wrench for the n samples of a burst (the device thread calls this)."""
-        readings, _ = self.model.measure(np.tile(self.applied, (n, 1)), time.monotonic() - self.t0)
+        """The model's readings of the held wrench for the n samples of a burst (the device thread calls this, and
+        then encodes the burst with the device's status word, set here for the same wrench)."""
+        applied = self.applied  # one read: the executor thread may replace it meanwhile
+        if applied is None:
+            self.device.status = STATUS_NOT_READY
+            self.counters.not_ready_records += n
+            applied = np.zeros(6)
+        else:
+            self.device.status = 0
+        readings, _ = self.model.measure(np.tile(applied, (n, 1)), time.monotonic() - self.t0)
         return readings
 
-    def _on_command(self, msg: WrenchStamped) -> None:
+    def _on_applied(self, msg: WrenchStamped) -> None:
         self.counters.received += 1
         f, m = msg.wrench.force, msg.wrench.torque
         wrench = (f.x, f.y, f.z, m.x, m.y, m.z)
         if not finite(wrench):
             self.counters.dropped_non_finite += 1
             return
+        if self.applied is None:
+            self.get_logger().info(f'first applied wrench {list(wrench)}: records have status 0 from now on')
         self.applied = np.array(wrench)
+        self.counters.used += 1
 
     def _report(self):
         dev = self.device
@@ -124,6 +148,8 @@ class RdtEmulator(Node):
                                             ('streaming', str(dev.streaming).lower())]
         if dev.bad_requests:
             return ERROR, f'{dev.bad_requests} malformed RDT requests received', pairs
+        if self.applied is None:
+            return OK, f'{load_cell.WAITING_FOR}; records have status 0x{STATUS_NOT_READY:08x}', pairs
         return OK, f'serving RDT on {dev.host}:{dev.port}, {"streaming" if dev.streaming else "idle"}', pairs
 
     def close(self) -> None:

@@ -287,6 +287,12 @@ class LvdtModel:
             return float(reading), bool(in_range)
         return reading, in_range
 
+    @property
+    def zero_offset(self) -> float:
+        """Where the zero lies along the axis from the contact point at the rest pose (u = 0, Q = I), m: the step a
+        re-zero puts into the readings (0 until :meth:`zero` is called away from the rest pose)."""
+        return float((self._reference - self._point) @ self._axis)
+
     def zero(self, u: ArrayLike = (0.0, 0.0, 0.0), q: ArrayLike | None = None) -> None:
         """Make the current contact-point position (pose ``(u, Q)``, default the rest pose) the zero."""
         q = np.eye(3) if q is None else q
