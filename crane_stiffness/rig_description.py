@@ -84,7 +84,8 @@ NODES: tuple[RigNode, ...] = (
     RigNode('lvdt', ('sensors',), condition='sim_sensors', reads=(topics.PLATFORM_POSE,)),
     RigNode('stiffness_estimator', ('crane', 'sensors'), reads=(topics.WRENCH_COMMAND, *_STREAMS)),
     RigNode('session_recorder', ('crane', 'sensors', 'program'), arguments={'session': 'session'},
-            condition='record', reads=(topics.WRENCH_COMMAND, topics.PLATFORM_POSE, *_STREAMS)),
+            condition='record', reads=(topics.WRENCH_COMMAND, topics.APPLIED_WRENCH, topics.REJECTED_COMMAND,
+                                        topics.PLATFORM_POSE, *_STREAMS)),
     RigNode('load_program', ('program',), runs_program=True),
 )
 #: Topics a message must have arrived on before the program starts: the model's prediction (latched) and both
