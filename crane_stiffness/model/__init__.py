@@ -5,21 +5,27 @@
 - :mod:`.stiffness` — exact tangent stiffness, the paper's eq. (18), K0, Kw, K_j and stiffness along a direction.
 - :mod:`.rotation` — the paper's z–x–y angles and conversions.
 """
-from crane_stiffness.model.equilibrium import (BatchEquilibrium, Equilibrium, as_load, net_wrench, rest_pose,
-                                               solve_batch, solve_equilibrium, solve_path, wrench_jacobian)
-from crane_stiffness.model.errors import ConvergenceError, GeometryError, ModelError, NoEquilibriumError
-from crane_stiffness.model.geometry import (WIRE_NAMES, CraneGeometry, lab_model, rest_wire_length)
-from crane_stiffness.model.rotation import euler_zxy_to_matrix, matrix_to_euler_zxy
-from crane_stiffness.model.stiffness import (AXES, PaperCoefficients, axis_index, axis_stiffness, compliance,
-                                             directional_stiffness, elastic_stiffness, loaded_height,
-                                             paper_coefficients, paper_stiffness, pendulum_stiffness,
-                                             single_wire_pendulum_stiffness, tangent_stiffness)
+import importlib
 
-__all__ = [
-    'AXES', 'BatchEquilibrium', 'ConvergenceError', 'CraneGeometry', 'Equilibrium', 'GeometryError', 'ModelError',
-    'NoEquilibriumError', 'PaperCoefficients', 'WIRE_NAMES', 'as_load', 'axis_index', 'axis_stiffness', 'compliance',
-    'directional_stiffness', 'elastic_stiffness', 'euler_zxy_to_matrix', 'lab_model', 'loaded_height',
-    'matrix_to_euler_zxy', 'net_wrench', 'paper_coefficients', 'paper_stiffness', 'pendulum_stiffness',
-    'rest_pose', 'rest_wire_length', 'single_wire_pendulum_stiffness', 'solve_batch', 'solve_equilibrium',
-    'solve_path', 'tangent_stiffness', 'wrench_jacobian',
-]
+#: The public names and the module of each. Imported on first use: importing .geometry alone (crane_stiffness.config,
+#: so every node) must not import .equilibrium and numba (~0.5 s of CPU in each node process at start).
+_EXPORTS = {
+    'equilibrium': ('BatchEquilibrium', 'Equilibrium', 'as_load', 'net_wrench', 'rest_pose', 'solve_batch',
+                    'solve_equilibrium', 'solve_path', 'wrench_jacobian'),
+    'errors': ('ConvergenceError', 'GeometryError', 'ModelError', 'NoEquilibriumError'),
+    'geometry': ('WIRE_NAMES', 'CraneGeometry', 'lab_model', 'rest_wire_length'),
+    'rotation': ('euler_zxy_to_matrix', 'matrix_to_euler_zxy'),
+    'stiffness': ('AXES', 'PaperCoefficients', 'axis_index', 'axis_stiffness', 'compliance', 'directional_stiffness',
+                  'elastic_stiffness', 'loaded_height', 'paper_coefficients', 'paper_stiffness', 'pendulum_stiffness',
+                  'single_wire_pendulum_stiffness', 'tangent_stiffness'),
+}
+_WHERE = {name: module for module, names in _EXPORTS.items() for name in names}
+__all__ = sorted(_WHERE)
+
+
+def __getattr__(name: str):
+    if name in _WHERE:
+        value = getattr(importlib.import_module(f'crane_stiffness.model.{_WHERE[name]}'), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f'module {__name__!r} has no attribute {name!r}')
