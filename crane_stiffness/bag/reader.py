@@ -33,7 +33,7 @@ from crane_stiffness.serde.bulk import SUPPORTED_TYPES, Decoder, new_decoder
 from .errors import BagCorruptError, BagDamageWarning, BagNotFoundError, TopicNotFoundError, UnsupportedTypeError
 from .chunks import ChunkRef
 from .mcapfile import McapFile
-from .metadata import METADATA_FILENAME, ROSBAG2_METADATA, read_metadata_yaml
+from .metadata import METADATA_FILENAME, ROSBAG2_METADATA, file_in_bag, read_metadata_yaml
 
 
 class RawMessage(NamedTuple):
@@ -109,14 +109,15 @@ class BagReader:
             except Exception as exc:  # any YAML or layout problem: fall back to the files on disk
                 self._warn(f'{meta_path} is unreadable ({exc}); reading the .mcap files in {self.path} instead')
             else:
-                found = [self.path / n for n in names]
+                found = [file_in_bag(self.path, n, f'{meta_path} relative_file_paths') for n in names]
                 missing = [p for p in found if not p.is_file()]
                 if missing:
                     self._warn(f'{meta_path} lists missing file(s) {", ".join(p.name for p in missing)}')
                 present = [p for p in found if p.is_file()]
                 if present:
                     return present
-        files = sorted(self.path.glob('*.mcap'), key=_file_order)
+        files = [file_in_bag(self.path, p.name, f'{self.path}') for p in sorted(self.path.glob('*.mcap'),
+                                                                                 key=_file_order)]
         if not files:
             raise BagNotFoundError(f'{self.path} holds no metadata.yaml and no .mcap file')
         return files

@@ -35,7 +35,8 @@ from crane_stiffness import __version__
 
 from .errors import BagError, BagExistsError, BagWriteFailedError, BagWriterError
 from .metadata import (
-    METADATA_FILENAME, ROSBAG2_METADATA, FileStats, TopicStats, build_bag_metadata, encode_metadata, serialized_bag_metadata,
+    METADATA_FILENAME, ROSBAG2_METADATA, FileStats, TopicStats, build_bag_metadata, encode_metadata,
+    serialized_bag_metadata,
     write_metadata_yaml,
 )
 from .msgdef import message_definition, normalize_type, type_description_hash
@@ -329,7 +330,8 @@ class BagWriter:
         except OSError as exc:
             self.failure = BagWriteFailedError(
                 f'writing {self.path / METADATA_FILENAME} failed: {_os_text(exc)}; every .mcap file of the bag is '
-                f'complete: run `crane-stiffness recover {self.path}` once there is room', self.path / METADATA_FILENAME,
+                f'complete: run `crane-stiffness recover {self.path}` once there is room',
+                self.path / METADATA_FILENAME,
                 exc.errno)
             _remove_tmp(self.path)
             raise self.failure from exc
