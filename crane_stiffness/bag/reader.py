@@ -3,8 +3,10 @@
 :class:`BagReader` opens a bag directory (through its metadata.yaml, or by scanning ``*.mcap`` when metadata.yaml is
 missing, as after a crash) or a single .mcap file. Each file is a :class:`~.mcapfile.McapFile` (its records read by
 the ``mcap`` package): the summary when the file was finished, otherwise the records that are on disk, so a file cut
-short by SIGKILL gives every complete chunk. Damage is reported with :class:`~.errors.BagDamageWarning` (or raised
-when ``strict=True``) and the readable part is used.
+short by SIGKILL gives every complete chunk. Only files inside the bag directory are read: a metadata.yaml entry with
+``..``, an absolute path or a symlink leading out raises :class:`~.errors.BagPathError` (``metadata.file_in_bag``).
+Damage is reported with :class:`~.errors.BagDamageWarning` (or raised when ``strict=True``) and the readable part is
+used.
 
 Bulk decoding (:meth:`BagReader.decode`) works a chunk at a time: decompress, gather the messages of a channel at
 once (:meth:`~.mcapfile.McapFile.chunk_messages`), then decode their CDR fields with numpy
