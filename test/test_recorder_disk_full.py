@@ -215,3 +215,55 @@ def test_recover_on_a_full_disk_names_the_file_and_the_space_it_needs(tmp_path):
             assert reader.complete and reader.topics[topics.WRENCH_COMMAND].count == 3000
     finally:
         subprocess.run(['umount', '-l', str(disk)], check=False)
+
+
+def test_the_writer_on_a_full_disk_keeps_every_complete_chunk_and_says_what_it_could_not_write(tmp_path):
+    """BagWriter alone: the write error names the file; with not even room for metadata.yaml, close() says so and
+    leaves no partial file; a split file that cannot be created leaves the earlier files whole."""
+    from crane_stiffness.bag import BagWriteFailedError, BagWriter
+    from rclpy.serialization import serialize_message
+    disk = tmp_path / 'small_disk'
+    disk.mkdir()
+    mounted = subprocess.run(['mount', '-t', 'tmpfs', '-o', 'size=512k', 'tmpfs', str(disk)], capture_output=True,
+                             text=True)
+    assert mounted.returncode == 0, f'cannot mount a tmpfs (the test needs root): {mounted.stderr}'
+    try:
+        for split in (None, 100_000):
+            bag = disk / f'split_{split}'
+            writer = BagWriter(bag, compression='none', chunk_size=8192, split_max_bytes=split)
+            writer.add_topic(topics.WRENCH_COMMAND, 'geometry_msgs/msg/WrenchStamped')
+            accepted = 0
+            with pytest.raises(BagWriteFailedError, match=r'No space left on device; recording stopped') as caught:
+                while accepted < 100_000:
+                    writer.write(topics.WRENCH_COMMAND,
+                                 serialize_message(_wrench(accepted * 1_000_000, float(accepted))),
+                                 accepted * 1_000_000)
+                    accepted += 1
+            assert caught.value.errno == 28 and str(caught.value.path).startswith(str(bag))
+            fd = os.open(disk / f'filler_{split}', os.O_WRONLY | os.O_CREAT)  # take the room the cut gave back
+            try:
+                for size in (65536, 4096, 1):
+                    try:
+                        while True:
+                            os.write(fd, b'\0' * size)
+                    except OSError:
+                        pass
+            finally:
+                os.close(fd)
+            assert writer.close() is None
+            assert 'metadata.yaml NOT written ([Errno 28] No space left on device)' in writer.salvage
+            assert f'crane-stiffness recover {bag}' in writer.salvage
+            assert not (bag / 'metadata.yaml').exists() and not (bag / 'metadata.yaml.tmp').exists()
+            on_disk = sum(_mcap_messages(f)[0] for f in sorted(bag.glob('*.mcap')))
+            assert on_disk == writer.message_count and on_disk + writer.lost_messages == accepted
+            if split:
+                assert len(list(bag.glob('*.mcap'))) >= 2
+            with pytest.warns(BagDamageWarning):
+                with BagReader(bag) as reader:
+                    fy = reader.decode(topics.WRENCH_COMMAND)['fy'].tolist()
+            assert fy == [float(i) for i in range(on_disk)]
+            (disk / f'filler_{split}').unlink()
+            for leftover in bag.iterdir():  # make room for the next case
+                leftover.unlink()
+    finally:
+        subprocess.run(['umount', '-l', str(disk)], check=False)
