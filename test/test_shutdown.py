@@ -194,10 +194,12 @@ def test_player_ends_cleanly_after_playback_and_on_repeated_sigint(install_tree,
         codes = wait_all(procs)
         logs = {n: procs.log(n) for n in procs.procs}
     end = assert_clean_exit('session_player', codes['to_the_end'], logs['to_the_end'])
-    assert end == {'state': 'finished', 'published': 112, 'loops': 1, 'problems': 0}, logs['to_the_end']
+    assert end == {'state': 'finished', 'read': 112, 'published': 112, 'skipped_stopped': 0,
+                   'skipped_publish_error': 0, 'loops': 1, 'problems': 0}, logs['to_the_end']
     assert 'finished: 112 messages published' in logs['to_the_end']
     looping = assert_clean_exit('session_player', codes['looping'], logs['looping'])
     assert looping['state'] == 'stopped' and looping['published'] > 0, looping
+    assert looping['read'] == looping['published'] + looping['skipped_stopped'] + looping['skipped_publish_error']
 
 
 def signal_caught(pid: int, sig: int) -> bool:

@@ -13,7 +13,8 @@
 """
 
 from .errors import (
-    BagCorruptError, BagDamageWarning, BagError, BagExistsError, BagFormatError, BagNotFoundError, BagWriterError,
+    BagCorruptError, BagDamageWarning, BagError, BagExistsError, BagFormatError, BagNotFoundError, BagPathError,
+    BagWriteFailedError, BagWriterError,
     MessageDefinitionError, TopicNotFoundError, UnsupportedTypeError,
 )
 from .mcapfile import McapFile
@@ -32,6 +33,7 @@ def __getattr__(name: str) -> object:
 
 __all__ = [
     'BagCorruptError', 'BagDamageWarning', 'BagError', 'BagExistsError', 'BagFormatError', 'BagNotFoundError',
+    'BagPathError', 'BagWriteFailedError',
     'BagReader', 'BagWriter', 'BagWriterError', 'McapFile', 'MessageDefinitionError', 'RawMessage', 'RecoveryReport',
     'SUPPORTED_TYPES', 'TopicInfo', 'TopicNotFoundError', 'UnsupportedTypeError', 'dump_qos_profiles',
     'normalize_qos_profiles', 'qos_profile', 'recover_bag',

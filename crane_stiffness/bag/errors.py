@@ -34,6 +34,24 @@ class BagWriterError(BagError):
     """Misuse of the writer: unknown topic, write after close, bad option."""
 
 
+class BagWriteFailedError(BagError):
+    """The operating system refused a write of the bag (disk full, I/O error, file system gone).
+
+    The writer stops at the first such error: the file it was writing is cut back to its last complete record, so
+    every chunk written before stays readable, and the writer accepts no more messages. ``path`` is the file whose
+    write failed, ``errno`` the OS error number (``errno.ENOSPC`` for a full disk).
+    """
+
+    def __init__(self, message: str, path: object = None, errno: int | None = None) -> None:
+        super().__init__(message)
+        self.path = path
+        self.errno = errno
+
+
+class BagPathError(BagFormatError):
+    """A bag names a file outside its own directory (``..``, an absolute path, a symlink leading out)."""
+
+
 class TopicNotFoundError(BagError, KeyError):
     """A requested topic is not in the bag; the message names the topics that are."""
 

@@ -16,7 +16,7 @@ from typing import Any
 
 import yaml
 
-from .errors import BagWriterError
+from .errors import BagPathError, BagWriterError
 from .qos import normalize_qos_profiles
 from .yamlfmt import dump_yaml
 
@@ -117,6 +117,32 @@ def write_metadata_yaml(bag_dir: Path, info: Mapping[str, Any]) -> Path:
     tmp = path.with_name(METADATA_FILENAME + '.tmp')
     tmp.write_text(dump_yaml({'rosbag2_bagfile_information': dict(info)}) + '\n', encoding='utf-8')
     os.replace(tmp, path)
+    return path
+
+
+def file_in_bag(bag_dir: Path, name: object, source: str) -> Path:
+    """``<bag_dir>/<name>`` for a file name a bag gives (metadata.yaml's ``relative_file_paths``, a file found in
+    the directory), refusing anything that leads outside the bag directory.
+
+    A bag is data from elsewhere: a name with ``..``, an absolute path, or a symlink whose target is outside the
+    directory would make a reader (analyze, the player, recover) read another directory's files as this bag's.
+
+    Raises:
+        BagPathError: naming ``source`` (where the name came from), the name and the rule.
+    """
+    bag_dir = Path(bag_dir)
+    rule = f'a bag reads only files inside its directory {bag_dir}'
+    if not isinstance(name, str) or not name or '\0' in name:
+        raise BagPathError(f'{source}: file name {name!r} is not a file name; {rule}')
+    if os.path.isabs(name) or Path(name).is_absolute():
+        raise BagPathError(f'{source}: file {name!r} is an absolute path; {rule}')
+    if '..' in Path(name).parts or '..' in name.replace('\\', '/').split('/'):
+        raise BagPathError(f'{source}: file {name!r} leads out of the bag with ..; {rule}')
+    path = bag_dir / name
+    real_dir = bag_dir.resolve()
+    real = path.resolve()
+    if real != real_dir and real_dir not in real.parents:
+        raise BagPathError(f'{source}: file {name!r} is a link to {real}, outside the bag; {rule}')
     return path
 
 

@@ -21,7 +21,7 @@ import sys
 from functools import lru_cache
 from pathlib import Path
 
-from .errors import MessageDefinitionError
+from .errors import MessageDefinitionError, UnsupportedTypeError
 
 SEPARATOR = '=' * 80
 """The line rosbag2 puts between definitions in a ros2msg schema."""
@@ -55,6 +55,43 @@ def ament_prefixes() -> list[Path]:
     if Path(sys.prefix) not in prefixes:
         prefixes.append(Path(sys.prefix))
     return prefixes
+
+
+INTERFACES_RESOURCE = Path('share') / 'ament_index' / 'resource_index' / 'rosidl_interfaces'
+"""Where each interface package lists its interfaces (``msg/Type.msg``, ``msg/Type.idl``, one per line)."""
+
+
+def interface_prefix(msg_type: str, prefixes: list[Path] | None = None) -> Path:
+    """The ament prefix whose index lists ``msg_type`` (``pkg/msg/Type`` or ``pkg/Type``) as an interface.
+
+    This is how a type named in a bag is trusted before its Python module is imported: only packages registered
+    in the ament index (``<prefix>/share/ament_index/resource_index/rosidl_interfaces/<pkg>``, the lookup of
+    ``ament_index_python``) that list the type resolve; any other name in a bag (``os/msg/Foo``, ``this/msg/Foo``)
+    is refused, so a bag cannot make the player import an arbitrary module.
+
+    Raises:
+        UnsupportedTypeError: naming the type and the prefixes searched.
+    """
+    try:
+        pkg, name = split_type(msg_type)
+    except MessageDefinitionError as exc:
+        raise UnsupportedTypeError(str(exc)) from None
+    if msg_type.count('/') == 2 and msg_type.split('/')[1] != 'msg':
+        raise UnsupportedTypeError(f'message type {msg_type!r} is not a message (pkg/msg/Type)')
+    searched = prefixes if prefixes is not None else ament_prefixes()
+    wanted = {f'msg/{name}.msg', f'msg/{name}.idl'}
+    for prefix in searched:
+        entry = prefix / INTERFACES_RESOURCE / pkg
+        try:
+            listed = entry.read_text(encoding='utf-8').splitlines()
+        except (OSError, UnicodeDecodeError):
+            continue
+        if wanted & {line.strip() for line in listed}:
+            return prefix
+    where = ', '.join(str(p) for p in searched) or '(none)'
+    raise UnsupportedTypeError(
+        f'message type {msg_type!r} is not an installed interface: no package {pkg!r} listing msg/{name} in the '
+        f'ament index (share/ament_index/resource_index/rosidl_interfaces) of the prefixes {where}')
 
 
 def _find_share_file(pkg: str, name: str, suffix: str, prefixes: tuple[Path, ...]) -> Path | None:

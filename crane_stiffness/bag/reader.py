@@ -3,8 +3,10 @@
 :class:`BagReader` opens a bag directory (through its metadata.yaml, or by scanning ``*.mcap`` when metadata.yaml is
 missing, as after a crash) or a single .mcap file. Each file is a :class:`~.mcapfile.McapFile` (its records read by
 the ``mcap`` package): the summary when the file was finished, otherwise the records that are on disk, so a file cut
-short by SIGKILL gives every complete chunk. Damage is reported with :class:`~.errors.BagDamageWarning` (or raised
-when ``strict=True``) and the readable part is used.
+short by SIGKILL gives every complete chunk. Only files inside the bag directory are read: a metadata.yaml entry with
+``..``, an absolute path or a symlink leading out raises :class:`~.errors.BagPathError` (``metadata.file_in_bag``).
+Damage is reported with :class:`~.errors.BagDamageWarning` (or raised when ``strict=True``) and the readable part is
+used.
 
 Bulk decoding (:meth:`BagReader.decode`) works a chunk at a time: decompress, gather the messages of a channel at
 once (:meth:`~.mcapfile.McapFile.chunk_messages`), then decode their CDR fields with numpy
@@ -33,7 +35,7 @@ from crane_stiffness.serde.bulk import SUPPORTED_TYPES, Decoder, new_decoder
 from .errors import BagCorruptError, BagDamageWarning, BagNotFoundError, TopicNotFoundError, UnsupportedTypeError
 from .chunks import ChunkRef
 from .mcapfile import McapFile
-from .metadata import METADATA_FILENAME, ROSBAG2_METADATA, read_metadata_yaml
+from .metadata import METADATA_FILENAME, ROSBAG2_METADATA, file_in_bag, read_metadata_yaml
 
 
 class RawMessage(NamedTuple):
@@ -109,14 +111,15 @@ class BagReader:
             except Exception as exc:  # any YAML or layout problem: fall back to the files on disk
                 self._warn(f'{meta_path} is unreadable ({exc}); reading the .mcap files in {self.path} instead')
             else:
-                found = [self.path / n for n in names]
+                found = [file_in_bag(self.path, n, f'{meta_path} relative_file_paths') for n in names]
                 missing = [p for p in found if not p.is_file()]
                 if missing:
                     self._warn(f'{meta_path} lists missing file(s) {", ".join(p.name for p in missing)}')
                 present = [p for p in found if p.is_file()]
                 if present:
                     return present
-        files = sorted(self.path.glob('*.mcap'), key=_file_order)
+        files = [file_in_bag(self.path, p.name, f'{self.path}') for p in sorted(self.path.glob('*.mcap'),
+                                                                                 key=_file_order)]
         if not files:
             raise BagNotFoundError(f'{self.path} holds no metadata.yaml and no .mcap file')
         return files

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import shutil
 import re
 import sys
 import warnings
@@ -26,10 +27,10 @@ from pathlib import Path
 
 from mcap.writer import Writer as McapWriter
 
-from .errors import BagError, BagFormatError, BagNotFoundError
+from .errors import BagError, BagFormatError, BagNotFoundError, BagWriteFailedError
 from .mcapfile import McapFile
 from .metadata import (
-    METADATA_FILENAME, ROSBAG2_METADATA, FileStats, TopicStats, build_bag_metadata, read_metadata_yaml,
+    METADATA_FILENAME, ROSBAG2_METADATA, FileStats, TopicStats, build_bag_metadata, file_in_bag, read_metadata_yaml,
     serialized_bag_metadata, write_metadata_yaml,
 )
 from .reader import _file_order
@@ -124,6 +125,14 @@ def _rewrite(source: McapFile, result: FileRecovery, stats: FileStats, counts: d
     tmp = source.path.with_name(source.path.name + '.recovering')
     try:
         _copy_messages(source, result, stats, counts, tmp, compression, chunk_size)
+    except OSError as exc:
+        tmp.unlink(missing_ok=True)
+        # The copy is written beside the original before it replaces it: it needs about the readable part's size.
+        needed = source.readable_end
+        raise BagWriteFailedError(
+            f'cannot rewrite {source.path}: writing {tmp.name} failed: {_os_text(exc)}; the rewrite needs about '
+            f'{needed} bytes ({needed / 2**20:.2f} MiB) free in {source.path.parent} (free now: '
+            f'{_free_bytes(source.path.parent)} bytes); the file was left as it was', source.path, exc.errno) from exc
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
@@ -257,7 +266,8 @@ def recover_bag(path: str | os.PathLike[str], *, backup: bool = True,
         bag_dir = target.parent
         write_meta = (bag_dir / METADATA_FILENAME).is_file() or bool(
             re.fullmatch(re.escape(bag_dir.name) + r'_\d+\.mcap', target.name))
-    files = sorted(bag_dir.glob('*.mcap'), key=_file_order) if write_meta else [target]
+    files = [file_in_bag(bag_dir, f.name, str(bag_dir)) for f in sorted(bag_dir.glob('*.mcap'), key=_file_order)] \
+        if write_meta else [target]
     if not files:
         raise BagNotFoundError(f'{target} holds no .mcap file')
     outcomes = [_recover_file(f, backup, chunk_size, rewrite=target.is_dir() or f == target) for f in files]
@@ -277,8 +287,26 @@ def recover_bag(path: str | os.PathLike[str], *, backup: bool = True,
                             start_ns=min(starts) if starts else None, end_ns=max(ends) if ends else None)
     if write_meta:
         info = build_bag_metadata(stats, list(topics.values()), custom_data=_old_custom_data(bag_dir))
-        report.metadata_path = write_metadata_yaml(bag_dir, info)
+        try:
+            report.metadata_path = write_metadata_yaml(bag_dir, info)
+        except OSError as exc:
+            (bag_dir / (METADATA_FILENAME + '.tmp')).unlink(missing_ok=True)
+            raise BagWriteFailedError(
+                f'cannot write {bag_dir / METADATA_FILENAME}: {_os_text(exc)}; it needs a few kB free in {bag_dir} '
+                f'(free now: {_free_bytes(bag_dir)} bytes); the .mcap files are recovered', bag_dir / METADATA_FILENAME,
+                exc.errno) from exc
     return report
+
+
+def _os_text(exc: OSError) -> str:
+    return f'[Errno {exc.errno}] {exc.strerror}' if exc.errno is not None else str(exc)
+
+
+def _free_bytes(directory: Path) -> int | str:
+    try:
+        return shutil.disk_usage(directory).free
+    except OSError:
+        return 'unknown'
 
 
 def _old_custom_data(bag_dir: Path) -> dict[str, str] | None:

@@ -7,6 +7,9 @@ Layout of ``BagWriter('<dir>/<session>')``::
 
 Each MCAP file is chunked (zstd, lz4 or none) and written straight to the operating system, one chunk at a time,
 so that a process killed with SIGKILL leaves a file whose complete chunks are all readable (see ``recover.py``).
+A write the operating system refuses (disk full, I/O error) stops the writer with :class:`BagWriteFailedError`: the
+file is cut back to its last complete record (every chunk before stays readable, as after SIGKILL), and ``close()``
+then writes metadata.yaml from what is on disk if there is room, or says that it could not (``salvage``).
 Schemas are ``ros2msg`` definitions built from the installed .msg files (``msgdef.py``), channels carry
 ``offered_qos_profiles`` (a YAML string, ``qos.py``) and ``topic_type_hash`` metadata as rosbag2 Jazzy writes them,
 the caller's own description of the recording goes into MCAP Metadata records (``add_metadata``), and metadata.yaml
@@ -18,7 +21,9 @@ Times are integer nanoseconds since the Unix epoch (``*_ns``); durations in seco
 from __future__ import annotations
 
 import os
-from collections.abc import Mapping
+import warnings
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import TracebackType
@@ -28,9 +33,10 @@ from mcap.writer import CompressionType, Writer as McapWriter
 
 from crane_stiffness import __version__
 
-from .errors import BagExistsError, BagWriterError
+from .errors import BagError, BagExistsError, BagWriteFailedError, BagWriterError
 from .metadata import (
-    ROSBAG2_METADATA, FileStats, TopicStats, build_bag_metadata, encode_metadata, serialized_bag_metadata,
+    METADATA_FILENAME, ROSBAG2_METADATA, FileStats, TopicStats, build_bag_metadata, encode_metadata,
+    serialized_bag_metadata,
     write_metadata_yaml,
 )
 from .msgdef import message_definition, normalize_type, type_description_hash
@@ -54,9 +60,16 @@ class _DirectFile:
 
     def write(self, data: bytes | bytearray | memoryview) -> int:
         view = memoryview(data)
-        while view:
-            written = os.write(self._fd, view)
-            view = view[written:]
+        try:
+            while view:
+                written = os.write(self._fd, view)
+                view = view[written:]
+        except OSError:
+            # The MCAP writer hands over whole records per write: cutting the file back to where this write began
+            # leaves it ending on a record boundary (a reader then sees a file cut after its last complete record)
+            # and gives the partial bytes back to a full disk.
+            self.cut()
+            raise
         self._pos += len(data)
         if self._fsync and len(data):
             os.fsync(self._fd)
@@ -64,6 +77,14 @@ class _DirectFile:
 
     def tell(self) -> int:
         return self._pos
+
+    def cut(self) -> None:
+        """Truncate the file to the end of the last complete write (best effort: the disk may be gone)."""
+        if self._fd >= 0:
+            try:
+                os.ftruncate(self._fd, self._pos)
+            except OSError:
+                pass
 
     def flush(self) -> None:
         if self._fsync:
@@ -93,6 +114,8 @@ class _OpenFile:
     schemas: dict[str, int] = field(default_factory=dict)
     channels: dict[str, int] = field(default_factory=dict)
     sequences: dict[str, int] = field(default_factory=dict)
+    counts: dict[str, int] = field(default_factory=dict)
+    """Messages accepted per topic into this file (on disk once their chunk is written)."""
     pending_since_ns: int | None = None
 
 
@@ -144,7 +167,22 @@ class BagWriter:
         self._files: list[FileStats] = []
         self._file: _OpenFile | None = None
         self._closed = False
-        self._open_file()
+        self.failure: BagWriteFailedError | None = None
+        """The write error that stopped the writer, None while every write succeeded."""
+        self.lost_messages = 0
+        """Messages accepted by :meth:`write` but not on disk because a write error lost their chunk."""
+        self.metadata_path: Path | None = None
+        """metadata.yaml once ``close()`` wrote it."""
+        self._cut_file: _OpenFile | None = None
+        self.salvage: str | None = None
+        """After a write error, what ``close()`` could save: messages on disk, messages lost, metadata.yaml."""
+        try:
+            with self._io('creating', None):
+                self._open_file()
+        except BagWriteFailedError:
+            self._closed = True
+            self._salvage()
+            raise
         for name, data in (metadata or {}).items():
             self.add_metadata(name, data)
 
@@ -197,7 +235,8 @@ class BagWriter:
                        qos_yaml=dump_qos_profiles(qos_profiles_yaml))
         self._topics[name] = topic
         assert self._file is not None
-        self._register(self._file, topic)
+        with self._io('writing', self._file):
+            self._register(self._file, topic)
 
     def add_metadata(self, name: str, data: Mapping[str, Any]) -> None:
         """Write an MCAP Metadata record ``name`` → ``{key: value}`` (non-strings JSON-encoded).
@@ -208,7 +247,8 @@ class BagWriter:
         encoded = encode_metadata(data)
         self._metadata.append((name, encoded))
         assert self._file is not None
-        self._file.mcap.add_metadata(name, encoded)
+        with self._io('writing', self._file):
+            self._file.mcap.add_metadata(name, encoded)
 
     def write(self, topic: str, data: bytes | bytearray | memoryview, log_time_ns: int,
               publish_time_ns: int | None = None) -> None:
@@ -232,48 +272,151 @@ class BagWriter:
         current = self._file
         assert current is not None
         if current.stats.message_count and self._should_split(current, log_time_ns):
-            self._close_file()
-            current = self._open_file()
-        sequence = current.sequences[topic] = current.sequences[topic] + 1
-        position = current.stream.tell()
-        current.mcap.add_message(current.channels[topic], log_time_ns, bytes(data),
-                                 log_time_ns if publish_time_ns is None else int(publish_time_ns), sequence)
-        current.stats.add(log_time_ns)
-        entry.count += 1
-        if self._flush_ns is not None:
-            if current.stream.tell() != position:
-                current.pending_since_ns = None  # the chunk holding this message was just written
-            elif current.pending_since_ns is None:
-                current.pending_since_ns = log_time_ns  # first message of a new chunk
-            elif log_time_ns - current.pending_since_ns >= self._flush_ns:
-                current.mcap.flush()
-                current.pending_since_ns = None
+            with self._io('finishing', current):
+                self._close_file()
+            with self._io('creating', None):
+                current = self._open_file()
+        with self._io('writing', current):
+            sequence = current.sequences[topic] = current.sequences[topic] + 1
+            position = current.stream.tell()
+            current.mcap.add_message(current.channels[topic], log_time_ns, bytes(data),
+                                     log_time_ns if publish_time_ns is None else int(publish_time_ns), sequence)
+            current.stats.add(log_time_ns)
+            current.counts[topic] = current.counts.get(topic, 0) + 1
+            entry.count += 1
+            if self._flush_ns is not None:
+                if current.stream.tell() != position:
+                    current.pending_since_ns = None  # the chunk holding this message was just written
+                elif current.pending_since_ns is None:
+                    current.pending_since_ns = log_time_ns  # first message of a new chunk
+                elif log_time_ns - current.pending_since_ns >= self._flush_ns:
+                    current.mcap.flush()
+                    current.pending_since_ns = None
 
     def flush(self) -> None:
         """Finish the chunk in progress and hand it to the OS, so everything written so far survives a crash."""
         self._check_open()
         assert self._file is not None
-        self._file.mcap.flush()
+        with self._io('writing', self._file):
+            self._file.mcap.flush()
         self._file.pending_since_ns = None
 
     def close(self) -> dict[str, Any] | None:
         """Finish the current file (summary, footer) and write metadata.yaml. Idempotent.
 
+        After a write error (``failure``) the file is left as the error cut it (every complete chunk readable) and
+        metadata.yaml is written from the messages actually on disk, if the disk allows; ``salvage`` says what was
+        saved. A write error during close itself is raised as :class:`BagWriteFailedError` after that salvage.
+
         Returns:
-            the ``rosbag2_bagfile_information`` mapping written, or None if already closed.
+            the ``rosbag2_bagfile_information`` mapping written, or None if already closed or if metadata.yaml could
+            not be written after an earlier write error.
         """
         if self._closed:
             return None
-        self._close_file()
         self._closed = True
+        if self.failure is None:
+            try:
+                with self._io('finishing', self._file):
+                    self._close_file()
+            except BagWriteFailedError:
+                self._salvage()
+                raise
+        if self.failure is not None:
+            return self._salvage()
         info = self._bag_metadata()
-        write_metadata_yaml(self.path, info)
+        try:
+            self.metadata_path = write_metadata_yaml(self.path, info)
+        except OSError as exc:
+            self.failure = BagWriteFailedError(
+                f'writing {self.path / METADATA_FILENAME} failed: {_os_text(exc)}; every .mcap file of the bag is '
+                f'complete: run `crane-stiffness recover {self.path}` once there is room',
+                self.path / METADATA_FILENAME,
+                exc.errno)
+            _remove_tmp(self.path)
+            raise self.failure from exc
         return info
 
     # -- internals --
     def _check_open(self) -> None:
+        if self.failure is not None:
+            raise BagWriterError(f'bag {self.path} stopped at a write error: {self.failure}')
         if self._closed:
             raise BagWriterError(f'bag {self.path} is closed')
+
+    @contextmanager
+    def _io(self, action: str, opened: _OpenFile | None) -> Iterator[None]:
+        """Turn an OSError of the block into the writer's failure (first error only): stop, keep what is on disk."""
+        try:
+            yield
+        except OSError as exc:
+            if self.failure is not None:
+                raise self.failure from exc
+            target = self.path / opened.stats.path if opened is not None else (
+                self.path / self._files[-1].path if self._files else self.path)
+            where = f'; the file ends at byte {opened.stream.tell()}, after its last complete record' \
+                if opened is not None else ''
+            self.failure = BagWriteFailedError(f'{action} {target} failed: {_os_text(exc)}; recording stopped{where}',
+                                               target, exc.errno)
+            failed = opened if opened is not None else self._file
+            if failed is not None:
+                failed.stream.cut()
+                failed.stream.close()
+                self._cut_file = failed
+            raise self.failure from exc
+
+    def _salvage(self) -> dict[str, Any] | None:
+        """After a write error: count what is on disk in the file the error cut, then try metadata.yaml."""
+        opened, self._file = self._cut_file or self._file, None
+        if opened is not None:
+            opened.stream.close()
+        lost = self._recount_cut_file(opened) if opened is not None else 0
+        self.lost_messages = lost
+        on_disk = self.message_count
+        info = self._bag_metadata()
+        try:
+            self.metadata_path = write_metadata_yaml(self.path, info)
+            meta = f'wrote {self.metadata_path}'
+        except OSError as exc:
+            _remove_tmp(self.path)
+            info = None
+            meta = (f'metadata.yaml NOT written ({_os_text(exc)}): run `crane-stiffness recover {self.path}` once '
+                    'there is room')
+        self.salvage = (f'{on_disk} message(s) on disk in complete chunks, {lost} lost with the chunk being '
+                        f'written; {meta}')
+        return info
+
+    def _recount_cut_file(self, opened: _OpenFile) -> int:
+        """Set the stats of the file a write error cut to what is readable in it; returns the messages lost."""
+        from .mcapfile import McapFile  # the reader's view of the cut file, as a user will read it
+        path = self.path / opened.stats.path
+        disk: dict[str, int] = {}
+        start = end = None
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter('ignore')  # the cut end is expected; it is reported by ``salvage``
+                with McapFile(path) as cut:
+                    for cid, count in cut.channel_counts.items():
+                        channel = cut.channels.get(cid)
+                        if channel is not None:
+                            disk[channel.topic] = disk.get(channel.topic, 0) + count
+                    start, end = cut.start_ns, cut.end_ns
+        except (BagError, OSError):
+            # nothing readable (not even the header): every message of the file is lost, and the file would make
+            # the whole bag unreadable
+            try:
+                path.unlink(missing_ok=True)
+                self._files = [f for f in self._files if f is not opened.stats]
+            except OSError:
+                pass
+        lost = 0
+        for topic, accepted in opened.counts.items():
+            missing = max(0, accepted - disk.get(topic, 0))
+            self._topics[topic].count -= missing
+            lost += missing
+        opened.stats.message_count = sum(disk.values())
+        opened.stats.start_ns, opened.stats.end_ns = (start, end) if disk else (None, None)
+        return lost
 
     def _should_split(self, current: _OpenFile, log_time_ns: int) -> bool:
         if self.split_max_bytes is not None and current.stream.tell() >= self.split_max_bytes:
@@ -292,10 +435,10 @@ class BagWriter:
         stream = _DirectFile(self.path / stats.path, self._fsync)
         mcap = McapWriter(stream, chunk_size=self.chunk_size, compression=COMPRESSIONS[self.compression],
                           enable_crcs=True)
-        mcap.start(profile='ros2', library=LIBRARY)
         opened = _OpenFile(stats=stats, stream=stream, mcap=mcap)
         self._files.append(stats)
-        self._file = opened
+        self._file = opened  # before the first write, so that a write error finds the file to cut
+        mcap.start(profile='ros2', library=LIBRARY)
         for topic in self._topics.values():
             self._register(opened, topic)
         for name, data in self._metadata:
@@ -322,3 +465,16 @@ class BagWriter:
             opened.mcap.finish()
         finally:
             opened.stream.close()
+
+
+def _os_text(exc: OSError) -> str:
+    """``[Errno 28] No space left on device`` (without the file name str(OSError) may carry)."""
+    return f'[Errno {exc.errno}] {exc.strerror}' if exc.errno is not None else str(exc)
+
+
+def _remove_tmp(bag_dir: Path) -> None:
+    """Remove a metadata.yaml.tmp left by a failed write (it holds a part of the file)."""
+    try:
+        (Path(bag_dir) / (METADATA_FILENAME + '.tmp')).unlink(missing_ok=True)
+    except OSError:
+        pass

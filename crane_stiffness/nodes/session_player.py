@@ -14,6 +14,12 @@ estimates whatever the timing jitter of the replay.
 
 Services (std_srvs/Trigger): ~/start (start, resume after pause, restart when finished), ~/pause, ~/stop. With
 ``exit_on_end`` the node shuts down once the bag has been played (not with ``loop``).
+
+A ``start_offset_s`` past the end of the bag is an error naming the offset and the bag's duration: at start-up the
+node exits with status 2, ~/start answers failure. Counters (FINAL_COUNTERS, /diagnostics) account for every message
+read from the bag: ``read = published + skipped_*`` (``skipped_stopped``: read, then the playback was stopped before
+its time; ``skipped_publish_error``: the publish raised). Only message types the ament index lists as interfaces are
+played (session_qos.message_class); a bag naming another type gets a warning naming it, and that topic is not played.
 """
 from __future__ import annotations
 
@@ -118,6 +124,7 @@ class _Playback(threading.Thread):
         self.resume_event.set()
         self.error: BaseException | None = None
         self.finished = False
+        self.pending = False  # a message read but not yet published (counted as skipped if the playback stops)
 
     def run(self) -> None:
         try:
@@ -125,6 +132,10 @@ class _Playback(threading.Thread):
             self.finished = not self.stop_event.is_set()
         except BaseException as exc:  # reported by the node; the thread must not die silently
             self.error = exc
+        finally:
+            if self.pending:
+                self.player.stats['skipped_stopped'] += 1
+                self.pending = False
 
     def _publish_clock(self, bag_ns: int) -> None:
         if self.clock_pub is not None:
@@ -143,6 +154,8 @@ class _Playback(threading.Thread):
             wall0 = time.monotonic_ns()
             last_clock = None
             for msg in self.reader.messages(topics, start_ns=base_ns):
+                stats['read'] += 1
+                self.pending = True
                 due = wall0 + int((msg.log_time_ns - base_ns) / self.rate)
                 while True:
                     if self.stop_event.is_set():
@@ -164,7 +177,12 @@ class _Playback(threading.Thread):
                         break
                     time.sleep(min(wait, self.clock_period_ns if self.clock_pub is not None else wait,
                                    50_000_000) / 1e9)
-                self.publishers[msg.topic].publish(msg.data)
+                self.pending = False
+                try:
+                    self.publishers[msg.topic].publish(msg.data)
+                except BaseException:
+                    stats['skipped_publish_error'] += 1
+                    raise
                 late = time.monotonic_ns() - due
                 stats['published'] += 1
                 stats['max_late_ms'] = max(stats['max_late_ms'], late / 1e6)
@@ -185,7 +203,8 @@ class SessionPlayer(Node):
         self.clock_pub = None
         self.state = 'idle'
         self.problems: list[str] = []
-        self.stats: dict[str, Any] = {'published': 0, 'max_late_ms': 0.0, 'loops': 0, 'bag_time_ns': None}
+        self.stats: dict[str, Any] = {'read': 0, 'published': 0, 'skipped_stopped': 0, 'skipped_publish_error': 0,
+                                      'max_late_ms': 0.0, 'loops': 0, 'bag_time_ns': None}
         self.topic_map: dict[str, str] = {}
         self.finished_at: float | None = None
         self.reader: BagReader | None = None
@@ -196,6 +215,7 @@ class SessionPlayer(Node):
         self._declare_lists()
         self.params = Params(self, PARAMS, _validate, lambda built, values: None)
         self.prepare()  # publishers exist from the start, so subscribers can connect before playing
+        self._check_offset()  # an offset past the end stops the node at start with the reason (exit status 2)
         self.create_service(Trigger, '~/start', self._srv_start)
         self.create_service(Trigger, '~/pause', self._srv_pause)
         self.create_service(Trigger, '~/stop', self._srv_stop)
@@ -258,8 +278,9 @@ class SessionPlayer(Node):
                                    self.list_param('topics_exclude'))
             publishers = self._make_publishers({t: infos[t] for t in chosen}, parse_remap(self.list_param('remap')))
             if not publishers:
-                raise ValueError(f'no topic of {path} to play (topics in the bag: {", ".join(sorted(infos))}; '
-                                 f'include {self.list_param("topics_include")}, exclude '
+                refused = ''.join(f'; {p}' for p in self.problems if ' not played: ' in p)
+                raise ValueError(f'no topic of {path} to play{refused} (topics in the bag: '
+                                 f'{", ".join(sorted(infos))}; include {self.list_param("topics_include")}, exclude '
                                  f'{self.list_param("topics_exclude")})')
             if p['publish_clock'] and self.clock_pub is None:
                 self.clock_pub = self.create_publisher(Clock, CLOCK_TOPIC, QoSProfile(
@@ -284,7 +305,9 @@ class SessionPlayer(Node):
             return 'already playing'
         self.prepare()
         p = self.params
-        self.stats.update(published=0, max_late_ms=0.0, loops=0, bag_time_ns=None)
+        self._check_offset()
+        self.stats.update(read=0, published=0, skipped_stopped=0, skipped_publish_error=0, max_late_ms=0.0, loops=0,
+                          bag_time_ns=None)
         self.playback = _Playback(self, self.reader, self.playing_topics,
                                   self.clock_pub if p['publish_clock'] else None, float(p['rate']),
                                   int(round(p['start_offset_s'] * 1e9)), bool(p['loop']), 1.0 / p['clock_rate_hz'])
@@ -296,6 +319,18 @@ class SessionPlayer(Node):
                    f'{", looping" if p["loop"] else ""}')
         self.get_logger().info(message)
         return message
+
+    def _check_offset(self) -> None:
+        """Raise ValueError when ``start_offset_s`` lies past the bag's last message: nothing would be played."""
+        reader = self.reader
+        offset = float(self.params['start_offset_s'])
+        if reader is None or reader.start_ns is None:
+            return
+        duration_ns = reader.duration_ns
+        if int(round(offset * 1e9)) > duration_ns:
+            raise ValueError(f'start_offset_s = {offset:g} s is past the end of the bag {self.params["bag"]} '
+                             f'({duration_ns * 1e-9:.3f} s long): nothing to play; use an offset in 0 .. '
+                             f'{duration_ns * 1e-9:.3f} s')
 
     def _make_publishers(self, infos: dict[str, Any], remap: dict[str, str]) -> dict[str, Any]:
         wanted: dict[str, tuple[str, Any, QoSProfile]] = {}
@@ -414,12 +449,16 @@ class SessionPlayer(Node):
     @property
     def counters(self) -> dict:
         """What ``run`` prints at exit (FINAL_COUNTERS)."""
-        return {'state': self.state, 'published': self.stats['published'], 'loops': self.stats['loops'],
-                'problems': len(self.problems)}
+        s = self.stats
+        return {'state': self.state, 'read': s['read'], 'published': s['published'],
+                'skipped_stopped': s['skipped_stopped'], 'skipped_publish_error': s['skipped_publish_error'],
+                'loops': s['loops'], 'problems': len(self.problems)}
 
     def _report(self):
         s = self.stats
-        pairs = [('bag', str(self.params['bag'])), ('published', str(s['published'])),
+        pairs = [('bag', str(self.params['bag'])), ('read', str(s['read'])), ('published', str(s['published'])),
+                 ('skipped_stopped', str(s['skipped_stopped'])),
+                 ('skipped_publish_error', str(s['skipped_publish_error'])),
                  ('max_late_ms', f'{s["max_late_ms"]:.3f}'), ('loops', str(s['loops'])),
                  ('problems', str(len(self.problems)))]
         level = ERROR if self.state == 'error' else (WARN if self.problems else OK)

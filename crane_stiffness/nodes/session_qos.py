@@ -18,6 +18,8 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from crane_stiffness import topics
+from crane_stiffness.bag.errors import UnsupportedTypeError
+from crane_stiffness.bag.msgdef import interface_prefix
 from crane_stiffness.nodes.common import rclpy_qos
 
 
@@ -120,13 +122,21 @@ def playback_qos(topic: str, offered: str | Iterable[Mapping[str, Any]] | None) 
 
 
 def message_class(msg_type: str) -> Any:
-    """The Python class of ``pkg/msg/Type`` (``pkg/Type`` accepted); raises ValueError if it is not installed."""
+    """The Python class of ``pkg/msg/Type`` (``pkg/Type`` accepted); raises ValueError if it is not installed.
+
+    Only a type the ament index lists as an interface (crane_stiffness.bag.msgdef.interface_prefix) is imported:
+    a type name read from a bag or the graph cannot make this import an arbitrary Python module.
+    """
     import importlib
     parts = msg_type.split('/')
     if len(parts) == 2:
         parts = [parts[0], 'msg', parts[1]]
-    if len(parts) != 3 or not all(parts):
+    if len(parts) != 3 or not all(parts) or parts[1] != 'msg':
         raise ValueError(f'message type {msg_type!r}: expected pkg/msg/Type')
+    try:
+        interface_prefix(msg_type)
+    except UnsupportedTypeError as exc:
+        raise ValueError(str(exc)) from None
     try:
         module = importlib.import_module(f'{parts[0]}.{parts[1]}')
         return getattr(module, parts[2])

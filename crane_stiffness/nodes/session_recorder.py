@@ -22,6 +22,13 @@ message count (both std_srvs/Trigger). With ``stop_on_program_done`` the recordi
 close the bag cleanly, also when repeated (they only end the spin loop; see crane_stiffness.nodes.common.run). After
 SIGKILL every chunk written so far is readable (chunks go to the OS as they are finished, at most
 ``flush_interval_s`` apart) and ``crane-stiffness recover BAG`` rewrites the files and metadata.yaml.
+
+A write the operating system refuses (disk full, I/O error) stops the recording, not the node: ERROR in the log and
+on /diagnostics with the error, the file cut after its last complete chunk, metadata.yaml written from what is on
+disk or its absence reported; ~/start opens a new bag once there is room. Every message received is accounted for
+(FINAL_COUNTERS and /diagnostics): ``received = written + dropped_*``, one counter per reason (``not_recording``:
+arrived after the bag was closed; ``write_error``: refused by the disk; ``lost_with_chunk``: accepted, then lost with
+the chunk a write error cut; ``rejected``: refused by the writer).
 """
 from __future__ import annotations
 
@@ -46,7 +53,7 @@ from std_srvs.srv import Trigger
 
 from crane_stiffness import __version__, topics
 from crane_stiffness.bag import BagWriter, dump_qos_profiles
-from crane_stiffness.bag.errors import BagError
+from crane_stiffness.bag.errors import BagError, BagWriteFailedError
 from crane_stiffness.bag.writer import COMPRESSIONS
 from crane_stiffness.config import GEOMETRY_PARAMS, ParamSpec, geometry_from_params
 from crane_stiffness.nodes.common import Diagnostics, run
@@ -182,6 +189,11 @@ class SessionRecorder(Node):
         self.recordings = 0
         self.errors = 0
         self.status = 'idle'
+        self.write_errors = 0                   # recordings stopped by a write error
+        self.write_failure: str | None = None   # the write error that stopped the last recording (cleared by start)
+        self.received = 0                       # every message callback (all recordings)
+        self.written = 0                        # on disk, recordings closed so far
+        self.dropped = {'not_recording': 0, 'write_error': 0, 'lost_with_chunk': 0, 'rejected': 0}
         self.state_subscription = None
         self.program_ran = False
         self.program_state: dict[str, Any] = {}
@@ -237,6 +249,7 @@ class SessionRecorder(Node):
             custom_data={'session': path.name, 'software_version': __version__})
         self.bag_path = path
         self.recordings += 1
+        self.write_failure = None
         self.program_ran = False
         self.program_state = {}
         self._flushed_at = 0
@@ -245,8 +258,10 @@ class SessionRecorder(Node):
             self.node_parameters = {}
             self._start_parameter_queries()
             self._subscribe_all()
-        except BaseException:
+        except BaseException as exc:
             self.stop('failed to start')
+            if isinstance(exc, BagWriteFailedError):
+                self.write_failure = str(exc)
             raise
         if p['flush_interval_s'] > 0:
             self.flush_timer = self.create_timer(float(p['flush_interval_s']), self._flush)
@@ -273,14 +288,40 @@ class SessionRecorder(Node):
                     'stop_reason': reason, 'end_time_ns': str(self.get_clock().now().nanoseconds),
                     'message_count': count, 'topics': {c.topic: c.count for c in self.channels.values() if c.count},
                     'program_state': self.program_state})
+            except BagWriteFailedError as exc:
+                self._note_write_failure(exc)
             except BagError:
-                pass
-            writer.close()
+                pass  # stopped by an earlier write error: reported then
+            try:
+                writer.close()
+            except BagWriteFailedError as exc:
+                self._note_write_failure(exc)
+            count = writer.message_count  # after a write error: what is on disk
+            self.written += count
+            self.dropped['lost_with_chunk'] += writer.lost_messages
             self.last_bag, self.last_count = self.bag_path, count
             self.bag_path = None
-            self.status = f'idle; last bag {self.last_bag} ({count} messages, {reason})'
-            self.get_logger().info(f'closed {self.last_bag}: {count} messages ({reason})')
+            if self.write_failure is not None:
+                self.status = (f'recording stopped by a write error: {self.write_failure}; {writer.salvage}; '
+                               'call ~/start once there is room')
+                self.get_logger().error(f'{self.last_bag}: {writer.salvage}')
+            else:
+                self.status = f'idle; last bag {self.last_bag} ({count} messages, {reason})'
+                self.get_logger().info(f'closed {self.last_bag}: {count} messages ({reason})')
             return self.last_bag, count
+
+    def _note_write_failure(self, exc: BagWriteFailedError) -> None:
+        """Count and log a write error once (the first one stops the writer)."""
+        if self.write_failure is None:
+            self.write_errors += 1
+            self.write_failure = str(exc)
+            self.get_logger().error(f'recording stopped: {exc}')
+
+    def _write_failed(self, exc: BagWriteFailedError) -> None:
+        """A write the disk refused: stop this recording (closing the bag as far as the disk allows), keep the node
+        running; ~/start begins a new bag."""
+        self._note_write_failure(exc)
+        self.stop('write error')
 
     def close(self) -> None:
         """Called by ``run`` on every exit (Ctrl-C, SIGTERM, end of spin): close the bag, writing metadata.yaml.
@@ -391,7 +432,11 @@ class SessionRecorder(Node):
                 self.destroy_client(q[key])
             del self._param_queries[node]
             if self.writer is not None:
-                self.writer.add_metadata(NODE_PARAMETERS_METADATA, self.node_parameters)
+                try:
+                    self.writer.add_metadata(NODE_PARAMETERS_METADATA, self.node_parameters)
+                except BagWriteFailedError as exc:
+                    self._write_failed(exc)
+                    return
 
     def _discover(self) -> None:
         """Subscribe topics outside the contract once they appear; follow a publisher whose type differs from the
@@ -418,18 +463,25 @@ class SessionRecorder(Node):
 
     # --- messages ---
     def _on_message(self, channel: _Channel, data: bytes) -> None:
+        self.received += 1
         writer = self.writer
         if writer is None:
+            self.dropped['not_recording'] += 1  # delivered after the bag was closed
             return
         now_ns = self.get_clock().now().nanoseconds
-        if not channel.added:
-            offered = offered_profiles(self, channel.topic, fallback=channel.qos)
-            writer.add_topic(channel.topic, channel.msg_type, dump_qos_profiles(offered))
-            channel.added = True
-        stamp = header_stamp_ns(data) if channel.stamped else None
         try:
+            if not channel.added:
+                offered = offered_profiles(self, channel.topic, fallback=channel.qos)
+                writer.add_topic(channel.topic, channel.msg_type, dump_qos_profiles(offered))
+                channel.added = True
+            stamp = header_stamp_ns(data) if channel.stamped else None
             writer.write(channel.topic, data, now_ns, stamp if stamp is not None else now_ns)
-        except (BagError, OSError) as exc:
+        except BagWriteFailedError as exc:
+            self.dropped['write_error'] += 1
+            self._write_failed(exc)
+            return
+        except BagError as exc:
+            self.dropped['rejected'] += 1
             self.errors += 1
             self.get_logger().error(f'writing {channel.topic} failed: {exc}', throttle_duration_sec=2.0)
             return
@@ -464,7 +516,11 @@ class SessionRecorder(Node):
     def _flush(self) -> None:
         writer = self.writer
         if writer is not None and writer.message_count != self._flushed_at:
-            writer.flush()
+            try:
+                writer.flush()
+            except BagWriteFailedError as exc:
+                self._write_failed(exc)
+                return
             self._flushed_at = writer.message_count
 
     # --- services ---
@@ -476,6 +532,7 @@ class SessionRecorder(Node):
             path = self.start()
         except (BagError, OSError, ValueError) as exc:
             response.success, response.message = False, f'cannot start recording: {exc}'
+            self.get_logger().error(response.message)
             return response
         response.success, response.message = True, f'recording to {path}'
         return response
@@ -493,20 +550,32 @@ class SessionRecorder(Node):
     def counters(self) -> dict:
         """What ``run`` prints at exit (FINAL_COUNTERS, after ``close``): the recordings and the last bag."""
         writer = self.writer
-        return {'recordings': self.recordings, 'errors': self.errors,
+        written = self.written + (writer.message_count if writer is not None else 0)
+        return {'recordings': self.recordings, 'errors': self.errors, 'write_errors': self.write_errors,
+                'received': self.received,
+                'written': written, **{f'dropped_{k}': v for k, v in self.dropped.items()},
                 'messages': writer.message_count if writer is not None else self.last_count,
-                'bag': str(self.bag_path or self.last_bag or '')}
+                'bag': str(self.bag_path or self.last_bag or ''),
+                **({'write_failure': self.write_failure} if self.write_failure else {})}
 
     def _report(self):
         writer = self.writer
+        counters = self.counters
         pairs = [('bag', str(self.bag_path or self.last_bag or '')), ('recordings', str(self.recordings)),
-                 ('errors', str(self.errors))]
+                 ('errors', str(self.errors)), ('write_errors', str(self.write_errors)),
+                 ('received', str(counters['received'])),
+                 ('written', str(counters['written']))]
+        pairs += [(f'dropped_{k}', str(v)) for k, v in self.dropped.items()]
+        if self.write_failure:
+            pairs.append(('write_failure', self.write_failure))
         if writer is not None:
             pairs.append(('messages', str(writer.message_count)))
             pairs += [(c.topic, str(c.count)) for c in self.channels.values()]
             if self.pending:
                 pairs.append(('waiting_for', ', '.join(self.pending)))
-        level = ERROR if self.errors else OK
+        # A write error is an ERROR until a new recording starts (the last bag stays incomplete, say so); other
+        # errors (a topic that cannot be recorded) stay ERROR.
+        level = ERROR if self.errors or self.write_failure else OK
         return level, self.status, pairs
 
 

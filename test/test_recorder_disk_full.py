@@ -1,0 +1,269 @@
+"""A full disk stops the recording, not the recorder (issue 9 case 4).
+
+The recorder runs as a process (started as ``ros2 run`` starts it) over real DDS and records onto a 2 MiB tmpfs the
+test mounts, most of it taken by a filler file. When the disk fills: ERROR on /diagnostics and in the log naming the
+file and the error, the process alive, the bag cut after its last complete record (every complete chunk read back by
+the ``mcap`` package's own stream reader, CRCs checked), metadata.yaml agreeing with what is on disk (or its absence
+reported). Then the filler is removed, ``~/start`` records a new, complete bag, and FINAL_COUNTERS account for every
+message received.
+"""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import time
+import zlib
+from pathlib import Path
+
+import pytest
+import yaml
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import WrenchStamped
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+
+from conftest import call_trigger, spin_until
+from crane_stiffness import topics
+from crane_stiffness.bag import BagDamageWarning, BagReader
+from crane_stiffness.cli import main as cli_main
+from crane_stiffness.nodes.common import RELIABLE_QOS
+from crane_stiffness.testing import rosrun
+
+NS = 1_000_000_000
+ERROR = 2
+
+
+def _final_counters(log: str, node: str) -> dict:
+    for line in log.splitlines():
+        if line.startswith(f'FINAL_COUNTERS {node} '):
+            return json.loads(line.split(' ', 2)[2])
+    raise AssertionError(f'no FINAL_COUNTERS {node} in:\n{log[-2000:]}')
+
+
+def _mcap_messages(path: Path) -> tuple[int, int]:
+    """(messages, complete chunks) of a .mcap file read by the ``mcap`` package's StreamReader alone, which
+    decompresses every chunk and checks its CRC; a file cut exactly after a record ends with EndOfFile and no
+    leftover bytes."""
+    from mcap.exceptions import EndOfFile
+    from mcap.records import Chunk, Message
+    from mcap.stream_reader import StreamReader, breakup_chunk
+    messages = chunks = 0
+    with open(path, 'rb') as f:
+        records = StreamReader(f, skip_magic=False, emit_chunks=True).records
+        while True:
+            try:
+                record = next(records)
+            except (StopIteration, EndOfFile):
+                break
+            if isinstance(record, Chunk):
+                chunks += 1
+                data = record.data
+                if record.compression == 'zstd':
+                    import zstandard
+                    data = zstandard.ZstdDecompressor().decompress(data, max_output_size=record.uncompressed_size)
+                assert zlib.crc32(data) == record.uncompressed_crc, f'chunk {chunks} of {path} is damaged'
+                messages += sum(isinstance(r, Message) for r in breakup_chunk(record, validate_crc=True))
+            elif isinstance(record, Message):
+                messages += 1
+        assert f.tell() == path.stat().st_size, 'bytes after the last complete record'
+    return messages, chunks
+
+
+def _wrench(ns: int, fy: float) -> WrenchStamped:
+    msg = WrenchStamped()
+    msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(ns, NS)
+    msg.header.frame_id = 'load_cell'
+    msg.wrench.force.y = fy
+    return msg
+
+
+def test_a_full_disk_stops_the_recording_not_the_recorder(install_tree, rclpy_context, tmp_path):
+    install, env = install_tree
+    disk = tmp_path / 'small_disk'
+    disk.mkdir()
+    mounted = subprocess.run(['mount', '-t', 'tmpfs', '-o', 'size=2m', 'tmpfs', str(disk)], capture_output=True,
+                             text=True)
+    assert mounted.returncode == 0, f'cannot mount a 2 MiB tmpfs (the test needs root): {mounted.stderr}'
+    try:
+        _run_on_small_disk(disk, env, rclpy_context, tmp_path)
+    finally:
+        # lazy: a file still open by a process the test failed to stop must not leave the mount behind
+        subprocess.run(['umount', '-l', str(disk)], check=False)
+
+
+def _run_on_small_disk(disk: Path, env: dict, ctx, tmp_path: Path) -> None:
+    free = shutil.disk_usage(disk).free
+    filler = disk / 'filler'
+    with open(filler, 'wb') as f:
+        f.write(b'\0' * (free - 300 * 1024))  # leave ~300 KiB: full after ~2 s of the stream below
+    out = disk / 'bags'
+    node = Node('disk_full_test', context=ctx)
+    pub = node.create_publisher(WrenchStamped, topics.WRENCH_COMMAND, RELIABLE_QOS)
+    reports: list = []
+    node.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, lambda m: reports.extend(
+        s for s in m.status if s.name == '/session_recorder'), 50)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+    with rosrun.Processes(env, tmp_path / 'logs') as procs:
+        procs.start('rec', 'crane_stiffness', 'session_recorder', [
+            '--ros-args', '-p', f'output_dir:={out}', '-p', 'session:=full', '-p', 'compression:=none',
+            '-p', 'chunk_size:=16384', '-p', 'flush_interval_s:=0.2', '-p', f'topics:=[{topics.WRENCH_COMMAND}]',
+            '-p', 'stop_on_program_done:=false', '-p', "record_node_parameters:=['']"])
+        assert spin_until(ex, lambda: pub.get_subscription_count() >= 1, 45), procs.log('rec')[-2000:]
+        t0 = 1_700_000_000 * NS
+        sent = 0
+        deadline = time.monotonic() + 60
+        while not any(r.level[0] == ERROR for r in reports) and time.monotonic() < deadline:
+            for _ in range(20):
+                pub.publish(_wrench(t0 + sent * 1_000_000, float(sent)))
+                sent += 1
+            spin_until(ex, lambda: False, 0.01)
+        procs.check_alive()  # the recorder lives on
+        error = next((r for r in reports if r.level[0] == ERROR), None)
+        assert error is not None, procs.log('rec')[-3000:]
+        bag = out / 'full'
+        mcap_file = bag / 'full_0.mcap'
+        assert 'No space left on device' in error.message and str(mcap_file) in error.message, error.message
+        assert 'call ~/start once there is room' in error.message
+        values = {kv.key: kv.value for kv in error.values}
+        assert 'No space left on device' in values['write_failure']
+        log = procs.log('rec')
+        assert '[ERROR]' in log and 'No space left on device' in log and 'FATAL' not in log, log[-3000:]
+
+        # the bag as far as the disk allowed: every complete chunk readable by an independent reader
+        on_disk, chunks = _mcap_messages(mcap_file)
+        assert chunks >= 3 and on_disk > 0
+        if (bag / 'metadata.yaml').exists():
+            meta = yaml.safe_load((bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+            assert meta['message_count'] == on_disk
+            assert meta['topics_with_message_count'][0]['message_count'] == on_disk
+            assert 'wrote ' + str(bag / 'metadata.yaml') in error.message
+        else:
+            assert 'metadata.yaml NOT written' in error.message and 'crane-stiffness recover' in error.message
+        assert not (bag / 'metadata.yaml.tmp').exists()
+        with pytest.warns(BagDamageWarning, match='truncated or unfinished'):
+            with BagReader(bag) as reader:
+                fy = reader.decode(topics.WRENCH_COMMAND)['fy']
+        assert fy.size == on_disk and fy.tolist() == [float(i) for i in range(on_disk)]  # reliable: no gap
+
+        # room again: ~/start records a new bag, complete
+        filler.unlink()
+        res = call_trigger(ex, node, '/session_recorder/start', 10)
+        assert res.success and res.message == f'recording to {out / "full_2"}', res.message
+        assert spin_until(ex, lambda: pub.get_subscription_count() >= 1, 10)
+        for i in range(500):
+            pub.publish(_wrench(t0 + (sent + i) * 1_000_000, -float(i)))
+        spin_until(ex, lambda: False, 1.0)
+        res = call_trigger(ex, node, '/session_recorder/stop', 10)
+        assert res.success and res.message == f'closed {out / "full_2"}: 500 messages', res.message
+        n = len(reports)
+        assert spin_until(ex, lambda: len(reports) > n + 1, 5)
+        assert reports[-1].level[0] == 0, reports[-1].message  # the new recording closed well: OK again
+        with BagReader(out / 'full_2') as reader:
+            assert reader.complete and reader.decode(topics.WRENCH_COMMAND)['fy'].tolist() == \
+                [-float(i) for i in range(500)]
+        codes = procs.stop()
+        log = procs.log('rec')
+    assert codes['rec'] == 0 and 'Traceback' not in log, log[-3000:]
+    counters = _final_counters(log, 'session_recorder')
+    dropped = {k[len('dropped_'):]: v for k, v in counters.items() if k.startswith('dropped_')}
+    assert set(dropped) == {'not_recording', 'write_error', 'lost_with_chunk', 'rejected'}, counters
+    assert counters['received'] == counters['written'] + sum(dropped.values()), counters
+    assert counters['written'] == on_disk + 500 and counters['write_errors'] == 1, counters
+    # the failing write lost at least the message being written or the chunk holding it
+    assert counters['received'] <= sent + 500 and dropped['write_error'] + dropped['lost_with_chunk'] >= 1, counters
+
+
+def test_recover_on_a_full_disk_names_the_file_and_the_space_it_needs(tmp_path):
+    """A killed recorder's bag on a full disk: recover cannot rewrite the file; it says which and how much room."""
+    from crane_stiffness.bag import BagWriter
+    disk = tmp_path / 'small_disk'
+    disk.mkdir()
+    mounted = subprocess.run(['mount', '-t', 'tmpfs', '-o', 'size=1m', 'tmpfs', str(disk)], capture_output=True,
+                             text=True)
+    assert mounted.returncode == 0, f'cannot mount a tmpfs (the test needs root): {mounted.stderr}'
+    try:
+        bag = disk / 'killed'
+        writer = BagWriter(bag, compression='none', chunk_size=8192)
+        writer.add_topic(topics.WRENCH_COMMAND, 'geometry_msgs/msg/WrenchStamped')
+        from rclpy.serialization import serialize_message
+        for i in range(3000):
+            writer.write(topics.WRENCH_COMMAND, serialize_message(_wrench(i * 1_000_000, float(i))), i * 1_000_000)
+        writer.flush()
+        os.close(writer._file.stream._fd)  # as after SIGKILL: no summary, no footer, no metadata.yaml
+        mcap_file = bag / 'killed_0.mcap'
+        size = mcap_file.stat().st_size
+        filler = disk / 'filler'
+        with open(filler, 'wb') as f:
+            f.write(b'\0' * (shutil.disk_usage(disk).free - 4096))
+        import io
+        from contextlib import redirect_stderr
+        err = io.StringIO()
+        with redirect_stderr(err):
+            code = cli_main(['recover', str(bag)])
+        text = err.getvalue()
+        assert code == 2, text
+        assert str(mcap_file) in text and 'No space left on device' in text, text
+        needed = int(text.split('needs about ')[1].split(' bytes')[0])
+        assert size * 0.9 <= needed <= size * 1.5, (needed, size)
+        assert mcap_file.stat().st_size == size and not list(bag.glob('*.recovering')), list(bag.iterdir())
+        filler.unlink()
+        assert cli_main(['recover', str(bag)]) == 0
+        with BagReader(bag) as reader:
+            assert reader.complete and reader.topics[topics.WRENCH_COMMAND].count == 3000
+    finally:
+        subprocess.run(['umount', '-l', str(disk)], check=False)
+
+
+def test_the_writer_on_a_full_disk_keeps_every_complete_chunk_and_says_what_it_could_not_write(tmp_path):
+    """BagWriter alone: the write error names the file; with not even room for metadata.yaml, close() says so and
+    leaves no partial file; a split file that cannot be created leaves the earlier files whole."""
+    from crane_stiffness.bag import BagWriteFailedError, BagWriter
+    from rclpy.serialization import serialize_message
+    disk = tmp_path / 'small_disk'
+    disk.mkdir()
+    mounted = subprocess.run(['mount', '-t', 'tmpfs', '-o', 'size=512k', 'tmpfs', str(disk)], capture_output=True,
+                             text=True)
+    assert mounted.returncode == 0, f'cannot mount a tmpfs (the test needs root): {mounted.stderr}'
+    try:
+        for split in (None, 100_000):
+            bag = disk / f'split_{split}'
+            writer = BagWriter(bag, compression='none', chunk_size=8192, split_max_bytes=split)
+            writer.add_topic(topics.WRENCH_COMMAND, 'geometry_msgs/msg/WrenchStamped')
+            accepted = 0
+            with pytest.raises(BagWriteFailedError, match=r'No space left on device; recording stopped') as caught:
+                while accepted < 100_000:
+                    writer.write(topics.WRENCH_COMMAND,
+                                 serialize_message(_wrench(accepted * 1_000_000, float(accepted))),
+                                 accepted * 1_000_000)
+                    accepted += 1
+            assert caught.value.errno == 28 and str(caught.value.path).startswith(str(bag))
+            fd = os.open(disk / f'filler_{split}', os.O_WRONLY | os.O_CREAT)  # take the room the cut gave back
+            try:
+                for size in (65536, 4096, 1):
+                    try:
+                        while True:
+                            os.write(fd, b'\0' * size)
+                    except OSError:
+                        pass
+            finally:
+                os.close(fd)
+            assert writer.close() is None
+            assert 'metadata.yaml NOT written ([Errno 28] No space left on device)' in writer.salvage
+            assert f'crane-stiffness recover {bag}' in writer.salvage
+            assert not (bag / 'metadata.yaml').exists() and not (bag / 'metadata.yaml.tmp').exists()
+            on_disk = sum(_mcap_messages(f)[0] for f in sorted(bag.glob('*.mcap')))
+            assert on_disk == writer.message_count and on_disk + writer.lost_messages == accepted
+            if split:
+                assert len(list(bag.glob('*.mcap'))) >= 2
+            with pytest.warns(BagDamageWarning):
+                with BagReader(bag) as reader:
+                    fy = reader.decode(topics.WRENCH_COMMAND)['fy'].tolist()
+            assert fy == [float(i) for i in range(on_disk)]
+            (disk / f'filler_{split}').unlink()
+            for leftover in bag.iterdir():  # make room for the next case
+                leftover.unlink()
+    finally:
+        subprocess.run(['umount', '-l', str(disk)], check=False)
