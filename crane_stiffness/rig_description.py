@@ -22,8 +22,10 @@ session (bag name), transport and drivers (below).
   config/drivers_onrobot_labjack.yaml; see README, "Real drivers").
 
 Each node also says which machine of the lab it belongs on (:attr:`RigNode.machine`): 'daq' (the rig PC: model,
-program, sensors, drivers and emulators) or 'analysis' (estimator and recorder); the lab network test places them
-in two network namespaces by it.
+program, sensors, drivers and emulators) or 'analysis' (estimator and recorder). ``machine`` (all | daq |
+analysis) starts only that machine's nodes, so one launch per PC runs the rig across the lab network; load_program
+still waits for every node of the whole rig (those on the other PC too). The lab network test places the nodes in
+two network namespaces by it.
 
 Every node starts at the same instant (as ``ros2 launch`` starts them); load_program starts the program only when
 the rig is ready. What "ready" means follows from the nodes started (:func:`readiness`): a message on the model's
@@ -68,6 +70,8 @@ ARGUMENTS: tuple[Argument, ...] = (
              "them; 'drivers' = through the device protocols (RDT, Modbus TCP) and the drivers netft, modbus_lvdt"),
     Argument('drivers', 'drivers_emulated.yaml', 'driver (and device emulator) parameters, read with '
              'transport:=drivers', config_file=True),
+    Argument('machine', 'all', "start the nodes of one lab machine only: 'daq' (model, program, sensors, drivers), "
+             "'analysis' (estimator, recorder), or 'all'"),
 )
 #: The values of the ``transport`` argument.
 TRANSPORTS = ('sim', 'drivers')
@@ -210,11 +214,14 @@ def rig_nodes(config_dir: str | os.PathLike, given: Mapping[str, str | bool] | N
     values = argument_values(config_dir, given)
     if values['transport'] not in TRANSPORTS:
         raise RigError(f"transport {values['transport']!r}: expected one of {', '.join(TRANSPORTS)}")
+    if values['machine'] not in ('all', *MACHINES):
+        raise RigError(f"machine {values['machine']!r}: expected one of all, {', '.join(MACHINES)}")
     files = config_files(config_dir, values)
     started = [node for node in NODES if (node.condition is None or flag(values[node.condition]))
                and all(str(values[arg]) == value for arg, value in node.when)]
+    # load_program waits for the whole rig, the other machine's nodes too.
     return [NodeStart(node.name, node.executable, tuple(files[f] for f in node.files),
                       {**{param: str(values[arg]) for param, arg in node.arguments.items()},
                        **(readiness(started) if node.runs_program else {})}, node.remappings, node.runs_program,
                       node.machine)
-            for node in started]
+            for node in started if values['machine'] in ('all', node.machine)]

@@ -47,13 +47,21 @@ def test_transport_argument_chooses_the_nodes():
     hw = [n.name for n in rig_nodes(CONFIG, {'transport': 'drivers', 'sim_sensors': 'false',
                                              'drivers': str(CONFIG / 'drivers_ati_labjack.yaml')})]
     assert hw == ['crane_model', 'netft', 'modbus_lvdt', 'stiffness_estimator', 'session_recorder', 'load_program']
-    # Where each node belongs in the lab (the network test splits the rig by it).
+    # Where each node belongs in the lab (the network test splits the rig by it), and one launch per PC.
     assert {n.name for n in NODES if n.machine == 'analysis'} == {'stiffness_estimator', 'session_recorder'}
+    daq = {n.name: n for n in rig_nodes(CONFIG, {'transport': 'drivers', 'machine': 'daq'})}
+    analysis = [n.name for n in rig_nodes(CONFIG, {'transport': 'drivers', 'machine': 'analysis'})]
+    assert analysis == ['stiffness_estimator', 'session_recorder']
+    assert sorted([*daq, *analysis]) == sorted(drivers)
+    # The program on the DAQ PC still waits for the estimator and the recorder on the analysis PC.
+    assert daq['load_program'].parameters == waits
 
 
 def test_transport_refusals_name_the_value_or_file(tmp_path):
     with pytest.raises(RigError, match="transport 'hardware': expected one of sim, drivers"):
         rig_nodes(CONFIG, {'transport': 'hardware'})
+    with pytest.raises(RigError, match="machine 'lab': expected one of all, daq, analysis"):
+        rig_nodes(CONFIG, {'machine': 'lab'})
     missing = tmp_path / 'nope.yaml'
     with pytest.raises(RigError, match=f'drivers file {missing} not found'):
         rig_nodes(CONFIG, {'transport': 'drivers', 'drivers': str(missing)})
@@ -121,13 +129,13 @@ def test_side_force_through_the_drivers_gives_the_prediction(install_tree, tmp_p
     ft, daq = _final_counters(logs['netft']), _final_counters(logs['modbus_lvdt'])
     rdt, modbus = _final_counters(logs['rdt_emulator']), _final_counters(logs['modbus_emulator'])
     duration = prog.duration_s
-    # 7 kHz records in, their 1 ms means out; a poll every 4 ms (a starved timer skips some: generous margins).
+    # 7 kHz records in, their 1 ms means out; a poll every 10 ms (a starved timer skips some: generous margins).
     assert ft['received'] > 7000 * duration * 0.9 and ft['published'] > 1000 * duration * 0.9, ft
     assert rdt['published'] >= ft['received'] and ft['records_lost'] <= 0.001 * ft['received'], (rdt, ft)
-    assert daq['published'] > 100 * duration and daq['failures'] <= 3, daq
+    assert daq['published'] > 50 * duration and daq['failures'] <= 3, daq
     assert modbus['published'] >= daq['published'], (modbus, daq)
     assert 'http_port' in logs['netft'] or 'counts/N' in logs['netft']  # calibration read from /netftapi2.xml
     est = summary['estimate']['loading']
     assert abs(summary['relative_error']) < 0.02, (summary['relative_error'], est, summary['prediction'])
-    assert est['n'] > 1000, est
+    assert est['n'] > 500, est
     assert summary['bag'] is not None
