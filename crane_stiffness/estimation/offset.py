@@ -26,6 +26,7 @@ estimator yet.
 """
 from __future__ import annotations
 
+import bisect
 from collections import deque
 from dataclasses import dataclass
 from typing import Iterable
@@ -148,8 +149,10 @@ class InterpolatingPairer:
         if not keep_s > 0:
             raise ParameterError('keep_s', keep_s, 'must be > 0 [s]')
         self.max_gap_s, self.keep_s = float(max_gap_s), float(keep_s)
-        self._fast_t: deque[float] = deque()
-        self._fast_y: deque[np.ndarray | float] = deque()
+        # Fast history as lists from index _start on (bisect on a list; the dropped head is cut off now and then).
+        self._fast_t: list[float] = []
+        self._fast_y: list[np.ndarray | float] = []
+        self._start = 0
         self._waiting: deque[tuple[int, float, object]] = deque()
         self._slow_count = 0
         self._last_slow = -np.inf
@@ -158,17 +161,23 @@ class InterpolatingPairer:
         self.unpaired_gap = 0
 
     def add_fast(self, stamp_s: float, value) -> list[tuple[int, float, object, object]]:
+        """A fast sample (stamp [s], value); returns the pairs it completes."""
         if not stamp_s > self._last_fast:
             raise DataError(f'fast stream: stamp {stamp_s!r} s does not follow {self._last_fast!r} s')
         self._last_fast = stamp_s
-        self._fast_t.append(float(stamp_s))
+        ft = self._fast_t
+        ft.append(float(stamp_s))
         self._fast_y.append(np.asarray(value, dtype=float) if np.ndim(value) else float(value))
-        while len(self._fast_t) > 2 and self._fast_t[1] < stamp_s - self.keep_s:
-            self._fast_t.popleft()
-            self._fast_y.popleft()
+        while len(ft) - self._start > 2 and ft[self._start + 1] < stamp_s - self.keep_s:
+            self._start += 1
+        if self._start > 4096 and self._start > len(ft) // 2:
+            del ft[:self._start], self._fast_y[:self._start]
+            self._start = 0
         return self._drain()
 
     def add_slow(self, stamp_s: float, value) -> list[tuple[int, float, object, object]]:
+        """A slow sample (stamp [s], value); returns the pairs that are complete (it waits for a fast sample at or
+        after its stamp)."""
         if not stamp_s > self._last_slow:
             raise DataError(f'slow stream: stamp {stamp_s!r} s does not follow {self._last_slow!r} s')
         self._last_slow = stamp_s
@@ -178,17 +187,15 @@ class InterpolatingPairer:
 
     def _drain(self) -> list[tuple[int, float, object, object]]:
         out = []
-        ft, fy = self._fast_t, self._fast_y
-        while self._waiting and ft and self._waiting[0][1] <= ft[-1]:
+        ft, fy, lo = self._fast_t, self._fast_y, self._start
+        while self._waiting and len(ft) > lo and self._waiting[0][1] <= ft[-1]:
             i, t, value = self._waiting.popleft()
-            if t < ft[0]:
+            if t < ft[lo]:
                 self.unpaired_outside += 1
                 continue
-            # The bracket: bisect over the kept history (a deque: index through a list view of stamps).
-            stamps = np.fromiter(ft, float, len(ft))
-            j = int(np.searchsorted(stamps, t, side='left'))
-            j = min(max(j, 1), len(ft) - 1)
-            t0, t1 = stamps[j - 1], stamps[j]
+            # The right-hand bracket as interpolate_at finds it: ft[j-1] < t <= ft[j].
+            j = min(max(bisect.bisect_left(ft, t, lo), lo + 1), len(ft) - 1)
+            t0, t1 = ft[j - 1], ft[j]
             if t1 - t0 > self.max_gap_s:
                 self.unpaired_gap += 1
                 continue
