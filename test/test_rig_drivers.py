@@ -139,3 +139,44 @@ def test_side_force_through_the_drivers_gives_the_prediction(install_tree, tmp_p
     assert abs(summary['relative_error']) < 0.02, (summary['relative_error'], est, summary['prediction'])
     assert est['n'] > 500, est
     assert summary['bag'] is not None
+
+
+def test_a_driver_waits_for_a_device_that_starts_after_it():
+    """Every node of a launch starts at once: the driver's first contact is retried for wait_for_device_s (here a
+    Modbus device that starts listening 1 s after the first attempt), a device that never comes is an error naming
+    the time waited, and a device that answers wrongly is an error at once."""
+    import threading
+
+    from crane_stiffness.devices.modbus_device import ModbusDevice
+    from crane_stiffness.drivers.errors import DeviceAddressError, DeviceResponseError
+    from crane_stiffness.drivers.modbus import Channel, ModbusPoller
+    from crane_stiffness.nodes.device_params import wait_for_device
+    from crane_stiffness.testing.lab import free_port
+
+    port = free_port()
+    device = ModbusDevice(lambda: 1.5e-3, channel=Channel(gain=0.001), port=port)
+    timer = threading.Timer(1.0, device.start)
+    poller = ModbusPoller('127.0.0.1', port, 1, Channel(gain=0.001), timeout_s=0.5)
+    logged: list[str] = []
+    t0 = time.monotonic()
+    timer.start()
+    try:
+        reading = wait_for_device(poller.read, 20.0, logged.append)
+    finally:
+        timer.join()
+        poller.close()
+        device.stop()
+    assert reading.metres == pytest.approx(1.5e-3, rel=1e-6)
+    assert 0.9 < time.monotonic() - t0 < 15
+    assert len(logged) == 1 and 'trying again for up to 20 s (wait_for_device_s)' in logged[0], logged
+    gone = ModbusPoller('127.0.0.1', free_port(), 1, Channel(), timeout_s=0.2)
+    with pytest.raises(DeviceAddressError, match=r'tried for 0.6 s: wait_for_device_s'):
+        wait_for_device(gone.read, 0.6)
+    calls = []
+
+    def wrong():
+        calls.append(1)
+        raise DeviceResponseError('answered Modbus exception 2')
+    with pytest.raises(DeviceResponseError):
+        wait_for_device(wrong, 10.0)
+    assert len(calls) == 1
