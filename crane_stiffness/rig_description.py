@@ -41,8 +41,8 @@ from typing import Any, Mapping
 from crane_stiffness import PACKAGE, topics
 from crane_stiffness.errors import CraneStiffnessError
 
-__all__ = ['ARGUMENTS', 'NODES', 'PACKAGE', 'Argument', 'NodeStart', 'RigError', 'RigNode', 'argument_values',
-           'config_files', 'flag', 'known_programs', 'MACHINES', 'program_file', 'readiness', 'rig_nodes', 'TRANSPORTS']
+__all__ = ['ARGUMENTS', 'MACHINES', 'NODES', 'PACKAGE', 'TRANSPORTS', 'Argument', 'NodeStart', 'RigError', 'RigNode',
+           'argument_values', 'config_files', 'flag', 'known_programs', 'program_file', 'readiness', 'rig_nodes']
 
 
 class RigError(CraneStiffnessError, ValueError):
@@ -83,8 +83,8 @@ MACHINES = ('daq', 'analysis')
 class RigNode:
     """One node of the rig (node name = executable name).
 
-    ``files``: the parameter files it reads, in order, by role: 'crane', 'sensors' (the arguments of those names)
-    or 'program' (the program's file). ``arguments``: parameters set from arguments, {parameter: argument}.
+    ``files``: the parameter files it reads, in order, by role: 'crane', 'sensors', 'drivers' (the arguments of
+    those names) or 'program' (the program's file). ``arguments``: parameters set from arguments, {parameter: argument}.
     ``condition``: the true/false argument that starts it (None: always). ``when``: (argument, value) pairs that
     must all hold for it to start (e.g. ('transport', 'drivers')). ``remappings``: (from, to) topic pairs.
     ``runs_program``: the node that plays the program; it starts with the others and waits until the rig is ready.
