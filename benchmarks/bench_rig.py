@@ -1,4 +1,7 @@
-"""Rig benchmark: the simulated rig as separate processes at 1 kHz (and 5 kHz), for 60 s each.
+"""Rig benchmark: the simulated rig as separate processes at 1 kHz (and 5 kHz), for 60 s each; with
+``--transports sim drivers`` also the rig through the drivers (rig.launch.py transport:=drivers: the load cell as a
+7 kHz RDT device read by netft, which publishes 1 ms means; the LVDT as a Modbus TCP device polled by modbus_lvdt
+at the same rate), so the two transports' estimate lags are measured back to back.
 
 Every node starts the way `ros2 run` starts it, from a colcon install tree. For each rate it reports, per sensor
 topic, the messages the sensor node published (its exit counter) against those the estimator received (its counter)
@@ -12,7 +15,12 @@ stamp of the newest pair an estimate includes:
 The baseline, measured in the same run, is the raw transport lag of the sensor messages (stamp to arrival here).
 Targets at 1 kHz: nothing lost, p99 ≤ 5 ms.
 
-Run: .venv/bin/python benchmarks/bench_rig.py [--seconds 60] [--rates 1000 5000] [--publish-rate HZ] [--json out.json]
+Through the drivers, ``rate`` is netft's publish rate and modbus_lvdt's poll rate (the RDT device runs at 7 kHz);
+"sent" is what netft and modbus_lvdt published; the LVDT's stamps are mid-request, not on a grid, so only the
+wrench's grid loss is counted; the LVDT's achieved poll rate is reported.
+
+Run: .venv/bin/python benchmarks/bench_rig.py [--seconds 60] [--rates 1000 5000] [--publish-rate HZ]
+     [--transports sim drivers] [--json out.json]
 """
 from __future__ import annotations
 
@@ -43,7 +51,7 @@ def final_counters(log: str) -> dict:
 
 
 def run_rate(rate: float, seconds: float, env: dict, share: Path, log_dir: Path, publish_rate: float = 0.0,
-             warmup_s: float = 2.0) -> dict:
+             warmup_s: float = 2.0, transport: str = 'sim') -> dict:
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
     from geometry_msgs.msg import PointStamped, WrenchStamped
@@ -54,6 +62,7 @@ def run_rate(rate: float, seconds: float, env: dict, share: Path, log_dir: Path,
     from crane_stiffness.nodes.common import RELIABLE_QOS, SENSOR_QOS, make_executor
     from crane_stiffness.rig_description import rig_nodes
     from crane_stiffness.testing import rosrun
+    from crane_stiffness.testing.lab import emulated_ports
     from crane_stiffness.testing.rig import estimate_fields, start_node
 
     fields = estimate_fields()
@@ -94,14 +103,22 @@ def run_rate(rate: float, seconds: float, env: dict, share: Path, log_dir: Path,
     node.create_subscription(Float64MultiArray, topics.STIFFNESS_VALUES, on_values, RELIABLE_QOS)
     node.create_subscription(DiagnosticArray, topics.STIFFNESS_ESTIMATE, on_estimate, RELIABLE_QOS)
     # The rig of rig.launch.py without the recorder, the sensors at the benchmark's rates.
-    nodes = rig_nodes(share, {'program': 'side_force', 'record': False})
-    rates = {'sample_rate_hz': rate, **({'publish_rate_hz': publish_rate} if publish_rate else {})}
+    nodes = rig_nodes(share, {'program': 'side_force', 'record': False, 'transport': transport})
+    if transport == 'sim':
+        sensor_nodes = {t: n for t, n in zip(sensors, ('load_cell', 'lvdt'))}
+        rates = {'sample_rate_hz': rate, **({'publish_rate_hz': publish_rate} if publish_rate else {})}
+        overrides = {'load_cell': rates, 'lvdt': rates}
+    else:
+        sensor_nodes = {t: n for t, n in zip(sensors, ('netft', 'modbus_lvdt'))}
+        overrides = emulated_ports()
+        overrides['netft'] |= {'publish_rate_hz': rate, **({'flush_rate_hz': publish_rate} if publish_rate else {})}
+        overrides['modbus_lvdt'] |= {'poll_rate_hz': rate}
     repeats = int(np.ceil(seconds / 21.0))
-    with rosrun.Processes(env, log_dir / f'{int(rate)}hz') as procs:
+    with rosrun.Processes(env, log_dir / f'{transport}_{int(rate)}hz') as procs:
         for n in nodes:
             if not n.runs_program:
-                start_node(procs, n, rates if n.name in ('load_cell', 'lvdt') else None)
-        deadline = time.monotonic() + 90
+                start_node(procs, n, overrides.get(n.name))
+        deadline = time.monotonic() + 150
         while not (node.count_subscribers(topics.LOAD_CELL_WRENCH) >= 2
                    and node.count_subscribers(topics.LVDT_DISPLACEMENT) >= 2
                    and node.count_publishers(topics.STIFFNESS_VALUES) >= 1):
@@ -119,12 +136,13 @@ def run_rate(rate: float, seconds: float, env: dict, share: Path, log_dir: Path,
             executor.spin_once(timeout_sec=0.01)
         procs.check_alive()
         # Stop the program and the sensors; everything they sent must still arrive.
-        procs.stop(names=('load_program', 'load_cell', 'lvdt'))
+        procs.stop(names=('load_program', *sensor_nodes.values()))
         t_drain = time.monotonic() + 3.0
         while time.monotonic() < t_drain:
             executor.spin_once(timeout_sec=0.01)
-        sent = {topics.LOAD_CELL_WRENCH: final_counters(procs.log('load_cell')).get('published'),
-                topics.LVDT_DISPLACEMENT: final_counters(procs.log('lvdt')).get('published')}
+        sent = {t: final_counters(procs.log(n)).get('published') for t, n in sensor_nodes.items()}
+        driver_counters = ({n: final_counters(procs.log(n)) for n in sensor_nodes.values()}
+                           if transport == 'drivers' else {})
     executor.remove_node(node)
     node.destroy_node()
     rclpy.shutdown()
@@ -133,11 +151,11 @@ def run_rate(rate: float, seconds: float, env: dict, share: Path, log_dir: Path,
     if os.environ.get('BENCH_DUMP'):  # raw arrays for a closer look
         np.savez(os.environ['BENCH_DUMP'], est=est, **{t.strip('/').replace('/', '_'): a for t, a in arrays.items()})
 
-    def grid_loss(ns: np.ndarray) -> dict:
+    def grid_loss(ns: np.ndarray, on_grid: bool = True) -> dict:
         """Samples sit on a grid of 1/rate: every missing grid point between the first and last received stamp
         is a message lost on the way to this observer (exact, unlike counts that include start-up)."""
         ns = np.unique(ns)
-        if len(ns) < 2:
+        if len(ns) < 2 or not on_grid:
             return {'expected': None, 'received': len(ns), 'lost': None, 'gaps': []}
         period = 1e9 / rate
         expected = int(round((ns[-1] - ns[0]) / period)) + 1
@@ -170,11 +188,16 @@ def run_rate(rate: float, seconds: float, env: dict, share: Path, log_dir: Path,
         per_sample = est[i[ok], 1] - t[ok]
     received = {topics.LOAD_CELL_WRENCH: int(est_input.get('force_received', -1)),
                 topics.LVDT_DISPLACEMENT: int(est_input.get('displacement_received', -1))}
+    lvdt_ns = np.unique(arrays[topics.LVDT_DISPLACEMENT][:, 0])
+    achieved = (len(lvdt_ns) - 1) / ((lvdt_ns[-1] - lvdt_ns[0]) * 1e-9) if len(lvdt_ns) > 1 else float('nan')
     return {
+        'transport': transport, 'driver_counters': driver_counters,
+        'lvdt_achieved_rate_hz': round(float(achieved), 1),
         'rate_hz': rate, 'seconds': seconds, 'publish_rate_hz': publish_rate or None, 'steady_state_from_s': warmup_s,
         'topics': {t: {'sent': sent[t], 'estimator_received': received[t], 'observer_received': len(arrays[t]),
                        'sent_minus_estimator_received': None if sent[t] is None else sent[t] - received[t],
-                       'observer_grid': grid_loss(arrays[t][:, 0])} for t in sensors},
+                       'observer_grid': grid_loss(arrays[t][:, 0], transport == 'sim' or t == topics.LOAD_CELL_WRENCH)}
+                   for t in sensors},
         'estimator_own_lag_ms': {k: float(est_input.get(f'lag_{k}_ms', 'nan')) for k in ('p50', 'p99', 'max')}
         | {'n': int(est_input.get('lag_n', 0))},
         'estimate_lag_ms': stats(est_in[:, 1] - est_in[:, 0]),
@@ -191,6 +214,9 @@ def main(argv=None) -> int:
                     help='sensor publish (burst) rate [Hz]; 0 = config/sensors.yaml')
     ap.add_argument('--warmup', type=float, default=2.0,
                     help='observer statistics start this long after the program start [s]')
+    ap.add_argument('--transports', nargs='+', default=['sim'], choices=['sim', 'drivers'],
+                    help="sim: the simulated sensors' direct topics; drivers: through the device emulators and the "
+                         'drivers (rig.launch.py transport:=drivers)')
     ap.add_argument('--json', help='write the figures here')
     args = ap.parse_args(argv)
     from crane_stiffness.testing import rosrun
@@ -198,9 +224,12 @@ def main(argv=None) -> int:
     rosrun.colcon_build(REPO, ws / 'build', ws / 'install', ws / 'log')
     env = rosrun.install_environment(ws / 'install')
     share = ws / 'install' / 'crane_stiffness' / 'share' / 'crane_stiffness' / 'config'
-    results = [run_rate(r, args.seconds, env, share, ws / 'logs', args.publish_rate, args.warmup) for r in args.rates]
+    results = [run_rate(r, args.seconds, env, share, ws / 'logs', args.publish_rate, args.warmup, transport)
+               for transport in args.transports for r in args.rates]
     for res in results:
-        print(f"--- {res['rate_hz']:.0f} Hz load cell and LVDT, {res['seconds']:.0f} s")
+        via = (f"through the drivers (RDT 7 kHz -> netft {res['rate_hz']:.0f} Hz means; modbus_lvdt polls achieved "
+               f"{res['lvdt_achieved_rate_hz']} Hz)" if res['transport'] == 'drivers' else 'simulated sensors, direct')
+        print(f"--- {res['rate_hz']:.0f} Hz load cell and LVDT, {res['seconds']:.0f} s, {via}")
         for topic, c in res['topics'].items():
             g = c['observer_grid']
             print(f"  {topic:22s} sent {c['sent']}, estimator received {c['estimator_received']} (difference "
@@ -218,6 +247,15 @@ def main(argv=None) -> int:
               f"buffer): p50 {s['p50']} ms, p99 {s['p99']} ms (n = {s['n']})")
         print(f"    baseline, raw sensor messages stamp to arrival: p50 {b['p50']} ms, p99 {b['p99']} ms "
               f"(n = {b['n']})")
+    by = {(r['transport'], r['rate_hz']): r for r in results}
+    for rate in args.rates:
+        if ('sim', rate) in by and ('drivers', rate) in by:
+            a, b = by[('sim', rate)], by[('drivers', rate)]
+            print(f"=== {rate:.0f} Hz, estimate arrival - newest pair stamp, steady state: direct p50 "
+                  f"{a['estimate_lag_ms']['p50']} / p99 {a['estimate_lag_ms']['p99']} ms; through the drivers p50 "
+                  f"{b['estimate_lag_ms']['p50']} / p99 {b['estimate_lag_ms']['p99']} ms (raw sensor messages: direct "
+                  f"p50 {a['baseline_sensor_transport_lag_ms']['p50']} ms, drivers p50 "
+                  f"{b['baseline_sensor_transport_lag_ms']['p50']} ms)")
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=1))
     return 0

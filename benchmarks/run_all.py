@@ -10,26 +10,30 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 OUT = HERE.parent / 'out' / 'bench'
+#: (script, arguments, JSON file name or None: the script writes no JSON).
 BENCHMARKS = [
-    ('bench_solver.py', []),
-    ('bench_bag_decode.py', []),
-    ('bench_analyze.py', []),
-    ('bench_rig.py', []),
-    ('bench_startup.py', []),
-    ('bench_soak.py', []),   # 10 minutes of the whole rig: every node's memory growth
+    ('bench_solver.py', [], 'bench_solver.json'),
+    ('bench_bag_decode.py', [], None),
+    ('bench_analyze.py', [], None),
+    ('bench_rig.py', [], 'bench_rig.json'),
+    # The rig through the drivers (rig.launch.py transport:=drivers) against the direct topics, back to back.
+    ('bench_rig.py', ['--rates', '1000', '--transports', 'sim', 'drivers'], 'bench_rig_drivers.json'),
+    ('bench_netft.py', [], 'bench_netft.json'),
+    ('bench_startup.py', [], 'bench_startup.json'),
+    ('bench_soak.py', [], 'bench_soak.json'),   # 10 minutes of the whole rig: every node's memory growth
 ]
 
 
 def main() -> int:
     OUT.mkdir(parents=True, exist_ok=True)
     failed = []
-    for script, args in BENCHMARKS:
-        print(f'=== {script}', flush=True)
+    for script, args, json_name in BENCHMARKS:
+        print(f'=== {script} {" ".join(args)}', flush=True)
         argv = [sys.executable, str(HERE / script), *args]
-        if script in ('bench_solver.py', 'bench_rig.py', 'bench_startup.py', 'bench_soak.py'):
-            argv += ['--json', str(OUT / script.replace('.py', '.json'))]
+        if json_name is not None:
+            argv += ['--json', str(OUT / json_name)]
         if subprocess.run(argv).returncode != 0:
-            failed.append(script)
+            failed.append(f'{script} {" ".join(args)}'.strip())
     if failed:
         print('targets missed or errors in: ' + ', '.join(failed))
     return 1 if failed else 0

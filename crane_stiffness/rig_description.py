@@ -7,8 +7,25 @@ and the benchmarks.
 
 Arguments (:data:`ARGUMENTS`): program (side_force | side_force_slack | moment_z | force_z, or a path to a program
 YAML), crane (a geometry YAML; default the lab model), sensors (sensor YAML), sim_sensors and record (true/false),
-session (bag name). To use real sensors, set sim_sensors:=false and remap the drivers' topics onto /load_cell/wrench
-and /lvdt/displacement (see README, "Real drivers").
+session (bag name), transport and drivers (below).
+
+``transport`` says how the sensor readings reach the estimator:
+
+- ``sim`` (default): the simulated sensors ``load_cell`` and ``lvdt`` publish /load_cell/wrench and
+  /lvdt/displacement directly.
+- ``drivers``: through the device protocols and the real drivers. The simulated physics is served as devices on
+  127.0.0.1 (``rdt_emulator``: an RDT F/T sensor on UDP; ``modbus_emulator``: a Modbus TCP analog input), and the
+  hardware drivers ``netft`` and ``modbus_lvdt`` read them and publish the two topics. Every one of those four
+  nodes reads the ``drivers`` file (default config/drivers_emulated.yaml: the addresses, ports, rates and
+  calibration of both sides). With ``sim_sensors:=false`` the emulators do not start and the drivers talk to real
+  hardware: give a drivers file with the devices' addresses (config/drivers_ati_labjack.yaml,
+  config/drivers_onrobot_labjack.yaml; see README, "Real drivers").
+
+Each node also says which machine of the lab it belongs on (:attr:`RigNode.machine`): 'daq' (the rig PC: model,
+program, sensors, drivers and emulators) or 'analysis' (estimator and recorder). ``machine`` (all | daq |
+analysis) starts only that machine's nodes, so one launch per PC runs the rig across the lab network; load_program
+still waits for every node of the whole rig (those on the other PC too). The lab network test places the nodes in
+two network namespaces by it.
 
 Every node starts at the same instant (as ``ros2 launch`` starts them); load_program starts the program only when
 the rig is ready. What "ready" means follows from the nodes started (:func:`readiness`): a message on the model's
@@ -24,8 +41,8 @@ from typing import Any, Mapping
 from crane_stiffness import PACKAGE, topics
 from crane_stiffness.errors import CraneStiffnessError
 
-__all__ = ['ARGUMENTS', 'NODES', 'PACKAGE', 'Argument', 'NodeStart', 'RigError', 'RigNode', 'argument_values',
-           'config_files', 'flag', 'known_programs', 'program_file', 'readiness', 'rig_nodes']
+__all__ = ['ARGUMENTS', 'MACHINES', 'NODES', 'PACKAGE', 'TRANSPORTS', 'Argument', 'NodeStart', 'RigError', 'RigNode',
+           'argument_values', 'config_files', 'flag', 'known_programs', 'program_file', 'readiness', 'rig_nodes']
 
 
 class RigError(CraneStiffnessError, ValueError):
@@ -49,27 +66,41 @@ ARGUMENTS: tuple[Argument, ...] = (
     Argument('sim_sensors', 'true', 'start the simulated sensors'),
     Argument('record', 'true', 'record the session to bags/'),
     Argument('session', '', 'bag name (default: time stamped)'),
+    Argument('transport', 'sim', "how the sensor readings reach the estimator: 'sim' = the simulated sensors publish "
+             "them; 'drivers' = through the device protocols (RDT, Modbus TCP) and the drivers netft, modbus_lvdt"),
+    Argument('drivers', 'drivers_emulated.yaml', 'driver (and device emulator) parameters, read with '
+             'transport:=drivers', config_file=True),
+    Argument('machine', 'all', "start the nodes of one lab machine only: 'daq' (model, program, sensors, drivers), "
+             "'analysis' (estimator, recorder), or 'all'"),
 )
+#: The values of the ``transport`` argument.
+TRANSPORTS = ('sim', 'drivers')
+#: The machines of the lab a node belongs on (see :attr:`RigNode.machine`).
+MACHINES = ('daq', 'analysis')
 
 
 @dataclass(frozen=True)
 class RigNode:
     """One node of the rig (node name = executable name).
 
-    ``files``: the parameter files it reads, in order, by role: 'crane', 'sensors' (the arguments of those names)
-    or 'program' (the program's file). ``arguments``: parameters set from arguments, {parameter: argument}.
-    ``condition``: the true/false argument that starts it (None: always). ``remappings``: (from, to) topic pairs.
+    ``files``: the parameter files it reads, in order, by role: 'crane', 'sensors', 'drivers' (the arguments of
+    those names) or 'program' (the program's file). ``arguments``: parameters set from arguments, {parameter: argument}.
+    ``condition``: the true/false argument that starts it (None: always). ``when``: (argument, value) pairs that
+    must all hold for it to start (e.g. ('transport', 'drivers')). ``remappings``: (from, to) topic pairs.
     ``runs_program``: the node that plays the program; it starts with the others and waits until the rig is ready.
     ``reads``: topics the program must not start before this node subscribes to (nothing of them may be lost).
+    ``machine``: where it runs in the lab: 'daq' (the rig PC, with the sensors' devices) or 'analysis'.
     """
 
     executable: str
     files: tuple[str, ...]
     arguments: Mapping[str, str] = field(default_factory=dict)
     condition: str | None = None
+    when: tuple[tuple[str, str], ...] = ()
     remappings: tuple[tuple[str, str], ...] = ()
     runs_program: bool = False
     reads: tuple[str, ...] = ()
+    machine: str = 'daq'
 
     @property
     def name(self) -> str:
@@ -78,14 +109,24 @@ class RigNode:
 
 _STREAMS = (topics.LOAD_CELL_WRENCH, topics.LVDT_DISPLACEMENT)
 
+_SIM = (('transport', 'sim'),)
+_DRIVERS = (('transport', 'drivers'),)
+
 NODES: tuple[RigNode, ...] = (
     RigNode('crane_model', ('crane',), reads=(topics.WRENCH_COMMAND,)),
-    RigNode('load_cell', ('sensors',), condition='sim_sensors', reads=(topics.APPLIED_WRENCH,)),
-    RigNode('lvdt', ('sensors',), condition='sim_sensors', reads=(topics.PLATFORM_POSE,)),
-    RigNode('stiffness_estimator', ('crane', 'sensors'), reads=(topics.WRENCH_COMMAND, *_STREAMS)),
+    RigNode('load_cell', ('sensors',), condition='sim_sensors', when=_SIM, reads=(topics.APPLIED_WRENCH,)),
+    RigNode('lvdt', ('sensors',), condition='sim_sensors', when=_SIM, reads=(topics.PLATFORM_POSE,)),
+    # transport:=drivers: the simulated physics served as devices (only with sim_sensors), read by the drivers.
+    RigNode('rdt_emulator', ('drivers',), condition='sim_sensors', when=_DRIVERS,
+            reads=(topics.APPLIED_WRENCH,)),
+    RigNode('modbus_emulator', ('drivers',), condition='sim_sensors', when=_DRIVERS, reads=(topics.PLATFORM_POSE,)),
+    RigNode('netft', ('drivers',), when=_DRIVERS),
+    RigNode('modbus_lvdt', ('drivers',), when=_DRIVERS),
+    RigNode('stiffness_estimator', ('crane', 'sensors'), reads=(topics.WRENCH_COMMAND, *_STREAMS),
+            machine='analysis'),
     RigNode('session_recorder', ('crane', 'sensors', 'program'), arguments={'session': 'session'},
             condition='record', reads=(topics.WRENCH_COMMAND, topics.APPLIED_WRENCH, topics.REJECTED_COMMAND,
-                                        topics.PLATFORM_POSE, *_STREAMS)),
+                                        topics.PLATFORM_POSE, *_STREAMS), machine='analysis'),
     RigNode('load_program', ('program',), runs_program=True),
 )
 #: Topics a message must have arrived on before the program starts: the model's prediction (latched) and both
@@ -103,6 +144,7 @@ class NodeStart:
     parameters: dict[str, Any]
     remappings: tuple[tuple[str, str], ...]
     runs_program: bool
+    machine: str = 'daq'
 
 
 def program_file(program: str, config_dir: str | os.PathLike) -> str:
@@ -146,8 +188,10 @@ def config_files(config_dir: str | os.PathLike, given: Mapping[str, str | bool] 
     a file that does not exist (for a program name, with the programs there are)."""
     values = argument_values(config_dir, given)
     files = {'crane': str(values['crane']), 'sensors': str(values['sensors']),
-             'program': program_file(str(values['program']), config_dir)}
+             'program': program_file(str(values['program']), config_dir), 'drivers': str(values['drivers'])}
     for role, path in files.items():
+        if role == 'drivers' and values['transport'] != 'drivers':
+            continue  # read only by the drivers' nodes
         if os.path.isfile(path):
             continue
         if role == 'program' and not str(values['program']).endswith('.yaml'):
@@ -170,9 +214,16 @@ def readiness(started: list[RigNode]) -> dict[str, list[str]]:
 def rig_nodes(config_dir: str | os.PathLike, given: Mapping[str, str | bool] | None = None) -> list[NodeStart]:
     """The nodes the rig starts for the arguments ``given`` (the rest at their defaults), in start order."""
     values = argument_values(config_dir, given)
+    if values['transport'] not in TRANSPORTS:
+        raise RigError(f"transport {values['transport']!r}: expected one of {', '.join(TRANSPORTS)}")
+    if values['machine'] not in ('all', *MACHINES):
+        raise RigError(f"machine {values['machine']!r}: expected one of all, {', '.join(MACHINES)}")
     files = config_files(config_dir, values)
-    started = [node for node in NODES if node.condition is None or flag(values[node.condition])]
+    started = [node for node in NODES if (node.condition is None or flag(values[node.condition]))
+               and all(str(values[arg]) == value for arg, value in node.when)]
+    # load_program waits for the whole rig, the other machine's nodes too.
     return [NodeStart(node.name, node.executable, tuple(files[f] for f in node.files),
                       {**{param: str(values[arg]) for param, arg in node.arguments.items()},
-                       **(readiness(started) if node.runs_program else {})}, node.remappings, node.runs_program)
-            for node in started]
+                       **(readiness(started) if node.runs_program else {})}, node.remappings, node.runs_program,
+                      node.machine)
+            for node in started if values['machine'] in ('all', node.machine)]

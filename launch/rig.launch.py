@@ -5,6 +5,9 @@ program when the rig is ready (it is told what to wait for: the nodes started he
 parameter file stops the launch at once with an error naming the file (rig_description.RigError).
 
     ros2 launch crane_stiffness rig.launch.py program:=side_force record:=true
+    ros2 launch crane_stiffness rig.launch.py transport:=drivers     # through RDT/Modbus emulators and the drivers
+    ros2 launch crane_stiffness rig.launch.py transport:=drivers sim_sensors:=false \
+        drivers:=/path/to/drivers_ati_labjack.yaml                  # real hardware
     ros2 launch crane_stiffness rig.launch.py --show-args
 """
 from launch import LaunchDescription

@@ -1,10 +1,15 @@
 """Parameter checks the hardware driver and device emulator nodes share (netft, modbus_lvdt, rdt_emulator,
-modbus_emulator): an address, a port, and the parameters a node reads only at start."""
+modbus_emulator): an address, a port, the parameters a node reads only at start, and the wait for a device at
+start."""
 from __future__ import annotations
 
-from typing import Any, Mapping, Sequence
+import time
+from typing import Any, Callable, Mapping, Sequence, TypeVar
 
+from crane_stiffness.drivers.errors import DeviceAddressError, DeviceSilentError
 from crane_stiffness.nodes.parameters import check
+
+T = TypeVar('T')
 
 
 def check_address(values: Mapping[str, Any], host: str = 'host', ports: Sequence[str] = ('port',),
@@ -27,3 +32,24 @@ def check_start_only(values: Mapping[str, Any], current: Mapping[str, Any], name
     for name in names:
         check(values[name] == current[name], name, values[name],
               f'is read at start only (now {current[name]!r}): restart the node to change it')
+
+
+def wait_for_device(action: Callable[[], T], wait_s: float, log: Callable[[str], None] | None = None,
+                    retry_interval_s: float = 0.25) -> T:
+    """``action()`` (a first contact with a device: a read, a request), tried again every ``retry_interval_s``
+    while it raises DeviceAddressError or DeviceSilentError (nothing there yet: the device still booting, or its
+    emulator still starting when every node of a launch starts at once) until ``wait_s`` has passed; then the last
+    error is raised with the time waited. A DeviceResponseError (a device that answers wrongly) is raised at once.
+    ``log`` gets one line when the first attempt fails."""
+    deadline = time.monotonic() + wait_s
+    first = True
+    while True:
+        try:
+            return action()
+        except (DeviceAddressError, DeviceSilentError) as exc:
+            if time.monotonic() + retry_interval_s > deadline:
+                raise type(exc)(f'{exc} (tried for {wait_s:g} s: wait_for_device_s)') from None
+            if first and log is not None:
+                log(f'{exc}; trying again for up to {wait_s:g} s (wait_for_device_s)')
+            first = False
+            time.sleep(retry_interval_s)

@@ -8,7 +8,8 @@ stamped at the middle of the request (the DAQ has no clock of its own to stamp w
 (timeouts, dropped connections, Modbus exception responses: ERROR with the reason) and the poll jitter (start of
 each request against the ideal grid: p50, p99, max [µs]; late polls). After a failure the device is asked again
 every ``reconnect_interval_s``. Service ~/zero (std_srvs/Trigger) zeroes on the mean of the last ``zero_samples``
-readings. At start a wrong address or a silent device stops the node (exit 2) with the reason.
+readings. At start a wrong address or a silent device stops the node (exit 2) with the reason, after trying for
+``wait_for_device_s``.
 """
 from __future__ import annotations
 
@@ -28,7 +29,7 @@ from crane_stiffness.drivers.errors import DeviceResponseError, DeviceSilentErro
 from crane_stiffness.drivers.modbus import DATA_TYPES, MODBUS_TCP_PORT, REGISTER_TYPES, Channel, ModbusPoller
 from crane_stiffness.nodes.common import SENSOR_QOS, Counters, Diagnostics, create_grid_timer, run
 from crane_stiffness.nodes.parameters import Params, check, positive
-from crane_stiffness.nodes.device_params import check_address, check_start_only
+from crane_stiffness.nodes.device_params import check_address, check_start_only, wait_for_device
 from crane_stiffness.sim.sampling import NS_PER_S
 from crane_stiffness.status import ERROR, OK, WARN
 
@@ -57,8 +58,10 @@ PARAMS = (
     ParamSpec('reconnect_interval_s', 1.0, 'after a failure, interval between attempts to reach the device [s]'),
     ParamSpec('frame_id', 'lvdt', 'header.frame_id of the published reading [-]'),
     ParamSpec('zero_samples', 10, 'readings averaged by the ~/zero service [samples]', low=1),
+    ParamSpec('wait_for_device_s', 3.0, 'at start, time to wait for a first answer before stopping with an error; '
+              'longer when the DAQ (or its emulator) starts with the driver [s]'),
 )
-START_ONLY = ('host', 'port', 'unit_id', 'timeout_s')
+START_ONLY = ('host', 'port', 'unit_id', 'timeout_s', 'wait_for_device_s')
 CHANNEL_KEYS = ('register', 'register_type', 'data_type', 'word_order', 'gain', 'offset')
 
 
@@ -70,7 +73,7 @@ def channel_from(values: dict[str, Any]) -> Channel:
 def _validate(values: dict[str, Any]) -> Channel:
     check_address(values)
     check(0 <= values['unit_id'] <= 255, 'unit_id', values['unit_id'], 'must be in 0..255')
-    positive(values, 'poll_rate_hz', 'timeout_s', 'reconnect_interval_s')
+    positive(values, 'poll_rate_hz', 'timeout_s', 'reconnect_interval_s', 'wait_for_device_s')
     check(values['zero_samples'] >= 1, 'zero_samples', values['zero_samples'], 'must be >= 1')
     check(isinstance(values['frame_id'], str) and values['frame_id'] != '', 'frame_id', values['frame_id'],
           'must be a non-empty string')
@@ -123,7 +126,8 @@ class ModbusLvdt(Node):
         if self.poller is None:
             self.poller = ModbusPoller(values['host'], values['port'], values['unit_id'], channel,
                                        values['timeout_s'], clock_ns=self._now_ns)
-            first = self.poller.read()  # a wrong address or a silent device stops the start with the reason
+            # A wrong address or a silent device stops the start with the reason, after wait_for_device_s.
+            first = wait_for_device(self.poller.read, values['wait_for_device_s'], self.get_logger().warning)
             self.get_logger().info(f'reading {channel.data_type} {channel.register_type} register {channel.register} '
                                    f'of {self.poller.where}: raw {first.raw:.6g} = {first.metres:.6g} m')
         else:

@@ -15,7 +15,7 @@ a non-zero status word (ERROR with the word in hex; ``drop_status_mask`` decides
 clock's estimated rate error, reconnects (ERROR while the sensor is silent: the stream is requested again every
 ``reconnect_interval_s``). Service ~/tare (std_srvs/Trigger): ``tare_mode`` 'software' subtracts the mean of the
 last ``tare_samples`` readings; 'hardware' sends the device's bias command (0x0042). At start a wrong address or a
-silent device stops the node (exit 2) with the reason.
+silent device stops the node (exit 2) with the reason, after trying for ``wait_for_device_s``.
 """
 from __future__ import annotations
 
@@ -33,7 +33,7 @@ from crane_stiffness.drivers.errors import DriverError
 from crane_stiffness.drivers.rdt_client import RdtPipeline, RdtReceiver, fetch_netftapi2
 from crane_stiffness.nodes.common import SENSOR_QOS, Counters, Diagnostics, create_grid_timer, run
 from crane_stiffness.nodes.parameters import Params, check, positive
-from crane_stiffness.nodes.device_params import check_address, check_start_only
+from crane_stiffness.nodes.device_params import check_address, check_start_only, wait_for_device
 from crane_stiffness.sim.sampling import NS_PER_S
 from crane_stiffness.status import ERROR, OK, WARN
 
@@ -65,8 +65,9 @@ PARAMS = (
               'not published; 0 = publish every record [-]', low=0, high=0xFFFFFFFF),
     ParamSpec('timeout_s', 0.5, 'silence after which the sensor counts as gone [s]'),
     ParamSpec('reconnect_interval_s', 1.0, 'interval between stream requests while the sensor is gone [s]'),
-    ParamSpec('wait_for_device_s', 3.0, 'at start, time to wait for the first record before stopping with an error '
-              '[s]'),
+    ParamSpec('wait_for_device_s', 3.0, "at start, time to wait for the device (the ATI box's /netftapi2.xml, then "
+              'the first record) before stopping with an error; longer when the device (or its emulator) starts with '
+              'the driver [s]'),
 )
 #: Read at start only: changing them means talking to another device, so the node must be restarted.
 START_ONLY = ('host', 'port', 'device', 'http_port', 'counts_per_force', 'counts_per_torque', 'command',
@@ -136,7 +137,8 @@ class NetFt(Node):
             return rdt.Calibration(float(v['counts_per_force']), float(v['counts_per_torque']))
         if v['device'] == 'onrobot':
             return rdt.ONROBOT
-        config = fetch_netftapi2(v['host'], v['http_port'])
+        config = wait_for_device(lambda: fetch_netftapi2(v['host'], v['http_port']), v['wait_for_device_s'],
+                                 self.get_logger().warning)
         self.get_logger().info(f'{v["host"]}: {config.product or "ATI box"}, {config.force_unit} / '
                                f'{config.torque_unit}, {config.calibration.counts_per_force:.6g} counts/N, '
                                f'{config.calibration.counts_per_torque:.6g} counts/(N·m), RDT rate '

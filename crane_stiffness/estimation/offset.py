@@ -1,0 +1,365 @@
+"""Streams at different rates and with a time offset: interpolated pairing, and the offset estimated from the data.
+
+Two drivers stamp with different clocks and latencies and run at different rates (e.g. a 7 kHz F/T sensor and a
+100 Hz Modbus LVDT). Two rules, pure numpy, no ROS:
+
+**Interpolated pairing.** Each sample of the *slower* stream is paired with the *faster* stream linearly
+interpolated at its stamp (not only the nearest sample within a slop): :func:`pair_interpolated` does a whole
+recording at once, :class:`InterpolatingPairer` the same sample by sample as they arrive (the live form; the tests
+pin one to the other). A slow sample is paired only when fast samples bracket its stamp no more than ``max_gap_s``
+apart: across a dropout nothing is invented; such samples are counted, never silently paired.
+
+**Time offset.** :func:`estimate_delay` finds how much later one stream's stamps are than the other's for the same
+physical instant, from the data: during load ramps and steps both streams change together, so the normalised
+cross-correlation of their time derivatives (both resampled on one uniform grid and smoothed to the slower
+stream's bandwidth) peaks at the delay; a parabola through the peak refines it below the grid step, and a bounded
+least-squares search (the lag that makes the slow stream the best straight-line function of the fast one at the
+shifted stamps) refines it further. :func:`correct_stamps` applies it. The result says how sure it is
+(:attr:`DelayEstimate.ok`, ``reason``): without load changes there is nothing to correlate, and it says so.
+
+Sign convention: ``delay_s`` > 0 means stream ``b``'s stamps are late: the sample of ``b`` stamped ``s`` was taken
+at ``s − delay_s`` (a displacement driver that stamps at the end of a slow request, say). Correct with
+``correct_stamps(b_stamps, delay) = b_stamps − delay``.
+
+Units: stamps in seconds (any common clock), values in the streams' own units (N, N·m, m). Not wired into the live
+estimator yet.
+"""
+from __future__ import annotations
+
+import bisect
+from collections import deque
+from dataclasses import dataclass
+from typing import Iterable
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from crane_stiffness.estimation.errors import DataError, ParameterError
+
+__all__ = ['DelayEstimate', 'InterpolatedPairs', 'InterpolatingPairer', 'correct_stamps', 'estimate_delay',
+           'interpolate_at', 'pair_interpolated']
+
+
+# --- interpolated pairing --------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class InterpolatedPairs:
+    """Pairs of a slow stream with the fast stream interpolated at its stamps.
+
+    Attributes:
+        stamp: Stamps of the paired slow samples [s], shape (n,).
+        slow: Their values, shape (n,) or (n, k).
+        fast: The fast stream linearly interpolated at those stamps, shape (n,) or (n, k).
+        index: Index of each pair's sample in the slow input, shape (n,).
+        unpaired_outside: Slow samples before the first or after the last fast sample (no bracket).
+        unpaired_gap: Slow samples whose bracketing fast samples are more than ``max_gap_s`` apart (a dropout).
+    """
+
+    stamp: NDArray[np.float64]
+    slow: NDArray[np.float64]
+    fast: NDArray[np.float64]
+    index: NDArray[np.int64]
+    unpaired_outside: int
+    unpaired_gap: int
+
+    def __len__(self) -> int:
+        return int(self.stamp.size)
+
+
+def _check_stream(name: str, t: ArrayLike, y: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    t = np.asarray(t, dtype=float)
+    y = np.asarray(y, dtype=float)
+    if t.ndim != 1 or y.shape[:1] != t.shape:
+        raise DataError(f'{name}: stamps must be 1-D and values have as many rows as stamps, got shapes '
+                        f'{t.shape} and {y.shape}')
+    if not (np.isfinite(t).all() and np.isfinite(y).all()):
+        raise DataError(f'{name}: stamps and values must be finite; got NaN or Inf')
+    if t.size > 1 and np.any(np.diff(t) <= 0):
+        i = int(np.argmax(np.diff(t) <= 0))
+        raise DataError(f'{name}: stamps must increase strictly; stamp {i + 1} = {t[i + 1]!r} s follows {t[i]!r} s')
+    return t, y
+
+
+def interpolate_at(t_fast: ArrayLike, y_fast: ArrayLike, t_query: ArrayLike,
+                   max_gap_s: float = np.inf) -> tuple[NDArray[np.float64], NDArray[np.bool_], NDArray[np.bool_]]:
+    """The fast stream linearly interpolated at ``t_query`` [s].
+
+    Args:
+        t_fast: Strictly increasing stamps [s], shape (m,).
+        y_fast: Values, shape (m,) or (m, k).
+        t_query: Stamps to interpolate at [s], any order, shape (n,).
+        max_gap_s: Largest distance between the two bracketing fast samples [s].
+
+    Returns:
+        (values, inside, gap_ok): values shape (n,) or (n, k) (NaN where not valid); ``inside``: the stamp lies
+        within [t_fast[0], t_fast[-1]]; ``gap_ok``: its bracketing samples are at most ``max_gap_s`` apart. A value
+        is valid where both hold.
+    """
+    t_fast, y_fast = _check_stream('fast stream', t_fast, y_fast)
+    tq = np.asarray(t_query, dtype=float).ravel()
+    if t_fast.size < 2:
+        raise DataError(f'interpolation needs at least 2 fast samples, got {t_fast.size}')
+    # Index of the right-hand bracket: t_fast[j-1] < tq <= t_fast[j] (a stamp on a sample uses the pair before it).
+    j = np.searchsorted(t_fast, tq, side='left')
+    inside = (tq >= t_fast[0]) & (tq <= t_fast[-1])
+    j = np.clip(j, 1, t_fast.size - 1)
+    t0, t1 = t_fast[j - 1], t_fast[j]
+    gap_ok = (t1 - t0) <= max_gap_s
+    w = (tq - t0) / (t1 - t0)
+    y0, y1 = y_fast[j - 1], y_fast[j]
+    wv = w if y_fast.ndim == 1 else w[:, None]
+    values = y0 + wv * (y1 - y0)
+    bad = ~(inside & gap_ok)
+    if bad.any():
+        values = values.copy()
+        values[bad] = np.nan
+    return values, inside, gap_ok
+
+
+def pair_interpolated(t_slow: ArrayLike, y_slow: ArrayLike, t_fast: ArrayLike, y_fast: ArrayLike,
+                      max_gap_s: float = np.inf) -> InterpolatedPairs:
+    """Each slow sample paired with the fast stream interpolated at its stamp (vectorised; the live form is
+    :class:`InterpolatingPairer`). Slow samples without two fast samples around them at most ``max_gap_s``
+    apart are left out and counted (:class:`InterpolatedPairs`). Raises DataError for non-finite or
+    non-increasing stamps."""
+    if not max_gap_s > 0:
+        raise ParameterError('max_gap_s', max_gap_s, 'must be > 0 [s]')
+    t_slow, y_slow = _check_stream('slow stream', t_slow, y_slow)
+    values, inside, gap_ok = interpolate_at(t_fast, y_fast, t_slow, max_gap_s)
+    ok = inside & gap_ok
+    index = np.nonzero(ok)[0]
+    return InterpolatedPairs(t_slow[index], y_slow[index], values[index], index.astype(np.int64),
+                             int(np.count_nonzero(~inside)), int(np.count_nonzero(inside & ~gap_ok)))
+
+
+class InterpolatingPairer:
+    """The live form of :func:`pair_interpolated`: feed both streams as they arrive (each in stamp order, the two
+    interleaved in any way); :meth:`add_slow` and :meth:`add_fast` return the pairs that became complete, as
+    (index of the slow sample, its stamp [s], slow value, interpolated fast value). A slow sample waits until a
+    fast sample at or after its stamp arrives; it is dropped and counted (``unpaired_outside``) if its stamp is
+    before the oldest fast sample kept, and ``unpaired_gap`` if the bracketing fast samples are more than
+    ``max_gap_s`` apart. ``keep_s``: how much fast history is kept behind the newest fast stamp [s] (slow samples
+    may arrive that much later than the fast ones they need). :meth:`finish` drops what still waits (no fast
+    sample after it will come) as ``unpaired_outside``, as the vectorised form counts it.
+    """
+
+    def __init__(self, max_gap_s: float = np.inf, keep_s: float = 1.0) -> None:
+        if not max_gap_s > 0:
+            raise ParameterError('max_gap_s', max_gap_s, 'must be > 0 [s]')
+        if not keep_s > 0:
+            raise ParameterError('keep_s', keep_s, 'must be > 0 [s]')
+        self.max_gap_s, self.keep_s = float(max_gap_s), float(keep_s)
+        # Fast history as lists from index _start on (bisect on a list; the dropped head is cut off now and then).
+        self._fast_t: list[float] = []
+        self._fast_y: list[np.ndarray | float] = []
+        self._start = 0
+        self._waiting: deque[tuple[int, float, object]] = deque()
+        self._slow_count = 0
+        self._last_slow = -np.inf
+        self._last_fast = -np.inf
+        self.unpaired_outside = 0
+        self.unpaired_gap = 0
+
+    def add_fast(self, stamp_s: float, value) -> list[tuple[int, float, object, object]]:
+        """A fast sample (stamp [s], value); returns the pairs it completes."""
+        if not stamp_s > self._last_fast:
+            raise DataError(f'fast stream: stamp {stamp_s!r} s does not follow {self._last_fast!r} s')
+        self._last_fast = stamp_s
+        ft = self._fast_t
+        ft.append(float(stamp_s))
+        self._fast_y.append(np.asarray(value, dtype=float) if np.ndim(value) else float(value))
+        while len(ft) - self._start > 2 and ft[self._start + 1] < stamp_s - self.keep_s:
+            self._start += 1
+        if self._start > 4096 and self._start > len(ft) // 2:
+            del ft[:self._start], self._fast_y[:self._start]
+            self._start = 0
+        return self._drain()
+
+    def add_slow(self, stamp_s: float, value) -> list[tuple[int, float, object, object]]:
+        """A slow sample (stamp [s], value); returns the pairs that are complete (it waits for a fast sample at or
+        after its stamp)."""
+        if not stamp_s > self._last_slow:
+            raise DataError(f'slow stream: stamp {stamp_s!r} s does not follow {self._last_slow!r} s')
+        self._last_slow = stamp_s
+        self._waiting.append((self._slow_count, float(stamp_s), value))
+        self._slow_count += 1
+        return self._drain()
+
+    def _drain(self) -> list[tuple[int, float, object, object]]:
+        out = []
+        ft, fy, lo = self._fast_t, self._fast_y, self._start
+        while self._waiting and len(ft) > lo and self._waiting[0][1] <= ft[-1]:
+            i, t, value = self._waiting.popleft()
+            if t < ft[lo]:
+                self.unpaired_outside += 1
+                continue
+            # The right-hand bracket as interpolate_at finds it: ft[j-1] < t <= ft[j].
+            j = min(max(bisect.bisect_left(ft, t, lo), lo + 1), len(ft) - 1)
+            t0, t1 = ft[j - 1], ft[j]
+            if t1 - t0 > self.max_gap_s:
+                self.unpaired_gap += 1
+                continue
+            w = (t - t0) / (t1 - t0)
+            out.append((i, t, value, fy[j - 1] + w * (fy[j] - fy[j - 1])))
+        return out
+
+    def finish(self) -> None:
+        """The streams ended: what still waits cannot be bracketed."""
+        self.unpaired_outside += len(self._waiting)
+        self._waiting.clear()
+
+
+# --- time offset -----------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class DelayEstimate:
+    """How much later stream b's stamps are than stream a's (see the module docstring for the sign).
+
+    Attributes:
+        delay_s: The estimate [s] (after the least-squares refinement).
+        xcorr_delay_s: The cross-correlation peak, parabola-refined [s].
+        peak_correlation: Normalised correlation of the two derivative signals at the peak (−1..1).
+        grid_s: Step of the common grid the correlation was computed on [s].
+        max_lag_s: The lags searched: ±max_lag_s [s].
+        samples: Grid points in the overlap of the two streams.
+        ok: Whether the estimate can be trusted: a clear peak (``peak_correlation`` >= ``min_correlation``) inside
+            the searched lags (not at their edge).
+        reason: Why not, when ``ok`` is False ('' otherwise).
+    """
+
+    delay_s: float
+    xcorr_delay_s: float
+    peak_correlation: float
+    grid_s: float
+    max_lag_s: float
+    samples: int
+    ok: bool
+    reason: str = ''
+
+
+def _median_period(t: NDArray[np.float64]) -> float:
+    return float(np.median(np.diff(t)))
+
+
+def _box(signal: NDArray[np.float64], width: int) -> NDArray[np.float64]:
+    if width <= 1:
+        return signal
+    return np.convolve(signal, np.ones(width) / width, mode='same')
+
+
+def estimate_delay(t_a: ArrayLike, y_a: ArrayLike, t_b: ArrayLike, y_b: ArrayLike, max_lag_s: float = 0.05,
+                   grid_s: float | None = None, min_correlation: float = 0.3, refine: bool = True) -> DelayEstimate:
+    """The delay of stream b's stamps against stream a's, from the data (both scalar streams, e.g. the force
+    component fitted [N] and the displacement [m]; their units and scale do not matter, nor the sign of their
+    relation).
+
+    Args:
+        t_a, y_a: Stream a: strictly increasing stamps [s] and values, shape (n,).
+        t_b, y_b: Stream b, the same.
+        max_lag_s: Delays searched: ±max_lag_s [s].
+        grid_s: Step of the common grid [s]; default: the faster stream's median period, but at most a tenth of
+            the slower stream's and at least 0.05 ms.
+        min_correlation: Peak correlation below which the estimate is not ``ok`` (no load changes to go by).
+        refine: Refine the correlation peak by least squares (see the module docstring).
+
+    Returns:
+        A :class:`DelayEstimate`. Raises DataError when the streams overlap too little (less than 4·max_lag_s)
+        or a stream has fewer than 4 samples.
+    """
+    t_a, y_a = _check_stream('stream a', t_a, y_a)
+    t_b, y_b = _check_stream('stream b', t_b, y_b)
+    if y_a.ndim != 1 or y_b.ndim != 1:
+        raise DataError('estimate_delay takes scalar streams (one component each)')
+    if not max_lag_s > 0:
+        raise ParameterError('max_lag_s', max_lag_s, 'must be > 0 [s]')
+    if t_a.size < 4 or t_b.size < 4:
+        raise DataError(f'each stream needs at least 4 samples, got {t_a.size} and {t_b.size}')
+    start, end = max(t_a[0], t_b[0]), min(t_a[-1], t_b[-1])
+    if end - start < 4 * max_lag_s:
+        raise DataError(f'the streams overlap for {max(end - start, 0.0):.4g} s: at least 4·max_lag_s = '
+                        f'{4 * max_lag_s:.4g} s needed')
+    pa, pb = _median_period(t_a), _median_period(t_b)
+    slow = max(pa, pb)
+    if grid_s is None:
+        grid_s = max(min(pa, pb, slow / 10.0), 5e-5)
+    if not grid_s > 0:
+        raise ParameterError('grid_s', grid_s, 'must be > 0 [s]')
+    grid = np.arange(start, end, grid_s)
+    ga = np.interp(grid, t_a, y_a)
+    gb = np.interp(grid, t_b, y_b)
+    # Both smoothed to the slower stream's bandwidth (a box of its period), then differentiated: what is left is
+    # where the load changes (ramps, steps), the same shape in both streams, shifted by the delay.
+    width = max(int(round(slow / grid_s)), 1)
+    da = np.diff(_box(ga, width))
+    db = np.diff(_box(gb, width))
+    cut = width  # the box's edge effects
+    da, db = da[cut:-cut or None], db[cut:-cut or None]
+    da = da - da.mean()
+    db = db - db.mean()
+    na, nb = np.sqrt(da @ da), np.sqrt(db @ db)
+    if na == 0 or nb == 0:
+        return DelayEstimate(float('nan'), float('nan'), 0.0, grid_s, max_lag_s, grid.size, False,
+                             'a stream does not change in the overlap: nothing to correlate')
+    n = da.size
+    size = 1 << int(np.ceil(np.log2(2 * n)))
+    # corr[L] = sum_i db[i + L]·da[i]: b lags a by L grid steps when the peak is at L > 0.
+    corr = np.fft.irfft(np.fft.rfft(db, size) * np.conj(np.fft.rfft(da, size)), size)
+    max_lag = min(int(np.ceil(max_lag_s / grid_s)), n - 1)
+    lags = np.arange(-max_lag, max_lag + 1)
+    c = corr[lags % size] / (na * nb)
+    # The relation may be inverted (a sign convention): take the strongest peak of either sign.
+    k = int(np.argmax(np.abs(c)))
+    peak = float(c[k])
+    sign = 1.0 if peak >= 0 else -1.0
+    frac = 0.0
+    if 0 < k < lags.size - 1:
+        y0, y1, y2 = sign * c[k - 1], sign * c[k], sign * c[k + 1]
+        denom = y0 - 2 * y1 + y2
+        frac = 0.5 * (y0 - y2) / denom if denom != 0 else 0.0
+    xcorr = float((lags[k] + frac) * grid_s)
+    ok, reason = True, ''
+    if abs(peak) < min_correlation:
+        ok, reason = False, (f'peak correlation {abs(peak):.3f} < {min_correlation}: too little load change '
+                             '(ramps or steps) to find the delay')
+    elif k in (0, lags.size - 1):
+        ok, reason = False, f'the correlation peaks at the edge of ±{max_lag_s} s: the delay may be larger'
+    delay = xcorr
+    if refine and ok:
+        delay = _refine(t_a, y_a, t_b, y_b, xcorr, max(10.0 * grid_s, slow / 2.0))
+    return DelayEstimate(float(delay), xcorr, abs(peak), float(grid_s), float(max_lag_s), int(grid.size), ok,
+                         reason)
+
+
+def _refine(t_a, y_a, t_b, y_b, guess: float, half_width: float) -> float:
+    """The delay within guess ± half_width that makes the slow stream the best straight-line function of the fast
+    one at the slow stream's shifted stamps (least squares over the slow samples). The fast stream is first
+    averaged over the slow stream's period (a centred box: exact on ramps, no shift): interpolating its raw noise
+    would make the sum of squares jump from one lag to the next."""
+    from scipy.optimize import minimize_scalar
+
+    pa, pb = _median_period(t_a), _median_period(t_b)
+    a_slow = pa > pb
+    t_fast, y_fast, t_slow, y_slow = (t_b, y_b, t_a, y_a) if a_slow else (t_a, y_a, t_b, y_b)
+    width = max(int(round(max(pa, pb) / min(pa, pb))), 1)
+    smooth = _box(y_fast, width)
+    keep = slice(width, -width or None)  # the box's edges
+    t_fast, smooth = t_fast[keep], smooth[keep]
+    sign = -1.0 if a_slow else 1.0       # b late by d: a's sample at s is b's at s + d
+
+    def sse(delay: float) -> float:
+        x, inside, _ = interpolate_at(t_fast, smooth, t_slow - sign * delay)
+        x, y = x[inside], y_slow[inside]
+        design = np.column_stack([x, np.ones_like(x)])
+        _, res, *_ = np.linalg.lstsq(design, y, rcond=None)
+        return float(res[0]) / x.size if res.size else float('inf')
+
+    result = minimize_scalar(sse, bounds=(guess - half_width, guess + half_width), method='bounded',
+                             options={'xatol': 1e-6})
+    return float(result.x)
+
+
+def correct_stamps(stamps_s: ArrayLike | Iterable[float], delay_s: float) -> NDArray[np.float64]:
+    """Stamps of the delayed stream moved to the instants their samples were taken: ``stamps − delay`` [s]."""
+    if not np.isfinite(delay_s):
+        raise ParameterError('delay_s', delay_s, 'must be finite [s]')
+    return np.asarray(stamps_s, dtype=float) - float(delay_s)

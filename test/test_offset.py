@@ -1,0 +1,144 @@
+"""Interpolated pairing and the time offset between the force and displacement streams (issue 10, part 5):
+crane_stiffness.estimation.offset, pure numpy.
+
+The streams are the lab's: force at 7 kHz (Net F/T), displacement at 100 Hz (Modbus polls), realistic noise and
+quantization, a ramp program on the lab model's side stiffness. The displacement stream is stamped 3 ms late; the
+delay is found within 0.5 ms, and the loading/unloading difference of the fitted slope that the delay causes
+disappears once the stamps are corrected.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from crane_stiffness.estimation.branch import branch_labels
+from crane_stiffness.estimation.errors import DataError, ParameterError
+from crane_stiffness.estimation.fit import fit_line
+from crane_stiffness.estimation.offset import (InterpolatingPairer, correct_stamps, estimate_delay, interpolate_at,
+                                               pair_interpolated)
+
+K = 53793.5          # the lab model's side stiffness [N/m]
+FORCE_RATE = 7000.0  # [Hz]
+DISP_RATE = 100.0    # [Hz]
+DELAY = 0.003        # the displacement stream's stamps are this late [s]
+
+
+def program(t: np.ndarray) -> np.ndarray:
+    """The applied side force [N]: hold 0 for 1 s, ramp to 4 N in 1 s, ramp back in 1 s; five cycles."""
+    phase = np.mod(t, 3.0)
+    return np.where(phase < 1.0, 0.0, np.where(phase < 2.0, 4.0 * (phase - 1.0), 4.0 * (3.0 - phase)))
+
+
+def lab_streams(seed: int, delay: float = DELAY, seconds: float = 15.0):
+    """(force stamps, force [N], displacement stamps, displacement [m]) as the drivers would publish them."""
+    rng = np.random.default_rng(seed)
+    t_f = np.arange(0.0, seconds, 1.0 / FORCE_RATE) + rng.uniform(0, 1e-4)
+    f = program(t_f) + rng.normal(0, 0.01, t_f.size)                 # F/T noise 0.01 N per sample
+    f = np.round(f / 0.002) * 0.002                                    # ADC step 2 mN
+    t_d = np.arange(0.0, seconds, 1.0 / DISP_RATE) + rng.uniform(0, 0.01)
+    t_d = t_d + rng.normal(0, 5e-5, t_d.size)                          # poll jitter 50 µs
+    x = program(t_d) / K + rng.normal(0, 2e-7, t_d.size)              # LVDT noise 0.2 µm
+    x = np.round(x / 1e-7) * 1e-7                                       # resolution 0.1 µm
+    return t_f, f, t_d + delay, x
+
+
+def branch_slopes(t_f, f, t_d, x) -> tuple[float, float, float]:
+    """(loading slope, unloading slope, their stderr combined) [N/m] of the interpolated pairs, branches by the
+    estimator's rule (branch.branch_labels on the paired force)."""
+    pairs = pair_interpolated(t_d, x, t_f, f, max_gap_s=0.002)
+    loading = branch_labels(pairs.fast, threshold=0.2)
+    up = fit_line(pairs.slow[loading], pairs.fast[loading])
+    down = fit_line(pairs.slow[~loading], pairs.fast[~loading])
+    return up.stiffness, down.stiffness, float(np.hypot(up.stderr, down.stderr))
+
+
+@pytest.mark.parametrize('seed', [1, 2, 3])
+def test_injected_3ms_delay_is_found_within_half_a_millisecond(seed):
+    t_f, f, t_d, x = lab_streams(seed)
+    est = estimate_delay(t_f, f, t_d, x)
+    assert est.ok, est.reason
+    assert est.delay_s == pytest.approx(DELAY, abs=0.5e-3), est
+    # The correlation of derivatives alone is the coarse step (ramps are boxes in the derivative: a broad peak).
+    assert est.xcorr_delay_s == pytest.approx(DELAY, abs=2.5e-3), est
+    assert est.peak_correlation > 0.8
+    # The other way round (b = force): the same delay with the opposite sign.
+    back = estimate_delay(t_d, x, t_f, f)
+    assert back.delay_s == pytest.approx(-DELAY, abs=0.5e-3), back
+
+
+def test_no_delay_is_found_as_none_and_a_negative_one_as_negative():
+    t_f, f, t_d, x = lab_streams(7, delay=0.0)
+    assert estimate_delay(t_f, f, t_d, x).delay_s == pytest.approx(0.0, abs=0.5e-3)
+    t_f, f, t_d, x = lab_streams(8, delay=-0.008)
+    assert estimate_delay(t_f, f, t_d, x).delay_s == pytest.approx(-0.008, abs=0.5e-3)
+
+
+def test_the_delay_splits_the_branches_and_the_correction_joins_them():
+    t_f, f, t_d, x = lab_streams(4)
+    up, down, se = branch_slopes(t_f, f, t_d, x)
+    before = (up - down) / K
+    # 3 ms at 4 N/s is 12 mN along each ramp, against the hold at 0 N that the unloading branch ends in: the two
+    # slopes differ by several times their errors.
+    assert abs(up - down) > 5 * se, (up, down, se)
+    assert abs(before) > 0.002, before
+    est = estimate_delay(t_f, f, t_d, x)
+    up_c, down_c, se_c = branch_slopes(t_f, f, correct_stamps(t_d, est.delay_s), x)
+    after = (up_c - down_c) / K
+    assert abs(up_c - down_c) < 4 * se_c, (up_c, down_c, se_c)
+    assert abs(after) < abs(before) / 5, (before, after)
+    assert up_c == pytest.approx(K, rel=0.005) and down_c == pytest.approx(K, rel=0.005)
+
+
+def test_no_load_change_is_reported_not_guessed():
+    rng = np.random.default_rng(5)
+    t_f = np.arange(0, 5, 1 / FORCE_RATE)
+    t_d = np.arange(0, 5, 1 / DISP_RATE)
+    est = estimate_delay(t_f, 2.0 + rng.normal(0, 0.01, t_f.size), t_d, 4e-5 + rng.normal(0, 2e-7, t_d.size))
+    assert not est.ok and 'too little load change' in est.reason
+    est = estimate_delay(t_f, np.full(t_f.size, 2.0), t_d, np.full(t_d.size, 4e-5))
+    assert not est.ok and 'does not change' in est.reason
+    with pytest.raises(DataError, match='overlap'):
+        estimate_delay(t_f, t_f, t_d + 10.0, t_d)
+    with pytest.raises(ParameterError, match='max_lag_s'):
+        estimate_delay(t_f, t_f, t_d, t_d, max_lag_s=0.0)
+    with pytest.raises(DataError, match='increase strictly'):
+        estimate_delay(t_f[::-1], t_f, t_d, t_d)
+
+
+def test_interpolation_is_linear_and_leaves_out_what_it_cannot_bracket():
+    t = np.array([0.0, 1.0, 2.0, 5.0])
+    y = np.array([[0.0, 10.0], [1.0, 20.0], [3.0, 30.0], [6.0, 60.0]])
+    values, inside, gap_ok = interpolate_at(t, y, [0.5, 1.5, 2.0, 3.5, -0.1, 5.0], max_gap_s=2.0)
+    np.testing.assert_allclose(values[:3], [[0.5, 15.0], [2.0, 25.0], [3.0, 30.0]])
+    assert np.isnan(values[3:]).all()  # outside, or across a gap wider than max_gap_s: no value
+    assert inside.tolist() == [True, True, True, True, False, True]
+    assert gap_ok.tolist() == [True, True, True, False, True, False]
+    pairs = pair_interpolated([-0.1, 0.5, 3.5, 4.9, 6.0], [1, 2, 3, 4, 5], t, y[:, 0], max_gap_s=2.0)
+    assert pairs.index.tolist() == [1] and pairs.unpaired_outside == 2 and pairs.unpaired_gap == 2
+    assert pairs.fast.tolist() == [0.5]
+
+
+@pytest.mark.parametrize('seed', [0, 1, 2])
+def test_streaming_pairer_matches_the_vectorised_form(seed):
+    """The two streams fed in a random interleaving (each in order, the slow one up to 50 ms behind or ahead),
+    with a dropout in the fast stream: the same pairs, values and counts as pair_interpolated."""
+    rng = np.random.default_rng(seed)
+    t_f, f, t_d, x = lab_streams(seed, seconds=3.0)
+    keep = (t_f < 1.2) | (t_f > 1.25)   # a 50 ms dropout
+    t_f, f = t_f[keep], f[keep]
+    want = pair_interpolated(t_d, x, t_f, f, max_gap_s=0.002)
+    pairer = InterpolatingPairer(max_gap_s=0.002, keep_s=0.5)
+    arrival_f = t_f + rng.uniform(0, 0.002, t_f.size)
+    arrival_d = t_d + rng.uniform(-0.05, 0.05, t_d.size)
+    arrival_d = np.maximum.accumulate(arrival_d)   # a stream arrives in its own order
+    events = sorted([(a, 0, i) for i, a in enumerate(np.maximum.accumulate(arrival_f))] +
+                    [(a, 1, i) for i, a in enumerate(arrival_d)])
+    got = []
+    for _, kind, i in events:
+        got += pairer.add_fast(t_f[i], f[i]) if kind == 0 else pairer.add_slow(t_d[i], x[i])
+    pairer.finish()
+    assert [g[0] for g in got] == want.index.tolist()
+    np.testing.assert_allclose([g[3] for g in got], want.fast, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal([g[2] for g in got], want.slow)
+    assert (pairer.unpaired_outside, pairer.unpaired_gap) == (want.unpaired_outside, want.unpaired_gap)
+    assert want.unpaired_gap >= 4   # the dropout left slow samples out, counted

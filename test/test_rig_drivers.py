@@ -1,0 +1,182 @@
+"""The rig through the drivers (issue 10, part 3): ``rig.launch.py transport:=drivers`` runs load_cell's physics
+as an RDT F/T device (rdt_emulator) read by netft, and the LVDT's as a Modbus TCP analog input (modbus_emulator)
+read by modbus_lvdt, instead of the simulated sensors' direct topics. The side-force program, every node started
+the way ``ros2 run`` starts it from the colcon install tree, all at the same instant, gives the estimate within 2 %
+of the model's prediction; the rig description's choices for the arguments are pinned here too."""
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import pytest
+
+from crane_stiffness.rig_description import NODES, RigError, config_files, readiness, rig_nodes
+from crane_stiffness.testing import rosrun
+from crane_stiffness.testing.lab import emulated_ports, start_rig_with
+from crane_stiffness.testing.rig import Observer, summarize, wait_for_program_start
+
+from conftest import REPO
+
+CONFIG = REPO / 'config'
+
+
+def _final_counters(log: str) -> dict:
+    for line in reversed(log.splitlines()):
+        if line.startswith('FINAL_COUNTERS '):
+            return json.loads(line.split(' ', 2)[2])
+    return {}
+
+
+def test_transport_argument_chooses_the_nodes():
+    sim = [n.name for n in rig_nodes(CONFIG)]
+    assert sim == ['crane_model', 'load_cell', 'lvdt', 'stiffness_estimator', 'session_recorder', 'load_program']
+    drivers = {n.name: n for n in rig_nodes(CONFIG, {'transport': 'drivers'})}
+    assert list(drivers) == ['crane_model', 'rdt_emulator', 'modbus_emulator', 'netft', 'modbus_lvdt',
+                             'stiffness_estimator', 'session_recorder', 'load_program']
+    for name in ('rdt_emulator', 'modbus_emulator', 'netft', 'modbus_lvdt'):
+        assert drivers[name].parameter_files == (str(CONFIG / 'drivers_emulated.yaml'),)
+    # The program waits for the emulators to hold the command and the pose (nothing of them may be lost), and for
+    # both streams from the drivers.
+    waits = drivers['load_program'].parameters
+    assert '/crane/wrench_command: crane_model rdt_emulator stiffness_estimator session_recorder' in \
+        waits['wait_for_subscribers']
+    assert '/crane/platform_pose: modbus_emulator session_recorder' in waits['wait_for_subscribers']
+    assert {'/load_cell/wrench', '/lvdt/displacement'} <= set(waits['wait_for_messages'])
+    # Real hardware: the drivers alone, with a drivers file naming the devices.
+    hw = [n.name for n in rig_nodes(CONFIG, {'transport': 'drivers', 'sim_sensors': 'false',
+                                             'drivers': str(CONFIG / 'drivers_ati_labjack.yaml')})]
+    assert hw == ['crane_model', 'netft', 'modbus_lvdt', 'stiffness_estimator', 'session_recorder', 'load_program']
+    # Where each node belongs in the lab (the network test splits the rig by it), and one launch per PC.
+    assert {n.name for n in NODES if n.machine == 'analysis'} == {'stiffness_estimator', 'session_recorder'}
+    daq = {n.name: n for n in rig_nodes(CONFIG, {'transport': 'drivers', 'machine': 'daq'})}
+    analysis = [n.name for n in rig_nodes(CONFIG, {'transport': 'drivers', 'machine': 'analysis'})]
+    assert analysis == ['stiffness_estimator', 'session_recorder']
+    assert sorted([*daq, *analysis]) == sorted(drivers)
+    # The program on the DAQ PC still waits for the estimator and the recorder on the analysis PC.
+    assert daq['load_program'].parameters == waits
+
+
+def test_transport_refusals_name_the_value_or_file(tmp_path):
+    with pytest.raises(RigError, match="transport 'hardware': expected one of sim, drivers"):
+        rig_nodes(CONFIG, {'transport': 'hardware'})
+    with pytest.raises(RigError, match="machine 'lab': expected one of all, daq, analysis"):
+        rig_nodes(CONFIG, {'machine': 'lab'})
+    missing = tmp_path / 'nope.yaml'
+    with pytest.raises(RigError, match=f'drivers file {missing} not found'):
+        rig_nodes(CONFIG, {'transport': 'drivers', 'drivers': str(missing)})
+    # The drivers file is read only by the drivers' nodes: with the simulated sensors it is not needed.
+    assert 'netft' not in [n.name for n in rig_nodes(CONFIG, {'drivers': str(missing)})]
+    assert config_files(CONFIG, {'drivers': str(missing)})['sensors'] == str(CONFIG / 'sensors.yaml')
+
+
+def test_every_drivers_file_has_only_parameters_the_nodes_declare():
+    """A key a node does not declare would stop it at start (exit 2): every drivers file is checked against the
+    nodes' ParamSpecs here, without a process."""
+    import yaml
+
+    from crane_stiffness.nodes import modbus_emulator, modbus_lvdt, netft, rdt_emulator
+    declared = {'rdt_emulator': rdt_emulator.PARAMS, 'netft': netft.PARAMS, 'modbus_emulator': modbus_emulator.PARAMS,
+                'modbus_lvdt': modbus_lvdt.PARAMS}
+    files = sorted(CONFIG.glob('drivers_*.yaml'))
+    assert {f.name for f in files} >= {'drivers_emulated.yaml', 'drivers_ati_labjack.yaml',
+                                       'drivers_onrobot_labjack.yaml'}
+    for path in files:
+        data = yaml.safe_load(path.read_text())
+        for node, section in data.items():
+            names = {s.name: s for s in declared[node]}
+            for key, value in section['ros__parameters'].items():
+                assert key in names, f'{path.name}: {node}.{key} is not a parameter of {node}'
+                default = names[key].default
+                # ROS keeps a parameter's type: a float written without a point would be refused.
+                assert type(value) is type(default) or (isinstance(default, list) and isinstance(value, list)), \
+                    f'{path.name}: {node}.{key} = {value!r} ({type(value).__name__}), declared ' \
+                    f'{type(default).__name__}'
+
+
+def test_side_force_through_the_drivers_gives_the_prediction(install_tree, tmp_path):
+    """`ros2 launch crane_stiffness rig.launch.py transport:=drivers`, every process at once from the install tree
+    (the emulators on free loopback ports), the side-force program: the estimate within 2 % of the prediction,
+    and the readings really came through the drivers."""
+    import rclpy
+    install, env = install_tree
+    share = install / 'crane_stiffness' / 'share' / 'crane_stiffness' / 'config'
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    observer = Observer(context=ctx)
+    given = {'program': 'side_force', 'transport': 'drivers', 'session': 'drivers'}
+    try:
+        with rosrun.Processes(env, tmp_path / 'logs') as procs:
+            prog, nodes = start_rig_with(procs, share, given, tmp_path / 'bags', ready_timeout_s=120,
+                                         overrides=emulated_ports())
+            wait_for_program_start(observer, procs, 150)
+            deadline = time.monotonic() + prog.duration_s + 60
+            while procs.procs['load_program'].poll() is None and time.monotonic() < deadline:
+                procs.check_alive(allow_exit=('load_program',))
+                observer.spin_once(0.1)
+            assert procs.procs['load_program'].poll() == 0, procs.log('load_program')[-3000:]
+            end = time.monotonic() + 1.5
+            while time.monotonic() < end:
+                observer.spin_once(0.05)
+            codes = procs.stop()
+            logs = {name: procs.log(name) for name in procs.procs}
+        summary = summarize(share, 'side_force', 'drivers', tmp_path / 'bags', observer, codes)
+    finally:
+        observer.destroy_node()
+        rclpy.shutdown(context=ctx)
+    assert 'load_cell' not in codes and 'lvdt' not in codes
+    assert all(code == 0 for code in codes.values()), {n: logs[n][-1500:] for n, c in codes.items() if c}
+    ft, daq = _final_counters(logs['netft']), _final_counters(logs['modbus_lvdt'])
+    rdt, modbus = _final_counters(logs['rdt_emulator']), _final_counters(logs['modbus_emulator'])
+    duration = prog.duration_s
+    # 7 kHz records in, their 1 ms means out; a poll every 10 ms (a starved timer skips some: generous margins).
+    assert ft['received'] > 7000 * duration * 0.9 and ft['published'] > 1000 * duration * 0.9, ft
+    assert rdt['published'] >= ft['received'] and ft['records_lost'] <= 0.001 * ft['received'], (rdt, ft)
+    assert daq['published'] > 50 * duration and daq['failures'] <= 3, daq
+    assert modbus['published'] >= daq['published'], (modbus, daq)
+    assert 'http_port' in logs['netft'] or 'counts/N' in logs['netft']  # calibration read from /netftapi2.xml
+    est = summary['estimate']['loading']
+    assert abs(summary['relative_error']) < 0.02, (summary['relative_error'], est, summary['prediction'])
+    assert est['n'] > 500, est
+    assert summary['bag'] is not None
+
+
+def test_a_driver_waits_for_a_device_that_starts_after_it():
+    """Every node of a launch starts at once: the driver's first contact is retried for wait_for_device_s (here a
+    Modbus device that starts listening 1 s after the first attempt), a device that never comes is an error naming
+    the time waited, and a device that answers wrongly is an error at once."""
+    import threading
+
+    from crane_stiffness.devices.modbus_device import ModbusDevice
+    from crane_stiffness.drivers.errors import DeviceAddressError, DeviceResponseError
+    from crane_stiffness.drivers.modbus import Channel, ModbusPoller
+    from crane_stiffness.nodes.device_params import wait_for_device
+    from crane_stiffness.testing.lab import free_port
+
+    port = free_port()
+    device = ModbusDevice(lambda: 1.5e-3, channel=Channel(gain=0.001), port=port)
+    timer = threading.Timer(1.0, device.start)
+    poller = ModbusPoller('127.0.0.1', port, 1, Channel(gain=0.001), timeout_s=0.5)
+    logged: list[str] = []
+    t0 = time.monotonic()
+    timer.start()
+    try:
+        reading = wait_for_device(poller.read, 20.0, logged.append)
+    finally:
+        timer.join()
+        poller.close()
+        device.stop()
+    assert reading.metres == pytest.approx(1.5e-3, rel=1e-6)
+    assert 0.9 < time.monotonic() - t0 < 15
+    assert len(logged) == 1 and 'trying again for up to 20 s (wait_for_device_s)' in logged[0], logged
+    gone = ModbusPoller('127.0.0.1', free_port(), 1, Channel(), timeout_s=0.2)
+    with pytest.raises(DeviceAddressError, match=r'tried for 0.6 s: wait_for_device_s'):
+        wait_for_device(gone.read, 0.6)
+    calls = []
+
+    def wrong():
+        calls.append(1)
+        raise DeviceResponseError('answered Modbus exception 2')
+    with pytest.raises(DeviceResponseError):
+        wait_for_device(wrong, 10.0)
+    assert len(calls) == 1
