@@ -46,7 +46,8 @@ from crane_stiffness.analysis.load import SessionData, load_session
 from crane_stiffness.analysis.progress import Progress
 from crane_stiffness.analysis.results import (COMPARED_FIELDS, WINDOW_FIT_FIELDS, CycleFits, LiveComparison,
                                               ModelSummary, SessionAnalysis, Step)
-from crane_stiffness.bag import BagDamageWarning
+from crane_stiffness.bag import BagDamageWarning, BagReader
+from crane_stiffness.commands import command_faults
 from crane_stiffness.config import geometry_from_params
 from crane_stiffness.estimation.branch import BRANCHES, LOADING, UNLOADING
 from crane_stiffness.estimation.errors import DataError
@@ -89,8 +90,11 @@ def _inputs(data: SessionData) -> tuple[Samples, Samples, dict[str, int]]:
     f = data.force
     wrench = np.column_stack([f[k] for k in AXES]) if f.size else np.zeros((0, 6))
     f_stamp = f['stamp_s']
+    # The clock-skew check: live, a stamp ahead of its arrival at the estimator; here, ahead of the recorder's log
+    # time of the message (its arrival at the recorder, on the same clock; a few ms from the estimator's).
     force, f_counts = checked_samples(f_stamp, f['log_time_ns'], wrench[:, s.axis_index],
-                                      np.isfinite(wrench).all(axis=1) & np.isfinite(f_stamp), s.max_abs_force)
+                                      np.isfinite(wrench).all(axis=1) & np.isfinite(f_stamp), s.max_abs_force,
+                                      s.max_clock_skew_s)
     d = data.disp
     if 'stamp_s' in d.dtype.names:
         d_stamp = d['stamp_s']
@@ -99,24 +103,47 @@ def _inputs(data: SessionData) -> tuple[Samples, Samples, dict[str, int]]:
         d_stamp = d['log_time_ns'] * 1e-9
         d_value = s.volts_to_displacement(d['data'])
     disp, d_counts = checked_samples(d_stamp, d['log_time_ns'], d_value, np.isfinite(d_value) & np.isfinite(d_stamp),
-                                     s.max_abs_displacement)
+                                     s.max_abs_displacement, s.max_clock_skew_s)
     counters = {'force_messages': int(f.size), 'displacement_messages': int(d.size),
                 **{name: f_counts[name] + d_counts[name] for name in INPUT_CHECKS}}
     return force, disp, counters
 
 
-def _commands(data: SessionData) -> CommandSeries | None:
+def _rejected_commands(path: Path) -> np.ndarray | None:
+    """The crane model's rejected commands (/crane/rejected_command) in the bag, decoded; None if absent."""
+    with BagReader(path) as reader:
+        info = reader.topics.get(topics.REJECTED_COMMAND)
+        if info is None or not info.count or info.msg_type != 'geometry_msgs/msg/WrenchStamped':
+            return None
+        return reader.decode_topics([topics.REJECTED_COMMAND])[topics.REJECTED_COMMAND]
+
+
+def _commands(data: SessionData, rejected: np.ndarray | None = None) -> CommandSeries | None:
+    """The commands as the live estimator holds them: absurd ones (crane_stiffness.commands, the model's own check)
+    and the model's rejections held as rejected."""
     c = data.command
     if c is None or c.size == 0:
         return None
-    return CommandSeries.of(c['stamp_s'], c['log_time_ns'], c[data.settings.force_axis].astype(float))
+    wrench = np.column_stack([c[k].astype(float) for k in AXES])
+    r_stamp = r_log = None
+    if rejected is not None and rejected.size:
+        r_stamp, r_log = rejected['stamp_s'], rejected['log_time_ns']
+    return CommandSeries.of(c['stamp_s'], c['log_time_ns'], c[data.settings.force_axis].astype(float),
+                            command_faults(wrench), r_stamp, r_log)
+
+
+def _accepted(commands: CommandSeries) -> tuple[np.ndarray, np.ndarray]:
+    """(stamps, loads) of the accepted commands: the program's steps (absurd and rejected ones left out)."""
+    if commands.rejected is None:
+        return commands.stamp, commands.value
+    return commands.stamp[~commands.rejected], commands.value[~commands.rejected]
 
 
 def _steps(data: SessionData, pairs: LivePairs, commands: CommandSeries | None, t0: float, settle_fraction: float,
            problems: list[str]) -> list[Step]:
     if commands is None:
         return []
-    stamp, value = commands.stamp, commands.value
+    stamp, value = _accepted(commands)
     runs = hold_runs(stamp, value)
     period = float(np.median(np.diff(stamp))) if stamp.size > 1 else 0.0
     holds = data.program.holds(data.settings.force_axis) if data.program is not None else []
@@ -264,7 +291,7 @@ def _model(data: SessionData, steps: list[Step], commands: CommandSeries | None,
     recorded = math.nan
     if data.prediction is not None and data.prediction.size:
         recorded = float(data.prediction['data'][0])
-    levels = np.array([s.level for s in steps]) if steps else (commands.value if commands else np.zeros(0))
+    levels = np.array([s.level for s in steps]) if steps else (_accepted(commands)[1] if commands else np.zeros(0))
     peak = float(levels[np.argmax(np.abs(levels))]) if levels.size and np.abs(levels).max() > 0 else 0.0
     lvdt = data.sensors.get('lvdt') or data.sensors.get('/lvdt')
     scale = lvdt_scale(axis, lvdt)
@@ -359,7 +386,7 @@ def analyze_session(bag_path: str | Path, out_dir: str | Path | None = None, *, 
             bar.done()
             bar.stage('pair')
             force, disp, input_counters = _inputs(data)
-            commands = _commands(data)
+            commands = _commands(data, _rejected_commands(path))
             pairs = live_pairs(data.settings, force, disp, commands)
             if pairs.stamp.size < 3:
                 raise SessionAnalysisError(
