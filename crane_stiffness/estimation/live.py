@@ -556,14 +556,16 @@ class LiveStiffness:
 
     def accounting(self) -> dict[str, int]:
         """Every message accounted (the node's final counters): per stream received = dropped (input checks) +
-        out_of_order + non_finite + stale + unmatched + discarded + pending + paired; pairs = fitted +
-        rejected_command + non_finite; commands received = used + rejected + dropped."""
+        passed_checks, and passed_checks = out_of_order + non_finite + stale + unmatched + discarded + pending +
+        paired; pairs = fitted + rejected_command + non_finite; commands received = used + rejected + dropped."""
         out = {f.name: getattr(self.counters, f.name) for f in fields(self.counters)}
         sc = self._sync.counters
         out['pairs'] = sc.pairs
         for stream, counters in ((FORCE, sc.force), (DISPLACEMENT, sc.displacement)):
             for f in fields(counters):
-                out[f'{stream}_{f.name}'] = getattr(counters, f.name)
+                # the pairing's 'received' are the samples that passed the input checks (not the messages received)
+                key = f'{stream}_passed_checks' if f.name == 'received' else f'{stream}_{f.name}'
+                out[key] = getattr(counters, f.name)
             out[f'{stream}_pending'] = self._sync.pending(stream)
         return out
 

@@ -237,6 +237,14 @@ class StiffnessEstimatorNode(Node):
         Message-only on purpose: rclpy's EventsExecutor (Jazzy) fails on callbacks that take the message info.
         """
         def callback(msg) -> None:
+            # Commands and rejections already queued go first: a sample must be judged under the command in force
+            # at its stamp (a command published just before it may be queued but not yet taken).
+            for subscription, on_command in self.drained[:2]:
+                for _ in range(MAX_BATCH):
+                    taken = _take_queued(subscription)
+                    if taken is None:
+                        break
+                    on_command(*taken)
             handle(msg)
             self._drain()
             if self.changed:
