@@ -8,7 +8,12 @@ decode):
 1. **Pairing.** Load-cell and LVDT samples are paired by header stamp as the live estimator pairs them
    (crane_stiffness.estimation.live.LiveStiffness), by its own rules in their vectorized form
    (crane_stiffness.estimation.live.live_pairs): the same input checks (NaN/Inf, zero stamp, absurd values), then
-   the synchroniser's pairing over the whole arrays (arrival = the recorded log time). The estimator's parameters
+   the synchroniser's pairing over the whole arrays (arrival = the recorded log time). The clock-skew check
+   (a stamp more than ``max_clock_skew_s`` ahead of its arrival at the node) takes the recorder's log time of the
+   message as the arrival: the recorder receives on the same clock, a few ms from the estimator. Pairs made while a
+   rejected command was in force (absurd by :mod:`crane_stiffness.commands`, or on /crane/rejected_command) are
+   left out, and the fraction of each stream's samples received (from its own stamps) is reported, as live.
+   Not reproduced offline: fit segments started by a sensor restart (the bag does not record publishers). The estimator's parameters
    are those recorded with the session: read from the running node (``crane_stiffness/node_parameters``), else the
    ``stiffness_estimator`` section of its parameter file (:mod:`crane_stiffness.analysis.load`).
 2. **Branches.** Each pair is labelled loading or unloading as the live estimator labels it (hysteresis on |load|,
@@ -458,6 +463,19 @@ def analyze_session(bag_path: str | Path, out_dir: str | Path | None = None, *, 
             except ValueError as exc:
                 problems.append(f'recorded geometry invalid: {exc}')
         counters = {**input_counters, **pairs.counters}
+        # The live estimator's warnings, offline: what it would have said about these inputs.
+        st = data.settings
+        if counters.get('dropped_clock_skew'):
+            problems.append(f'{counters["dropped_clock_skew"]} sensor sample(s) stamped more than max_clock_skew_s = '
+                            f'{st.max_clock_skew_s:g} s ahead of their log time were dropped (a skewed sensor clock)')
+        if counters.get('pairs_rejected_command'):
+            problems.append(f'{counters["pairs_rejected_command"]} pair(s) made while a rejected command (absurd, or '
+                            f'rejected by the crane model) was in force were not fitted')
+        for stream in ('force', 'displacement'):
+            fraction = counters.get(f'{stream}_received_fraction', math.nan)
+            if fraction < 1.0 - st.max_loss_fraction:
+                problems.append(f'{stream}: the bag holds {fraction:.2%} of the samples its stamps say were sent '
+                                f'(more than max_loss_fraction = {st.max_loss_fraction:.2%} lost)')
         result = SessionAnalysis(
             bag=str(path), session=str(session.get('session') or path.name), notes=str(session.get('notes', '')),
             recorded_with=str(session.get('software_version', '')), analysed_with=__version__,

@@ -6,16 +6,24 @@ publishing one:
 1. Input checks. A force sample is the selected component (``force_axis``, N or N·m) of a wrench; a displacement
    sample is a reading in m (or rad), or a voltage converted by ``x = displacement_gain · V + displacement_offset``.
    Dropped and counted (:class:`~crane_stiffness.estimation.inputs.InputCounters`): a NaN/Inf anywhere in the
-   sample, a zero (or negative) stamp, a selected force above ``max_abs_force`` or a displacement above
-   ``max_abs_displacement`` in magnitude (:func:`~crane_stiffness.estimation.inputs.input_faults`), and a message
-   its reader could not decode (:meth:`LiveStiffness.add_malformed`).
+   sample, a zero (or negative) stamp, a stamp more than ``max_clock_skew_s`` ahead of its arrival (node clock), a
+   selected force above ``max_abs_force`` or a displacement above ``max_abs_displacement`` in magnitude
+   (:func:`~crane_stiffness.estimation.inputs.input_faults`), and a message its reader could not decode
+   (:meth:`LiveStiffness.add_malformed`). Each stream's health (:class:`~crane_stiffness.estimation.inputs.
+   StreamHealth`): the fraction of its samples received (WARN above ``max_loss_fraction`` lost) and, given the node
+   clock, silence (longer than ``dropout_factor`` delivery periods: ERROR, both branches STALE). A sensor publisher
+   whose sequence numbers start again (a restart, which zeroes the sensor) starts a new fit segment
+   (:meth:`LiveStiffness.new_segment`).
 2. Pairing by header stamp with :class:`~crane_stiffness.estimation.sync.ApproximateTimeSync` (``slop_s``,
    ``max_age_s``, ``expected_period_s``, ``dropout_factor``): out-of-order and stale samples are counted there and
    never fitted; dropouts are counted.
 3. Fitting each pair with :class:`~crane_stiffness.estimation.fit.StiffnessEstimator` (windowed least squares and
    RLS with forgetting, loading and unloading branches apart). The branch follows the commanded load (the
    ``force_axis`` component of the wrench command in effect at the pair's stamp) once a command has been seen and
-   ``branch_source`` is ``'auto'``, else the measured force.
+   ``branch_source`` is ``'auto'``, else the measured force. A pair stamped while a rejected command is in force
+   (absurd by :mod:`crane_stiffness.commands`, the crane model's own rule, or republished by the model on
+   /crane/rejected_command; from its stamp to the next accepted command) is not fitted, and the statuses say so
+   (WARN, never OK).
 4. Outputs. :meth:`LiveStiffness.values` is the cheap O(1) numeric estimate (rows ``BRANCHES`` × ``VALUE_FIELDS``)
    for publishing after every batch of new pairs; its ``nonlinearity`` is the value of the last
    :meth:`LiveStiffness.refresh`, which sorts the windows and is meant for a slow timer together with
