@@ -193,13 +193,13 @@ class StiffnessEstimatorNode(Node):
 
     def _on_force(self, data: bytes, info: dict | None = None) -> None:
         sample = self._decode(data, 6, FORCE)
-        if sample is not None and self.core.add_force(sample[0], sample[1], self._arrival_s(info),
+        if sample is not None and self.core.add_force(sample[0], sample[1], self._sensor_arrival_s(info),
                                                       self._sequence(info)):
             self.changed = True
 
     def _on_point(self, data: bytes, info: dict | None = None) -> None:
         sample = self._decode(data, 3, DISPLACEMENT)
-        if sample is not None and self.core.add_displacement(sample[0], sample[1][0], self._arrival_s(info),
+        if sample is not None and self.core.add_displacement(sample[0], sample[1][0], self._sensor_arrival_s(info),
                                                              self._sequence(info)):
             self.changed = True
 
@@ -220,6 +220,12 @@ class StiffnessEstimatorNode(Node):
     def _on_rejected(self, msg: WrenchStamped, info: dict | None = None) -> None:
         f, m = msg.wrench.force, msg.wrench.torque
         self.core.add_rejected(stamp_to_s(msg.header.stamp), (f.x, f.y, f.z, m.x, m.y, m.z), self._arrival_s(info))
+
+    def _sensor_arrival_s(self, info: dict | None) -> float:
+        """A sensor sample's arrival for the clock-skew check, s; NaN (not judged) while the node clock is at zero
+        (use_sim_time before the first /clock message)."""
+        arrival = self._arrival_s(info)
+        return arrival if arrival > 0.0 else float('nan')
 
     def _arrival_s(self, info: dict | None) -> float:
         """When a message arrived, s: the middleware's reception stamp (system clock = the node clock) if known, else
