@@ -46,7 +46,7 @@ def isolated(extra_remaps: dict[str, str] | None = None) -> tuple[str, str, list
     name = f'estimator_{os.getpid()}_{next(_ids)}'
     prefix = f'/{name}_t'
     args = ['--ros-args', '-r', f'__node:={name}']
-    for topic in (topics.WRENCH_COMMAND, topics.LOAD_CELL_WRENCH, topics.LVDT_DISPLACEMENT,
+    for topic in (topics.WRENCH_COMMAND, topics.REJECTED_COMMAND, topics.LOAD_CELL_WRENCH, topics.LVDT_DISPLACEMENT,
                   topics.PREDICTED_AXIS_STIFFNESS, topics.STIFFNESS_ESTIMATE, topics.STIFFNESS_VALUES,
                   topics.STIFFNESS, topics.DIAGNOSTICS):
         target = (extra_remaps or {}).get(topic, prefix + topic)
@@ -90,6 +90,12 @@ class SyntheticRig:
         self.pub_cmd = self.node.create_publisher(WrenchStamped, prefix + topics.WRENCH_COMMAND, RELIABLE_QOS) \
             if command else None
         self.clock = SampleClock(rate_hz)
+        # Fault hooks (test_estimator_faults): which samples are published, the LVDT's zero, commands on or off.
+        self.force_ok = lambda i: True
+        self.force_map = lambda i, f: f
+        self.disp_ok = lambda i: True
+        self.x_offset = 0.0
+        self.command_on = True
         self.start_ns: int | None = None
         self.sent = 0
         self.burst_newest: list[int] = []  # stamp of the newest sample of every burst, ns
@@ -133,7 +139,7 @@ class SyntheticRig:
             times = np.array([now_ns])
         if self.start_ns is None:
             self.start_ns = int(times[0])
-        if self.pub_cmd is not None:
+        if self.pub_cmd is not None and self.command_on:
             first = self.load((int(times[0]) - self.start_ns) / NS)
             if first is not None:
                 self.pub_cmd.publish(self.wrench_msg(int(times[0]), first))
@@ -146,10 +152,13 @@ class SyntheticRig:
                 break
             if self.inject is not None:
                 self.inject(self, self.sent, t_ns)
-            x = (f - C) / K + self.rng.normal(0.0, self.x_noise)
-            self.pub_force.publish(self.wrench_msg(t_ns, f + self.rng.normal(0.0, self.force_noise)))
+            x = (f - C) / K + self.rng.normal(0.0, self.x_noise) - self.x_offset
+            force_msg = self.wrench_msg(t_ns, self.force_map(self.sent, f + self.rng.normal(0.0, self.force_noise)))
+            if self.force_ok(self.sent):
+                self.pub_force.publish(force_msg)
             if self.pub_point is not None:
-                self.pub_point.publish(self.point_msg(t_ns, x))
+                if self.disp_ok(self.sent):
+                    self.pub_point.publish(self.point_msg(t_ns, x))
             else:
                 self.pub_volts.publish(Float64(data=(x - self.offset) / self.gain))
             self.sent += 1
@@ -249,8 +258,12 @@ def test_known_stiffness_interval_prediction_outputs_and_reset(rclpy_context):
                 'rls_stiffness', 'prediction', 'relative_error'):
         assert key in kv
     assert float(kv['stiffness']) == pytest.approx(loading['stiffness'], rel=1e-5)
-    assert abs(float(kv['nonlinearity'])) < 0.05 and last.status[0].level == b'\x00'
-    assert 'N/m' in last.status[0].message
+    assert abs(float(kv['nonlinearity'])) < 0.05 and 'N/m' in last.status[0].message
+    # The rig stopped at the program's end: its streams are silent, the estimate is frozen, STALE (never OK), the
+    # input status ERROR; while the rig ran, the estimate was OK.
+    assert last.status[0].level == last.status[1].level == b'\x03', last.status[0].message
+    assert 'silent' in last.status[0].message and last.status[2].level == b'\x02'
+    assert any(a.status[0].level == b'\x00' for a in probe.estimates)
     inputs = {k.key: k.value for k in last.status[2].values}
     assert int(inputs['pairs_fitted']) == counters.pairs_fitted
     # The estimator's own lag (publication − newest pair stamp) over every estimate it published: the rig's

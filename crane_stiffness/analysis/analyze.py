@@ -8,7 +8,12 @@ decode):
 1. **Pairing.** Load-cell and LVDT samples are paired by header stamp as the live estimator pairs them
    (crane_stiffness.estimation.live.LiveStiffness), by its own rules in their vectorized form
    (crane_stiffness.estimation.live.live_pairs): the same input checks (NaN/Inf, zero stamp, absurd values), then
-   the synchroniser's pairing over the whole arrays (arrival = the recorded log time). The estimator's parameters
+   the synchroniser's pairing over the whole arrays (arrival = the recorded log time). The clock-skew check
+   (a stamp more than ``max_clock_skew_s`` ahead of its arrival at the node) takes the recorder's log time of the
+   message as the arrival: the recorder receives on the same clock, a few ms from the estimator. Pairs made while a
+   rejected command was in force (absurd by :mod:`crane_stiffness.commands`, or on /crane/rejected_command) are
+   left out, and the fraction of each stream's samples received (from its own stamps) is reported, as live.
+   Not reproduced offline: fit segments started by a sensor restart (the bag does not record publishers). The estimator's parameters
    are those recorded with the session: read from the running node (``crane_stiffness/node_parameters``), else the
    ``stiffness_estimator`` section of its parameter file (:mod:`crane_stiffness.analysis.load`).
 2. **Branches.** Each pair is labelled loading or unloading as the live estimator labels it (hysteresis on |load|,
@@ -46,7 +51,8 @@ from crane_stiffness.analysis.load import SessionData, load_session
 from crane_stiffness.analysis.progress import Progress
 from crane_stiffness.analysis.results import (COMPARED_FIELDS, WINDOW_FIT_FIELDS, CycleFits, LiveComparison,
                                               ModelSummary, SessionAnalysis, Step)
-from crane_stiffness.bag import BagDamageWarning
+from crane_stiffness.bag import BagDamageWarning, BagReader
+from crane_stiffness.commands import command_faults
 from crane_stiffness.config import geometry_from_params
 from crane_stiffness.estimation.branch import BRANCHES, LOADING, UNLOADING
 from crane_stiffness.estimation.errors import DataError
@@ -89,8 +95,11 @@ def _inputs(data: SessionData) -> tuple[Samples, Samples, dict[str, int]]:
     f = data.force
     wrench = np.column_stack([f[k] for k in AXES]) if f.size else np.zeros((0, 6))
     f_stamp = f['stamp_s']
+    # The clock-skew check: live, a stamp ahead of its arrival at the estimator; here, ahead of the recorder's log
+    # time of the message (its arrival at the recorder, on the same clock; a few ms from the estimator's).
     force, f_counts = checked_samples(f_stamp, f['log_time_ns'], wrench[:, s.axis_index],
-                                      np.isfinite(wrench).all(axis=1) & np.isfinite(f_stamp), s.max_abs_force)
+                                      np.isfinite(wrench).all(axis=1) & np.isfinite(f_stamp), s.max_abs_force,
+                                      s.max_clock_skew_s)
     d = data.disp
     if 'stamp_s' in d.dtype.names:
         d_stamp = d['stamp_s']
@@ -99,24 +108,47 @@ def _inputs(data: SessionData) -> tuple[Samples, Samples, dict[str, int]]:
         d_stamp = d['log_time_ns'] * 1e-9
         d_value = s.volts_to_displacement(d['data'])
     disp, d_counts = checked_samples(d_stamp, d['log_time_ns'], d_value, np.isfinite(d_value) & np.isfinite(d_stamp),
-                                     s.max_abs_displacement)
+                                     s.max_abs_displacement, s.max_clock_skew_s)
     counters = {'force_messages': int(f.size), 'displacement_messages': int(d.size),
                 **{name: f_counts[name] + d_counts[name] for name in INPUT_CHECKS}}
     return force, disp, counters
 
 
-def _commands(data: SessionData) -> CommandSeries | None:
+def _rejected_commands(path: Path) -> np.ndarray | None:
+    """The crane model's rejected commands (/crane/rejected_command) in the bag, decoded; None if absent."""
+    with BagReader(path) as reader:
+        info = reader.topics.get(topics.REJECTED_COMMAND)
+        if info is None or not info.count or info.msg_type != 'geometry_msgs/msg/WrenchStamped':
+            return None
+        return reader.decode_topics([topics.REJECTED_COMMAND])[topics.REJECTED_COMMAND]
+
+
+def _commands(data: SessionData, rejected: np.ndarray | None = None) -> CommandSeries | None:
+    """The commands as the live estimator holds them: absurd ones (crane_stiffness.commands, the model's own check)
+    and the model's rejections held as rejected."""
     c = data.command
     if c is None or c.size == 0:
         return None
-    return CommandSeries.of(c['stamp_s'], c['log_time_ns'], c[data.settings.force_axis].astype(float))
+    wrench = np.column_stack([c[k].astype(float) for k in AXES])
+    r_stamp = r_log = None
+    if rejected is not None and rejected.size:
+        r_stamp, r_log = rejected['stamp_s'], rejected['log_time_ns']
+    return CommandSeries.of(c['stamp_s'], c['log_time_ns'], c[data.settings.force_axis].astype(float),
+                            command_faults(wrench), r_stamp, r_log)
+
+
+def _accepted(commands: CommandSeries) -> tuple[np.ndarray, np.ndarray]:
+    """(stamps, loads) of the accepted commands: the program's steps (absurd and rejected ones left out)."""
+    if commands.rejected is None:
+        return commands.stamp, commands.value
+    return commands.stamp[~commands.rejected], commands.value[~commands.rejected]
 
 
 def _steps(data: SessionData, pairs: LivePairs, commands: CommandSeries | None, t0: float, settle_fraction: float,
            problems: list[str]) -> list[Step]:
     if commands is None:
         return []
-    stamp, value = commands.stamp, commands.value
+    stamp, value = _accepted(commands)
     runs = hold_runs(stamp, value)
     period = float(np.median(np.diff(stamp))) if stamp.size > 1 else 0.0
     holds = data.program.holds(data.settings.force_axis) if data.program is not None else []
@@ -264,7 +296,7 @@ def _model(data: SessionData, steps: list[Step], commands: CommandSeries | None,
     recorded = math.nan
     if data.prediction is not None and data.prediction.size:
         recorded = float(data.prediction['data'][0])
-    levels = np.array([s.level for s in steps]) if steps else (commands.value if commands else np.zeros(0))
+    levels = np.array([s.level for s in steps]) if steps else (_accepted(commands)[1] if commands else np.zeros(0))
     peak = float(levels[np.argmax(np.abs(levels))]) if levels.size and np.abs(levels).max() > 0 else 0.0
     lvdt = data.sensors.get('lvdt') or data.sensors.get('/lvdt')
     scale = lvdt_scale(axis, lvdt)
@@ -359,7 +391,7 @@ def analyze_session(bag_path: str | Path, out_dir: str | Path | None = None, *, 
             bar.done()
             bar.stage('pair')
             force, disp, input_counters = _inputs(data)
-            commands = _commands(data)
+            commands = _commands(data, _rejected_commands(path))
             pairs = live_pairs(data.settings, force, disp, commands)
             if pairs.stamp.size < 3:
                 raise SessionAnalysisError(
@@ -431,6 +463,19 @@ def analyze_session(bag_path: str | Path, out_dir: str | Path | None = None, *, 
             except ValueError as exc:
                 problems.append(f'recorded geometry invalid: {exc}')
         counters = {**input_counters, **pairs.counters}
+        # The live estimator's warnings, offline: what it would have said about these inputs.
+        st = data.settings
+        if counters.get('dropped_clock_skew'):
+            problems.append(f'{counters["dropped_clock_skew"]} sensor sample(s) stamped more than max_clock_skew_s = '
+                            f'{st.max_clock_skew_s:g} s ahead of their log time were dropped (a skewed sensor clock)')
+        if counters.get('pairs_rejected_command'):
+            problems.append(f'{counters["pairs_rejected_command"]} pair(s) made while a rejected command (absurd, or '
+                            f'rejected by the crane model) was in force were not fitted')
+        for stream in ('force', 'displacement'):
+            fraction = counters.get(f'{stream}_received_fraction', math.nan)
+            if fraction < 1.0 - st.max_loss_fraction:
+                problems.append(f'{stream}: the bag holds {fraction:.2%} of the samples its stamps say were sent '
+                                f'(more than max_loss_fraction = {st.max_loss_fraction:.2%} lost)')
         result = SessionAnalysis(
             bag=str(path), session=str(session.get('session') or path.name), notes=str(session.get('notes', '')),
             recorded_with=str(session.get('software_version', '')), analysed_with=__version__,

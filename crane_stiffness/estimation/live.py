@@ -6,16 +6,24 @@ publishing one:
 1. Input checks. A force sample is the selected component (``force_axis``, N or N·m) of a wrench; a displacement
    sample is a reading in m (or rad), or a voltage converted by ``x = displacement_gain · V + displacement_offset``.
    Dropped and counted (:class:`~crane_stiffness.estimation.inputs.InputCounters`): a NaN/Inf anywhere in the
-   sample, a zero (or negative) stamp, a selected force above ``max_abs_force`` or a displacement above
-   ``max_abs_displacement`` in magnitude (:func:`~crane_stiffness.estimation.inputs.input_faults`), and a message
-   its reader could not decode (:meth:`LiveStiffness.add_malformed`).
+   sample, a zero (or negative) stamp, a stamp more than ``max_clock_skew_s`` ahead of its arrival (node clock), a
+   selected force above ``max_abs_force`` or a displacement above ``max_abs_displacement`` in magnitude
+   (:func:`~crane_stiffness.estimation.inputs.input_faults`), and a message its reader could not decode
+   (:meth:`LiveStiffness.add_malformed`). Each stream's health (:class:`~crane_stiffness.estimation.inputs.
+   StreamHealth`): the fraction of its samples received (WARN above ``max_loss_fraction`` lost) and, given the node
+   clock, silence (longer than ``dropout_factor`` delivery periods: ERROR, both branches STALE). A sensor publisher
+   whose sequence numbers start again (a restart, which zeroes the sensor) starts a new fit segment
+   (:meth:`LiveStiffness.new_segment`).
 2. Pairing by header stamp with :class:`~crane_stiffness.estimation.sync.ApproximateTimeSync` (``slop_s``,
    ``max_age_s``, ``expected_period_s``, ``dropout_factor``): out-of-order and stale samples are counted there and
    never fitted; dropouts are counted.
 3. Fitting each pair with :class:`~crane_stiffness.estimation.fit.StiffnessEstimator` (windowed least squares and
    RLS with forgetting, loading and unloading branches apart). The branch follows the commanded load (the
    ``force_axis`` component of the wrench command in effect at the pair's stamp) once a command has been seen and
-   ``branch_source`` is ``'auto'``, else the measured force.
+   ``branch_source`` is ``'auto'``, else the measured force. A pair stamped while a rejected command is in force
+   (absurd by :mod:`crane_stiffness.commands`, the crane model's own rule, or republished by the model on
+   /crane/rejected_command; from its stamp to the next accepted command) is not fitted, and the statuses say so
+   (WARN, never OK).
 4. Outputs. :meth:`LiveStiffness.values` is the cheap O(1) numeric estimate (rows ``BRANCHES`` × ``VALUE_FIELDS``)
    for publishing after every batch of new pairs; its ``nonlinearity`` is the value of the last
    :meth:`LiveStiffness.refresh`, which sorts the windows and is meant for a slow timer together with
@@ -42,8 +50,9 @@ from crane_stiffness.estimation.branch import BRANCHES, LOADING, Branch, branch_
 from crane_stiffness.estimation.errors import ParameterError
 from crane_stiffness.estimation.estimator import Estimate, StiffnessEstimator
 from crane_stiffness.estimation.fit import t_quantile
-from crane_stiffness.estimation.inputs import (CommandHold, CommandSeries, InputCounters, Samples, command_inputs,
-                                               input_faults)
+from crane_stiffness.commands import command_fault
+from crane_stiffness.estimation.inputs import (CommandHold, CommandSeries, InputCounters, Samples, StreamHealth,
+                                               command_inputs, input_faults, stream_health_of)
 from crane_stiffness.status import ERROR, OK, STALE, WARN
 from crane_stiffness.estimation.sync import (DISPLACEMENT, FORCE, ApproximateTimeSync, Pair, SyncCounters,
                                              pair_by_stamp, pair_stamp)
@@ -95,6 +104,8 @@ class LiveSettings:
     displacement_gain: float = 1.0       # volts channel: metres per volt [m/V]
     displacement_offset: float = 0.0     # volts channel: metres at 0 V [m]
     nonlinearity_warn: float = 0.2       # WARN when a branch's nonlinearity exceeds this [-]
+    max_clock_skew_s: float = 0.1        # samples stamped further ahead of their arrival are dropped [s]
+    max_loss_fraction: float = 0.01      # WARN when a stream lost more of its samples than this [-]
 
     @classmethod
     def from_params(cls, values: Mapping[str, Any]) -> LiveSettings:
@@ -123,13 +134,18 @@ class LiveSettings:
         gain = _number(v, 'displacement_gain')
         if gain == 0.0:
             raise ParameterError('displacement_gain', gain, 'must be non-zero (m/V)')
+        skew = _number(v, 'max_clock_skew_s', above=0.0)
+        if skew > max_age:
+            raise ParameterError('max_clock_skew_s', skew, f'must be <= max_age_s = {max_age} (seconds): a sample '
+                                 'stamped that far ahead holds the pairing up for as long')
         return cls(force_axis=v['force_axis'], slop_s=slop, max_age_s=max_age, expected_period_s=period,
                    dropout_factor=dropout, window=window, forgetting=forgetting,
                    hysteresis=_number(v, 'hysteresis', minimum=0.0), branch_source=v['branch_source'],
                    max_abs_force=_number(v, 'max_abs_force', above=0.0),
                    max_abs_displacement=_number(v, 'max_abs_displacement', above=0.0),
                    displacement_gain=gain, displacement_offset=_number(v, 'displacement_offset'),
-                   nonlinearity_warn=_number(v, 'nonlinearity_warn', above=0.0))
+                   nonlinearity_warn=_number(v, 'nonlinearity_warn', above=0.0), max_clock_skew_s=skew,
+                   max_loss_fraction=_number(v, 'max_loss_fraction', minimum=0.0, maximum=1.0))
 
     def volts_to_displacement(self, volts: Any) -> Any:
         """Displacement, m (or rad), of a reading in volts (a float, or element-wise an array)."""
@@ -213,18 +229,29 @@ class LiveStiffness:
         self.prediction = math.nan
         self.lag = LagHistogram()
         self._settings = settings or LiveSettings()
+        self._sync: ApproximateTimeSync | None = None
         self._build()
 
     def _build(self) -> None:
         s = self._settings
         self._axis = s.axis_index
+        old = self._sync
         self._sync = s.make_sync()
+        if old is not None:  # the counters go on across restarts: every message stays accounted
+            self._sync.carry_counters(old)
         self._estimator = s.make_estimator()
         self._commands = CommandHold()
         for dof in range(1, min(s.window - 1, _T_CACHE)):  # fill scipy's t quantiles now, not one per pair later
             t_quantile(dof)
         self._last_report: dict[str, tuple[int, ...]] = {}  # input_report's previous problem counts per consumer
+        self._new_health()
+        self._segment_reason = 'start'
         self._clear_outputs()
+
+    def _new_health(self) -> None:
+        period = self._settings.expected_period_s or None
+        self.health = {FORCE: StreamHealth(period), DISPLACEMENT: StreamHealth(period)}
+        self._rejection: tuple[str, float] | None = None  # (reason, stamp) of the rejected command now in force
 
     def _clear_outputs(self) -> None:
         self._nonlinearity = {b: math.nan for b in BRANCHES}
@@ -241,20 +268,40 @@ class LiveStiffness:
     def sync_counters(self) -> SyncCounters:
         return self._sync.counters
 
+    @property
+    def segment_reason(self) -> str:
+        """Why the current fit segment started ('start', '~/reset', 'force publisher restarted', ...)."""
+        return self._segment_reason
+
     def configure(self, settings: LiveSettings) -> bool:
         """Take new settings; returns True if the change restarted pairing and fitting (counters are kept)."""
         restart = settings.fit_key() != self._settings.fit_key()
         self._settings = settings
         if restart:
             self.counters.fit_restarts += 1
+            self.counters.segments += 1
             self._build()
+            self._segment_reason = 'parameters changed'
         return restart
 
     def reset(self) -> None:
-        """Clear the fits of both branches (pairing and counters go on)."""
+        """Start afresh, as at start-up, but keep the counters: the fits of both branches, the branch tracker, the
+        pairing's queues and timing, the commands held, the streams' health (~/reset)."""
+        self.new_segment('~/reset', commands=True)
+
+    def new_segment(self, reason: str, *, commands: bool = False) -> None:
+        """Start a new fit segment (a sensor restarted or was re-zeroed: the old window must not mix with the new
+        zero point): fits, branch tracker, pairing and stream health start afresh; with ``commands`` the commands
+        held too. The reason is reported in every status until the next segment."""
         self._estimator.reset()
+        self._sync.restart()
+        if commands:
+            self._commands = CommandHold()
+        self._new_health()
         self._clear_outputs()
         self.counters.fit_restarts += 1
+        self.counters.segments += 1
+        self._segment_reason = reason
 
     # --- inputs ---
     def set_prediction(self, value: float) -> bool:
@@ -268,71 +315,127 @@ class LiveStiffness:
         return True
 
     def add_command(self, stamp_s: float, wrench: Sequence[float], arrival_s: float) -> bool:
-        """A wrench command [N, N·m]; a zero stamp counts from ``arrival_s``. Returns False if dropped (NaN/Inf)."""
+        """A wrench command [N, N·m]; a zero stamp counts from ``arrival_s``. Returns False if dropped (NaN/Inf in
+        its load along the axis or its times) or rejected (absurd by :mod:`crane_stiffness.commands`: held as a
+        rejected command, pairs are not fitted while it is in force)."""
         self.counters.command_received += 1
         load = float(wrench[self._axis])
         usable, stamp = command_inputs(stamp_s, arrival_s, load)
         if not usable:
             self.counters.command_dropped += 1
             return False
+        reason = command_fault(wrench)
+        if reason is not None:
+            self.counters.command_rejected += 1
+            self._commands.add(float(stamp), load, f'absurd command: {reason}')
+            return False
+        self.counters.command_used += 1
         self._commands.add(float(stamp), load)
         return True
 
-    def add_force(self, stamp_s: float, wrench: Sequence[float]) -> int:
-        """A wrench sample [N, N·m] stamped ``stamp_s``; returns the number of pairs it completed and fitted."""
+    def add_rejected(self, stamp_s: float, wrench: Sequence[float], arrival_s: float) -> None:
+        """A command the crane model rejected (/crane/rejected_command, the command with its own stamp): from its
+        stamp until the next accepted command no pair is fitted."""
+        self.counters.rejected_received += 1
+        usable, stamp = command_inputs(stamp_s, arrival_s, 0.0)
+        if not usable:
+            return
+        reason = command_fault(wrench) or 'no equilibrium'
+        self._commands.add(float(stamp), math.nan, f'command rejected by the crane model ({reason})', from_model=True)
+
+    def add_force(self, stamp_s: float, wrench: Sequence[float], arrival_s: float = math.nan,
+                  sequence: int | None = None) -> int:
+        """A wrench sample [N, N·m] stamped ``stamp_s``, arrived at ``arrival_s`` (s, node clock; NaN: unknown), with
+        its publisher's sequence number if known; returns the number of pairs it completed and fitted."""
         self.counters.force_received += 1
         finite = all(math.isfinite(v) for v in wrench) and math.isfinite(stamp_s)
         value = float(wrench[self._axis])
-        if not self._accepted(finite, stamp_s, value, self._settings.max_abs_force):
-            return 0
-        return self._fit(self._sync.push(FORCE, stamp_s, value))
+        return self._sample(FORCE, finite, stamp_s, value, self._settings.max_abs_force, arrival_s, sequence)
 
     def add_malformed(self, stream: str) -> None:
         """Count a ``'force'`` or ``'displacement'`` message that could not be decoded (dropped)."""
         if stream == FORCE:
             self.counters.force_received += 1
+            self.counters.force_dropped += 1
         else:
             self.counters.displacement_received += 1
+            self.counters.displacement_dropped += 1
         self.counters.dropped_malformed += 1
 
-    def add_displacement(self, stamp_s: float, value_m: float) -> int:
+    def add_displacement(self, stamp_s: float, value_m: float, arrival_s: float = math.nan,
+                         sequence: int | None = None) -> int:
         """A displacement sample, m (or rad); returns the number of pairs it completed and fitted."""
         self.counters.displacement_received += 1
-        return self._displacement(stamp_s, float(value_m))
-
-    def add_volts(self, stamp_s: float, volts: float) -> int:
-        """A displacement sample in volts, converted with displacement_gain and displacement_offset."""
-        self.counters.displacement_received += 1
-        return self._displacement(stamp_s, self._settings.volts_to_displacement(float(volts)))
-
-    def _displacement(self, stamp_s: float, value: float) -> int:
+        value = float(value_m)
         finite = math.isfinite(value) and math.isfinite(stamp_s)
-        if not self._accepted(finite, stamp_s, value, self._settings.max_abs_displacement):
-            return 0
-        return self._fit(self._sync.push(DISPLACEMENT, stamp_s, value))
+        return self._sample(DISPLACEMENT, finite, stamp_s, value, self._settings.max_abs_displacement, arrival_s,
+                            sequence)
 
-    def _accepted(self, finite: bool, stamp_s: float, value: float, limit: float) -> bool:
+    def add_volts(self, stamp_s: float, volts: float, sequence: int | None = None) -> int:
+        """A displacement sample in volts, converted with displacement_gain and displacement_offset, stamped on its
+        arrival (``stamp_s`` is the arrival)."""
+        self.counters.displacement_received += 1
+        value = self._settings.volts_to_displacement(float(volts))
+        finite = math.isfinite(value) and math.isfinite(stamp_s)
+        return self._sample(DISPLACEMENT, finite, stamp_s, value, self._settings.max_abs_displacement, stamp_s,
+                            sequence)
+
+    def _sample(self, stream: str, finite: bool, stamp_s: float, value: float, limit: float, arrival_s: float,
+                sequence: int | None) -> int:
+        if not self._accepted(stream, finite, stamp_s, value, limit, arrival_s):
+            return 0
+        health = self.health[stream]
+        if sequence is not None:
+            if health.sequence is not None and sequence < health.sequence and health.count:
+                # A publisher numbers its messages from 1: a number that goes back is a new publisher, a restarted
+                # sensor (which zeroes itself again): its readings must not share a window with the old ones.
+                self.new_segment(f'{stream} publisher restarted (sequence number {health.sequence} -> {sequence})')
+                health = self.health[stream]
+            health.sequence = sequence
+        health.add(stamp_s, arrival_s)
+        return self._fit(self._sync.push(stream, stamp_s, value))
+
+    def _accepted(self, stream: str, finite: bool, stamp_s: float, value: float, limit: float,
+                  arrival_s: float) -> bool:
         """The input checks (:func:`~crane_stiffness.estimation.inputs.input_faults`); a dropped sample is counted."""
-        non_finite, zero_stamp, absurd = input_faults(finite, stamp_s, value, limit)
+        non_finite, zero_stamp, skew, absurd = input_faults(finite, stamp_s, value, limit, arrival_s,
+                                                            self._settings.max_clock_skew_s)
         c = self.counters
         if non_finite:
             c.dropped_non_finite += 1
         elif zero_stamp:
             c.dropped_zero_stamp += 1
+        elif skew:
+            c.dropped_clock_skew += 1
         elif absurd:
             c.dropped_absurd += 1
         else:
             return True
+        if stream == FORCE:
+            c.force_dropped += 1
+        else:
+            c.displacement_dropped += 1
         return False
 
     def _fit(self, pairs: list[Pair]) -> int:
         fitted = 0
-        use_command = self._settings.branch_source == 'auto' and bool(self._commands)
+        use_command = self._settings.branch_source == 'auto'
+        commands = self._commands
         for pair in pairs:
             stamp = pair.stamp_s
-            load = self._commands.at(stamp) if use_command else None
+            entry = commands.entry(stamp) if commands else None
+            if entry is not None and entry[1] is not None:
+                # A rejected command is in force: the sensors may show it (or not); either way not a load the model
+                # holds, so not a point of the stiffness curve.
+                self.counters.pairs_rejected_command += 1
+                if self._rejection is None or self._rejection[0] != entry[1]:
+                    self._rejection = (entry[1], stamp)
+                continue
+            self._rejection = None
+            load = entry[0] if (entry is not None and use_command) else None
             branch = self._estimator.add(stamp, pair.force, pair.displacement, load)
             if branch is None:
+                self.counters.pairs_non_finite += 1
                 continue
             self._dirty.add(branch)
             self._current = branch
@@ -395,13 +498,41 @@ class LiveStiffness:
             self._nonlinearity[branch] = self._estimator.nonlinearity(branch)
         return dict(self._nonlinearity)
 
-    def report(self) -> list[BranchReport]:
-        """Per-branch status for people; call after :meth:`refresh` and :meth:`values`."""
+    def input_problems(self, now_s: float = math.nan) -> tuple[int, list[str]]:
+        """What makes the inputs invalid or doubtful now (``now_s``: the node clock, s; NaN: silence not judged):
+        (worst level, reasons). ERROR: a stream silent for longer than ``dropout_factor`` delivery periods (a dead
+        sensor); WARN: a rejected command in force, a stream that lost more than ``max_loss_fraction``."""
+        s = self._settings
+        level, reasons = OK, []
+        for stream, health in self.health.items():
+            limit = health.silence_limit(s.dropout_factor)
+            silent = health.silent_for(now_s)
+            if health.count and silent > limit:
+                level = ERROR
+                reasons.append(f'{stream} silent for {silent:.3g} s (> {s.dropout_factor:g} x '
+                               f'{limit / s.dropout_factor * 1e3:.3g} ms): sensor dead or disconnected?')
+        if self._rejection is not None:
+            level = max(level, WARN)
+            reasons.append(f'{self._rejection[0]} in force since stamp {self._rejection[1]:.6f} s: '
+                           f'{self.counters.pairs_rejected_command} pair(s) not fitted so far')
+        for stream, health in self.health.items():
+            fraction = health.received_fraction()
+            if fraction < 1.0 - s.max_loss_fraction:
+                level = max(level, WARN)
+                reasons.append(f'{stream}: received {fraction:.2%} of its samples (lost {1.0 - fraction:.2%} > '
+                               f'max_loss_fraction {s.max_loss_fraction:.2%})')
+        return level, reasons
+
+    def report(self, now_s: float = math.nan) -> list[BranchReport]:
+        """Per-branch status for people; call after :meth:`refresh` and :meth:`values`. With ``now_s`` (the node
+        clock, s) a dead input stream makes every branch STALE: never OK while its inputs are invalid."""
         self._update_rows()
         s = self._settings
         unit = s.stiffness_unit
+        problem_level, problems = self.input_problems(now_s)
         names = ('stiffness', 'intercept', 'stderr', 'ci95_low', 'ci95_high', 'r2', 'n', 'nonlinearity',
                  'rls_stiffness', 'prediction', 'relative_error')
+        segment = f'segment {self.counters.segments} (started by {self._segment_reason})'
         out = []
         for branch in BRANCHES:
             row = dict(zip(VALUE_FIELDS, self._rows[branch]))
@@ -418,13 +549,38 @@ class LiveStiffness:
                 if nl > s.nonlinearity_warn:
                     level = WARN
                     message = f'nonlinear (slack wire?): nonlinearity {nl:.3g} > {s.nonlinearity_warn:g}; ' + message
-            pairs += [('unit', unit), ('axis', s.force_axis), ('current', str(branch == self._current).lower())]
+            if problem_level == ERROR:
+                level = STALE
+                message = 'inputs invalid, estimate frozen: ' + '; '.join(problems) + '; last ' + message
+            elif problem_level == WARN:
+                level = max(level, WARN) if level != STALE else STALE
+                message = '; '.join(problems) + '; ' + message
+            if self.counters.segments > 1:
+                message += f'; new fit {segment}'
+            pairs += [('unit', unit), ('axis', s.force_axis), ('current', str(branch == self._current).lower()),
+                      ('segment', str(self.counters.segments)), ('segment_reason', self._segment_reason)]
             out.append(BranchReport(branch, level, message, pairs))
         return out
 
-    def input_report(self, consumer: str = '') -> tuple[int, str, list[tuple[str, str]]]:
-        """Input health: (level, message, key/values); WARN if samples were dropped, out of order, stale or lost
-        in a dropout since this ``consumer``'s previous call."""
+    def accounting(self) -> dict[str, int]:
+        """Every message accounted (the node's final counters): per stream received = dropped (input checks) +
+        passed_checks, and passed_checks = out_of_order + non_finite + stale + unmatched + discarded + pending +
+        paired; pairs = fitted + rejected_command + non_finite; commands received = used + rejected + dropped."""
+        out = {f.name: getattr(self.counters, f.name) for f in fields(self.counters)}
+        sc = self._sync.counters
+        out['pairs'] = sc.pairs
+        for stream, counters in ((FORCE, sc.force), (DISPLACEMENT, sc.displacement)):
+            for f in fields(counters):
+                # the pairing's 'received' are the samples that passed the input checks (not the messages received)
+                key = f'{stream}_passed_checks' if f.name == 'received' else f'{stream}_{f.name}'
+                out[key] = getattr(counters, f.name)
+            out[f'{stream}_pending'] = self._sync.pending(stream)
+        return out
+
+    def input_report(self, consumer: str = '', now_s: float = math.nan) -> tuple[int, str, list[tuple[str, str]]]:
+        """Input health: (level, message, key/values); ERROR if a stream is silent (``now_s``: node clock, s), WARN
+        if a rejected command is in force, a stream lost too many samples, or samples were dropped, out of order,
+        stale or lost in a dropout since this ``consumer``'s previous call."""
         c = self.counters
         sc = self._sync.counters
         problems = {
@@ -441,12 +597,20 @@ class LiveStiffness:
         pairs += [('pairs', str(sc.pairs))]
         for stream, counters in ((FORCE, sc.force), (DISPLACEMENT, sc.displacement)):
             pairs += [(f'{stream}.{f.name}', str(getattr(counters, f.name))) for f in fields(counters)]
+        for stream, health in self.health.items():
+            pairs += [(f'{stream}.received_fraction', _fmt(health.received_fraction())),
+                      (f'{stream}.silent_s', _fmt(health.silent_for(now_s)))]
+        pairs += [('segment', str(c.segments)), ('segment_reason', self._segment_reason)]
         pairs += [('newest_pair_stamp', _fmt(self._newest_stamp))]
         pairs += [(f'lag_{name}_ms', _fmt(value * 1e3)) for name, value in (
             ('p50', self.lag.percentile(50)), ('p99', self.lag.percentile(99)), ('max', self.lag.max_s))]
         pairs += [('lag_n', str(self.lag.n))]
+        level, reasons = self.input_problems(now_s)
         if new:
-            return WARN, 'since last report: ' + ', '.join(f'{v} {k}' for k, v in new.items()), pairs
+            level = max(level, WARN)
+            reasons.append('since last report: ' + ', '.join(f'{v} {k}' for k, v in new.items()))
+        if reasons:
+            return level, '; '.join(reasons), pairs
         return OK, f'{sc.pairs} pairs, {c.pairs_fitted} fitted', pairs
 
 
@@ -470,17 +634,28 @@ class LivePairs:
 def live_pairs(settings: LiveSettings, force: Samples, displacement: Samples,
                commands: CommandSeries | None) -> LivePairs:
     """What :class:`LiveStiffness` pairs and the branch it fits each pair to, for whole recorded streams that passed
-    the input checks (:func:`~crane_stiffness.estimation.inputs.checked_samples`), vectorized."""
+    the input checks (:func:`~crane_stiffness.estimation.inputs.checked_samples`), vectorized. Pairs made while a
+    rejected command was in force are left out (counted as ``pairs_rejected_command``)."""
     s = settings
     result = pair_by_stamp(force.stamp, force.arrival_ns, displacement.stamp, displacement.arrival_ns, s.slop_s,
                            s.max_age_s)
     fi, di = result.force_index, result.displacement_index
     stamp = pair_stamp(force.stamp[fi], displacement.stamp[di])
-    value = force.value[fi]
     fit_log = np.maximum(force.arrival_ns[fi], displacement.arrival_ns[di])
+    counters = dict(result.counters)
+    if commands is not None:
+        rejected = commands.rejected_at(stamp, fit_log)
+        counters['pairs_rejected_command'] = int(rejected.sum())
+        keep = ~rejected
+        fi, di, stamp, fit_log = fi[keep], di[keep], stamp[keep], fit_log[keep]
+    else:
+        counters['pairs_rejected_command'] = 0
+    value = force.value[fi]
     load = value
     if commands is not None and s.branch_source == 'auto':
         held_load, held = commands.at(stamp, fit_log)
-        load = np.where(held, held_load, value)
-    return LivePairs(stamp, value, displacement.value[di], branch_labels(load, s.hysteresis), fit_log,
-                     result.counters)
+        load = np.where(held & np.isfinite(held_load), held_load, value)
+    for name, samples in (('force', force), ('displacement', displacement)):
+        counters[f'{name}_received_fraction'] = stream_health_of(samples.stamp,
+                                                                 s.expected_period_s or None).received_fraction
+    return LivePairs(stamp, value, displacement.value[di], branch_labels(load, s.hysteresis), fit_log, counters)

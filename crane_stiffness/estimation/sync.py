@@ -19,6 +19,10 @@ Bookkeeping per stream (see :class:`StreamCounters`):
 - dropout: a gap between consecutive stamps larger than ``dropout_factor`` times the expected period (given, or
   estimated online from the gaps); the sample itself is kept.
 - unmatched: a sample discarded because no partner within ``slop`` can exist.
+- discarded: a sample still queued when the pairing restarted (:meth:`ApproximateTimeSync.restart`).
+
+Every sample pushed is accounted: received = paired + out_of_order + non_finite + stale + unmatched + discarded +
+pending (dropouts are flagged, not dropped).
 
 Every push is amortised O(1) (deques, each sample enters and leaves once).
 
@@ -77,6 +81,7 @@ class StreamCounters:
     stale: int = 0
     dropouts: int = 0
     unmatched: int = 0
+    discarded: int = 0
 
 
 @dataclass(slots=True)
@@ -173,6 +178,23 @@ class ApproximateTimeSync:
         self._streams = (_Stream(self._periods[FORCE], self._counters.force),
                          _Stream(self._periods[DISPLACEMENT], self._counters.displacement))
         self._index = {FORCE: 0, DISPLACEMENT: 1}
+
+    def restart(self) -> None:
+        """Start pairing afresh (a new fit segment, a reset): the queued samples are discarded (counted), the
+        streams' newest stamps and estimated periods forgotten; the counters go on."""
+        for i, name in enumerate(STREAMS):
+            old = self._streams[i]
+            old.counters.discarded += len(old.queue)
+        self._streams = (_Stream(self._periods[FORCE], self._counters.force),
+                         _Stream(self._periods[DISPLACEMENT], self._counters.displacement))
+
+    def carry_counters(self, previous: ApproximateTimeSync) -> None:
+        """Go on counting where ``previous`` (replaced by this one on a settings change) stopped; its queued samples
+        count as discarded."""
+        previous.restart()
+        self._counters = previous._counters
+        self._streams[0].counters = self._counters.force
+        self._streams[1].counters = self._counters.displacement
 
     @property
     def counters(self) -> SyncCounters:

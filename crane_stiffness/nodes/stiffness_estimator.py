@@ -5,14 +5,22 @@ Subscribes (sensor QoS: best effort, so reliable and best-effort publishers both
   /lvdt/displacement (PointStamped, point.x in m) or, with ``displacement_type: float64``, a std_msgs/Float64
   channel in volts converted by ``displacement_gain`` [m/V] and ``displacement_offset`` [m] and stamped with its
   reception time;
-and (reliable) /crane/wrench_command for the load branch, (transient local) /crane/predicted_axis_stiffness.
+and (reliable) /crane/wrench_command for the load branch, /crane/rejected_command (commands the crane model
+rejected: no pair is fitted while one is in force, nor while an absurd command is), (transient local)
+/crane/predicted_axis_stiffness.
 Pairs samples by header stamp, fits loading and unloading branches apart (windowed LS + RLS) and publishes
   /stiffness/estimate_values (Float64MultiArray, rows loading, unloading × columns VALUE_FIELDS) and
   /stiffness/stiffness (Float64, loading branch) once per batch of queued messages that changed it (a sensor
   buffer is one estimate: the newest pair's stamp is its age), and
   /stiffness/estimate (DiagnosticArray: one status per branch plus an input status with the counters) and again
   /stiffness/stiffness at ``diagnostics_rate_hz``.
-Service ~/reset (std_srvs/Trigger) clears the fits. Plug in a real driver by remapping the input topics.
+Inputs are judged at every report: a stream silent for more than ``dropout_factor`` delivery periods makes the input
+status ERROR and both branches STALE; a stream that lost more than ``max_loss_fraction`` of its samples, or a
+rejected command in force, makes them WARN. A sensor publisher whose sequence numbers start again (a restarted
+sensor, which zeroes itself) or a new publisher on a sensor topic starts a new fit segment (the old window is
+dropped), named in every status.
+Service ~/reset (std_srvs/Trigger) starts afresh: fits, branch tracker, pairing queues, commands held, stream health
+(the counters go on). Plug in a real driver by remapping the input topics.
 """
 from __future__ import annotations
 
@@ -83,6 +91,11 @@ PARAMS = (
               'absurd and dropped [m or rad]'),
     ParamSpec('nonlinearity_warn', _D.nonlinearity_warn, 'a branch whose nonlinearity (1 - k_upper/k_lower) '
               'exceeds this is reported WARN: slack wires [-]'),
+    ParamSpec('max_clock_skew_s', _D.max_clock_skew_s, 'sensor samples stamped further ahead of their arrival '
+              '(node clock) are dropped as clock skew; <= max_age_s, the longest such a sample may hold the pairing '
+              'up [s]', rule='0 < max_clock_skew_s <= max_age_s'),
+    ParamSpec('max_loss_fraction', _D.max_loss_fraction, 'WARN when a sensor stream lost more than this fraction of '
+              'its samples (expected from its own stamps) [-]', rule='0 <= max_loss_fraction <= 1'),
     ParamSpec('diagnostics_rate_hz', 5.0, 'rate of /stiffness/estimate and of the nonlinearity update [Hz]',
               rule='> 0'),
 )
@@ -120,6 +133,9 @@ class StiffnessEstimatorNode(Node):
             MultiArrayDimension(label='field', size=n, stride=n)]
         self.sub_command = self.create_subscription(WrenchStamped, topics.WRENCH_COMMAND, self._on_command,
                                                     RELIABLE_QOS)
+        self.sub_rejected = self.create_subscription(WrenchStamped, topics.REJECTED_COMMAND, self._on_rejected,
+                                                     RELIABLE_QOS)
+        self.publisher_counts: dict[str, int] = {}  # matched publishers per sensor stream at the last report
         # The sensor streams are taken serialized and decoded here (serde.cdr): a quarter of the CPU per message.
         self.sub_force = self.create_subscription(WrenchStamped, topics.LOAD_CELL_WRENCH,
                                                   self._then_drain(self._on_force), SENSOR_QOS,
@@ -127,12 +143,16 @@ class StiffnessEstimatorNode(Node):
         self.params = Params(self, PARAMS, _validate, self._apply)  # subscribes the displacement
         self.create_subscription(Float64, topics.PREDICTED_AXIS_STIFFNESS, self._on_prediction, LATCHED_QOS)
         self.create_service(Trigger, '~/reset', self._srv_reset)
-        self.diagnostics = Diagnostics(self, lambda: self.core.input_report('diagnostics'))
+        self.diagnostics = Diagnostics(self, lambda: self.core.input_report('diagnostics', self._now_s()))
 
     @property
-    def counters(self):
-        """The input counters (what ``run`` prints at exit); the pairing's own are ``core.sync_counters``."""
-        return self.core.counters
+    def counters(self) -> dict[str, int]:
+        """Every message accounted (what ``run`` prints at exit): the input counters and the pairing's, per stream
+        (see LiveStiffness.accounting)."""
+        return self.core.accounting()
+
+    def _now_s(self) -> float:
+        return self.get_clock().now().nanoseconds * 1e-9
 
     def _apply(self, settings: LiveSettings, values: dict[str, Any]) -> None:
         if self.core.configure(settings):
@@ -146,8 +166,9 @@ class StiffnessEstimatorNode(Node):
             self.sub_displacement = self.create_subscription(msg_type, topics.LVDT_DISPLACEMENT,
                                                              self._then_drain(handle), SENSOR_QOS,
                                                              event_callbacks=_NO_EVENTS_SUB, raw=True)
-            self.drained = [(self.sub_command, self._on_command), (self.sub_force, self._on_force),
-                            (self.sub_displacement, handle)]
+            self.drained = [(self.sub_command, self._on_command), (self.sub_rejected, self._on_rejected),
+                            (self.sub_force, self._on_force), (self.sub_displacement, handle)]
+            self.publisher_counts.pop(DISPLACEMENT, None)
         if values['diagnostics_rate_hz'] != self.settings.get('diagnostics_rate_hz'):
             if self.timer is not None:
                 self.destroy_timer(self.timer)
@@ -164,14 +185,22 @@ class StiffnessEstimatorNode(Node):
             return None
         return stamp_seconds(sec, nanosec), values
 
+    @staticmethod
+    def _sequence(info: dict | None) -> int | None:
+        """The publisher's sequence number of a message (it starts at 1 for every new publisher), if known."""
+        seq = (info or {}).get('publication_sequence_number') or 0
+        return seq if 0 < seq < 2**63 else None  # 0 or all ones: not supported by the middleware
+
     def _on_force(self, data: bytes, info: dict | None = None) -> None:
         sample = self._decode(data, 6, FORCE)
-        if sample is not None and self.core.add_force(*sample):
+        if sample is not None and self.core.add_force(sample[0], sample[1], self._sensor_arrival_s(info),
+                                                      self._sequence(info)):
             self.changed = True
 
     def _on_point(self, data: bytes, info: dict | None = None) -> None:
         sample = self._decode(data, 3, DISPLACEMENT)
-        if sample is not None and self.core.add_displacement(sample[0], sample[1][0]):
+        if sample is not None and self.core.add_displacement(sample[0], sample[1][0], self._sensor_arrival_s(info),
+                                                             self._sequence(info)):
             self.changed = True
 
     def _on_volts(self, data: bytes, info: dict | None = None) -> None:
@@ -180,13 +209,23 @@ class StiffnessEstimatorNode(Node):
         except CdrError:
             self.core.add_malformed(DISPLACEMENT)
             return
-        if self.core.add_volts(self._arrival_s(info), volts):
+        if self.core.add_volts(self._arrival_s(info), volts, self._sequence(info)):
             self.changed = True
 
     def _on_command(self, msg: WrenchStamped, info: dict | None = None) -> None:
         f, m = msg.wrench.force, msg.wrench.torque
         self.core.add_command(stamp_to_s(msg.header.stamp), (f.x, f.y, f.z, m.x, m.y, m.z),
                               self._arrival_s(info))
+
+    def _on_rejected(self, msg: WrenchStamped, info: dict | None = None) -> None:
+        f, m = msg.wrench.force, msg.wrench.torque
+        self.core.add_rejected(stamp_to_s(msg.header.stamp), (f.x, f.y, f.z, m.x, m.y, m.z), self._arrival_s(info))
+
+    def _sensor_arrival_s(self, info: dict | None) -> float:
+        """A sensor sample's arrival for the clock-skew check, s; NaN (not judged) while the node clock is at zero
+        (use_sim_time before the first /clock message)."""
+        arrival = self._arrival_s(info)
+        return arrival if arrival > 0.0 else float('nan')
 
     def _arrival_s(self, info: dict | None) -> float:
         """When a message arrived, s: the middleware's reception stamp (system clock = the node clock) if known, else
@@ -204,6 +243,14 @@ class StiffnessEstimatorNode(Node):
         Message-only on purpose: rclpy's EventsExecutor (Jazzy) fails on callbacks that take the message info.
         """
         def callback(msg) -> None:
+            # Commands and rejections already queued go first: a sample must be judged under the command in force
+            # at its stamp (a command published just before it may be queued but not yet taken).
+            for subscription, on_command in self.drained[:2]:
+                for _ in range(MAX_BATCH):
+                    taken = _take_queued(subscription)
+                    if taken is None:
+                        break
+                    on_command(*taken)
             handle(msg)
             self._drain()
             if self.changed:
@@ -237,7 +284,23 @@ class StiffnessEstimatorNode(Node):
             self.pub_stiffness.publish(Float64(data=k))
         self.last_stiffness = k
 
+    def _check_publishers(self) -> None:
+        """A new publisher on a sensor topic while one was already matched (a sensor restarted before its old
+        publisher was found gone) starts a new fit segment."""
+        for stream, sub in ((FORCE, self.sub_force), (DISPLACEMENT, self.sub_displacement)):
+            count = sub.get_publisher_count()
+            before = self.publisher_counts.get(stream)
+            if before and count > before and self.core.health[stream].count:
+                self.core.new_segment(f'a new {stream} publisher ({before} -> {count} matched)')
+                self.get_logger().warn(f'new fit segment: a new {stream} publisher appeared')
+            self.publisher_counts[stream] = count
+
     def _publish_estimate(self) -> None:
+        # Judge the inputs on everything already delivered: take what is queued first.
+        self._drain()
+        if self.changed:
+            self._publish_values()
+        self._check_publishers()
         stiffness = self.core.loading_stiffness()
         if stiffness == stiffness:  # not NaN; also at this slow rate, for a late subscriber during a hold
             self.pub_stiffness.publish(Float64(data=stiffness))
@@ -245,11 +308,12 @@ class StiffnessEstimatorNode(Node):
         name = self.get_fully_qualified_name()
         msg = DiagnosticArray()
         msg.header.stamp = self.get_clock().now().to_msg()
-        for r in self.core.report():
+        now = self._now_s()
+        for r in self.core.report(now):
             msg.status.append(DiagnosticStatus(level=bytes([r.level]), name=f'{name}: {r.branch}',
                                                message=r.message, hardware_id=self.get_name(),
                                                values=[KeyValue(key=k, value=v) for k, v in r.values]))
-        level, message, pairs = self.core.input_report('estimate')
+        level, message, pairs = self.core.input_report('estimate', now)
         msg.status.append(DiagnosticStatus(level=bytes([level]), name=f'{name}: input', message=message,
                                            hardware_id=self.get_name(),
                                            values=[KeyValue(key=k, value=v) for k, v in pairs]))
@@ -260,7 +324,8 @@ class StiffnessEstimatorNode(Node):
         self.core.reset()
         self._publish_values()
         response.success = True
-        response.message = f'fits cleared ({fitted} pairs fitted so far)'
+        response.message = (f'fits cleared, pairing, branches, commands and stream health restarted ({fitted} pairs '
+                            f'fitted so far; segment {self.core.counters.segments})')
         self.get_logger().info(response.message)
         return response
 
