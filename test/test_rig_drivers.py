@@ -36,11 +36,11 @@ def test_transport_argument_chooses_the_nodes():
                              'stiffness_estimator', 'session_recorder', 'load_program']
     for name in ('rdt_emulator', 'modbus_emulator', 'netft', 'modbus_lvdt'):
         assert drivers[name].parameter_files == (str(CONFIG / 'drivers_emulated.yaml'),)
-    # The program waits for the emulators to hold the command and the pose (nothing of them may be lost), and for
-    # both streams from the drivers.
+    # The program waits for the emulators to hold the applied load and the pose (nothing of them may be lost), and
+    # for both streams from the drivers.
     waits = drivers['load_program'].parameters
-    assert '/crane/wrench_command: crane_model rdt_emulator stiffness_estimator session_recorder' in \
-        waits['wait_for_subscribers']
+    assert '/crane/wrench_command: crane_model stiffness_estimator session_recorder' in waits['wait_for_subscribers']
+    assert '/crane/applied_wrench: rdt_emulator session_recorder' in waits['wait_for_subscribers']
     assert '/crane/platform_pose: modbus_emulator session_recorder' in waits['wait_for_subscribers']
     assert {'/load_cell/wrench', '/lvdt/displacement'} <= set(waits['wait_for_messages'])
     # Real hardware: the drivers alone, with a drivers file naming the devices.
