@@ -6,12 +6,14 @@ and Ctrl-C reaches all of them, so a signal often arrives during that import; wi
 end the node with a KeyboardInterrupt traceback. Here the signal is only noted, the import finishes, and
 :class:`crane_stiffness.nodes.common.ShutdownRequest` takes it over: the node ends at once, cleanly, with status 0.
 This module imports nothing heavy; each node's executable (``nodes_bin/<node>`` in the source tree) is three lines
-calling one of its functions, so only the interpreter's own start-up (some 20 ms) comes before it.
+calling one of its entry points, so only the interpreter's own start-up comes before it.
 """
 from __future__ import annotations
 
 import importlib
+import importlib.util
 import signal
+from typing import Callable
 
 #: The signals that arrived before the node's own handlers were installed, in order.
 _PENDING: list[int] = []
@@ -34,45 +36,8 @@ def _main(module: str) -> int:
     return importlib.import_module(f'crane_stiffness.nodes.{module}').main()
 
 
-def load_program() -> int:
-    return _main('load_program')
-
-
-def crane_model() -> int:
-    return _main('crane_model')
-
-
-def load_cell() -> int:
-    return _main('load_cell')
-
-
-def lvdt() -> int:
-    return _main('lvdt')
-
-
-def stiffness_estimator() -> int:
-    return _main('stiffness_estimator')
-
-
-def session_recorder() -> int:
-    return _main('session_recorder')
-
-
-def session_player() -> int:
-    return _main('session_player')
-
-
-def netft() -> int:
-    return _main('netft')
-
-
-def modbus_lvdt() -> int:
-    return _main('modbus_lvdt')
-
-
-def rdt_emulator() -> int:
-    return _main('rdt_emulator')
-
-
-def modbus_emulator() -> int:
-    return _main('modbus_emulator')
+def __getattr__(name: str) -> Callable[[], int]:
+    """``from crane_stiffness.entry import crane_model``: the entry point of the node module of that name."""
+    if name.startswith('_') or importlib.util.find_spec(f'crane_stiffness.nodes.{name}') is None:
+        raise AttributeError(f'module {__name__!r} has no attribute {name!r} (no node crane_stiffness.nodes.{name})')
+    return lambda: _main(name)

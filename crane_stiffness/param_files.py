@@ -123,35 +123,32 @@ class ParamFile:
         return out
 
 
-def params_files_from_args(args: Sequence[str] | None) -> list[str]:
-    """The ``--params-file`` paths in the ROS arguments of a command line (sys.argv when None)."""
+def _ros_args(args: Sequence[str] | None) -> list[tuple[str, str | None]]:
+    """(argument, the one after it or None) for each argument inside ``--ros-args`` … ``--`` of a command line
+    (sys.argv when None)."""
     argv = list(sys.argv if args is None else args)
-    files: list[str] = []
+    out: list[tuple[str, str | None]] = []
     in_ros = False
     for i, arg in enumerate(argv):
         if arg == '--ros-args':
             in_ros = True
         elif arg == '--':
             in_ros = False
-        elif in_ros and arg == '--params-file' and i + 1 < len(argv):
-            files.append(argv[i + 1])
-    return files
+        elif in_ros:
+            out.append((arg, argv[i + 1] if i + 1 < len(argv) else None))
+    return out
+
+
+def params_files_from_args(args: Sequence[str] | None) -> list[str]:
+    """The ``--params-file`` paths in the ROS arguments of a command line (sys.argv when None)."""
+    return [following for arg, following in _ros_args(args) if arg == '--params-file' and following is not None]
 
 
 def param_names_from_args(args: Sequence[str] | None) -> list[str]:
     """The parameter names set by ``-p``/``--param name:=value`` in the ROS arguments of a command line (sys.argv
     when None), in order."""
-    argv = list(sys.argv if args is None else args)
-    names: list[str] = []
-    in_ros = False
-    for i, arg in enumerate(argv):
-        if arg == '--ros-args':
-            in_ros = True
-        elif arg == '--':
-            in_ros = False
-        elif in_ros and arg in ('-p', '--param') and i + 1 < len(argv) and ':=' in argv[i + 1]:
-            names.append(argv[i + 1].partition(':=')[0])
-    return names
+    return [following.partition(':=')[0] for arg, following in _ros_args(args)
+            if arg in ('-p', '--param') and following is not None and ':=' in following]
 
 
 def read_params_files(paths: Sequence[str]) -> tuple[list[dict[str, str]], dict[str, dict[str, Any]], list[str]]:

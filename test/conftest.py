@@ -86,3 +86,17 @@ def colcon_install(tmp_path_factory):
                                                              '__pycache__', 'bags', '*.egg-info'))
     colcon_build(src, ws / 'build', ws / 'install', ws / 'log')
     return ws / 'install'
+
+
+def publish_wrench_now(node, publisher, wrench, frame_id: str = 'crane_base') -> int:
+    """Publish ``wrench`` [fx fy fz mx my mz] (N, N·m) as a WrenchStamped stamped with ``node``'s clock now; returns
+    the stamp [ns]."""
+    from geometry_msgs.msg import WrenchStamped
+    msg = WrenchStamped()
+    now = node.get_clock().now()
+    msg.header.stamp = now.to_msg()
+    msg.header.frame_id = frame_id
+    f, m = msg.wrench.force, msg.wrench.torque
+    f.x, f.y, f.z, m.x, m.y, m.z = (float(v) for v in wrench)
+    publisher.publish(msg)
+    return now.nanoseconds

@@ -22,7 +22,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from std_msgs.msg import String
 
-from conftest import call_trigger as call
+from conftest import publish_wrench_now, call_trigger as call
 from conftest import spin_until
 from crane_stiffness import topics
 from crane_stiffness.drivers import rdt
@@ -72,14 +72,7 @@ class Probe:
                               lambda m: self.diagnostics.extend(m.status), 100)
 
     def command(self, wrench) -> int:
-        msg = WrenchStamped()
-        now = self.node.get_clock().now()
-        msg.header.stamp = now.to_msg()
-        msg.header.frame_id = topics.FRAME_BASE
-        f, m = msg.wrench.force, msg.wrench.torque
-        f.x, f.y, f.z, m.x, m.y, m.z = (float(v) for v in wrench)
-        self.cmd.publish(msg)
-        return now.nanoseconds
+        return publish_wrench_now(self.node, self.cmd, wrench, topics.FRAME_BASE)
 
     def applied_at(self, t_ns: int) -> WrenchStamped | None:
         return next((m for m in self.applied if stamp_ns(m.header.stamp) == t_ns), None)
