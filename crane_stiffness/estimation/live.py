@@ -333,6 +333,8 @@ class StreamDelay:
         if not f or not d:
             return None
         newest = min(f[-1][0], d[-1][0])
+        if newest - max(f[0][0], d[0][0]) < 4 * DELAY_MAX_LAG_S:
+            return None  # too little overlap yet to search ±DELAY_MAX_LAG_S
         paused = self._new == self._new_at_update
         self._new_at_update = self._new
         if not paused and newest - self._last_newest < max(self.settings.delay_window_s / 4.0, 0.5):
