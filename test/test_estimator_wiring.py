@@ -186,3 +186,85 @@ def test_analyze_moves_the_wrench_and_reports_the_delay_like_the_live_estimator(
     assert float(fx.stream_delay['stream_delay_residual_s']) == pytest.approx(0.0, abs=0.5e-3)
     assert fx.stream_delay['stream_delay_ok'] == 'true' and not any('max_stream_delay_s' in p for p in fx.problems)
     assert float(fx.stream_delay['displacement_delay_s']) == DELAY
+
+
+# --- the live and vectorised forms pinned together; the parameters' checks ---------------------------------------
+
+@pytest.mark.parametrize('axis', ['fx', 'fy', 'fz', 'mx', 'my', 'mz'])
+def test_the_per_sample_row_is_the_vectorised_matrix_and_the_frames_transform(axis):
+    from crane_stiffness.axes import AXES
+    from crane_stiffness.estimation.frames import transform_wrench
+    settings = LiveSettings.from_params({**MOUNT_PARAMS, 'force_axis': axis})
+    w = np.random.default_rng(5).normal(0.0, 10.0, (200, 6))
+    i = AXES.index(axis)
+    row = settings.force_row()
+    live = np.array([sum(c * v for c, v in zip(row, sample)) for sample in w.tolist()])
+    np.testing.assert_allclose(live, settings.force_component(w), rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(live, transform_wrench(w, QUAT, POSITION, reaction=True)[:, i], rtol=1e-12, atol=1e-12)
+    # The independent sensor model inverted: the platform's wrench comes back.
+    np.testing.assert_allclose(settings.force_component(sensor_reading(w)), w[:, i], rtol=1e-12, atol=1e-12)
+    # At the centre, aligned: nothing to compute, the component as is.
+    plain = LiveSettings.from_params({'force_axis': axis})
+    assert plain.force_row() is None and np.array_equal(plain.force_component(w), w[:, i])
+
+
+@pytest.mark.parametrize('correction', [0.0, 0.0025])
+def test_stream_delay_live_window_matches_the_offline_estimate(correction):
+    """LiveStiffness fed sample by sample (estimates at its slow refresh) and stream_delay_of over the same samples
+    find the same delay, and say the same about it, when the window holds the whole recording."""
+    from crane_stiffness.estimation.inputs import Samples
+    from crane_stiffness.estimation.live import LiveStiffness, stream_delay_of
+    from crane_stiffness.status import OK, WARN
+    rng = np.random.default_rng(2)
+    t = np.arange(0.0, 2.1, 0.001) + 100.0
+    load = np.array([delayed_load(s - 100.0) for s in t])
+    f = load + rng.normal(0.0, 0.01, t.size)
+    x = (load - 0.15) / K + rng.normal(0.0, 2e-7, t.size)
+    settings = LiveSettings.from_params({'window': 5000, 'delay_window_s': 5.0, 'displacement_delay_s': correction})
+    core = LiveStiffness(settings)
+    for i in range(t.size):
+        core.add_force(t[i], (0.0, f[i], 0.0, 0.0, 0.0, 0.0))
+        core.add_displacement(t[i] + DELAY, x[i])
+    core.refresh()   # new data, a first estimate
+    core.refresh()   # nothing new: the streams paused; the estimate stays
+    live = core.stream_delay.estimate
+    assert live is not None and live.ok
+    none = np.zeros(t.size, np.int64)
+    offline, problem, values = stream_delay_of(settings, Samples(t, none, f),
+                                               Samples(t + DELAY - correction, none, x))
+    assert offline.delay_s == pytest.approx(live.delay_s, abs=1e-9)
+    assert live.delay_s == pytest.approx(DELAY - correction, abs=0.5e-3)
+    kv = dict(values)
+    assert float(kv['stream_delay_s']) == pytest.approx(DELAY, abs=0.5e-3)
+    level, message, pairs = core.input_report('test')
+    assert dict(pairs) == {**dict(pairs), **kv}  # the same key/values live and offline
+    if correction == 0.0:   # 3 ms left > max_stream_delay_s = 2 ms
+        assert level == WARN and problem and problem in message and kv['stream_delay_ok'] == 'false'
+    else:                   # 0.5 ms left
+        assert level == OK and problem == '' and kv['stream_delay_ok'] == 'true'
+
+
+def test_mount_and_delay_parameters_validated_on_start_and_on_change(rclpy_context):
+    _, _, args = isolated()
+    node = StiffnessEstimatorNode(context=rclpy_context, cli_args=args)
+    for param, value, words in [('sensor_rotation', [0.0, 0.0, 0.0, 0.0], 'sensor_rotation = [0.0, 0.0, 0.0, 0.0]'),
+                                ('sensor_rotation', [1.0, 2.0], 'sensor_rotation'),
+                                ('sensor_position', [0.0, 0.1], 'sensor_position = [0.0, 0.1]'),
+                                ('displacement_delay_s', 0.5, 'displacement_delay_s = 0.5'),
+                                ('max_stream_delay_s', 0.0, 'max_stream_delay_s = 0.0'),
+                                ('delay_window_s', 0.1, 'delay_window_s = 0.1')]:
+        old = node.get_parameter(param).value
+        result = node.set_parameters([Parameter(param, value=value)])[0]
+        assert not result.successful, param
+        assert words in result.reason, result.reason
+        assert list(node.get_parameter(param).value) == list(old) if isinstance(old, (list, tuple)) or \
+            hasattr(old, 'tolist') else node.get_parameter(param).value == old
+    restarts = node.core.counters.fit_restarts
+    assert node.set_parameters([Parameter('sensor_rotation', value=QUAT)])[0].successful
+    assert node.core.counters.fit_restarts == restarts + 1 and node.core.settings.force_row() is not None
+    assert node.set_parameters([Parameter('displacement_delay_s', value=0.003)])[0].successful
+    assert node.core.settings.displacement_delay_s == 0.003 and node.core.counters.fit_restarts == restarts + 2
+    with pytest.raises(ValueError, match='sensor_position'):
+        StiffnessEstimatorNode(context=rclpy_context, cli_args=isolated()[2],
+                               parameter_overrides=[Parameter('sensor_position', value=[0.0, float('nan'), 0.0])])
+    node.destroy_node()
