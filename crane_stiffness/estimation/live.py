@@ -3,8 +3,13 @@
 :class:`LiveStiffness` is everything the ``stiffness_estimator`` node does between decoding a message and
 publishing one:
 
-1. Input checks. A force sample is the selected component (``force_axis``, N or N·m) of a wrench; a displacement
-   sample is a reading in m (or rad), or a voltage converted by ``x = displacement_gain · V + displacement_offset``.
+1. Input checks. A force sample is the selected component (``force_axis``, N or N·m) of a wrench, moved first from
+   the F/T sensor's frame to the platform centre in crane_base (``sensor_rotation``, ``sensor_position``,
+   ``sensor_reaction``; :class:`~crane_stiffness.estimation.frames.SensorMount`: one row of its 6×6 matrix per
+   sample, nothing when the sensor is at the centre, aligned); a displacement sample is a reading in m (or rad), or a
+   voltage converted by ``x = displacement_gain · V + displacement_offset``, its stamp corrected to
+   ``t − displacement_delay_s``. :class:`StreamDelay` estimates the delay left between the streams from the recent
+   data (:func:`~crane_stiffness.estimation.offset.estimate_delay`) and WARNs above ``max_stream_delay_s``.
    Dropped and counted (:class:`~crane_stiffness.estimation.inputs.InputCounters`): a NaN/Inf anywhere in the
    sample, a zero (or negative) stamp, a stamp more than ``max_clock_skew_s`` ahead of its arrival (node clock), a
    selected force above ``max_abs_force`` or a displacement above ``max_abs_displacement`` in magnitude
