@@ -93,6 +93,11 @@ class SyntheticRig:
         # Fault hooks (test_estimator_faults): which samples are published, the LVDT's zero, commands on or off.
         self.force_ok = lambda i: True
         self.force_map = lambda i, f: f
+        # Sensor hooks (test_estimator_wiring): the platform wrench at the centre (crane_base) for a load F, what the
+        # F/T sensor reports of it in its own frame, and how late the LVDT's stamps are [ns].
+        self.platform = lambda f: (0.0, f, 0.0, 0.0, 0.0, 0.0)
+        self.sensor = None
+        self.disp_late_ns = 0
         self.disp_ok = lambda i: True
         self.x_offset = 0.0
         self.command_on = True
@@ -116,11 +121,17 @@ class SyntheticRig:
             return self.peak * (2 * self.ramp_s - t) / self.ramp_s
         return None
 
-    def wrench_msg(self, t_ns: int, fy: float) -> WrenchStamped:
+    def wrench_msg(self, t_ns: int, fy: float, wrench=None) -> WrenchStamped:
+        """A WrenchStamped with force.y = fy, or with all six components of ``wrench``."""
         msg = WrenchStamped()
         msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(int(t_ns), NS)
         msg.header.frame_id = 'load_cell'
-        msg.wrench.force.y = float(fy)
+        if wrench is None:
+            msg.wrench.force.y = float(fy)
+        else:
+            w = [float(v) for v in wrench]
+            f, m = msg.wrench.force, msg.wrench.torque
+            f.x, f.y, f.z, m.x, m.y, m.z = w
         return msg
 
     def point_msg(self, t_ns: int, x: float) -> PointStamped:
@@ -142,7 +153,7 @@ class SyntheticRig:
         if self.pub_cmd is not None and self.command_on:
             first = self.load((int(times[0]) - self.start_ns) / NS)
             if first is not None:
-                self.pub_cmd.publish(self.wrench_msg(int(times[0]), first))
+                self.pub_cmd.publish(self.wrench_msg(int(times[0]), first, self.platform(first)))
         newest: int | None = None
         for t_ns in times.tolist():
             f = self.load((t_ns - self.start_ns) / NS)
@@ -153,12 +164,14 @@ class SyntheticRig:
             if self.inject is not None:
                 self.inject(self, self.sent, t_ns)
             x = (f - C) / K + self.rng.normal(0.0, self.x_noise) - self.x_offset
-            force_msg = self.wrench_msg(t_ns, self.force_map(self.sent, f + self.rng.normal(0.0, self.force_noise)))
+            measured = self.force_map(self.sent, f + self.rng.normal(0.0, self.force_noise))
+            wrench = self.platform(measured)
+            force_msg = self.wrench_msg(t_ns, measured, wrench if self.sensor is None else self.sensor(wrench))
             if self.force_ok(self.sent):
                 self.pub_force.publish(force_msg)
             if self.pub_point is not None:
                 if self.disp_ok(self.sent):
-                    self.pub_point.publish(self.point_msg(t_ns, x))
+                    self.pub_point.publish(self.point_msg(t_ns + self.disp_late_ns, x))
             else:
                 self.pub_volts.publish(Float64(data=(x - self.offset) / self.gain))
             self.sent += 1

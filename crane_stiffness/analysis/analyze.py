@@ -13,6 +13,10 @@ decode):
    message as the arrival: the recorder receives on the same clock, a few ms from the estimator. Pairs made while a
    rejected command was in force (absurd by :mod:`crane_stiffness.commands`, or on /crane/rejected_command) are
    left out, and the fraction of each stream's samples received (from its own stamps) is reported, as live.
+   The wrench is moved from the sensor's frame to the platform centre and the displacement stamps corrected by
+   ``displacement_delay_s`` as live; the delay left between the streams is estimated over the whole recording
+   (:func:`~crane_stiffness.estimation.live.stream_delay_of`, the live input status's stream_delay_*) and named
+   among the problems above ``max_stream_delay_s``.
    Not reproduced offline: fit segments started by a sensor restart (the bag does not record publishers). The estimator's parameters
    are those recorded with the session: read from the running node (``crane_stiffness/node_parameters``), else the
    ``stiffness_estimator`` section of its parameter file (:mod:`crane_stiffness.analysis.load`).
@@ -58,7 +62,7 @@ from crane_stiffness.estimation.branch import BRANCHES, LOADING, UNLOADING
 from crane_stiffness.estimation.errors import DataError
 from crane_stiffness.estimation.fit import LineFit, RecursiveLeastSquares, fit_line
 from crane_stiffness.estimation.inputs import INPUT_CHECKS, CommandSeries, Samples, checked_samples
-from crane_stiffness.estimation.live import AXES, VALUE_FIELDS, LivePairs, live_pairs
+from crane_stiffness.estimation.live import AXES, VALUE_FIELDS, LivePairs, live_pairs, stream_delay_of
 
 STAGES = ('open+decode', 'pair', 'steps', 'fits', 'model', 'figures', 'report')
 #: Pairs of a branch fed to the recursive least squares for the live comparison (its memory is ~1/(1-λ)).
@@ -97,7 +101,9 @@ def _inputs(data: SessionData) -> tuple[Samples, Samples, dict[str, int]]:
     f_stamp = f['stamp_s']
     # The clock-skew check: live, a stamp ahead of its arrival at the estimator; here, ahead of the recorder's log
     # time of the message (its arrival at the recorder, on the same clock; a few ms from the estimator's).
-    force, f_counts = checked_samples(f_stamp, f['log_time_ns'], wrench[:, s.axis_index],
+    # The wrench moved from the sensor's frame to the platform centre (sensor_rotation, _position, _reaction), the
+    # live estimator's matrix, vectorised; as is when the sensor is at the centre.
+    force, f_counts = checked_samples(f_stamp, f['log_time_ns'], s.force_component(wrench),
                                       np.isfinite(wrench).all(axis=1) & np.isfinite(f_stamp), s.max_abs_force,
                                       s.max_clock_skew_s)
     d = data.disp
@@ -107,6 +113,7 @@ def _inputs(data: SessionData) -> tuple[Samples, Samples, dict[str, int]]:
     else:  # std_msgs/Float64 in volts, stamped on arrival by the estimator
         d_stamp = d['log_time_ns'] * 1e-9
         d_value = s.volts_to_displacement(d['data'])
+    d_stamp = d_stamp - s.displacement_delay_s  # the instants the samples were taken, as live
     disp, d_counts = checked_samples(d_stamp, d['log_time_ns'], d_value, np.isfinite(d_value) & np.isfinite(d_stamp),
                                      s.max_abs_displacement, s.max_clock_skew_s)
     counters = {'force_messages': int(f.size), 'displacement_messages': int(d.size),
@@ -463,6 +470,9 @@ def analyze_session(bag_path: str | Path, out_dir: str | Path | None = None, *, 
             except ValueError as exc:
                 problems.append(f'recorded geometry invalid: {exc}')
         counters = {**input_counters, **pairs.counters}
+        _, delay_problem, delay_values = stream_delay_of(data.settings, force, disp)
+        if delay_problem:
+            problems.append(delay_problem)
         # The live estimator's warnings, offline: what it would have said about these inputs.
         st = data.settings
         if counters.get('dropped_clock_skew'):
@@ -484,7 +494,7 @@ def analyze_session(bag_path: str | Path, out_dir: str | Path | None = None, *, 
             unit=data.settings.stiffness_unit, program=program, geometry=geometry,
             settings=asdict(data.settings), counts=data.counts, pairing=counters, branch_fits=branch_fits,
             hold_fits=hold_fits, cycle_fits=cycles, steps=steps, live=live, model=model, problems=problems,
-            missing_topics=missing)
+            missing_topics=missing, stream_delay=dict(delay_values))
         if write_files:
             out = Path(out_dir) if out_dir is not None else _default_out(path)
             out.mkdir(parents=True, exist_ok=True)

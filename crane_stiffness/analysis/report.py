@@ -123,6 +123,9 @@ def session_blocks(a: SessionAnalysis, images: Sequence[str] = ()) -> list[Block
         blocks.append(('table', ['repeat', 't [s]', f'loading k [{unit}]', f'unloading k [{unit}]'], rows))
     blocks.append(('h2', 'Pairing'))
     blocks.append(('table', ['counter', 'value'], [[k, fmt(v)] for k, v in a.pairing.items()]))
+    if a.stream_delay:
+        blocks.append(('table', ['stream delay (displacement against force)', 'value'],
+                       [[k, v] for k, v in a.stream_delay.items()]))
     for image in images:
         blocks.append(('img', image, Path(image).stem.replace('_', ' ')))
     if a.problems:

@@ -126,6 +126,8 @@ class SessionAnalysis:
     missing_topics: list[str]
     files: list[str] = field(default_factory=list)
     timings_s: dict[str, float] = field(default_factory=dict)
+    #: The delay between the streams estimated from the data (the keys the live input status reports, stream_delay_*).
+    stream_delay: dict[str, str] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         return _json_safe(self)

@@ -94,3 +94,22 @@ class SensorMount:
         """:func:`transform_wrench` with this mounting."""
         return transform_wrench(wrench, self.rotation, self.position, self.reaction)
 
+    @property
+    def is_identity(self) -> bool:
+        """True when the sensor frame is the platform centre's (no rotation, no offset, no sign): nothing to do."""
+        return (not self.reaction and bool(np.array_equal(self.rotation, np.eye(3)))
+                and not bool(np.any(self.position)))
+
+    def matrix(self) -> NDArray[np.float64]:
+        """The 6×6 matrix T with ``apply(w) == T @ w`` (rows: crane_base components at the platform centre)."""
+        return self.apply(np.eye(6)).T
+
+    def component_row(self, axis_index: int) -> tuple[float, ...]:
+        """Row ``axis_index`` of :meth:`matrix` as 6 floats: the one component the estimator fits, as a dot
+        product with the sensor's wrench (the live per-sample form; :meth:`component` is the vectorised one)."""
+        return tuple(float(v) for v in self.matrix()[axis_index])
+
+    def component(self, wrench: ArrayLike, axis_index: int) -> NDArray[np.float64]:
+        """Component ``axis_index`` of the moved wrench for wrenches of shape (n, 6) (vectorised)."""
+        return np.asarray(wrench, dtype=float) @ self.matrix()[axis_index]
+

@@ -3,8 +3,13 @@
 :class:`LiveStiffness` is everything the ``stiffness_estimator`` node does between decoding a message and
 publishing one:
 
-1. Input checks. A force sample is the selected component (``force_axis``, N or N·m) of a wrench; a displacement
-   sample is a reading in m (or rad), or a voltage converted by ``x = displacement_gain · V + displacement_offset``.
+1. Input checks. A force sample is the selected component (``force_axis``, N or N·m) of a wrench, moved first from
+   the F/T sensor's frame to the platform centre in crane_base (``sensor_rotation``, ``sensor_position``,
+   ``sensor_reaction``; :class:`~crane_stiffness.estimation.frames.SensorMount`: one row of its 6×6 matrix per
+   sample, nothing when the sensor is at the centre, aligned); a displacement sample is a reading in m (or rad), or a
+   voltage converted by ``x = displacement_gain · V + displacement_offset``, its stamp corrected to
+   ``t − displacement_delay_s``. :class:`StreamDelay` estimates the delay left between the streams from the recent
+   data (:func:`~crane_stiffness.estimation.offset.estimate_delay`) and WARNs above ``max_stream_delay_s``.
    Dropped and counted (:class:`~crane_stiffness.estimation.inputs.InputCounters`): a NaN/Inf anywhere in the
    sample, a zero (or negative) stamp, a stamp more than ``max_clock_skew_s`` ahead of its arrival (node clock), a
    selected force above ``max_abs_force`` or a displacement above ``max_abs_displacement`` in magnitude
@@ -39,6 +44,7 @@ each streaming rule (:mod:`~crane_stiffness.estimation.inputs`, :func:`~crane_st
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, fields
 from typing import Any
@@ -47,9 +53,11 @@ import numpy as np
 
 from crane_stiffness.axes import AXES
 from crane_stiffness.estimation.branch import BRANCHES, LOADING, Branch, branch_labels
-from crane_stiffness.estimation.errors import ParameterError
+from crane_stiffness.estimation.errors import DataError, ParameterError
+from crane_stiffness.estimation.offset import DelayEstimate, estimate_delay
 from crane_stiffness.estimation.estimator import Estimate, StiffnessEstimator
 from crane_stiffness.estimation.fit import t_quantile
+from crane_stiffness.estimation.frames import SensorMount
 from crane_stiffness.commands import command_fault
 from crane_stiffness.estimation.inputs import (CommandHold, CommandSeries, InputCounters, Samples, StreamHealth,
                                                command_inputs, input_faults, stream_health_of)
@@ -66,6 +74,9 @@ BRANCH_SOURCES = ('auto', 'force')
 VALUE_FIELDS = ('stiffness', 'intercept', 'stderr', 'ci95_low', 'ci95_high', 'r2', 'n', 'residual_rms',
                 'nonlinearity', 'rls_stiffness', 'rls_stderr', 'prediction', 'relative_error', 'current',
                 'sample_stamp')
+
+#: Delays searched by the stream-delay estimate: ±this [s] (offset.estimate_delay's max_lag_s).
+DELAY_MAX_LAG_S = 0.05
 
 # Student-t quantiles computed ahead when a fit starts (t_quantile's cache holds 1024).
 _T_CACHE = 1000
@@ -106,6 +117,16 @@ class LiveSettings:
     nonlinearity_warn: float = 0.2       # WARN when a branch's nonlinearity exceeds this [-]
     max_clock_skew_s: float = 0.1        # samples stamped further ahead of their arrival are dropped [s]
     max_loss_fraction: float = 0.01      # WARN when a stream lost more of its samples than this [-]
+    # The F/T sensor's mounting (frames.SensorMount): wrenches are moved to the platform centre in crane_base before
+    # the force_axis component is taken.
+    sensor_rotation: tuple[float, ...] = (0.0, 0.0, 0.0, 1.0)  # sensor → crane_base, quaternion [x, y, z, w]
+    sensor_position: tuple[float, ...] = (0.0, 0.0, 0.0)       # sensor origin from the platform centre [m]
+    sensor_reaction: bool = False        # the sensor measures the reaction: negate [-]
+    # Clocks (offset.py): displacement stamps are corrected by t − displacement_delay_s before pairing; the delay
+    # between the streams is estimated from the last delay_window_s of data and WARNed above max_stream_delay_s.
+    displacement_delay_s: float = 0.0    # the displacement stamps are this late [s]
+    max_stream_delay_s: float = 0.002    # WARN when the estimated, uncorrected delay exceeds this [s]
+    delay_window_s: float = 5.0          # data the delay is estimated from [s]; 0 = not estimated
 
     @classmethod
     def from_params(cls, values: Mapping[str, Any]) -> LiveSettings:
@@ -138,7 +159,19 @@ class LiveSettings:
         if skew > max_age:
             raise ParameterError('max_clock_skew_s', skew, f'must be <= max_age_s = {max_age} (seconds): a sample '
                                  'stamped that far ahead holds the pairing up for as long')
-        return cls(force_axis=v['force_axis'], slop_s=slop, max_age_s=max_age, expected_period_s=period,
+        mount = SensorMount.from_params(v)  # ParameterError naming sensor_rotation / _position / _reaction
+        delay = _number(v, 'displacement_delay_s')
+        if abs(delay) > max_age:
+            raise ParameterError('displacement_delay_s', delay, f'must be within ±max_age_s = {max_age} (seconds)')
+        window_s = _number(v, 'delay_window_s', minimum=0.0)
+        if 0.0 < window_s < 4 * DELAY_MAX_LAG_S:
+            raise ParameterError('delay_window_s', window_s, f'must be 0 (not estimated) or >= '
+                                 f'{4 * DELAY_MAX_LAG_S:g} s (4 x the ±{DELAY_MAX_LAG_S:g} s searched)')
+        return cls(sensor_rotation=tuple(float(x) for x in np.ravel(v['sensor_rotation'])),
+                   sensor_position=tuple(float(x) for x in mount.position), sensor_reaction=mount.reaction,
+                   displacement_delay_s=delay, max_stream_delay_s=_number(v, 'max_stream_delay_s', above=0.0),
+                   delay_window_s=window_s,
+                   force_axis=v['force_axis'], slop_s=slop, max_age_s=max_age, expected_period_s=period,
                    dropout_factor=dropout, window=window, forgetting=forgetting,
                    hysteresis=_number(v, 'hysteresis', minimum=0.0), branch_source=v['branch_source'],
                    max_abs_force=_number(v, 'max_abs_force', above=0.0),
@@ -146,6 +179,24 @@ class LiveSettings:
                    displacement_gain=gain, displacement_offset=_number(v, 'displacement_offset'),
                    nonlinearity_warn=_number(v, 'nonlinearity_warn', above=0.0), max_clock_skew_s=skew,
                    max_loss_fraction=_number(v, 'max_loss_fraction', minimum=0.0, maximum=1.0))
+
+    @property
+    def mount(self) -> SensorMount:
+        """The sensor's mounting (validated in from_params)."""
+        return SensorMount.from_params({k: getattr(self, k) for k in SensorMount.PARAM_NAMES})
+
+    def force_row(self) -> tuple[float, ...] | None:
+        """The fitted component as a dot product with the sensor's wrench (6 coefficients), or None when the
+        sensor is at the platform centre, aligned, without sign change: then the component is taken as is."""
+        mount = self.mount
+        return None if mount.is_identity else mount.component_row(self.axis_index)
+
+    def force_component(self, wrench: np.ndarray) -> np.ndarray:
+        """The fitted component of sensor wrenches, shape (n, 6) → (n,), moved to the platform centre (vectorised
+        form of :meth:`LiveStiffness.add_force`'s rule; the same matrix)."""
+        mount = self.mount
+        w = np.asarray(wrench, dtype=float).reshape(-1, 6)
+        return w[:, self.axis_index] if mount.is_identity else mount.component(w, self.axis_index)
 
     def volts_to_displacement(self, volts: Any) -> Any:
         """Displacement, m (or rad), of a reading in volts (a float, or element-wise an array)."""
@@ -171,7 +222,8 @@ class LiveSettings:
         """The settings whose change restarts pairing and fitting (the others are thresholds)."""
         return (self.force_axis, self.slop_s, self.max_age_s, self.expected_period_s, self.dropout_factor,
                 self.window, self.forgetting, self.hysteresis, self.branch_source, self.displacement_gain,
-                self.displacement_offset)
+                self.displacement_offset, self.sensor_rotation, self.sensor_position, self.sensor_reaction,
+                self.displacement_delay_s)
 
 
 @dataclass(frozen=True)
@@ -221,6 +273,103 @@ class LagHistogram:
         return math.inf  # not reached
 
 
+def _delay_problem(settings: LiveSettings, estimate: DelayEstimate | None) -> str:
+    """The WARN reason for a trusted delay estimate whose remaining (uncorrected) part exceeds max_stream_delay_s,
+    else ''. ``estimate`` is of the corrected stamps: what displacement_delay_s has not removed."""
+    if estimate is None or not estimate.ok or abs(estimate.delay_s) <= settings.max_stream_delay_s:
+        return ''
+    total = estimate.delay_s + settings.displacement_delay_s
+    return (f'displacement stamps {estimate.delay_s * 1e3:+.3g} ms late against force after correction (estimated '
+            f'from the data, peak correlation {estimate.peak_correlation:.2f}) > max_stream_delay_s '
+            f'{settings.max_stream_delay_s * 1e3:g} ms: loading and unloading are skewed; set displacement_delay_s '
+            f'= {total:.6g}')
+
+
+def _delay_values(settings: LiveSettings, estimate: DelayEstimate | None, attempt: DelayEstimate | None,
+                  note: str) -> list[tuple[str, str]]:
+    nan = math.nan
+    residual = estimate.delay_s if estimate is not None else nan
+    return [('stream_delay_s', _fmt(residual + settings.displacement_delay_s)),
+            ('stream_delay_residual_s', _fmt(residual)),
+            ('displacement_delay_s', _fmt(settings.displacement_delay_s)),
+            ('stream_delay_ok', str(estimate is not None and not _delay_problem(settings, estimate)).lower()),
+            ('stream_delay_peak_correlation', _fmt(estimate.peak_correlation if estimate is not None else nan)),
+            ('stream_delay_note', note or (attempt.reason if attempt is not None else 'not estimated yet'))]
+
+
+class StreamDelay:
+    """The delay of the displacement stream's stamps against the force stream's, estimated live from the last
+    ``delay_window_s`` of accepted samples (stamps already corrected by ``displacement_delay_s``) with
+    :func:`~crane_stiffness.estimation.offset.estimate_delay`. :meth:`update` (from the slow timer) estimates again
+    when there is new data: every quarter window while data flows, and once when the streams pause (the end of a
+    load change). The last trusted estimate (``ok``: load changes to correlate) is kept through holds. The vectorised
+    form over a whole recording is :func:`stream_delay_of`."""
+
+    def __init__(self, settings: LiveSettings) -> None:
+        self.settings = settings
+        self.enabled = settings.delay_window_s > 0.0
+        self._data = {FORCE: deque(), DISPLACEMENT: deque()}
+        self._new = 0                # samples since the last estimate
+        self._new_at_update = -1     # _new at the previous update: unchanged = the streams pause
+        self._last_newest = -math.inf
+        self.estimate: DelayEstimate | None = None   # last trusted estimate (ok)
+        self.attempt: DelayEstimate | None = None    # last estimate made, trusted or not
+        self.note = ''
+        self.runs = 0
+
+    def add(self, stream: str, stamp_s: float, value: float) -> None:
+        """An accepted sample (stamp corrected, s; value in its unit): kept while within the window."""
+        if not self.enabled:
+            return
+        q = self._data[stream]
+        if q and stamp_s <= q[-1][0]:
+            return  # out of order: the pairing counts it; the correlation needs increasing stamps
+        q.append((stamp_s, value))
+        horizon = stamp_s - self.settings.delay_window_s
+        while q[0][0] < horizon:
+            q.popleft()
+        self._new += 1
+
+    def update(self) -> DelayEstimate | None:
+        """Estimate again if it is time (see the class docstring); returns the new estimate or None."""
+        if not self.enabled or self._new == 0:
+            return None
+        f, d = self._data[FORCE], self._data[DISPLACEMENT]
+        if not f or not d:
+            return None
+        newest = min(f[-1][0], d[-1][0])
+        if newest - max(f[0][0], d[0][0]) < 4 * DELAY_MAX_LAG_S:
+            return None  # too little overlap yet to search ±DELAY_MAX_LAG_S
+        paused = self._new == self._new_at_update
+        self._new_at_update = self._new
+        if not paused and newest - self._last_newest < max(self.settings.delay_window_s / 4.0, 0.5):
+            return None
+        self._last_newest = newest
+        self._new, self._new_at_update = 0, -1
+        tf, yf = np.array(f).T
+        td, yd = np.array(d).T
+        try:
+            result = estimate_delay(tf, yf, td, yd, max_lag_s=DELAY_MAX_LAG_S)
+        except (DataError, ParameterError) as exc:
+            self.note = f'not estimated: {exc}'
+            return None
+        self.runs += 1
+        self.attempt = result
+        self.note = ''
+        if result.ok:
+            self.estimate = result
+        return result
+
+    def problem(self) -> str:
+        return _delay_problem(self.settings, self.estimate)
+
+    def values(self) -> list[tuple[str, str]]:
+        if not self.enabled:
+            return [('stream_delay_note', 'not estimated (delay_window_s = 0)'),
+                    ('displacement_delay_s', _fmt(self.settings.displacement_delay_s))]
+        return _delay_values(self.settings, self.estimate, self.attempt, self.note)
+
+
 class LiveStiffness:
     """Streams in, live stiffness estimate out (see the module docstring)."""
 
@@ -235,6 +384,8 @@ class LiveStiffness:
     def _build(self) -> None:
         s = self._settings
         self._axis = s.axis_index
+        self._force_row = s.force_row()  # None: the sensor is the platform centre's frame, take the component as is
+        self._delay_correction = s.displacement_delay_s
         old = self._sync
         self._sync = s.make_sync()
         if old is not None:  # the counters go on across restarts: every message stays accounted
@@ -251,6 +402,7 @@ class LiveStiffness:
     def _new_health(self) -> None:
         period = self._settings.expected_period_s or None
         self.health = {FORCE: StreamHealth(period), DISPLACEMENT: StreamHealth(period)}
+        self._delay = StreamDelay(self._settings)
         self._rejection: tuple[str, float] | None = None  # (reason, stamp) of the rejected command now in force
 
     def _clear_outputs(self) -> None:
@@ -349,7 +501,12 @@ class LiveStiffness:
         its publisher's sequence number if known; returns the number of pairs it completed and fitted."""
         self.counters.force_received += 1
         finite = all(math.isfinite(v) for v in wrench) and math.isfinite(stamp_s)
-        value = float(wrench[self._axis])
+        r = self._force_row
+        if r is None:
+            value = float(wrench[self._axis])
+        else:  # moved to the platform centre in crane_base (frames.SensorMount), only the component fitted
+            w0, w1, w2, w3, w4, w5 = wrench
+            value = r[0] * w0 + r[1] * w1 + r[2] * w2 + r[3] * w3 + r[4] * w4 + r[5] * w5
         return self._sample(FORCE, finite, stamp_s, value, self._settings.max_abs_force, arrival_s, sequence)
 
     def add_malformed(self, stream: str) -> None:
@@ -368,6 +525,7 @@ class LiveStiffness:
         self.counters.displacement_received += 1
         value = float(value_m)
         finite = math.isfinite(value) and math.isfinite(stamp_s)
+        stamp_s -= self._delay_correction  # displacement_delay_s: the instant the sample was taken
         return self._sample(DISPLACEMENT, finite, stamp_s, value, self._settings.max_abs_displacement, arrival_s,
                             sequence)
 
@@ -377,8 +535,8 @@ class LiveStiffness:
         self.counters.displacement_received += 1
         value = self._settings.volts_to_displacement(float(volts))
         finite = math.isfinite(value) and math.isfinite(stamp_s)
-        return self._sample(DISPLACEMENT, finite, stamp_s, value, self._settings.max_abs_displacement, stamp_s,
-                            sequence)
+        return self._sample(DISPLACEMENT, finite, stamp_s - self._delay_correction, value,
+                            self._settings.max_abs_displacement, stamp_s, sequence)
 
     def _sample(self, stream: str, finite: bool, stamp_s: float, value: float, limit: float, arrival_s: float,
                 sequence: int | None) -> int:
@@ -393,6 +551,7 @@ class LiveStiffness:
                 health = self.health[stream]
             health.sequence = sequence
         health.add(stamp_s, arrival_s)
+        self._delay.add(stream, stamp_s, value)
         return self._fit(self._sync.push(stream, stamp_s, value))
 
     def _accepted(self, stream: str, finite: bool, stamp_s: float, value: float, limit: float,
@@ -496,7 +655,13 @@ class LiveStiffness:
         """Recompute the nonlinearity indicator of each branch's window (sorts the window: call it slowly)."""
         for branch in BRANCHES:
             self._nonlinearity[branch] = self._estimator.nonlinearity(branch)
+        self._delay.update()
         return dict(self._nonlinearity)
+
+    @property
+    def stream_delay(self) -> StreamDelay:
+        """The estimate of the delay between the streams (updated by :meth:`refresh`)."""
+        return self._delay
 
     def input_problems(self, now_s: float = math.nan) -> tuple[int, list[str]]:
         """What makes the inputs invalid or doubtful now (``now_s``: the node clock, s; NaN: silence not judged):
@@ -521,6 +686,10 @@ class LiveStiffness:
                 level = max(level, WARN)
                 reasons.append(f'{stream}: received {fraction:.2%} of its samples (lost {1.0 - fraction:.2%} > '
                                f'max_loss_fraction {s.max_loss_fraction:.2%})')
+        delay_problem = self._delay.problem()
+        if delay_problem:
+            level = max(level, WARN)
+            reasons.append(delay_problem)
         return level, reasons
 
     def report(self, now_s: float = math.nan) -> list[BranchReport]:
@@ -605,6 +774,7 @@ class LiveStiffness:
         pairs += [(f'lag_{name}_ms', _fmt(value * 1e3)) for name, value in (
             ('p50', self.lag.percentile(50)), ('p99', self.lag.percentile(99)), ('max', self.lag.max_s))]
         pairs += [('lag_n', str(self.lag.n))]
+        pairs += self._delay.values()
         level, reasons = self.input_problems(now_s)
         if new:
             level = max(level, WARN)
@@ -659,3 +829,30 @@ def live_pairs(settings: LiveSettings, force: Samples, displacement: Samples,
         counters[f'{name}_received_fraction'] = stream_health_of(samples.stamp,
                                                                  s.expected_period_s or None).received_fraction
     return LivePairs(stamp, value, displacement.value[di], branch_labels(load, s.hysteresis), fit_log, counters)
+
+
+def _increasing(stamp: np.ndarray) -> np.ndarray:
+    """Samples stamped after every earlier one (those :meth:`StreamDelay.add` keeps)."""
+    if stamp.size == 0:
+        return np.zeros(0, bool)
+    before = np.maximum.accumulate(np.concatenate([[-np.inf], stamp[:-1]]))
+    return stamp > before
+
+
+def stream_delay_of(settings: LiveSettings, force: Samples, displacement: Samples
+                    ) -> tuple[DelayEstimate | None, str, list[tuple[str, str]]]:
+    """The delay between the streams over a whole recording (the vectorised form of :class:`StreamDelay`; samples
+    that passed the input checks, displacement stamps already corrected by ``displacement_delay_s``): (the
+    estimate or None, the WARN reason or '', the key/values the live input status reports)."""
+    estimate, note = None, ''
+    if settings.delay_window_s <= 0.0:
+        return None, '', [('stream_delay_note', 'not estimated (delay_window_s = 0)'),
+                          ('displacement_delay_s', _fmt(settings.displacement_delay_s))]
+    try:
+        fi, di = _increasing(force.stamp), _increasing(displacement.stamp)
+        estimate = estimate_delay(force.stamp[fi], force.value[fi], displacement.stamp[di], displacement.value[di],
+                                  max_lag_s=DELAY_MAX_LAG_S)
+    except (DataError, ParameterError) as exc:
+        note = f'not estimated: {exc}'
+    trusted = estimate if estimate is not None and estimate.ok else None
+    return trusted, _delay_problem(settings, trusted), _delay_values(settings, trusted, estimate, note)

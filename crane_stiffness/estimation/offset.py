@@ -21,8 +21,9 @@ Sign convention: ``delay_s`` > 0 means stream ``b``'s stamps are late: the sampl
 at ``s − delay_s`` (a displacement driver that stamps at the end of a slow request, say). Correct with
 ``correct_stamps(b_stamps, delay) = b_stamps − delay``.
 
-Units: stamps in seconds (any common clock), values in the streams' own units (N, N·m, m). Not wired into the live
-estimator yet.
+Units: stamps in seconds (any common clock), values in the streams' own units (N, N·m, m). The live estimator uses
+:func:`estimate_delay` and the stamp correction (estimation.live.StreamDelay, stream_delay_of, displacement_delay_s);
+interpolated pairing is not wired into it yet.
 """
 from __future__ import annotations
 

@@ -19,6 +19,11 @@ status ERROR and both branches STALE; a stream that lost more than ``max_loss_fr
 rejected command in force, makes them WARN. A sensor publisher whose sequence numbers start again (a restarted
 sensor, which zeroes itself) or a new publisher on a sensor topic starts a new fit segment (the old window is
 dropped), named in every status.
+The wrench is moved from the sensor's frame to the platform centre in crane_base (``sensor_rotation``,
+``sensor_position``, ``sensor_reaction``; frames.SensorMount) before the ``force_axis`` component is taken; the
+displacement stamps are corrected by ``displacement_delay_s``; the remaining delay between the streams is estimated
+from the recent data (``delay_window_s``) and reported in the input status (stream_delay_*), WARN above
+``max_stream_delay_s``.
 Service ~/reset (std_srvs/Trigger) starts afresh: fits, branch tracker, pairing queues, commands held, stream health
 (the counters go on). Plug in a real driver by remapping the input topics.
 """
@@ -96,6 +101,19 @@ PARAMS = (
               'up [s]', rule='0 < max_clock_skew_s <= max_age_s'),
     ParamSpec('max_loss_fraction', _D.max_loss_fraction, 'WARN when a sensor stream lost more than this fraction of '
               'its samples (expected from its own stamps) [-]', rule='0 <= max_loss_fraction <= 1'),
+    ParamSpec('sensor_rotation', list(_D.sensor_rotation), 'rotation of the F/T sensor frame in crane_base (sensor -> '
+              'crane_base), quaternion [x, y, z, w]; the wrench is moved to the platform centre before force_axis is '
+              'taken [-]', rule='a non-zero quaternion, or 9 numbers of a rotation matrix'),
+    ParamSpec('sensor_position', list(_D.sensor_position), 'origin of the F/T sensor frame from the platform centre, '
+              'crane_base [m]', rule='3 finite numbers'),
+    ParamSpec('sensor_reaction', _D.sensor_reaction, 'the sensor measures the reaction of the load: negate the '
+              'wrench [-]'),
+    ParamSpec('displacement_delay_s', _D.displacement_delay_s, 'the displacement stamps are this late against the '
+              "force's: corrected to t - displacement_delay_s before pairing [s]", rule='|value| <= max_age_s'),
+    ParamSpec('max_stream_delay_s', _D.max_stream_delay_s, 'WARN when the delay between the streams estimated from '
+              'the data, after displacement_delay_s, exceeds this [s]', rule='> 0'),
+    ParamSpec('delay_window_s', _D.delay_window_s, 'recent data the stream delay is estimated from, every quarter of '
+              'it and at pauses; 0 = not estimated [s]', rule='0 or >= 0.2'),
     ParamSpec('diagnostics_rate_hz', 5.0, 'rate of /stiffness/estimate and of the nonlinearity update [Hz]',
               rule='> 0'),
 )
@@ -156,8 +174,10 @@ class StiffnessEstimatorNode(Node):
 
     def _apply(self, settings: LiveSettings, values: dict[str, Any]) -> None:
         if self.core.configure(settings):
+            where = 'at the platform centre' if settings.force_row() is None else 'moved to the platform centre'
             self.get_logger().info(f'fitting {settings.force_axis}: window {settings.window} pairs, slop '
-                                   f'{settings.slop_s} s, branch from {settings.branch_source}')
+                                   f'{settings.slop_s} s, branch from {settings.branch_source}, wrench {where}, '
+                                   f'displacement stamps - {settings.displacement_delay_s:g} s')
         if values['displacement_type'] != self.settings.get('displacement_type'):
             if self.sub_displacement is not None:
                 self.destroy_subscription(self.sub_displacement)

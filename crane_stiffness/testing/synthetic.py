@@ -12,7 +12,7 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -78,8 +78,9 @@ def write_synthetic_session(path: str | Path, program: LoadProgram, *, geometry:
                             force_noise: float = 0.01, displacement_noise: float = 2e-7, seed: int = 0,
                             estimator: dict[str, Any] | None = None, live: bool = False,
                             chunk_size: int = 1024 * 1024, t0_ns: int = T0_NS, notes: str = 'synthetic session',
-                            lvdt: dict[str, Any] | None = None, live_tail_s: float | None = None
-                            ) -> SyntheticSession:
+                            lvdt: dict[str, Any] | None = None, live_tail_s: float | None = None,
+                            sensor: Callable[[np.ndarray], np.ndarray] | None = None,
+                            displacement_late_s: float = 0.0) -> SyntheticSession:
     """Write a synthetic session bag (see the module docstring) and return its truth.
 
     Args:
@@ -96,6 +97,10 @@ def write_synthetic_session(path: str | Path, program: LoadProgram, *, geometry:
             the session short, or use ``live_tail_s``).
         live_tail_s: run the live estimator over the last this many seconds only (an estimator started late).
         lvdt: the lvdt parameters to record (default: measuring along a force axis at the platform centre).
+        sensor: maps the platform wrenches (n, 6) at the centre in crane_base to what the F/T sensor reports in
+            its own frame (a rotated, off-centre sensor); default: the platform's wrench as is.
+        displacement_late_s: the LVDT's stamps are this much later than the instants measured [s] (a driver's
+            latency); the log times follow.
     """
     if geometry is None and stiffness is None:
         raise ValueError('give a geometry (nonlinear model) or a stiffness (linear truth)')
@@ -121,6 +126,8 @@ def write_synthetic_session(path: str | Path, program: LoadProgram, *, geometry:
         true_disp = model_displacement(geometry, axis, load)
     noise = np.array([force_noise] * 3 + [force_noise * 0.05] * 3)
     force = wrench + rng.normal(size=wrench.shape) * noise
+    if sensor is not None:
+        force = np.asarray(sensor(force), dtype=float)
     disp = true_disp + rng.normal(size=stamps.size) * displacement_noise
     # Each burst leaves at the next publish tick plus a jitter; its samples follow in order, 10 µs apart.
     tick = (stamps // burst + 1) * burst
@@ -130,7 +137,10 @@ def write_synthetic_session(path: str | Path, program: LoadProgram, *, geometry:
     f_log = tick + np.repeat(rng.integers(50_000, 400_000, first.size), sizes) + 10_000 * position
     d_log = tick + np.repeat(rng.integers(50_000, 400_000, first.size), sizes) + 10_000 * position
     f_bytes, f_size = encode_stamped(stamps, 'load_cell', force)
-    d_bytes, d_size = encode_stamped(stamps, 'lvdt', np.column_stack([disp, np.zeros((stamps.size, 2))]))
+    late_ns = int(round(displacement_late_s * 1e9))
+    d_stamps = stamps + late_ns
+    d_log = d_log + late_ns
+    d_bytes, d_size = encode_stamped(d_stamps, 'lvdt', np.column_stack([disp, np.zeros((stamps.size, 2))]))
     c_bytes, c_size = encode_stamped(cmd_stamp, 'crane_base', cmd_wrench)
     settings = LiveSettings.from_params({**(estimator or {}), 'force_axis': axis})
     est_params = {**(estimator or {}), 'force_axis': axis}
@@ -169,7 +179,8 @@ def write_synthetic_session(path: str | Path, program: LoadProgram, *, geometry:
                 core.add_command(_seconds(int(cmd_stamp[i])), cmd_wrench[i], log * 1e-9)
                 continue
             stamp_s = _seconds(int(stamps[i]))
-            fitted = core.add_force(stamp_s, force[i]) if kind == 1 else core.add_displacement(stamp_s, disp[i])
+            fitted = core.add_force(stamp_s, force[i]) if kind == 1 else \
+                core.add_displacement(_seconds(int(d_stamps[i])), disp[i])
             if fitted:
                 values = core.values()
                 last_values = np.asarray(values).reshape(2, n)
@@ -208,7 +219,7 @@ def write_synthetic_session(path: str | Path, program: LoadProgram, *, geometry:
             if c == 0:
                 write(topics.LOAD_CELL_WRENCH, f_bytes[i * f_size:(i + 1) * f_size], log, f_stamp[i])
             elif c == 1:
-                write(topics.LVDT_DISPLACEMENT, d_bytes[i * d_size:(i + 1) * d_size], log, f_stamp[i])
+                write(topics.LVDT_DISPLACEMENT, d_bytes[i * d_size:(i + 1) * d_size], log, f_stamp[i] + late_ns)
             elif c == 2:
                 write(topics.WRENCH_COMMAND, c_bytes[i * c_size:(i + 1) * c_size], log, c_stamp[i])
             else:
