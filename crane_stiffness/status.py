@@ -4,5 +4,7 @@ report with them and the nodes publish them unchanged. Pure Python, no ROS impor
 from __future__ import annotations
 
 OK, WARN, ERROR, STALE = 0, 1, 2, 3
+#: The levels by name, for people.
+NAMES = {OK: 'OK', WARN: 'WARN', ERROR: 'ERROR', STALE: 'STALE'}
 
-__all__ = ['ERROR', 'OK', 'STALE', 'WARN']
+__all__ = ['ERROR', 'NAMES', 'OK', 'STALE', 'WARN']

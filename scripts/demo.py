@@ -98,11 +98,19 @@ def main(argv=None) -> int:
     for branch in ('loading', 'unloading'):
         e = est[branch]
         print(f"  estimated {branch:9s} stiffness {e['stiffness']:10.1f} N/m  95 % CI [{e['ci95_low']:.1f}, "
-              f"{e['ci95_high']:.1f}]  R² {e['r2']:.5f}  n = {e['n']}")
+              f"{e['ci95_high']:.1f}]  R² {e['r2']:.5f}  n = {int(e['n'])}")
     print(f"  model prediction (eq. 19 = exact tangent at rest) {pred['stiffness']:10.1f} N/m")
+    # The estimator's own verdict on those numbers (its last /stiffness/estimate statuses).
+    for part in ('loading', 'unloading', 'input'):
+        st = summary['status'].get(part, {'level': 'NONE', 'message': 'no status received'})
+        print(f"  estimator status {part:9s} {st['level']:5s} {st['message']}")
     print(f"  relative error (loading) {100 * summary['relative_error']:+.2f} %   -> {out / 'summary.json'}")
     if summary.get('bag'):
         print(f"  session recorded: {summary['bag']}")
+    bad = {p: st['level'] for p, st in summary['status'].items() if st['level'] in ('ERROR', 'STALE')}
+    if bad or 'loading' not in summary['status']:
+        print(f'the estimator does not stand by its estimate: {bad or "no status received"}', file=sys.stderr)
+        return 1
     if abs(summary['relative_error']) > args.tolerance:
         print(f'estimate differs from the prediction by more than {100 * args.tolerance:.0f} %', file=sys.stderr)
         return 1

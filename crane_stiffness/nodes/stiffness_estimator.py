@@ -131,7 +131,7 @@ class StiffnessEstimatorNode(Node):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('stiffness_estimator', **kwargs)
-        self.core = LiveStiffness()
+        self.core: LiveStiffness | None = None  # built with the start-up settings by the first _apply
         self.settings: dict[str, Any] = {}
         self.sub_displacement = None
         self.drained: list = []  # (subscription, handler) taken from in turn: command, force, displacement
@@ -173,7 +173,10 @@ class StiffnessEstimatorNode(Node):
         return self.get_clock().now().nanoseconds * 1e-9
 
     def _apply(self, settings: LiveSettings, values: dict[str, Any]) -> None:
-        if self.core.configure(settings):
+        first = self.core is None
+        if first:  # the start: segment 1 is fitted with these settings (not a change of parameters)
+            self.core = LiveStiffness(settings)
+        if first or self.core.configure(settings):
             where = 'at the platform centre' if settings.force_row() is None else 'moved to the platform centre'
             self.get_logger().info(f'fitting {settings.force_axis}: window {settings.window} pairs, slop '
                                    f'{settings.slop_s} s, branch from {settings.branch_source}, wrench {where}, '

@@ -13,10 +13,12 @@ from pathlib import Path
 from typing import Any, Mapping
 
 import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from std_msgs.msg import Float64, Float64MultiArray, String
 
 from crane_stiffness import __version__, topics
+from crane_stiffness.status import NAMES as LEVEL_NAMES
 from crane_stiffness.config import geometry_from_params, load_params
 from crane_stiffness.model import axis_stiffness, rest_pose, tangent_stiffness
 from crane_stiffness.nodes.common import LATCHED_QOS, RELIABLE_QOS
@@ -42,6 +44,9 @@ class Observer(Node):
         self.create_subscription(String, topics.PROGRAM_STATE, self._on_state, LATCHED_QOS)
         self.create_subscription(Float64MultiArray, topics.STIFFNESS_VALUES, self._on_values, RELIABLE_QOS)
         self.create_subscription(Float64, topics.PREDICTED_AXIS_STIFFNESS, self._on_predicted, LATCHED_QOS)
+        #: The estimator's latest statuses: {'loading' | 'unloading' | 'input': (level name, message)}.
+        self.statuses: dict[str, tuple[str, str]] = {}
+        self.create_subscription(DiagnosticArray, topics.STIFFNESS_ESTIMATE, self._on_estimate, RELIABLE_QOS)
 
     def _on_progress(self, msg: Float64) -> None:
         self.progress = msg.data
@@ -54,6 +59,10 @@ class Observer(Node):
     def _on_values(self, msg: Float64MultiArray) -> None:
         self.values = msg
         self.values_count += 1
+
+    def _on_estimate(self, msg: DiagnosticArray) -> None:
+        for st in msg.status:
+            self.statuses[st.name.rpartition(': ')[2]] = (LEVEL_NAMES.get(st.level[0], str(st.level[0])), st.message)
 
     def _on_predicted(self, msg: Float64) -> None:
         self.predicted = msg.data
@@ -173,6 +182,7 @@ def summarize(share: Path, program: str, session: str, bags: Path, observer: Obs
         'program': {'name': prog.name, 'axis': axis, 'peak': float(np.abs(levels).max()),
                     'levels': levels.tolist(), 'duration_s': prog.duration_s, 'file': str(cfg['program'])},
         'estimate': est,
+        'status': {part: {'level': level, 'message': message} for part, (level, message) in observer.statuses.items()},
         'prediction': {'stiffness': predicted, 'from_node': observer.predicted,
                        'what': f'exact tangent of the nonlinear model at the rest pose under W, along {axis} with '
                                'the other DOFs free (equals eq. 19 K_j for fy)'},
