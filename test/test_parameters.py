@@ -132,7 +132,7 @@ class ParamClient:
         return self._call(Trigger, service, Trigger.Request())
 
 
-def test_crane_model_over_services_integers_ranges_and_full_names(rclpy_context):
+def test_crane_model_over_services_integers_ranges_and_full_names(rclpy_context, capfd):
     ex = SingleThreadedExecutor(context=rclpy_context)
     # An integer override where a float is declared (what `-p geometry.height:=1` sends) starts the node.
     model = CraneModel(context=rclpy_context, parameter_overrides=[Parameter('geometry.height', value=1)])
@@ -152,6 +152,10 @@ def test_crane_model_over_services_integers_ranges_and_full_names(rclpy_context)
     assert model.get_parameter('geometry.a').value > 0
     ok, reason = client.set('geometry.weight', -1.0)
     assert not ok and 'geometry.weight' in reason
+    # A string for a number: rclpy refuses it with a reason naming neither; the node's log names both.
+    ok, reason = client.set('geometry.height', 'tall')
+    assert not ok and model.get_parameter('geometry.height').value == 1.0
+    assert "parameter change rejected: geometry.height = 'tall': must be a number" in capfd.readouterr().err
     ok, reason = client.set('geometry.com_offset', [0.0, 0.0])
     assert not ok and 'geometry.com_offset = [0.0, 0.0]' in reason and 'array(' not in reason
     ok, reason = client.set('geometry.com_offset', [0, 0, 1])  # integers in a float list

@@ -188,16 +188,22 @@ class Params:
         return message
 
     def _pre_set(self, params: list[Parameter]) -> list[Parameter]:
-        """Integers where a float is declared become floats before rclpy checks the type."""
+        """Integers where a float is declared become floats before rclpy checks the type. A value of another type
+        rclpy refuses with its own reason, which names neither the parameter nor the value (``Wrong parameter type,
+        expected 'Type.DOUBLE' got 'Type.STRING'``): the node's log says which, as at start."""
         out = []
         for p in params:
             spec = self._specs.get(p.name)
-            if spec is not None and p.type_ in (Parameter.Type.INTEGER, Parameter.Type.INTEGER_ARRAY):
-                self._written[p.name] = p.value
+            if spec is not None:
+                if p.type_ in (Parameter.Type.INTEGER, Parameter.Type.INTEGER_ARRAY):
+                    self._written[p.name] = p.value
                 try:
-                    p = Parameter(p.name, value=coerce(spec, p.value))
-                except ValueError:
-                    pass  # rclpy rejects the type
+                    value = coerce(spec, p.value)
+                except ValueError as exc:
+                    self._node.get_logger().warning(f'parameter change rejected: {exc}')
+                else:
+                    if p.type_ in (Parameter.Type.INTEGER, Parameter.Type.INTEGER_ARRAY):
+                        p = Parameter(p.name, value=value)
             out.append(p)
         return out
 
