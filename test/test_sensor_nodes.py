@@ -43,7 +43,8 @@ def isolated(base: str) -> tuple[str, str, list[str]]:
     prefix = f'/{name}_t'
     args = ['--ros-args', '-r', f'__node:={name}']
     for topic in (topics.WRENCH_COMMAND, topics.APPLIED_WRENCH, topics.REJECTED_COMMAND, topics.PLATFORM_POSE,
-                  topics.LOAD_CELL_WRENCH, topics.LVDT_DISPLACEMENT, topics.MODEL_STATUS, topics.DIAGNOSTICS):
+                  topics.LOAD_CELL_WRENCH, topics.LVDT_DISPLACEMENT, topics.LVDT_ZERO, topics.LOAD_CELL_TARE,
+                  topics.MODEL_STATUS, topics.DIAGNOSTICS):
         args += ['-r', f'{topic}:={prefix}{topic}']
     return name, prefix, args
 
