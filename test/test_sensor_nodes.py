@@ -324,6 +324,8 @@ def test_lvdt_zeroes_on_first_pose_with_noise_and_resolution(rclpy_context):
     t0 = probe.publish(rest, np.eye(3))
     assert spin_until(ex, lambda: len(probe.readings_after(t0)) > 500, 10.0)  # enough for the statistics
     zero = probe.readings_after(t0)
+    # Zeroed before its first reading: epoch 1 is the first it publishes (a 0 -> 1 could race the first readings).
+    assert spin_until(ex, lambda: probe.epochs == [1.0], 3.0), probe.epochs
     assert np.allclose(zero / 1e-8, np.round(zero / 1e-8), atol=1e-6)  # on the 10 nm grid
     assert abs(zero.mean()) < 4 * 2e-7 / math.sqrt(len(zero))
     print(f'lvdt noise std measured {zero.std(ddof=1):.3e} m, configured 2e-7 m')
