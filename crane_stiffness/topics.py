@@ -35,6 +35,16 @@ PROGRAM_STATE = '/load_program/state'
 LOAD_CELL_WRENCH = '/load_cell/wrench'
 # LVDT, geometry_msgs/PointStamped: point.x = reading [m] along the sensor axis, sensor-data QoS.
 LVDT_DISPLACEMENT = '/lvdt/displacement'
+# Zero epochs of the sensors, std_msgs/Float64, latched: the number of zero (LVDT ``~/zero``) or tare/bias (load cell
+# ``~/tare``) operations since the sensor node started [-] (0 = none yet; a whole number held in a float). Published
+# at start (the simulated LVDT zeroing at its first pose: 1 then instead) and after every zero/tare, also by the
+# real drivers (modbus_lvdt, netft). The estimator starts a new fit
+# segment when the epoch changes while it holds readings of that sensor (issue 9, case 3): a re-zero without a
+# restart steps the readings, and the two zero points must not share a window. They are topics of their own: a user
+# who remaps a sensor topic must remap its zero topic alongside (nothing does it for them); without them the
+# estimator still works, it only cannot see a re-zero (a restart it sees by the sequence numbers).
+LVDT_ZERO = '/lvdt/zero'
+LOAD_CELL_TARE = '/load_cell/tare'
 # Estimates: diagnostic_msgs/DiagnosticArray for people, std_msgs/Float64MultiArray for plots (see
 # crane_stiffness.nodes.stiffness_estimator.VALUE_FIELDS), std_msgs/Float64 for the headline number.
 STIFFNESS_ESTIMATE = '/stiffness/estimate'
@@ -58,6 +68,8 @@ RIG_TOPICS: dict[str, str] = {
     PROGRAM_STATE: 'std_msgs/msg/String',
     LOAD_CELL_WRENCH: 'geometry_msgs/msg/WrenchStamped',
     LVDT_DISPLACEMENT: 'geometry_msgs/msg/PointStamped',
+    LVDT_ZERO: 'std_msgs/msg/Float64',
+    LOAD_CELL_TARE: 'std_msgs/msg/Float64',
     STIFFNESS_ESTIMATE: 'diagnostic_msgs/msg/DiagnosticArray',
     STIFFNESS_VALUES: 'std_msgs/msg/Float64MultiArray',
     STIFFNESS: 'std_msgs/msg/Float64',
@@ -102,6 +114,8 @@ TOPIC_QOS: dict[str, QoS] = {
     PROGRAM_STATE: LATCHED,
     LOAD_CELL_WRENCH: SENSOR_DATA,
     LVDT_DISPLACEMENT: SENSOR_DATA,
+    LVDT_ZERO: LATCHED,
+    LOAD_CELL_TARE: LATCHED,
     STIFFNESS_ESTIMATE: RELIABLE,
     STIFFNESS_VALUES: RELIABLE,
     STIFFNESS: RELIABLE,

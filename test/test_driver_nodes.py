@@ -33,7 +33,8 @@ from crane_stiffness.devices.rdt_device import RdtDevice
 from crane_stiffness.drivers import rdt
 from crane_stiffness.drivers.modbus import Channel
 from crane_stiffness.nodes import modbus_emulator, modbus_lvdt, netft, rdt_emulator
-from crane_stiffness.nodes.common import RELIABLE_QOS, SENSOR_QOS
+from crane_stiffness.nodes.common import LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS
+from std_msgs.msg import Float64
 from test_sensor_nodes import isolated  # noqa: E402 (one way to isolate a node's topics in every test)
 
 NS = 1_000_000_000
@@ -68,6 +69,10 @@ class Probe:
             lambda m: self.points.append((stamp_ns(m.header.stamp), m.header.frame_id, m.point.x)), SENSOR_QOS)
         self.node.create_subscription(DiagnosticArray, prefix + topics.DIAGNOSTICS,
                                       lambda m: self.diagnostics.extend(m.status), 100)
+        self.epochs: dict[str, list[float]] = {topics.LVDT_ZERO: [], topics.LOAD_CELL_TARE: []}  # zero epochs
+        for topic, received in self.epochs.items():
+            self.node.create_subscription(Float64, prefix + topic, lambda m, r=received: r.append(m.data),
+                                          LATCHED_QOS)
 
     def _on_wrench(self, msg: WrenchStamped) -> None:
         f, m = msg.wrench.force, msg.wrench.torque
@@ -170,8 +175,10 @@ def test_netft_reads_the_rdt_emulator_across_processes(rclpy_context, tmp_path):
         assert np.median(np.diff(stamps)) == pytest.approx(1e6, abs=5e4)   # 1 kHz out of 7 kHz
         assert t_start < stamps[0] and stamps[-1] < time.time_ns()         # on the host clock
         # Software tare at the load: the reading becomes zero.
+        assert spin_until(ex, lambda: probe.epochs[topics.LOAD_CELL_TARE] == [0.0], 5.0)  # latched at start
         reply = call_trigger(ex, probe.node, f'/{ft_name}/tare')
         assert reply.success and 'tared on 200 samples' in reply.message
+        assert spin_until(ex, lambda: probe.epochs[topics.LOAD_CELL_TARE] == [0.0, 1.0], 5.0)  # the estimator segments
         # Samples stamped after the reply were sampled, so received and processed, after the tare.
         t_tare = time.time_ns() + 5_000_000
         assert spin_until(ex, lambda: len(probe.wrench_after(t_tare)) >= 100, 10.0)
@@ -225,8 +232,10 @@ def test_modbus_lvdt_reads_the_modbus_emulator_across_processes(rclpy_context, t
         np.testing.assert_allclose(probe.points_after(t_move), 5e-5, atol=1e-9)  # float32 volts: ~1e-10 m
         stamps = np.array([s for s, _, _ in probe.points])
         assert np.all(np.diff(stamps) > 0) and {f for _, f, _ in probe.points} == {'lvdt_mb'}
+        assert spin_until(ex, lambda: probe.epochs[topics.LVDT_ZERO] == [0.0], 5.0)  # latched at start
         reply = call_trigger(ex, probe.node, f'/{lv_name}/zero')
         assert reply.success and 'zeroed on 10 readings' in reply.message
+        assert spin_until(ex, lambda: probe.epochs[topics.LVDT_ZERO] == [0.0, 1.0], 5.0)  # the estimator segments
         t_zero = time.time_ns() + 5_000_000  # polled after the reply
         assert spin_until(ex, lambda: len(probe.points_after(t_zero)) >= 10, 5.0)
         assert np.abs(probe.points_after(t_zero)).max() < 1e-9
@@ -284,6 +293,7 @@ def test_netft_reports_lost_records_status_word_and_a_device_that_goes_away(rclp
         # Hardware tare: the bias command reaches the device, readings become zero.
         reply = call_trigger(ex, probe.node, f'/{name}/tare')
         assert reply.success and '0x0042' in reply.message
+        assert spin_until(ex, lambda: probe.epochs[topics.LOAD_CELL_TARE] == [0.0, 1.0], 5.0)  # a bias is a tare too
         assert spin_until(ex, lambda: np.abs(probe.wrenches[-1][2]).max() < 1e-5, 5.0)
         assert (rdt.CMD_BIAS, 0) in dev.requests
         # The device goes away: ERROR while silent, then it comes back and the stream is requested again.

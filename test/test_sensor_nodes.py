@@ -27,7 +27,8 @@ from crane_stiffness import topics  # noqa: E402
 from crane_stiffness.config import load_params  # noqa: E402
 from crane_stiffness.model.rotation import euler_zxy_to_matrix, matrix_to_quaternion  # noqa: E402
 from crane_stiffness.nodes import load_cell, lvdt  # noqa: E402
-from crane_stiffness.nodes.common import RELIABLE_QOS, SENSOR_QOS  # noqa: E402
+from crane_stiffness.nodes.common import LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS  # noqa: E402
+from std_msgs.msg import Float64  # noqa: E402
 
 _ids = itertools.count()
 MS = 1_000_000  # ns
@@ -43,7 +44,8 @@ def isolated(base: str) -> tuple[str, str, list[str]]:
     prefix = f'/{name}_t'
     args = ['--ros-args', '-r', f'__node:={name}']
     for topic in (topics.WRENCH_COMMAND, topics.APPLIED_WRENCH, topics.REJECTED_COMMAND, topics.PLATFORM_POSE,
-                  topics.LOAD_CELL_WRENCH, topics.LVDT_DISPLACEMENT, topics.MODEL_STATUS, topics.DIAGNOSTICS):
+                  topics.LOAD_CELL_WRENCH, topics.LVDT_DISPLACEMENT, topics.LVDT_ZERO, topics.LOAD_CELL_TARE,
+                  topics.MODEL_STATUS, topics.DIAGNOSTICS):
         args += ['-r', f'{topic}:={prefix}{topic}']
     return name, prefix, args
 
@@ -71,6 +73,9 @@ class LoadCellProbe:
         self.node.create_subscription(WrenchStamped, prefix + topics.LOAD_CELL_WRENCH, self._on_sample, SENSOR_QOS)
         self.node.create_subscription(DiagnosticArray, prefix + topics.DIAGNOSTICS,
                                       lambda m: self.diagnostics.extend(m.status), 10)
+        self.epochs: list[float] = []  # the zero epochs received on /load_cell/tare
+        self.node.create_subscription(Float64, prefix + topics.LOAD_CELL_TARE, lambda m: self.epochs.append(m.data),
+                                      LATCHED_QOS)
 
     def _on_sample(self, msg: WrenchStamped) -> None:
         f, m = msg.wrench.force, msg.wrench.torque
@@ -149,6 +154,7 @@ def test_load_cell_tare_crosstalk_and_overload(rclpy_context):
     wait_connected(ex, probe.cmd)
     reply = call(ex, probe.node, f'/{name}/tare')
     assert not reply.success and 'waiting for /crane/applied_wrench' in reply.message  # no load known yet
+    assert spin_until(ex, lambda: probe.epochs == [0.0], 3.0), probe.epochs  # latched at start; a failed tare: none
     probe.command(np.zeros(6))
     assert spin_until(ex, lambda: len(probe.samples) > 300, 5.0)
     raw = np.array([w for _, _, w in probe.samples])
@@ -156,6 +162,7 @@ def test_load_cell_tare_crosstalk_and_overload(rclpy_context):
     assert np.all(np.abs(raw.mean(axis=0) - bias) < tol)  # before the tare, the bias shows
     reply = call(ex, probe.node, f'/{name}/tare')
     assert reply.success and 'tared on 400 samples' in reply.message and '0.5' in reply.message
+    assert spin_until(ex, lambda: probe.epochs == [0.0, 1.0], 3.0), probe.epochs  # the estimator segments on it
     np.testing.assert_allclose(node.model.offset, bias, atol=4 * noise.max() / math.sqrt(400) + 1e-12)
     t_tare = probe.node.get_clock().now().nanoseconds
     # Enough readings for the statistics (how long they take is the machine's business, not this test's).
@@ -221,6 +228,9 @@ class LvdtProbe:
             lambda m: self.samples.append((stamp_ns(m.header.stamp), m.header.frame_id, m.point.x)), SENSOR_QOS)
         self.node.create_subscription(DiagnosticArray, prefix + topics.DIAGNOSTICS,
                                       lambda m: self.diagnostics.extend(m.status), 10)
+        self.epochs: list[float] = []  # the zero epochs received on /lvdt/zero
+        self.node.create_subscription(Float64, prefix + topics.LVDT_ZERO, lambda m: self.epochs.append(m.data),
+                                      LATCHED_QOS)
 
     def publish(self, u, q: np.ndarray) -> int:
         msg = PoseStamped()
@@ -262,6 +272,7 @@ def test_lvdt_reading_of_a_rotated_pose_zero_service_and_stroke(rclpy_context):
     assert probe.samples == []  # nothing before the first pose
     reply = call(ex, probe.node, f'/{name}/zero')
     assert not reply.success and 'no pose' in reply.message
+    assert spin_until(ex, lambda: probe.epochs == [0.0], 3.0), probe.epochs  # latched at start; a failed zero: none
     # Pose: translation plus a rotation of 10, 20 and -15 mrad (z, x, y): the contact point moves by u + (Q - I) p.
     u = np.array([0.001, 0.002, 0.003])
     q = euler_zxy_to_matrix(0.01, 0.02, -0.015)
@@ -281,6 +292,7 @@ def test_lvdt_reading_of_a_rotated_pose_zero_service_and_stroke(rclpy_context):
     # ~/zero at the current pose: the reading becomes 0; a further move reads the difference.
     reply = call(ex, probe.node, f'/{name}/zero')
     assert reply.success and 'zeroed' in reply.message
+    assert spin_until(ex, lambda: probe.epochs == [0.0, 1.0], 3.0), probe.epochs  # the estimator segments on it
     t_zero = probe.node.get_clock().now().nanoseconds
     assert spin_until(ex, lambda: len(probe.readings_after(t_zero)) >= 5, 3.0)
     assert probe.readings_after(t_zero) == pytest.approx(np.zeros(len(probe.readings_after(t_zero))), abs=1e-15)
@@ -312,6 +324,8 @@ def test_lvdt_zeroes_on_first_pose_with_noise_and_resolution(rclpy_context):
     t0 = probe.publish(rest, np.eye(3))
     assert spin_until(ex, lambda: len(probe.readings_after(t0)) > 500, 10.0)  # enough for the statistics
     zero = probe.readings_after(t0)
+    # Zeroed before its first reading: epoch 1 is the first it publishes (a 0 -> 1 could race the first readings).
+    assert spin_until(ex, lambda: probe.epochs == [1.0], 3.0), probe.epochs
     assert np.allclose(zero / 1e-8, np.round(zero / 1e-8), atol=1e-6)  # on the 10 nm grid
     assert abs(zero.mean()) < 4 * 2e-7 / math.sqrt(len(zero))
     print(f'lvdt noise std measured {zero.std(ddof=1):.3e} m, configured 2e-7 m')

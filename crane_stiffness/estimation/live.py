@@ -18,7 +18,8 @@ publishing one:
    StreamHealth`): the fraction of its samples received (WARN above ``max_loss_fraction`` lost) and, given the node
    clock, silence (longer than ``dropout_factor`` delivery periods: ERROR, both branches STALE). A sensor publisher
    whose sequence numbers start again (a restart, which zeroes the sensor) starts a new fit segment
-   (:meth:`LiveStiffness.new_segment`).
+   (:meth:`LiveStiffness.new_segment`), and so does a re-zero or tare without a restart: a change of the sensor's
+   zero epoch (:meth:`LiveStiffness.zero_epoch`, topics.LVDT_ZERO / LOAD_CELL_TARE).
 2. Pairing by header stamp with :class:`~crane_stiffness.estimation.sync.ApproximateTimeSync` (``slop_s``,
    ``max_age_s``, ``expected_period_s``, ``dropout_factor``): out-of-order and stale samples are counted there and
    never fitted; dropouts are counted.
@@ -379,6 +380,7 @@ class LiveStiffness:
         self.lag = LagHistogram()
         self._settings = settings or LiveSettings()
         self._sync: ApproximateTimeSync | None = None
+        self._zero_epochs: dict[str, float] = {}  # the last zero epoch seen per stream (see zero_epoch)
         self._build()
 
     def _build(self) -> None:
@@ -454,6 +456,18 @@ class LiveStiffness:
         self.counters.fit_restarts += 1
         self.counters.segments += 1
         self._segment_reason = reason
+
+    def zero_epoch(self, stream: str, epoch: float) -> bool:
+        """The zero epoch of a sensor (``stream``: FORCE or DISPLACEMENT; the number of zero/tare operations since
+        the sensor started, [-]). A change while this segment holds readings of that sensor starts a new segment
+        ('lvdt re-zeroed' / 'load cell tared'): its readings stepped by the new zero. The first epoch seen, or a
+        change before any reading (a sensor that zeroes at its first pose), starts none. Returns True if it did."""
+        before = self._zero_epochs.get(stream)
+        self._zero_epochs[stream] = epoch
+        if before is None or epoch == before or not self.health[stream].count:
+            return False
+        self.new_segment('lvdt re-zeroed' if stream == DISPLACEMENT else 'load cell tared')
+        return True
 
     # --- inputs ---
     def set_prediction(self, value: float) -> bool:

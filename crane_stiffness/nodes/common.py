@@ -304,3 +304,28 @@ def final_counters(node: Node) -> None:
     except (TypeError, ValueError):
         return
     print(f'FINAL_COUNTERS {node.get_name()} {text}', flush=True)
+
+
+class ZeroEpoch:
+    """The latched zero epoch of a sensor (topics.LVDT_ZERO, topics.LOAD_CELL_TARE): std_msgs/Float64, the number of
+    zero/tare operations since the node started [-]. Published at once (0) and again by :meth:`step` after every
+    zero or tare, so the estimator starts a new fit segment when a re-zero steps the readings (issue 9, case 3).
+    ``publish=False``: nothing at once (a sensor that zeroes itself before its first reading publishes epoch 1 then,
+    so the estimator never sees 0 -> 1 race its first readings)."""
+
+    def __init__(self, node: Node, topic: str, count: int = 0, *, publish: bool = True) -> None:
+        from std_msgs.msg import Float64  # local: the other nodes of this module need no std_msgs
+        self._msg_type = Float64
+        self.count = count
+        self.pub = node.create_publisher(Float64, topic, LATCHED_QOS)
+        if publish:
+            self._publish()
+
+    def _publish(self) -> None:
+        self.pub.publish(self._msg_type(data=float(self.count)))
+
+    def step(self, by: int = 1) -> int:
+        """``by`` more zeros/tares (0: publish the current epoch): publish the epoch; returns it."""
+        self.count += by
+        self._publish()
+        return self.count

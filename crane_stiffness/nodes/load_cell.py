@@ -13,7 +13,8 @@ reported on /diagnostics (WARN).
 
 A re-zero is visible to a consumer (issue 9, case 3): /diagnostics carries the tare ``offset``, ``tare_count`` and
 ``tared_at`` (node-clock stamp of the last tare [ns], 0 = none) and ``started_at`` (the node's start [ns]), so a
-restart or a tare shows as a new start time or a new count. Counters: received = used + dropped_non_finite
+restart or a tare shows as a new start time or a new count. The tare count is also published, latched, on
+/load_cell/tare (std_msgs/Float64, at start and after every tare): the estimator starts a new fit segment on it. Counters: received = used + dropped_non_finite
 (applied wrenches); published = samples; waiting_samples = sample instants passed before the first applied wrench.
 """
 from __future__ import annotations
@@ -29,7 +30,7 @@ from std_srvs.srv import Trigger
 from crane_stiffness import topics
 from crane_stiffness.axes import AXES
 from crane_stiffness.config import ParamSpec
-from crane_stiffness.nodes.common import (RELIABLE_QOS, SENSOR_QOS, Counters, Diagnostics, SampleSchedule,
+from crane_stiffness.nodes.common import (RELIABLE_QOS, SENSOR_QOS, Counters, Diagnostics, SampleSchedule, ZeroEpoch,
                                           check_sensor_params, finite, run)
 from crane_stiffness.nodes.parameters import Params, check
 from crane_stiffness.sim.sampling import NS_PER_S, SampleClock, StampedHold
@@ -95,6 +96,7 @@ class LoadCell(Node):
         self.settings: dict[str, Any] = {}
         self.t0_ns = self.get_clock().now().nanoseconds  # drift time origin; also the start reported
         self.pub = self.create_publisher(WrenchStamped, topics.LOAD_CELL_WRENCH, SENSOR_QOS)
+        self.tare_epoch = ZeroEpoch(self, topics.LOAD_CELL_TARE)  # = tare_count, latched on /load_cell/tare
         self.params = Params(self, PARAMS, _validate, self._apply)
         self.create_subscription(WrenchStamped, topics.APPLIED_WRENCH, self._on_applied, RELIABLE_QOS)
         self.create_service(Trigger, '~/tare', self._srv_tare)
@@ -165,6 +167,7 @@ class LoadCell(Node):
         offset = self.model.tare(readings)
         self.tare_count += 1
         self.tared_at_ns = now_ns
+        self.tare_epoch.step()  # before the next burst: the estimator starts a new segment on it
         response.success = True
         response.message = (f'tared on {n} samples: offset [fx fy fz] = {[round(v, 6) for v in offset[:3].tolist()]} '
                             f'N, [mx my mz] = {[round(v, 7) for v in offset[3:].tolist()]} N·m')

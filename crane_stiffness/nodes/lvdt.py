@@ -12,7 +12,8 @@ Nothing is published before the first pose. Service ~/zero (std_srvs/Trigger) ze
 A re-zero is visible to a consumer (issue 9, case 3): /diagnostics carries ``zero_offset_m`` (where the zero lies
 along the axis from the rest pose [m]; a re-zero at another pose steps it), ``zero_count``, ``zeroed_at`` (node-clock
 stamp of the last zero [ns], 0 = none) and ``started_at`` (the node's start [ns]): a restarted LVDT, which zeroes
-itself again, shows a new start time. Counters: received = used + dropped_non_finite (poses); published = samples.
+itself again, shows a new start time. The zero count is also published, latched, on /lvdt/zero (std_msgs/Float64,
+after every zero, and 0 at start unless ``zero_on_first_pose``): the estimator starts a new fit segment on it. Counters: received = used + dropped_non_finite (poses); published = samples.
 """
 from __future__ import annotations
 
@@ -27,7 +28,7 @@ from std_srvs.srv import Trigger
 from crane_stiffness import topics
 from crane_stiffness.config import ParamSpec
 from crane_stiffness.model.rotation import quaternion_to_matrix
-from crane_stiffness.nodes.common import (RELIABLE_QOS, SENSOR_QOS, Diagnostics, SampleSchedule,
+from crane_stiffness.nodes.common import (RELIABLE_QOS, SENSOR_QOS, Diagnostics, SampleSchedule, ZeroEpoch,
                                           check_sensor_params, finite, run)
 from crane_stiffness.nodes.load_cell import SensorCounters
 from crane_stiffness.nodes.parameters import Params
@@ -87,7 +88,10 @@ class Lvdt(Node):
         self.schedule = SampleSchedule(self, self._tick)
         self.settings: dict[str, Any] = {}
         self.pub = self.create_publisher(PointStamped, topics.LVDT_DISPLACEMENT, SENSOR_QOS)
+        self.zero_epoch = ZeroEpoch(self, topics.LVDT_ZERO, publish=False)  # = zero_count, latched on /lvdt/zero
         self.params = Params(self, PARAMS, _validate, self._apply)
+        if not self.settings['zero_on_first_pose']:  # else epoch 1 at the first pose, before any reading
+            self.zero_epoch.step(0)
         self.create_subscription(PoseStamped, topics.PLATFORM_POSE, self._on_pose, RELIABLE_QOS)
         self.create_service(Trigger, '~/zero', self._srv_zero)
         self.diagnostics = Diagnostics(self, self._report)
@@ -111,6 +115,7 @@ class Lvdt(Node):
         if new:
             self.zero_count += 1
             self.zeroed_at_ns = self.get_clock().now().nanoseconds
+            self.zero_epoch.step()  # before the next burst: the estimator starts a new segment on it
 
     def _on_pose(self, msg: PoseStamped) -> None:
         self.counters.received += 1

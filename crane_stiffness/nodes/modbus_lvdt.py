@@ -8,7 +8,8 @@ stamped at the middle of the request (the DAQ has no clock of its own to stamp w
 (timeouts, dropped connections, Modbus exception responses: ERROR with the reason) and the poll jitter (start of
 each request against the ideal grid: p50, p99, max [µs]; late polls). After a failure the device is asked again
 every ``reconnect_interval_s``. Service ~/zero (std_srvs/Trigger) zeroes on the mean of the last ``zero_samples``
-readings. At start a wrong address or a silent device stops the node (exit 2) with the reason, after trying for
+readings; the number of zeros since start is published, latched, on /lvdt/zero (std_msgs/Float64, at start and
+after every zero) so the estimator starts a new fit segment. At start a wrong address or a silent device stops the node (exit 2) with the reason, after trying for
 ``wait_for_device_s``.
 """
 from __future__ import annotations
@@ -27,7 +28,7 @@ from crane_stiffness import topics
 from crane_stiffness.config import ParamSpec
 from crane_stiffness.drivers.errors import DeviceResponseError, DeviceSilentError, DriverError, ParameterError
 from crane_stiffness.drivers.modbus import DATA_TYPES, MODBUS_TCP_PORT, REGISTER_TYPES, Channel, ModbusPoller
-from crane_stiffness.nodes.common import SENSOR_QOS, Counters, Diagnostics, create_grid_timer, run
+from crane_stiffness.nodes.common import SENSOR_QOS, Counters, Diagnostics, ZeroEpoch, create_grid_timer, run
 from crane_stiffness.nodes.parameters import Params, check, positive
 from crane_stiffness.nodes.device_params import check_address, check_start_only, wait_for_device
 from crane_stiffness.sim.sampling import NS_PER_S
@@ -110,6 +111,7 @@ class ModbusLvdt(Node):
         self._jitter_ns: deque[int] = deque(maxlen=5000)   # request start minus its grid instant
         self._recent: deque[float] = deque(maxlen=10)
         self.pub = self.create_publisher(PointStamped, topics.LVDT_DISPLACEMENT, SENSOR_QOS)
+        self.zero_epoch = ZeroEpoch(self, topics.LVDT_ZERO)  # zeros since start, latched on /lvdt/zero
         self.params = Params(self, PARAMS, self._validate, self._apply)
         self.create_service(Trigger, '~/zero', self._srv_zero)
         self.diagnostics = Diagnostics(self, self._report)
@@ -182,6 +184,7 @@ class ModbusLvdt(Node):
             response.success, response.message = False, f'no reading from {self.poller.where} yet'
             return response
         self.zero_m = float(np.mean(self._recent))
+        self.zero_epoch.step()  # the readings step: the estimator starts a new fit segment on it
         response.success = True
         response.message = f'zeroed on {len(self._recent)} readings: zero = {self.zero_m:.9f} m'
         self.get_logger().info(response.message)

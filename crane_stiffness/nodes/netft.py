@@ -14,7 +14,9 @@ with the other sensors) publishes what arrived since its last tick.
 a non-zero status word (ERROR with the word in hex; ``drop_status_mask`` decides which are not published), the
 clock's estimated rate error, reconnects (ERROR while the sensor is silent: the stream is requested again every
 ``reconnect_interval_s``). Service ~/tare (std_srvs/Trigger): ``tare_mode`` 'software' subtracts the mean of the
-last ``tare_samples`` readings; 'hardware' sends the device's bias command (0x0042). At start a wrong address or a
+last ``tare_samples`` readings; 'hardware' sends the device's bias command (0x0042);
+either way the number of tares since start is published, latched, on /load_cell/tare (std_msgs/Float64, at start
+and after every tare) so the estimator starts a new fit segment. At start a wrong address or a
 silent device stops the node (exit 2) with the reason, after trying for ``wait_for_device_s``.
 """
 from __future__ import annotations
@@ -31,7 +33,7 @@ from crane_stiffness.config import ParamSpec
 from crane_stiffness.drivers import rdt
 from crane_stiffness.drivers.errors import DriverError
 from crane_stiffness.drivers.rdt_client import RdtPipeline, RdtReceiver, fetch_netftapi2
-from crane_stiffness.nodes.common import SENSOR_QOS, Counters, Diagnostics, create_grid_timer, run
+from crane_stiffness.nodes.common import SENSOR_QOS, Counters, Diagnostics, ZeroEpoch, create_grid_timer, run
 from crane_stiffness.nodes.parameters import Params, check, positive
 from crane_stiffness.nodes.device_params import check_address, check_start_only, wait_for_device
 from crane_stiffness.sim.sampling import NS_PER_S
@@ -123,6 +125,7 @@ class NetFt(Node):
         self.settings: dict[str, Any] = {}
         self._reported = FtCounters()
         self.pub = self.create_publisher(WrenchStamped, topics.LOAD_CELL_WRENCH, SENSOR_QOS)
+        self.tare_epoch = ZeroEpoch(self, topics.LOAD_CELL_TARE)  # tares/biases since start, latched
         self.params = Params(self, PARAMS, self._validate, self._apply)
         self.create_service(Trigger, '~/tare', self._srv_tare)
         self.diagnostics = Diagnostics(self, self._report)
@@ -203,6 +206,7 @@ class NetFt(Node):
                                     f'{[round(v, 6) for v in offset[:3].tolist()]} N, [mx my mz] = '
                                     f'{[round(v, 7) for v in offset[3:].tolist()]} N·m')
             response.success = True
+            self.tare_epoch.step()  # software tare or hardware bias: the readings step either way
         except DriverError as exc:
             response.success, response.message = False, str(exc)
         self.get_logger().info(f'~/tare: {response.message}')

@@ -18,7 +18,9 @@ Inputs are judged at every report: a stream silent for more than ``dropout_facto
 status ERROR and both branches STALE; a stream that lost more than ``max_loss_fraction`` of its samples, or a
 rejected command in force, makes them WARN. A sensor publisher whose sequence numbers start again (a restarted
 sensor, which zeroes itself) or a new publisher on a sensor topic starts a new fit segment (the old window is
-dropped), named in every status.
+dropped), named in every status; so does a re-zero without a restart: a change of the latched zero epoch on
+/lvdt/zero or /load_cell/tare (std_msgs/Float64, the sensor's zero/tare count; the first value starts none, nor does
+one before any reading; without these topics a re-zero goes unseen).
 The wrench is moved from the sensor's frame to the platform centre in crane_base (``sensor_rotation``,
 ``sensor_position``, ``sensor_reaction``; frames.SensorMount) before the ``force_axis`` component is taken; the
 displacement stamps are corrected by ``displacement_delay_s``; the remaining delay between the streams is estimated
@@ -160,6 +162,8 @@ class StiffnessEstimatorNode(Node):
                                                   event_callbacks=_NO_EVENTS_SUB, raw=True)
         self.params = Params(self, PARAMS, _validate, self._apply)  # subscribes the displacement
         self.create_subscription(Float64, topics.PREDICTED_AXIS_STIFFNESS, self._on_prediction, LATCHED_QOS)
+        for stream, topic in ((DISPLACEMENT, topics.LVDT_ZERO), (FORCE, topics.LOAD_CELL_TARE)):
+            self.create_subscription(Float64, topic, lambda msg, s=stream: self._on_zero_epoch(s, msg), LATCHED_QOS)
         self.create_service(Trigger, '~/reset', self._srv_reset)
         self.diagnostics = Diagnostics(self, lambda: self.core.input_report('diagnostics', self._now_s()))
 
@@ -292,6 +296,15 @@ class StiffnessEstimatorNode(Node):
                     progress = True
             if not progress:
                 return
+
+    def _on_zero_epoch(self, stream: str, msg: Float64) -> None:
+        # The readings queued were published before the sensor's zero changed: they belong to the old segment.
+        self._drain()
+        if self.changed:
+            self._publish_values()
+        if self.core.zero_epoch(stream, msg.data):
+            self.get_logger().warn(f'new fit segment: {self.core.segment_reason} (zero epoch {msg.data:g})')
+            self._publish_values()
 
     def _on_prediction(self, msg: Float64) -> None:
         self.core.set_prediction(msg.data)
