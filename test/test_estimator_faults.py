@@ -471,3 +471,19 @@ def test_analyze_agrees_with_the_live_estimator_on_a_bag_with_these_faults(tmp_p
     for branch, index in (('loading', 0), ('unloading', 1)):
         assert analysis.live.max_rel_diff[branch] < 1e-9, (branch, analysis.live)
         assert row(last_values, index)['stiffness'] == pytest.approx(K, rel=0.01)
+
+
+def test_silence_is_judged_against_dropout_factor_periods_and_min_silence_s():
+    """1 kHz streams: 3 periods are 3 ms, but a busy machine stalls a sensor's process for tens of ms (the demo
+    caught a 29 ms gap and called both sensors dead). Dead means silent for dropout_factor periods AND
+    min_silence_s."""
+    for floor, hiccup_ok in ((0.25, True), (0.0, False)):
+        core = LiveStiffness(LiveSettings(min_silence_s=floor, expected_period_s=0.001))
+        for i in range(1, 501):
+            t = 100.0 + i * 1e-3
+            core.add_force(t, [0.0, 1e-3 * i, 0.0, 0.0, 0.0, 0.0], arrival_s=t)
+            core.add_displacement(t, 1e-3 * i / 1875.0, arrival_s=t)
+        level, reasons = core.input_problems(100.5 + 0.03)  # a 30 ms hiccup
+        assert (level == OK) == hiccup_ok, reasons
+        level, reasons = core.input_problems(100.5 + 0.3)   # dead
+        assert level == ERROR and 'force silent' in reasons[0] and 'displacement silent' in reasons[1], reasons

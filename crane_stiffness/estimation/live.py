@@ -16,7 +16,7 @@ publishing one:
    (:func:`~crane_stiffness.estimation.inputs.input_faults`), and a message its reader could not decode
    (:meth:`LiveStiffness.add_malformed`). Each stream's health (:class:`~crane_stiffness.estimation.inputs.
    StreamHealth`): the fraction of its samples received (WARN above ``max_loss_fraction`` lost) and, given the node
-   clock, silence (longer than ``dropout_factor`` delivery periods: ERROR, both branches STALE). A sensor publisher
+   clock, silence (longer than ``dropout_factor`` delivery periods and ``min_silence_s``: ERROR, both branches STALE). A sensor publisher
    whose sequence numbers start again (a restart, which zeroes the sensor) starts a new fit segment
    (:meth:`LiveStiffness.new_segment`), and so does a re-zero or tare without a restart: a change of the sensor's
    zero epoch (:meth:`LiveStiffness.zero_epoch`, topics.LVDT_ZERO / LOAD_CELL_TARE).
@@ -107,6 +107,7 @@ class LiveSettings:
     max_age_s: float = 0.1               # staleness limit and pairing latency bound [s]
     expected_period_s: float = 0.0       # sample period of both streams [s]; 0 = estimated online
     dropout_factor: float = 3.0          # a gap above this many periods is a dropout [-]; 0 = not detected
+    min_silence_s: float = 0.25          # a stream is silent (dead) only after this long at least [s]
     window: int = 500                    # pairs per windowed fit [pairs]
     forgetting: float = 0.999            # RLS forgetting factor λ in (0, 1] [-]
     hysteresis: float = 0.2              # branch dead band [N or N·m]
@@ -153,6 +154,7 @@ class LiveSettings:
         if 0.0 < dropout <= 1.0:
             raise ParameterError('dropout_factor', dropout, 'must be > 1, or 0 to disable dropout detection')
         forgetting = _number(v, 'forgetting', above=0.0, maximum=1.0)
+        min_silence = _number(v, 'min_silence_s', minimum=0.0)
         gain = _number(v, 'displacement_gain')
         if gain == 0.0:
             raise ParameterError('displacement_gain', gain, 'must be non-zero (m/V)')
@@ -173,7 +175,7 @@ class LiveSettings:
                    displacement_delay_s=delay, max_stream_delay_s=_number(v, 'max_stream_delay_s', above=0.0),
                    delay_window_s=window_s,
                    force_axis=v['force_axis'], slop_s=slop, max_age_s=max_age, expected_period_s=period,
-                   dropout_factor=dropout, window=window, forgetting=forgetting,
+                   dropout_factor=dropout, min_silence_s=min_silence, window=window, forgetting=forgetting,
                    hysteresis=_number(v, 'hysteresis', minimum=0.0), branch_source=v['branch_source'],
                    max_abs_force=_number(v, 'max_abs_force', above=0.0),
                    max_abs_displacement=_number(v, 'max_abs_displacement', above=0.0),
@@ -679,17 +681,19 @@ class LiveStiffness:
 
     def input_problems(self, now_s: float = math.nan) -> tuple[int, list[str]]:
         """What makes the inputs invalid or doubtful now (``now_s``: the node clock, s; NaN: silence not judged):
-        (worst level, reasons). ERROR: a stream silent for longer than ``dropout_factor`` delivery periods (a dead
-        sensor); WARN: a rejected command in force, a stream that lost more than ``max_loss_fraction``."""
+        (worst level, reasons). ERROR: a stream silent for longer than ``dropout_factor`` delivery periods and
+        ``min_silence_s`` (a dead sensor, not a busy machine's hiccup); WARN: a rejected command in force, a stream
+        that lost more than ``max_loss_fraction``."""
         s = self._settings
         level, reasons = OK, []
         for stream, health in self.health.items():
             limit = health.silence_limit(s.dropout_factor)
+            limit = max(limit, s.min_silence_s) if math.isfinite(limit) else limit
             silent = health.silent_for(now_s)
             if health.count and silent > limit:
                 level = ERROR
-                reasons.append(f'{stream} silent for {silent:.3g} s (> {s.dropout_factor:g} x '
-                               f'{limit / s.dropout_factor * 1e3:.3g} ms): sensor dead or disconnected?')
+                reasons.append(f'{stream} silent for {silent:.3g} s (> {limit:.3g} s: {s.dropout_factor:g} '
+                               f'periods, at least min_silence_s): sensor dead or disconnected?')
         if self._rejection is not None:
             level = max(level, WARN)
             reasons.append(f'{self._rejection[0]} in force since stamp {self._rejection[1]:.6f} s: '

@@ -14,8 +14,8 @@ Pairs samples by header stamp, fits loading and unloading branches apart (window
   buffer is one estimate: the newest pair's stamp is its age), and
   /stiffness/estimate (DiagnosticArray: one status per branch plus an input status with the counters) and again
   /stiffness/stiffness at ``diagnostics_rate_hz``.
-Inputs are judged at every report: a stream silent for more than ``dropout_factor`` delivery periods makes the input
-status ERROR and both branches STALE; a stream that lost more than ``max_loss_fraction`` of its samples, or a
+Inputs are judged at every report: a stream silent for more than ``dropout_factor`` delivery periods (and at least
+``min_silence_s``) makes the input status ERROR and both branches STALE; a stream that lost more than ``max_loss_fraction`` of its samples, or a
 rejected command in force, makes them WARN. A sensor publisher whose sequence numbers start again (a restarted
 sensor, which zeroes itself) or a new publisher on a sensor topic starts a new fit segment (the old window is
 dropped), named in every status; so does a re-zero without a restart: a change of the latched zero epoch on
@@ -85,6 +85,9 @@ PARAMS = (
     ParamSpec('expected_period_s', _D.expected_period_s, 'sample period of both streams, 0 = estimated online [s]'),
     ParamSpec('dropout_factor', _D.dropout_factor, 'a stamp gap above this many periods counts as a dropout, '
               '0 = not detected [-]'),
+    ParamSpec('min_silence_s', _D.min_silence_s, 'a stream silent this long at least (and dropout_factor '
+              'periods) is dead: input ERROR, branches STALE; shorter gaps are a busy machine, not a sensor [s]',
+              low=0.0),
     ParamSpec('window', _D.window, 'pairs per windowed least-squares fit; span several load levels [pairs]'),
     ParamSpec('forgetting', _D.forgetting, 'RLS forgetting factor in (0, 1], memory ~ 1/(1 - forgetting) [-]',
               rule='0 < forgetting <= 1'),
