@@ -161,6 +161,7 @@ def main(argv=None) -> int:
         print(f"  nodes that ended during the run (exit status): {res['died_during_run']}")
     print(f"  exit status at the end: {res['exit_codes']}")
     if args.json:
+        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
         Path(args.json).write_text(json.dumps(res, indent=1))
     return 1 if failed or res['died_during_run'] or any(c != 0 for c in res['exit_codes'].values()) else 0
 
