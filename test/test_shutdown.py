@@ -222,14 +222,13 @@ def test_a_signal_while_the_node_still_imports_ends_it_cleanly(install_tree, tmp
     names = ('crane_model', 'stiffness_estimator', 'session_recorder')
     importing: dict[str, bool] = {}
     with rosrun.Processes(env, tmp_path / 'logs') as procs:
-        for name in names:
-            procs.start(name, PACKAGE, name, ['--ros-args', '-p', f'output_dir:={tmp_path}']
-                        if name == 'session_recorder' else [])
-        for name, proc in procs.procs.items():
+        for name in names:  # one at a time: a node's import (0.3–1 s) is the window to hit
+            proc = procs.start(name, PACKAGE, name, ['--ros-args', '-p', f'output_dir:={tmp_path}']
+                               if name == 'session_recorder' else [])
             deadline = time.monotonic() + 30.0
             while not signal_caught(proc.pid, signal.SIGTERM):
                 assert proc.poll() is None and time.monotonic() < deadline, procs.log(name)
-                time.sleep(0.002)
+                time.sleep(0.001)
             # rclpy's extension not mapped yet: the node module is still importing when the signal comes.
             importing[name] = '_rclpy_pybind11' not in Path(f'/proc/{proc.pid}/maps').read_text()
             proc.send_signal(signal.SIGINT)
