@@ -7,10 +7,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import signal
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -25,7 +21,8 @@ from crane_stiffness.estimation.sync import DISPLACEMENT, FORCE
 from crane_stiffness.nodes.common import RELIABLE_QOS, SENSOR_QOS
 from crane_stiffness.nodes.stiffness_estimator import StiffnessEstimatorNode
 from crane_stiffness.status import ERROR, OK, STALE, WARN
-from test_estimator_node import C, K, NS, Probe, SyntheticRig, isolated, row, run_program, setup
+from test_estimator_node import (C, K, NS, Probe, SyntheticRig, isolated, row, run_in_own_process, run_program,
+                                 setup)
 
 LEVEL = {OK: b'\x00', WARN: b'\x01', ERROR: b'\x02', STALE: b'\x03'}
 
@@ -341,25 +338,9 @@ def test_final_counters_account_for_every_message(rclpy_context):
 
     name, prefix, args = isolated()
     rig = SyntheticRig(rclpy_context, prefix, rate_hz=500.0, inject=inject, seed=25)
-    proc = subprocess.Popen([sys.executable, '-m', 'crane_stiffness.nodes.stiffness_estimator'] + args,
-                            env=dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path)),
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-    try:
-        ex = setup(rclpy_context, rig.node)
-        assert spin_until(ex, lambda: rig.pub_force.get_subscription_count() >= 1
-                          and rig.pub_point.get_subscription_count() >= 1
-                          and rig.pub_cmd.get_subscription_count() >= 1, 60.0)
-        rig.start()
-        assert spin_until(ex, lambda: rig.done, 15.0)
-        spin_until(ex, lambda: False, 1.0)
-    finally:
-        proc.send_signal(signal.SIGINT)
-        try:
-            out, err = proc.communicate(timeout=20)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            out, err = proc.communicate()
-    assert proc.returncode == 0, err.decode()[-2000:]
+    done = run_in_own_process(rclpy_context, rig, args, run_timeout_s=15.0, settle_s=1.0, stop_timeout_s=20.0)
+    assert done.returncode == 0, done.stderr.decode()[-2000:]
+    out = done.stdout
     line = [ln for ln in out.decode().splitlines() if ln.startswith('FINAL_COUNTERS')]
     assert len(line) == 1, out.decode()[-2000:]
     c = json.loads(line[0].split(' ', 2)[2])
@@ -369,7 +350,6 @@ def test_final_counters_account_for_every_message(rclpy_context):
     assert 0.5 * sent_force <= c['force_received'] <= sent_force  # best-effort: a loaded machine may lose some
     assert c['dropped_clock_skew'] > 0 and c['dropped_malformed'] > 0 and c['force_out_of_order'] > 0
     assert c['command_rejected'] == 1 and c['command_dropped'] == 1
-    ex.shutdown()
 
 
 # ------------------------------------------------------------------------------------------------- offline --

@@ -303,25 +303,9 @@ def test_estimator_in_its_own_process_keeps_up_with_1khz(rclpy_context):
     name, prefix, args = isolated()
     probe = Probe(rclpy_context, prefix, values_only=True)
     rig = SyntheticRig(rclpy_context, prefix, rate_hz=1000.0, burst_hz=200.0, ramp_s=0.75, seed=3)
-    proc = subprocess.Popen([sys.executable, '-m', 'crane_stiffness.nodes.stiffness_estimator'] + args,
-                            env=dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path)),
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    try:
-        ex = setup(rclpy_context, probe.node, rig.node)
-        assert spin_until(ex, lambda: rig.pub_force.get_subscription_count() >= 1
-                          and rig.pub_point.get_subscription_count() >= 1 and rig.pub_cmd.get_subscription_count() >= 1
-                          and probe.node.count_publishers(prefix + topics.STIFFNESS_VALUES) >= 1, 20.0)
-        rig.start()
-        assert spin_until(ex, lambda: rig.done, 8.0)
-        spin_until(ex, lambda: False, 0.5)
-    finally:
-        proc.send_signal(signal.SIGINT)
-        try:
-            _, err = proc.communicate(timeout=10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            _, err = proc.communicate()
-    assert proc.returncode == 0, err.decode()[-2000:]
+    done = run_in_own_process(rclpy_context, rig, args, nodes=[probe.node],
+                              ready=lambda: probe.node.count_publishers(prefix + topics.STIFFNESS_VALUES) >= 1)
+    assert done.returncode == 0, done.stderr.decode()[-2000:]
     lat = latencies_ms(probe, rig)
     print(f'latency at 1 kHz (200 Hz bursts, own process): median {np.median(lat):.2f} ms, '
           f'p95 {np.percentile(lat, 95):.2f} ms, max {lat.max():.2f} ms, n = {len(lat)}; '
@@ -329,7 +313,6 @@ def test_estimator_in_its_own_process_keeps_up_with_1khz(rclpy_context):
     assert len(lat) > 200
     assert probe.last(0)['stiffness'] == pytest.approx(K, rel=0.01)
     assert probe.last(1)['stiffness'] == pytest.approx(K, rel=0.01)
-    ex.shutdown()
 
 
 def test_driver_like_inputs_by_remapping_reliable_wrench_and_volts_channel(rclpy_context):
@@ -448,6 +431,47 @@ def test_out_of_order_and_dropout_flagged_never_fitted(rclpy_context):
     ex.shutdown()
 
 
+def assert_refused(node, param: str, value, words: str) -> None:
+    """Setting ``param`` to ``value`` is refused with a reason containing ``words``; the old value stays."""
+    old = node.get_parameter(param).value
+    result = node.set_parameters([Parameter(param, value=value)])[0]
+    assert not result.successful, param
+    assert words in result.reason, result.reason
+    now = node.get_parameter(param).value
+    if isinstance(old, (list, tuple)) or hasattr(old, 'tolist'):
+        assert list(now) == list(old)
+    else:
+        assert now == old
+
+
+def run_in_own_process(ctx, rig: SyntheticRig, args: list[str], nodes=(), ready=lambda: True,
+                       run_timeout_s: float = 8.0, settle_s: float = 0.5,
+                       stop_timeout_s: float = 10.0) -> subprocess.CompletedProcess:
+    """The estimator as deployed, in its own process (``python -m``), fed by ``rig`` (and watched by ``nodes``):
+    wait for the rig's connections and ``ready``, play the program, settle, then SIGINT. Returns the process's exit
+    status, stdout and stderr (bytes)."""
+    proc = subprocess.Popen([sys.executable, '-m', 'crane_stiffness.nodes.stiffness_estimator'] + args,
+                            env=dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path)),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    ex = setup(ctx, *nodes, rig.node)
+    try:
+        assert spin_until(ex, lambda: rig.pub_force.get_subscription_count() >= 1
+                          and rig.pub_point.get_subscription_count() >= 1 and rig.pub_cmd.get_subscription_count() >= 1
+                          and ready(), 60.0)
+        rig.start()
+        assert spin_until(ex, lambda: rig.done, run_timeout_s)
+        spin_until(ex, lambda: False, settle_s)
+    finally:
+        proc.send_signal(signal.SIGINT)
+        try:
+            out, err = proc.communicate(timeout=stop_timeout_s)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            out, err = proc.communicate()
+        ex.shutdown()
+    return subprocess.CompletedProcess(proc.args, proc.returncode, out, err)
+
+
 def test_parameters_validated_on_start_and_on_change(rclpy_context, capsys):
     name, prefix, args = isolated()
     estimator = StiffnessEstimatorNode(context=rclpy_context, cli_args=args)
@@ -457,11 +481,7 @@ def test_parameters_validated_on_start_and_on_change(rclpy_context, capsys):
                                 ('forgetting', 1.5, 'forgetting = 1.5'),
                                 ('diagnostics_rate_hz', 0.0, 'diagnostics_rate_hz = 0.0'),
                                 ('displacement_gain', 0.0, 'displacement_gain = 0.0')]:
-        old = estimator.get_parameter(param).value
-        result = estimator.set_parameters([Parameter(param, value=value)])[0]
-        assert not result.successful, param
-        assert words in result.reason, result.reason
-        assert estimator.get_parameter(param).value == old
+        assert_refused(estimator, param, value, words)
     assert estimator.core.settings.window == 500 and estimator.core.settings.force_axis == 'fy'
     # Accepted changes take effect (a threshold keeps the fit, a fit setting restarts it).
     assert estimator.set_parameters([Parameter('nonlinearity_warn', value=0.3)])[0].successful

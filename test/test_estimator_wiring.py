@@ -22,7 +22,7 @@ from crane_stiffness.estimation.live import LiveSettings
 from crane_stiffness.nodes.stiffness_estimator import StiffnessEstimatorNode
 from crane_stiffness.sim.program import LoadProgram, Segment
 from crane_stiffness.testing.synthetic import write_synthetic_session
-from test_estimator_node import K, Probe, SyntheticRig, isolated, run_program, setup
+from test_estimator_node import K, Probe, SyntheticRig, assert_refused, isolated, run_program, setup
 
 ANGLE = math.pi / 2                                # sensor rotated 90° about z
 R = np.array([[math.cos(ANGLE), -math.sin(ANGLE), 0.0], [math.sin(ANGLE), math.cos(ANGLE), 0.0], [0.0, 0.0, 1.0]])
@@ -261,12 +261,7 @@ def test_mount_and_delay_parameters_validated_on_start_and_on_change(rclpy_conte
                                 ('displacement_delay_s', 0.5, 'displacement_delay_s = 0.5'),
                                 ('max_stream_delay_s', 0.0, 'max_stream_delay_s = 0.0'),
                                 ('delay_window_s', 0.1, 'delay_window_s = 0.1')]:
-        old = node.get_parameter(param).value
-        result = node.set_parameters([Parameter(param, value=value)])[0]
-        assert not result.successful, param
-        assert words in result.reason, result.reason
-        assert list(node.get_parameter(param).value) == list(old) if isinstance(old, (list, tuple)) or \
-            hasattr(old, 'tolist') else node.get_parameter(param).value == old
+        assert_refused(node, param, value, words)
     restarts = node.core.counters.fit_restarts
     assert node.set_parameters([Parameter('sensor_rotation', value=QUAT)])[0].successful
     assert node.core.counters.fit_restarts == restarts + 1 and node.core.settings.force_row() is not None
