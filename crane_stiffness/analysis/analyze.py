@@ -57,7 +57,7 @@ from crane_stiffness.analysis.load import SessionData, load_session
 from crane_stiffness.analysis.progress import Progress
 from crane_stiffness.analysis.results import (COMPARED_FIELDS, WINDOW_FIT_FIELDS, CycleFits, LiveComparison,
                                               ModelSummary, SessionAnalysis, Step)
-from crane_stiffness.bag import BagDamageWarning, BagReader
+from crane_stiffness.bag import BagDamageWarning
 from crane_stiffness.commands import command_faults
 from crane_stiffness.config import geometry_from_params
 from crane_stiffness.estimation.branch import BRANCHES, LOADING, UNLOADING
@@ -123,23 +123,15 @@ def _inputs(data: SessionData) -> tuple[Samples, Samples, dict[str, int]]:
     return force, disp, counters
 
 
-def _rejected_commands(path: Path) -> np.ndarray | None:
-    """The crane model's rejected commands (/crane/rejected_command) in the bag, decoded; None if absent."""
-    with BagReader(path) as reader:
-        info = reader.topics.get(topics.REJECTED_COMMAND)
-        if info is None or not info.count or info.msg_type != 'geometry_msgs/msg/WrenchStamped':
-            return None
-        return reader.decode_topics([topics.REJECTED_COMMAND])[topics.REJECTED_COMMAND]
-
-
-def _commands(data: SessionData, rejected: np.ndarray | None = None) -> CommandSeries | None:
+def _commands(data: SessionData) -> CommandSeries | None:
     """The commands as the live estimator holds them: absurd ones (crane_stiffness.commands, the model's own check)
-    and the model's rejections held as rejected."""
+    and the model's rejections (/crane/rejected_command, decoded with the other streams) held as rejected."""
     c = data.command
     if c is None or c.size == 0:
         return None
     wrench = np.column_stack([c[k].astype(float) for k in AXES])
     r_stamp = r_log = None
+    rejected = data.rejected
     if rejected is not None and rejected.size:
         r_stamp, r_log = rejected['stamp_s'], rejected['log_time_ns']
     return CommandSeries.of(c['stamp_s'], c['log_time_ns'], c[data.settings.force_axis].astype(float),
@@ -400,7 +392,7 @@ def analyze_session(bag_path: str | Path, out_dir: str | Path | None = None, *, 
             bar.done()
             bar.stage('pair')
             force, disp, input_counters = _inputs(data)
-            commands = _commands(data, _rejected_commands(path))
+            commands = _commands(data)
             pairs = live_pairs(data.settings, force, disp, commands)
             if pairs.stamp.size < 3:
                 raise SessionAnalysisError(

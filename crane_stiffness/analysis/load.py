@@ -41,6 +41,7 @@ class SessionData:
     force: np.ndarray | None = None
     disp: np.ndarray | None = None
     command: np.ndarray | None = None
+    rejected: np.ndarray | None = None  # the crane model's rejected commands (/crane/rejected_command)
     live_series: np.ndarray | None = None
     prediction: np.ndarray | None = None
     states: list[tuple[int, dict[str, Any]]] = field(default_factory=list)
@@ -194,6 +195,7 @@ def load_session(path: Path, axis: str | None, problems: list[str], missing: lis
                                        f'{known[topics.LVDT_DISPLACEMENT].msg_type}, expected PointStamped or Float64')
         wanted = list(REQUIRED_TOPICS)
         for topic, msg_type in ((topics.WRENCH_COMMAND, 'geometry_msgs/msg/WrenchStamped'),
+                                (topics.REJECTED_COMMAND, 'geometry_msgs/msg/WrenchStamped'),
                                 (topics.PREDICTED_AXIS_STIFFNESS, 'std_msgs/msg/Float64'),
                                 (topics.STIFFNESS, 'std_msgs/msg/Float64')):
             if topic in known and known[topic].count and known[topic].msg_type == msg_type:
@@ -202,6 +204,7 @@ def load_session(path: Path, axis: str | None, problems: list[str], missing: lis
         data.force = arrays[topics.LOAD_CELL_WRENCH]
         data.disp = arrays[topics.LVDT_DISPLACEMENT]
         data.command = arrays.get(topics.WRENCH_COMMAND)
+        data.rejected = arrays.get(topics.REJECTED_COMMAND)
         data.prediction = arrays.get(topics.PREDICTED_AXIS_STIFFNESS)
         data.live_series = arrays.get(topics.STIFFNESS)
         if topics.PROGRAM_STATE in known and known[topics.PROGRAM_STATE].count:

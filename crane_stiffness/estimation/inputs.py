@@ -194,15 +194,15 @@ class CommandSeries:
         usable, stamp = command_inputs(stamp_s, arrival_ns * 1e-9, load)
         rej = np.zeros(stamp.shape, bool) if absurd is None else np.asarray(absurd, bool)
         stamp, value, arrival, rej = stamp[usable], np.asarray(load, float)[usable], arrival_ns[usable], rej[usable]
+        model = np.zeros(stamp.size, np.int8)  # 1: a rejection by the model
         if rejected_stamp_s is not None and rejected_stamp_s.size:
             r_ok, r_stamp = command_inputs(rejected_stamp_s, rejected_arrival_ns * 1e-9, np.zeros(rejected_stamp_s.size))
+            n = int(r_ok.sum())
             stamp = np.concatenate([stamp, r_stamp[r_ok]])
-            value = np.concatenate([value, np.full(int(r_ok.sum()), np.nan)])
+            value = np.concatenate([value, np.full(n, np.nan)])
             arrival = np.concatenate([arrival, rejected_arrival_ns[r_ok]])
-            rej = np.concatenate([rej, np.ones(int(r_ok.sum()), bool)])
-            model = np.concatenate([np.zeros(stamp.size - int(r_ok.sum()), np.int8), np.ones(int(r_ok.sum()), np.int8)])
-        else:
-            model = np.zeros(stamp.size, np.int8)
+            rej = np.concatenate([rej, np.ones(n, bool)])
+            model = np.concatenate([model, np.ones(n, np.int8)])
         if stamp.size == 0:
             return None
         # Key (stamp, rejected by the model, arrival) as CommandHold orders its updates (the model's rejections of

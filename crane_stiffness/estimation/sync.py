@@ -182,8 +182,7 @@ class ApproximateTimeSync:
     def restart(self) -> None:
         """Start pairing afresh (a new fit segment, a reset): the queued samples are discarded (counted), the
         streams' newest stamps and estimated periods forgotten; the counters go on."""
-        for i, name in enumerate(STREAMS):
-            old = self._streams[i]
+        for old in self._streams:
             old.counters.discarded += len(old.queue)
         self._streams = (_Stream(self._periods[FORCE], self._counters.force),
                          _Stream(self._periods[DISPLACEMENT], self._counters.displacement))

@@ -282,9 +282,7 @@ class StiffnessEstimatorNode(Node):
                         break
                     on_command(*taken)
             handle(msg)
-            self._drain()
-            if self.changed:
-                self._publish_values()
+            self._catch_up()
         return callback
 
     def _drain(self) -> None:
@@ -300,11 +298,15 @@ class StiffnessEstimatorNode(Node):
             if not progress:
                 return
 
-    def _on_zero_epoch(self, stream: str, msg: Float64) -> None:
-        # The readings queued were published before the sensor's zero changed: they belong to the old segment.
+    def _catch_up(self) -> None:
+        """Handle what is queued (:meth:`_drain`), then publish the estimate once if it changed."""
         self._drain()
         if self.changed:
             self._publish_values()
+
+    def _on_zero_epoch(self, stream: str, msg: Float64) -> None:
+        # The readings queued were published before the sensor's zero changed: they belong to the old segment.
+        self._catch_up()
         if self.core.zero_epoch(stream, msg.data):
             self.get_logger().warn(f'new fit segment: {self.core.segment_reason} (zero epoch {msg.data:g})')
             self._publish_values()
@@ -336,9 +338,7 @@ class StiffnessEstimatorNode(Node):
 
     def _publish_estimate(self) -> None:
         # Judge the inputs on everything already delivered: take what is queued first.
-        self._drain()
-        if self.changed:
-            self._publish_values()
+        self._catch_up()
         self._check_publishers()
         stiffness = self.core.loading_stiffness()
         if stiffness == stiffness:  # not NaN; also at this slow rate, for a late subscriber during a hold
