@@ -65,6 +65,7 @@ from crane_stiffness.estimation.errors import DataError
 from crane_stiffness.estimation.fit import LineFit, RecursiveLeastSquares, fit_line
 from crane_stiffness.estimation.inputs import INPUT_CHECKS, CommandSeries, Samples, checked_samples
 from crane_stiffness.estimation.live import AXES, VALUE_FIELDS, LivePairs, live_pairs, stream_delay_of
+from crane_stiffness.estimation.offset import correct_stamps
 
 STAGES = ('open+decode', 'pair', 'steps', 'fits', 'model', 'figures', 'report')
 #: Pairs of a branch fed to the recursive least squares for the live comparison (its memory is ~1/(1-λ)).
@@ -115,7 +116,7 @@ def _inputs(data: SessionData) -> tuple[Samples, Samples, dict[str, int]]:
     else:  # std_msgs/Float64 in volts, stamped on arrival by the estimator
         d_stamp = d['log_time_ns'] * 1e-9
         d_value = s.volts_to_displacement(d['data'])
-    d_stamp = d_stamp - s.displacement_delay_s  # the instants the samples were taken, as live
+    d_stamp = correct_stamps(d_stamp, s.displacement_delay_s)  # the instants the samples were taken, as live
     disp, d_counts = checked_samples(d_stamp, d['log_time_ns'], d_value, np.isfinite(d_value) & np.isfinite(d_stamp),
                                      s.max_abs_displacement, s.max_clock_skew_s)
     counters = {'force_messages': int(f.size), 'displacement_messages': int(d.size),
