@@ -15,6 +15,8 @@ import shutil
 import subprocess
 import time
 import zlib
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
@@ -71,6 +73,21 @@ def _mcap_messages(path: Path) -> tuple[int, int]:
     return messages, chunks
 
 
+@contextmanager
+def _small_disk(tmp_path: Path, size: str) -> Iterator[Path]:
+    """A tmpfs of ``size`` (mount's ``size=`` option) mounted at ``<tmp_path>/small_disk`` (the test needs root)."""
+    disk = tmp_path / 'small_disk'
+    disk.mkdir()
+    mounted = subprocess.run(['mount', '-t', 'tmpfs', '-o', f'size={size}', 'tmpfs', str(disk)], capture_output=True,
+                             text=True)
+    assert mounted.returncode == 0, f'cannot mount a {size} tmpfs (the test needs root): {mounted.stderr}'
+    try:
+        yield disk
+    finally:
+        # lazy: a file still open by a process the test failed to stop must not leave the mount behind
+        subprocess.run(['umount', '-l', str(disk)], check=False)
+
+
 def _wrench(ns: int, fy: float) -> WrenchStamped:
     msg = WrenchStamped()
     msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(ns, NS)
@@ -81,16 +98,8 @@ def _wrench(ns: int, fy: float) -> WrenchStamped:
 
 def test_a_full_disk_stops_the_recording_not_the_recorder(install_tree, rclpy_context, tmp_path):
     install, env = install_tree
-    disk = tmp_path / 'small_disk'
-    disk.mkdir()
-    mounted = subprocess.run(['mount', '-t', 'tmpfs', '-o', 'size=2m', 'tmpfs', str(disk)], capture_output=True,
-                             text=True)
-    assert mounted.returncode == 0, f'cannot mount a 2 MiB tmpfs (the test needs root): {mounted.stderr}'
-    try:
+    with _small_disk(tmp_path, '2m') as disk:
         _run_on_small_disk(disk, env, rclpy_context, tmp_path)
-    finally:
-        # lazy: a file still open by a process the test failed to stop must not leave the mount behind
-        subprocess.run(['umount', '-l', str(disk)], check=False)
 
 
 def _run_on_small_disk(disk: Path, env: dict, ctx, tmp_path: Path) -> None:
@@ -179,12 +188,7 @@ def _run_on_small_disk(disk: Path, env: dict, ctx, tmp_path: Path) -> None:
 def test_recover_on_a_full_disk_names_the_file_and_the_space_it_needs(tmp_path):
     """A killed recorder's bag on a full disk: recover cannot rewrite the file; it says which and how much room."""
     from crane_stiffness.bag import BagWriter
-    disk = tmp_path / 'small_disk'
-    disk.mkdir()
-    mounted = subprocess.run(['mount', '-t', 'tmpfs', '-o', 'size=1m', 'tmpfs', str(disk)], capture_output=True,
-                             text=True)
-    assert mounted.returncode == 0, f'cannot mount a tmpfs (the test needs root): {mounted.stderr}'
-    try:
+    with _small_disk(tmp_path, '1m') as disk:
         bag = disk / 'killed'
         writer = BagWriter(bag, compression='none', chunk_size=8192)
         writer.add_topic(topics.WRENCH_COMMAND, 'geometry_msgs/msg/WrenchStamped')
@@ -213,8 +217,6 @@ def test_recover_on_a_full_disk_names_the_file_and_the_space_it_needs(tmp_path):
         assert cli_main(['recover', str(bag)]) == 0
         with BagReader(bag) as reader:
             assert reader.complete and reader.topics[topics.WRENCH_COMMAND].count == 3000
-    finally:
-        subprocess.run(['umount', '-l', str(disk)], check=False)
 
 
 def test_the_writer_on_a_full_disk_keeps_every_complete_chunk_and_says_what_it_could_not_write(tmp_path):
@@ -222,12 +224,7 @@ def test_the_writer_on_a_full_disk_keeps_every_complete_chunk_and_says_what_it_c
     leaves no partial file; a split file that cannot be created leaves the earlier files whole."""
     from crane_stiffness.bag import BagWriteFailedError, BagWriter
     from rclpy.serialization import serialize_message
-    disk = tmp_path / 'small_disk'
-    disk.mkdir()
-    mounted = subprocess.run(['mount', '-t', 'tmpfs', '-o', 'size=512k', 'tmpfs', str(disk)], capture_output=True,
-                             text=True)
-    assert mounted.returncode == 0, f'cannot mount a tmpfs (the test needs root): {mounted.stderr}'
-    try:
+    with _small_disk(tmp_path, '512k') as disk:
         for split in (None, 100_000):
             bag = disk / f'split_{split}'
             writer = BagWriter(bag, compression='none', chunk_size=8192, split_max_bytes=split)
@@ -265,5 +262,3 @@ def test_the_writer_on_a_full_disk_keeps_every_complete_chunk_and_says_what_it_c
             (disk / f'filler_{split}').unlink()
             for leftover in bag.iterdir():  # make room for the next case
                 leftover.unlink()
-    finally:
-        subprocess.run(['umount', '-l', str(disk)], check=False)

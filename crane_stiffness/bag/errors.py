@@ -48,6 +48,11 @@ class BagWriteFailedError(BagError):
         self.errno = errno
 
 
+def os_error_text(exc: OSError) -> str:
+    """``[Errno 28] No space left on device`` (without the file name str(OSError) may carry)."""
+    return f'[Errno {exc.errno}] {exc.strerror}' if exc.errno is not None else str(exc)
+
+
 class BagPathError(BagFormatError):
     """A bag names a file outside its own directory (``..``, an absolute path, a symlink leading out)."""
 

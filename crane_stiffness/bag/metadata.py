@@ -7,6 +7,7 @@ strings and JSON-encodes everything else, :func:`decode_metadata` undoes that fo
 """
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 from collections.abc import Mapping, Sequence
@@ -115,8 +116,14 @@ def write_metadata_yaml(bag_dir: Path, info: Mapping[str, Any]) -> Path:
     """Write ``<bag_dir>/metadata.yaml`` atomically (temporary file, then rename); return its path."""
     path = Path(bag_dir) / METADATA_FILENAME
     tmp = path.with_name(METADATA_FILENAME + '.tmp')
-    tmp.write_text(dump_yaml({'rosbag2_bagfile_information': dict(info)}) + '\n', encoding='utf-8')
-    os.replace(tmp, path)
+    try:
+        tmp.write_text(dump_yaml({'rosbag2_bagfile_information': dict(info)}) + '\n', encoding='utf-8')
+        os.replace(tmp, path)
+    except BaseException:
+        # a failed write (a full disk) leaves no partial metadata.yaml.tmp behind (best effort: the disk may be gone)
+        with contextlib.suppress(OSError):
+            tmp.unlink(missing_ok=True)
+        raise
     return path
 
 
@@ -134,9 +141,9 @@ def file_in_bag(bag_dir: Path, name: object, source: str) -> Path:
     rule = f'a bag reads only files inside its directory {bag_dir}'
     if not isinstance(name, str) or not name or '\0' in name:
         raise BagPathError(f'{source}: file name {name!r} is not a file name; {rule}')
-    if os.path.isabs(name) or Path(name).is_absolute():
+    if os.path.isabs(name):
         raise BagPathError(f'{source}: file {name!r} is an absolute path; {rule}')
-    if '..' in Path(name).parts or '..' in name.replace('\\', '/').split('/'):
+    if '..' in name.replace('\\', '/').split('/'):  # also with Windows separators (a bag made elsewhere)
         raise BagPathError(f'{source}: file {name!r} leads out of the bag with ..; {rule}')
     path = bag_dir / name
     real_dir = bag_dir.resolve()

@@ -27,7 +27,7 @@ from pathlib import Path
 
 from mcap.writer import Writer as McapWriter
 
-from .errors import BagError, BagFormatError, BagNotFoundError, BagWriteFailedError
+from .errors import BagError, BagFormatError, BagNotFoundError, BagWriteFailedError, os_error_text
 from .mcapfile import McapFile
 from .metadata import (
     METADATA_FILENAME, ROSBAG2_METADATA, FileStats, TopicStats, build_bag_metadata, file_in_bag, read_metadata_yaml,
@@ -130,7 +130,7 @@ def _rewrite(source: McapFile, result: FileRecovery, stats: FileStats, counts: d
         # The copy is written beside the original before it replaces it: it needs about the readable part's size.
         needed = source.readable_end
         raise BagWriteFailedError(
-            f'cannot rewrite {source.path}: writing {tmp.name} failed: {_os_text(exc)}; the rewrite needs about '
+            f'cannot rewrite {source.path}: writing {tmp.name} failed: {os_error_text(exc)}; the rewrite needs about '
             f'{needed} bytes ({needed / 2**20:.2f} MiB) free in {source.path.parent} (free now: '
             f'{_free_bytes(source.path.parent)} bytes); the file was left as it was', source.path, exc.errno) from exc
     except BaseException:
@@ -290,16 +290,11 @@ def recover_bag(path: str | os.PathLike[str], *, backup: bool = True,
         try:
             report.metadata_path = write_metadata_yaml(bag_dir, info)
         except OSError as exc:
-            (bag_dir / (METADATA_FILENAME + '.tmp')).unlink(missing_ok=True)
             raise BagWriteFailedError(
-                f'cannot write {bag_dir / METADATA_FILENAME}: {_os_text(exc)}; it needs a few kB free in {bag_dir} '
-                f'(free now: {_free_bytes(bag_dir)} bytes); the .mcap files are recovered', bag_dir / METADATA_FILENAME,
-                exc.errno) from exc
+                f'cannot write {bag_dir / METADATA_FILENAME}: {os_error_text(exc)}; it needs a few kB free in '
+                f'{bag_dir} (free now: {_free_bytes(bag_dir)} bytes); the .mcap files are recovered',
+                bag_dir / METADATA_FILENAME, exc.errno) from exc
     return report
-
-
-def _os_text(exc: OSError) -> str:
-    return f'[Errno {exc.errno}] {exc.strerror}' if exc.errno is not None else str(exc)
 
 
 def _free_bytes(directory: Path) -> int | str:

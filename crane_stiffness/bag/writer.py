@@ -33,7 +33,7 @@ from mcap.writer import CompressionType, Writer as McapWriter
 
 from crane_stiffness import __version__
 
-from .errors import BagError, BagExistsError, BagWriteFailedError, BagWriterError
+from .errors import BagError, BagExistsError, BagWriteFailedError, BagWriterError, os_error_text
 from .metadata import (
     METADATA_FILENAME, ROSBAG2_METADATA, FileStats, TopicStats, build_bag_metadata, encode_metadata,
     serialized_bag_metadata,
@@ -276,7 +276,8 @@ class BagWriter:
                 self._close_file()
             with self._io('creating', None):
                 current = self._open_file()
-        with self._io('writing', current):
+        # the per-message path: a plain try (not ``self._io``, a generator-based context manager per message)
+        try:
             sequence = current.sequences[topic] = current.sequences[topic] + 1
             position = current.stream.tell()
             current.mcap.add_message(current.channels[topic], log_time_ns, bytes(data),
@@ -292,6 +293,8 @@ class BagWriter:
                 elif log_time_ns - current.pending_since_ns >= self._flush_ns:
                     current.mcap.flush()
                     current.pending_since_ns = None
+        except OSError as exc:
+            raise self._fail('writing', current, exc) from exc
 
     def flush(self) -> None:
         """Finish the chunk in progress and hand it to the OS, so everything written so far survives a crash."""
@@ -329,11 +332,10 @@ class BagWriter:
             self.metadata_path = write_metadata_yaml(self.path, info)
         except OSError as exc:
             self.failure = BagWriteFailedError(
-                f'writing {self.path / METADATA_FILENAME} failed: {_os_text(exc)}; every .mcap file of the bag is '
+                f'writing {self.path / METADATA_FILENAME} failed: {os_error_text(exc)}; every .mcap file of the bag is '
                 f'complete: run `crane-stiffness recover {self.path}` once there is room',
                 self.path / METADATA_FILENAME,
                 exc.errno)
-            _remove_tmp(self.path)
             raise self.failure from exc
         return info
 
@@ -346,24 +348,29 @@ class BagWriter:
 
     @contextmanager
     def _io(self, action: str, opened: _OpenFile | None) -> Iterator[None]:
-        """Turn an OSError of the block into the writer's failure (first error only): stop, keep what is on disk."""
+        """Turn an OSError of the block into the writer's failure (see :meth:`_fail`)."""
         try:
             yield
         except OSError as exc:
-            if self.failure is not None:
-                raise self.failure from exc
-            target = self.path / opened.stats.path if opened is not None else (
-                self.path / self._files[-1].path if self._files else self.path)
-            where = f'; the file ends at byte {opened.stream.tell()}, after its last complete record' \
-                if opened is not None else ''
-            self.failure = BagWriteFailedError(f'{action} {target} failed: {_os_text(exc)}; recording stopped{where}',
-                                               target, exc.errno)
-            failed = opened if opened is not None else self._file
-            if failed is not None:
-                failed.stream.cut()
-                failed.stream.close()
-                self._cut_file = failed
-            raise self.failure from exc
+            raise self._fail(action, opened, exc) from exc
+
+    def _fail(self, action: str, opened: _OpenFile | None, exc: OSError) -> BagWriteFailedError:
+        """Record ``exc`` as the writer's failure (first error only): stop, cut the file back to its last complete
+        record, keep what is on disk. Returns the error to raise."""
+        if self.failure is not None:
+            return self.failure
+        target = self.path / opened.stats.path if opened is not None else (
+            self.path / self._files[-1].path if self._files else self.path)
+        where = f'; the file ends at byte {opened.stream.tell()}, after its last complete record' \
+            if opened is not None else ''
+        self.failure = BagWriteFailedError(
+            f'{action} {target} failed: {os_error_text(exc)}; recording stopped{where}', target, exc.errno)
+        failed = opened if opened is not None else self._file
+        if failed is not None:
+            failed.stream.cut()
+            failed.stream.close()
+            self._cut_file = failed
+        return self.failure
 
     def _salvage(self) -> dict[str, Any] | None:
         """After a write error: count what is on disk in the file the error cut, then try metadata.yaml."""
@@ -378,9 +385,8 @@ class BagWriter:
             self.metadata_path = write_metadata_yaml(self.path, info)
             meta = f'wrote {self.metadata_path}'
         except OSError as exc:
-            _remove_tmp(self.path)
             info = None
-            meta = (f'metadata.yaml NOT written ({_os_text(exc)}): run `crane-stiffness recover {self.path}` once '
+            meta = (f'metadata.yaml NOT written ({os_error_text(exc)}): run `crane-stiffness recover {self.path}` once '
                     'there is room')
         self.salvage = (f'{on_disk} message(s) on disk in complete chunks, {lost} lost with the chunk being '
                         f'written; {meta}')
@@ -465,16 +471,3 @@ class BagWriter:
             opened.mcap.finish()
         finally:
             opened.stream.close()
-
-
-def _os_text(exc: OSError) -> str:
-    """``[Errno 28] No space left on device`` (without the file name str(OSError) may carry)."""
-    return f'[Errno {exc.errno}] {exc.strerror}' if exc.errno is not None else str(exc)
-
-
-def _remove_tmp(bag_dir: Path) -> None:
-    """Remove a metadata.yaml.tmp left by a failed write (it holds a part of the file)."""
-    try:
-        (Path(bag_dir) / (METADATA_FILENAME + '.tmp')).unlink(missing_ok=True)
-    except OSError:
-        pass

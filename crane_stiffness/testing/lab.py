@@ -171,13 +171,7 @@ class NamespacedProcesses(Processes):
         if ns is None:
             raise LabNetworkError(f'no network namespace for node {name}')
         env = {**self.env, **self.env_of.get(ns, {})}
-        argv = ['ip', 'netns', 'exec', ns, *command(package, executable, args, env)]
-        log = open(self.log_dir / f'{name}.log', 'w')
-        proc = subprocess.Popen(argv, env=env, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-                                start_new_session=True)
-        log.close()
-        self.procs[name] = proc
-        return proc
+        return self._popen(name, ['ip', 'netns', 'exec', ns, *command(package, executable, args, env)], env)
 
 
 __all__ = ['LabNetwork', 'LabNetworkError', 'NamespacedProcesses', 'emulated_ports', 'free_port', 'start_rig_with',

@@ -118,10 +118,13 @@ class Processes:
             pass
 
     def start(self, name: str, package: str, executable: str, args: Sequence[str] = ()) -> subprocess.Popen:
-        argv = command(package, executable, args, self.env)
+        return self._popen(name, command(package, executable, args, self.env), self.env)
+
+    def _popen(self, name: str, argv: Sequence[str], env: Mapping[str, str]) -> subprocess.Popen:
+        """Start ``argv`` as node ``name`` (log ``<log_dir>/<name>.log``, own session or the shared group)."""
         log = open(self.log_dir / f'{name}.log', 'w')
         group = {'start_new_session': True} if self.leader is None else {'process_group': self.leader.pid}
-        proc = subprocess.Popen(argv, env=self.env, stdout=log, stderr=subprocess.STDOUT,
+        proc = subprocess.Popen(argv, env=env, stdout=log, stderr=subprocess.STDOUT,
                                 stdin=subprocess.DEVNULL, **group)
         log.close()
         self.procs[name] = proc
