@@ -221,9 +221,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     from crane_stiffness.testing import rosrun
     ws = REPO / 'out' / 'bench_rig'
-    rosrun.colcon_build(REPO, ws / 'build', ws / 'install', ws / 'log')
-    env = rosrun.install_environment(ws / 'install')
-    share = ws / 'install' / 'crane_stiffness' / 'share' / 'crane_stiffness' / 'config'
+    env, share = rosrun.build_workspace(REPO, ws)
     results = [run_rate(r, args.seconds, env, share, ws / 'logs', args.publish_rate, args.warmup, transport)
                for transport in args.transports for r in args.rates]
     for res in results:

@@ -144,9 +144,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     from crane_stiffness.testing import rosrun
     ws = REPO / 'out' / 'bench_soak'
-    rosrun.colcon_build(REPO, ws / 'build', ws / 'install', ws / 'log')
-    env = rosrun.install_environment(ws / 'install')
-    share = ws / 'install' / 'crane_stiffness' / 'share' / 'crane_stiffness' / 'config'
+    env, share = rosrun.build_workspace(REPO, ws)
     res = soak(args.seconds, args.rate, args.every, args.warmup, env, share, ws / time.strftime('%Y%m%dT%H%M%S'))
     print(f"--- soak: whole rig at {res['rate_hz']:.0f} Hz, {res['seconds']:.0f} s after the program start, RSS every "
           f"{res['every_s']:.0f} s; growth from {res['warmup_s']:.0f} s on (target <= {args.max_growth_mb} MB)")

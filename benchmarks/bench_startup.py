@@ -49,7 +49,7 @@ def launch_to_program_start(install: Path, log_dir: Path, timeout_s: float = 180
     from crane_stiffness.testing import rosrun
     from crane_stiffness.testing.rig import Observer, start_rig, wait_for_program_start
     env = rosrun.install_environment(install)
-    share = install / 'crane_stiffness' / 'share' / 'crane_stiffness' / 'config'
+    share = rosrun.installed_config(install)
     ctx = rclpy.Context()
     rclpy.init(context=ctx)
     observer = Observer(context=ctx)

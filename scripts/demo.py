@@ -49,9 +49,7 @@ def main(argv=None) -> int:
     # A fresh build of the package: setuptools would otherwise keep installing modules since moved or deleted.
     for stale in (REPO / 'build' / 'crane_stiffness', REPO / 'install' / 'crane_stiffness'):
         shutil.rmtree(stale, ignore_errors=True)
-    rosrun.colcon_build(REPO, REPO / 'build', REPO / 'install', REPO / 'log')
-    env = rosrun.install_environment(REPO / 'install')
-    share = REPO / 'install' / 'crane_stiffness' / 'share' / 'crane_stiffness' / 'config'
+    env, share = rosrun.build_workspace(REPO, REPO)  # REPO/build, REPO/install, REPO/log
     session = f'demo_{args.program}_{datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%SZ")}'
     print(f'[2/3] starting the rig (ROS_DOMAIN_ID={env["ROS_DOMAIN_ID"]}, loopback only), '
           f'program {args.program!r}, recording bags/{session}', flush=True)

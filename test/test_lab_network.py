@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 import yaml
 
+from crane_stiffness.testing import rosrun
 from crane_stiffness.testing.lab import LabNetwork, LabNetworkError, NamespacedProcesses, start_rig_with
 from crane_stiffness.testing.rig import decode_values
 from crane_stiffness.config import geometry_from_params, load_params
@@ -59,7 +60,7 @@ def test_drivers_on_one_pc_estimator_and_recorder_on_another(install_tree, tmp_p
     from std_msgs.msg import Float64MultiArray
 
     install, env = install_tree
-    share = install / 'crane_stiffness' / 'share' / 'crane_stiffness' / 'config'
+    share = rosrun.installed_config(install)
     net = LabNetwork()
     try:
         net.create()

@@ -242,7 +242,7 @@ def _recorder_args(share: Path, out: Path, session: str, *extra: str) -> list[st
 
 def test_sigint_sigterm_close_the_bag_and_sigkill_leaves_a_recoverable_one(install_tree, rclpy_context, tmp_path):
     install, env = install_tree
-    share = install / 'crane_stiffness' / 'share' / 'crane_stiffness' / 'config'
+    share = rosrun.installed_config(install)
     out = tmp_path / 'bags'
     ctx = rclpy_context
     node = Node('signal_test_publisher', context=ctx)

@@ -17,7 +17,7 @@ from crane_stiffness.estimation.sync import DISPLACEMENT, FORCE
 from crane_stiffness.nodes.common import LATCHED_QOS
 from crane_stiffness.nodes.stiffness_estimator import StiffnessEstimatorNode
 from test_estimator_faults import identity, statuses
-from test_estimator_node import C, K, NS, Probe, SyntheticRig, isolated, setup
+from test_estimator_node import C, K, Probe, SyntheticRig, isolated, setup
 
 RATE_HZ = 500.0
 WINDOW = 600

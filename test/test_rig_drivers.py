@@ -7,11 +7,10 @@ from __future__ import annotations
 
 import json
 import time
-from pathlib import Path
 
 import pytest
 
-from crane_stiffness.rig_description import NODES, RigError, config_files, readiness, rig_nodes
+from crane_stiffness.rig_description import NODES, RigError, config_files, rig_nodes
 from crane_stiffness.testing import rosrun
 from crane_stiffness.testing.lab import emulated_ports, start_rig_with
 from crane_stiffness.testing.rig import Observer, summarize, wait_for_program_start
@@ -100,7 +99,7 @@ def test_side_force_through_the_drivers_gives_the_prediction(install_tree, tmp_p
     and the readings really came through the drivers."""
     import rclpy
     install, env = install_tree
-    share = install / 'crane_stiffness' / 'share' / 'crane_stiffness' / 'config'
+    share = rosrun.installed_config(install)
     ctx = rclpy.Context()
     rclpy.init(context=ctx)
     observer = Observer(context=ctx)

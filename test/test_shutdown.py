@@ -21,7 +21,6 @@ from rclpy.serialization import serialize_message
 from std_msgs.msg import Float64, String
 
 from conftest import spin_until
-from crane_stiffness import topics
 from crane_stiffness.bag import BagWriter, dump_qos_profiles, qos_profile
 from crane_stiffness.rig_description import PACKAGE, rig_nodes
 from crane_stiffness.testing import rosrun
@@ -113,7 +112,7 @@ def wait_all(procs: rosrun.Processes, names=None) -> dict[str, int | None]:
 
 
 def config_dir(install: Path) -> Path:
-    return install / PACKAGE / 'share' / PACKAGE / 'config'
+    return rosrun.installed_config(install)
 
 
 @pytest.mark.parametrize('how', ['sigint', 'sigint_twice', 'sigterm'])

@@ -25,7 +25,7 @@ def _site(install: Path) -> Path:
 
 
 def _share(install: Path) -> Path:
-    return install / 'crane_stiffness' / 'share' / 'crane_stiffness' / 'config'
+    return rosrun.installed_config(install)
 
 
 def _final_counters(log: str) -> dict:

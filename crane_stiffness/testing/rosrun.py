@@ -77,6 +77,19 @@ def colcon_build(source: str | os.PathLike, build_base: str | os.PathLike, insta
                    text=True)
 
 
+def installed_config(install_base: str | os.PathLike, package: str = PACKAGE) -> Path:
+    """The package's installed ``config/`` in an isolated colcon install (``share/<package>/config``)."""
+    return Path(install_base) / package / 'share' / package / 'config'
+
+
+def build_workspace(source: str | os.PathLike, ws: str | os.PathLike) -> tuple[dict[str, str], Path]:
+    """``colcon build`` of ``source`` into ``ws/{build,install,log}``: (the install's environment, its config
+    directory)."""
+    ws = Path(ws)
+    colcon_build(source, ws / 'build', ws / 'install', ws / 'log')
+    return install_environment(ws / 'install'), installed_config(ws / 'install')
+
+
 class Processes:
     """Nodes started as separate processes; ``stop()`` (or leaving the ``with``) sends SIGINT like Ctrl-C, then
     SIGTERM, then SIGKILL to what is still running. stdout and stderr go to ``<log_dir>/<name>.log``.
