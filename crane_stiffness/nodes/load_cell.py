@@ -19,7 +19,6 @@ restart or a tare shows as a new start time or a new count. The tare count is al
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -30,8 +29,8 @@ from std_srvs.srv import Trigger
 from crane_stiffness import topics
 from crane_stiffness.axes import AXES
 from crane_stiffness.config import ParamSpec
-from crane_stiffness.nodes.common import (RELIABLE_QOS, SENSOR_QOS, Counters, Diagnostics, SampleSchedule, ZeroEpoch,
-                                          check_sensor_params, finite, run)
+from crane_stiffness.nodes.common import (RELIABLE_QOS, SENSOR_QOS, Diagnostics, SampleSchedule, SensorCounters,
+                                          ZeroEpoch, check_sensor_params, finite, run)
 from crane_stiffness.nodes.parameters import Params, check
 from crane_stiffness.sim.sampling import NS_PER_S, SampleClock, StampedHold
 from crane_stiffness.sim.sensors import LoadCellModel
@@ -63,15 +62,6 @@ PARAMS = (
 MODEL_KEYS = ('noise_std', 'bias', 'drift_per_s', 'crosstalk', 'resolution', 'full_scale')
 #: What a simulated force sensor waits for before it measures anything.
 WAITING_FOR = f'waiting for {topics.APPLIED_WRENCH} (the load crane_model has in force)'
-
-
-@dataclass
-class SensorCounters(Counters):
-    """``received`` = ``used`` + ``dropped_non_finite`` (input messages); ``published`` = samples published;
-    ``waiting_samples``: sample instants that passed before there was an input to measure (none published)."""
-
-    used: int = 0
-    waiting_samples: int = 0
 
 
 def _validate(values: dict[str, Any]) -> LoadCellModel:

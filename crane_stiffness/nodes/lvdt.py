@@ -28,9 +28,8 @@ from std_srvs.srv import Trigger
 from crane_stiffness import topics
 from crane_stiffness.config import ParamSpec
 from crane_stiffness.model.rotation import quaternion_to_matrix
-from crane_stiffness.nodes.common import (RELIABLE_QOS, SENSOR_QOS, Diagnostics, SampleSchedule, ZeroEpoch,
-                                          check_sensor_params, finite, run)
-from crane_stiffness.nodes.load_cell import SensorCounters
+from crane_stiffness.nodes.common import (RELIABLE_QOS, SENSOR_QOS, Diagnostics, SampleSchedule, SensorCounters,
+                                          ZeroEpoch, check_sensor_params, finite, run)
 from crane_stiffness.nodes.parameters import Params
 from crane_stiffness.sim.sampling import NS_PER_S, SampleClock, StampedHold
 from crane_stiffness.sim.sensors import LvdtModel
