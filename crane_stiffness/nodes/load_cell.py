@@ -79,14 +79,13 @@ class LoadCell(Node):
         self.saturated = np.zeros(6, dtype=np.int64)    # saturated samples per axis, since start
         self._saturated_reported = np.zeros(6, dtype=np.int64)
         self.applied = StampedHold(6)  # no value until crane_model says which load is in force
-        self.tare_count = 0
         self.tared_at_ns = 0
         self.model: LoadCellModel | None = None
         self.schedule = SampleSchedule(self, self._tick)
         self.settings: dict[str, Any] = {}
         self.t0_ns = self.get_clock().now().nanoseconds  # drift time origin; also the start reported
         self.pub = self.create_publisher(WrenchStamped, topics.LOAD_CELL_WRENCH, SENSOR_QOS)
-        self.tare_epoch = ZeroEpoch(self, topics.LOAD_CELL_TARE)  # = tare_count, latched on /load_cell/tare
+        self.tare_epoch = ZeroEpoch(self, topics.LOAD_CELL_TARE)  # tares since start, latched on /load_cell/tare
         self.params = Params(self, PARAMS, _validate, self._apply)
         self.create_subscription(WrenchStamped, topics.APPLIED_WRENCH, self._on_applied, RELIABLE_QOS)
         self.create_service(Trigger, '~/tare', self._srv_tare)
@@ -97,6 +96,11 @@ class LoadCell(Node):
     def clock(self) -> SampleClock:
         """The sample clock (period, skipped samples)."""
         return self.schedule.clock
+
+    @property
+    def tare_count(self) -> int:
+        """Tares since start: the epoch latched on /load_cell/tare (one count, not two kept in step)."""
+        return self.tare_epoch.count
 
     def _apply(self, model: LoadCellModel, values: dict[str, Any]) -> None:
         if self.model is not None and self.model.offset.any():
@@ -155,7 +159,6 @@ class LoadCell(Node):
             return response
         readings, _ = self.model.measure(np.tile(load, (n, 1)), np.full(n, (now_ns - self.t0_ns) * 1e-9))
         offset = self.model.tare(readings)
-        self.tare_count += 1
         self.tared_at_ns = now_ns
         self.tare_epoch.step()  # before the next burst: the estimator starts a new segment on it
         response.success = True

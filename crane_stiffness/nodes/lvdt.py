@@ -77,7 +77,6 @@ class Lvdt(Node):
         super().__init__('lvdt', **kwargs)
         self.counters = SensorCounters()
         self.started_at_ns = self.get_clock().now().nanoseconds
-        self.zero_count = 0
         self.zeroed_at_ns = 0
         self.out_of_range = 0       # saturated samples since start
         self._out_of_range_reported = 0
@@ -87,7 +86,7 @@ class Lvdt(Node):
         self.schedule = SampleSchedule(self, self._tick)
         self.settings: dict[str, Any] = {}
         self.pub = self.create_publisher(PointStamped, topics.LVDT_DISPLACEMENT, SENSOR_QOS)
-        self.zero_epoch = ZeroEpoch(self, topics.LVDT_ZERO, publish=False)  # = zero_count, latched on /lvdt/zero
+        self.zero_epoch = ZeroEpoch(self, topics.LVDT_ZERO, publish=False)  # zeros since start, latched
         self.params = Params(self, PARAMS, _validate, self._apply)
         if not self.settings['zero_on_first_pose']:  # else epoch 1 at the first pose, before any reading
             self.zero_epoch.step(0)
@@ -99,6 +98,11 @@ class Lvdt(Node):
     def clock(self) -> SampleClock:
         """The sample clock (period, skipped samples)."""
         return self.schedule.clock
+
+    @property
+    def zero_count(self) -> int:
+        """Zeros since start: the epoch latched on /lvdt/zero (one count, not two kept in step)."""
+        return self.zero_epoch.count
 
     def _apply(self, model: LvdtModel, values: dict[str, Any]) -> None:
         self.model = model
@@ -112,7 +116,6 @@ class Lvdt(Node):
         self.model.zero(pose[:3], pose[3:].reshape(3, 3))
         self.zero_pose = pose
         if new:
-            self.zero_count += 1
             self.zeroed_at_ns = self.get_clock().now().nanoseconds
             self.zero_epoch.step()  # before the next burst: the estimator starts a new segment on it
 
