@@ -139,10 +139,11 @@ class Lvdt(Node):
         if times.size == 0:
             return
         poses, valid = self.pose.read(times)
-        self.counters.waiting_samples += int((~valid).sum())  # instants before the first pose
-        if not valid.any():
-            return
-        times, poses = times[valid], poses[valid]
+        if not valid.all():  # instants before the first pose: nothing to measure
+            self.counters.waiting_samples += int((~valid).sum())
+            times, poses = times[valid], poses[valid]
+            if times.size == 0:
+                return
         readings, in_range = self.model.measure(poses[:, :3], poses[:, 3:].reshape(-1, 3, 3))
         if not in_range.all():
             self.out_of_range += int((~in_range).sum())
