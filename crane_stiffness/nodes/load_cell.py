@@ -31,7 +31,7 @@ from crane_stiffness.axes import AXES
 from crane_stiffness.config import ParamSpec
 from crane_stiffness.nodes.common import (RELIABLE_QOS, SENSOR_QOS, Diagnostics, SampleSchedule, SensorCounters,
                                           ZeroEpoch, check_sensor_params, finite, run)
-from crane_stiffness.nodes.parameters import Params, check
+from crane_stiffness.nodes.parameters import Params
 from crane_stiffness.sim.sampling import NS_PER_S, SampleClock, StampedHold
 from crane_stiffness.sim.sensors import LoadCellModel
 from crane_stiffness.status import OK, WARN
@@ -66,7 +66,6 @@ WAITING_FOR = f'waiting for {topics.APPLIED_WRENCH} (the load crane_model has in
 
 def _validate(values: dict[str, Any]) -> LoadCellModel:
     seed = check_sensor_params(values)
-    check(values['tare_samples'] >= 1, 'tare_samples', values['tare_samples'], 'must be >= 1')
     return LoadCellModel.from_params({**{k: values[k] for k in MODEL_KEYS}, 'seed': seed})  # names a bad field
 
 

@@ -44,7 +44,6 @@ REST_POSE = np.concatenate([np.zeros(3), np.eye(3).ravel()])
 def _validate(values: dict[str, Any]):
     check_address(values, allow_zero=True)
     check(1 <= values['unit_id'] <= 247, 'unit_id', values['unit_id'], 'must be in 1..247')
-    check(values['seed'] >= -1, 'seed', values['seed'], 'must be -1 (random) or a seed >= 0')
     try:
         channel = channel_from(values)
     except ParameterError as exc:
