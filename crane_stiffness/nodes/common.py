@@ -64,6 +64,15 @@ class Counters:
         return [(k, str(v)) for k, v in self.__dict__.items()]
 
 
+@dataclass
+class SensorCounters(Counters):
+    """``received`` = ``used`` + ``dropped_non_finite`` (input messages); ``published`` = samples published;
+    ``waiting_samples``: sample instants that passed before there was an input to measure (none published)."""
+
+    used: int = 0
+    waiting_samples: int = 0
+
+
 class Diagnostics:
     """Publishes a DiagnosticStatus for the node on /diagnostics at a fixed rate, from a callback."""
 

@@ -19,7 +19,6 @@ restart or a tare shows as a new start time or a new count. The tare count is al
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -30,9 +29,9 @@ from std_srvs.srv import Trigger
 from crane_stiffness import topics
 from crane_stiffness.axes import AXES
 from crane_stiffness.config import ParamSpec
-from crane_stiffness.nodes.common import (RELIABLE_QOS, SENSOR_QOS, Counters, Diagnostics, SampleSchedule, ZeroEpoch,
-                                          check_sensor_params, finite, run)
-from crane_stiffness.nodes.parameters import Params, check
+from crane_stiffness.nodes.common import (RELIABLE_QOS, SENSOR_QOS, Diagnostics, SampleSchedule, SensorCounters,
+                                          ZeroEpoch, check_sensor_params, finite, run)
+from crane_stiffness.nodes.parameters import Params
 from crane_stiffness.sim.sampling import NS_PER_S, SampleClock, StampedHold
 from crane_stiffness.sim.sensors import LoadCellModel
 from crane_stiffness.status import OK, WARN
@@ -65,18 +64,8 @@ MODEL_KEYS = ('noise_std', 'bias', 'drift_per_s', 'crosstalk', 'resolution', 'fu
 WAITING_FOR = f'waiting for {topics.APPLIED_WRENCH} (the load crane_model has in force)'
 
 
-@dataclass
-class SensorCounters(Counters):
-    """``received`` = ``used`` + ``dropped_non_finite`` (input messages); ``published`` = samples published;
-    ``waiting_samples``: sample instants that passed before there was an input to measure (none published)."""
-
-    used: int = 0
-    waiting_samples: int = 0
-
-
 def _validate(values: dict[str, Any]) -> LoadCellModel:
     seed = check_sensor_params(values)
-    check(values['tare_samples'] >= 1, 'tare_samples', values['tare_samples'], 'must be >= 1')
     return LoadCellModel.from_params({**{k: values[k] for k in MODEL_KEYS}, 'seed': seed})  # names a bad field
 
 
@@ -89,14 +78,13 @@ class LoadCell(Node):
         self.saturated = np.zeros(6, dtype=np.int64)    # saturated samples per axis, since start
         self._saturated_reported = np.zeros(6, dtype=np.int64)
         self.applied = StampedHold(6)  # no value until crane_model says which load is in force
-        self.tare_count = 0
         self.tared_at_ns = 0
         self.model: LoadCellModel | None = None
         self.schedule = SampleSchedule(self, self._tick)
         self.settings: dict[str, Any] = {}
         self.t0_ns = self.get_clock().now().nanoseconds  # drift time origin; also the start reported
         self.pub = self.create_publisher(WrenchStamped, topics.LOAD_CELL_WRENCH, SENSOR_QOS)
-        self.tare_epoch = ZeroEpoch(self, topics.LOAD_CELL_TARE)  # = tare_count, latched on /load_cell/tare
+        self.tare_epoch = ZeroEpoch(self, topics.LOAD_CELL_TARE)  # tares since start, latched on /load_cell/tare
         self.params = Params(self, PARAMS, _validate, self._apply)
         self.create_subscription(WrenchStamped, topics.APPLIED_WRENCH, self._on_applied, RELIABLE_QOS)
         self.create_service(Trigger, '~/tare', self._srv_tare)
@@ -107,6 +95,11 @@ class LoadCell(Node):
     def clock(self) -> SampleClock:
         """The sample clock (period, skipped samples)."""
         return self.schedule.clock
+
+    @property
+    def tare_count(self) -> int:
+        """Tares since start: the epoch latched on /load_cell/tare (one count, not two kept in step)."""
+        return self.tare_epoch.count
 
     def _apply(self, model: LoadCellModel, values: dict[str, Any]) -> None:
         if self.model is not None and self.model.offset.any():
@@ -165,7 +158,6 @@ class LoadCell(Node):
             return response
         readings, _ = self.model.measure(np.tile(load, (n, 1)), np.full(n, (now_ns - self.t0_ns) * 1e-9))
         offset = self.model.tare(readings)
-        self.tare_count += 1
         self.tared_at_ns = now_ns
         self.tare_epoch.step()  # before the next burst: the estimator starts a new segment on it
         response.success = True

@@ -201,10 +201,6 @@ class LoadProgramNode(Node):
 
     # --- parameters ---
     def _validate(self, values: dict[str, Any]) -> LoadProgram:
-        check(values['start_delay_s'] >= 0, 'start_delay_s', values['start_delay_s'], 'must be >= 0')
-        check(values['min_subscribers'] >= 0, 'min_subscribers', values['min_subscribers'], 'must be >= 0')
-        check(values['ready_timeout_s'] >= 0, 'ready_timeout_s', values['ready_timeout_s'],
-              'must be >= 0 (0: no limit)')
         check(values['ready_log_period_s'] > 0, 'ready_log_period_s', values['ready_log_period_s'], 'must be > 0')
         wanted_subscribers(values['wait_for_subscribers'])  # raises naming a malformed entry
         if self.state in ('running', 'paused') and self.program is not None:

@@ -28,9 +28,8 @@ from std_srvs.srv import Trigger
 from crane_stiffness import topics
 from crane_stiffness.config import ParamSpec
 from crane_stiffness.model.rotation import quaternion_to_matrix
-from crane_stiffness.nodes.common import (RELIABLE_QOS, SENSOR_QOS, Diagnostics, SampleSchedule, ZeroEpoch,
-                                          check_sensor_params, finite, run)
-from crane_stiffness.nodes.load_cell import SensorCounters
+from crane_stiffness.nodes.common import (RELIABLE_QOS, SENSOR_QOS, Diagnostics, SampleSchedule, SensorCounters,
+                                          ZeroEpoch, check_sensor_params, finite, run)
 from crane_stiffness.nodes.parameters import Params
 from crane_stiffness.sim.sampling import NS_PER_S, SampleClock, StampedHold
 from crane_stiffness.sim.sensors import LvdtModel
@@ -78,7 +77,6 @@ class Lvdt(Node):
         super().__init__('lvdt', **kwargs)
         self.counters = SensorCounters()
         self.started_at_ns = self.get_clock().now().nanoseconds
-        self.zero_count = 0
         self.zeroed_at_ns = 0
         self.out_of_range = 0       # saturated samples since start
         self._out_of_range_reported = 0
@@ -88,7 +86,7 @@ class Lvdt(Node):
         self.schedule = SampleSchedule(self, self._tick)
         self.settings: dict[str, Any] = {}
         self.pub = self.create_publisher(PointStamped, topics.LVDT_DISPLACEMENT, SENSOR_QOS)
-        self.zero_epoch = ZeroEpoch(self, topics.LVDT_ZERO, publish=False)  # = zero_count, latched on /lvdt/zero
+        self.zero_epoch = ZeroEpoch(self, topics.LVDT_ZERO, publish=False)  # zeros since start, latched
         self.params = Params(self, PARAMS, _validate, self._apply)
         if not self.settings['zero_on_first_pose']:  # else epoch 1 at the first pose, before any reading
             self.zero_epoch.step(0)
@@ -100,6 +98,11 @@ class Lvdt(Node):
     def clock(self) -> SampleClock:
         """The sample clock (period, skipped samples)."""
         return self.schedule.clock
+
+    @property
+    def zero_count(self) -> int:
+        """Zeros since start: the epoch latched on /lvdt/zero (one count, not two kept in step)."""
+        return self.zero_epoch.count
 
     def _apply(self, model: LvdtModel, values: dict[str, Any]) -> None:
         self.model = model
@@ -113,7 +116,6 @@ class Lvdt(Node):
         self.model.zero(pose[:3], pose[3:].reshape(3, 3))
         self.zero_pose = pose
         if new:
-            self.zero_count += 1
             self.zeroed_at_ns = self.get_clock().now().nanoseconds
             self.zero_epoch.step()  # before the next burst: the estimator starts a new segment on it
 
@@ -137,10 +139,11 @@ class Lvdt(Node):
         if times.size == 0:
             return
         poses, valid = self.pose.read(times)
-        self.counters.waiting_samples += int((~valid).sum())  # instants before the first pose
-        if not valid.any():
-            return
-        times, poses = times[valid], poses[valid]
+        if not valid.all():  # instants before the first pose: nothing to measure
+            self.counters.waiting_samples += int((~valid).sum())
+            times, poses = times[valid], poses[valid]
+            if times.size == 0:
+                return
         readings, in_range = self.model.measure(poses[:, :3], poses[:, 3:].reshape(-1, 3, 3))
         if not in_range.all():
             self.out_of_range += int((~in_range).sum())

@@ -21,8 +21,7 @@ from crane_stiffness.config import ParamSpec
 from crane_stiffness.devices.modbus_device import ModbusDevice
 from crane_stiffness.drivers.errors import ParameterError
 from crane_stiffness.nodes import lvdt
-from crane_stiffness.nodes.common import RELIABLE_QOS, Diagnostics, run
-from crane_stiffness.nodes.load_cell import SensorCounters
+from crane_stiffness.nodes.common import RELIABLE_QOS, Diagnostics, SensorCounters, run
 from crane_stiffness.nodes.parameters import Params, check
 from crane_stiffness.nodes.device_params import check_address, check_start_only
 from crane_stiffness.nodes.modbus_lvdt import CHANNEL_PARAMS, channel_from
@@ -45,7 +44,6 @@ REST_POSE = np.concatenate([np.zeros(3), np.eye(3).ravel()])
 def _validate(values: dict[str, Any]):
     check_address(values, allow_zero=True)
     check(1 <= values['unit_id'] <= 247, 'unit_id', values['unit_id'], 'must be in 1..247')
-    check(values['seed'] >= -1, 'seed', values['seed'], 'must be -1 (random) or a seed >= 0')
     try:
         channel = channel_from(values)
     except ParameterError as exc:

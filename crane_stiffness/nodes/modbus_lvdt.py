@@ -73,9 +73,7 @@ def channel_from(values: dict[str, Any]) -> Channel:
 
 def _validate(values: dict[str, Any]) -> Channel:
     check_address(values)
-    check(0 <= values['unit_id'] <= 255, 'unit_id', values['unit_id'], 'must be in 0..255')
     positive(values, 'poll_rate_hz', 'timeout_s', 'reconnect_interval_s', 'wait_for_device_s')
-    check(values['zero_samples'] >= 1, 'zero_samples', values['zero_samples'], 'must be >= 1')
     check(isinstance(values['frame_id'], str) and values['frame_id'] != '', 'frame_id', values['frame_id'],
           'must be a non-empty string')
     try:

@@ -91,9 +91,6 @@ def _validate(values: dict[str, Any]) -> dict[str, Any]:
     check(isinstance(values['frame_id'], str) and values['frame_id'] != '', 'frame_id', values['frame_id'],
           'must be a non-empty string')
     check(values['tare_mode'] in TARE_MODES, 'tare_mode', values['tare_mode'], f'must be one of {", ".join(TARE_MODES)}')
-    check(values['tare_samples'] >= 1, 'tare_samples', values['tare_samples'], 'must be >= 1')
-    check(0 <= values['drop_status_mask'] <= 0xFFFFFFFF, 'drop_status_mask', values['drop_status_mask'],
-          'must be in 0..4294967295')
     return values
 
 

@@ -56,12 +56,10 @@ START_ONLY = ('host', 'port', 'http_port', 'sample_rate_hz', 'clock_ppm', 'count
 
 def _validate(values: dict[str, Any]) -> LoadCellModel:
     check_address(values, allow_zero=True)
-    check(-1 <= values['http_port'] < 65536, 'http_port', values['http_port'], 'must be -1 (none), 0 (free) or a port')
     positive(values, 'sample_rate_hz', 'counts_per_force', 'counts_per_torque')
     check(abs(values['clock_ppm']) < 1e5, 'clock_ppm', values['clock_ppm'], 'must be within ±100000 ppm')
     check(1 <= values['records_per_packet'] <= 40, 'records_per_packet', values['records_per_packet'],
           'must be in 1..40')
-    check(values['seed'] >= -1, 'seed', values['seed'], 'must be -1 (random) or a seed >= 0')
     seed = None if values['seed'] < 0 else values['seed']
     return LoadCellModel.from_params({**{k: values[k] for k in load_cell.MODEL_KEYS}, 'seed': seed})
 

@@ -24,7 +24,6 @@ played (session_qos.message_class); a bag naming another type gets a warning nam
 from __future__ import annotations
 
 import fnmatch
-import math
 import threading
 import time
 import warnings
@@ -100,8 +99,6 @@ def _validate(values: dict[str, Any]) -> dict[str, Any]:
           'must name a bag directory or .mcap file')
     check(Path(values['bag']).expanduser().exists(), 'bag', values['bag'], 'does not exist')
     positive(values, 'rate', 'clock_rate_hz')
-    for name in ('start_offset_s', 'start_delay_s'):
-        check(math.isfinite(values[name]) and values[name] >= 0, name, values[name], 'must be >= 0 s')
     return values
 
 
