@@ -115,7 +115,9 @@ def test_commands_the_model_rejects_reach_no_sensor(rclpy_context):
     # crane_model sends the load in force (rest: zero) to the load cell when it matches it: readings start at 0.
     assert spin_until(ex, lambda: len(probe.samples) > 50, 10.0)
     assert np.all(np.array([w for _, w in probe.samples]) == 0.0)
-    assert spin_until(ex, lambda: probe.cmd.get_subscription_count() >= 1, 5.0)
+    # Both directions matched: the model hears the probe, and the probe has heard the model (the load in force it
+    # sends a reader on matching); a reply sent before the probe's reader matched would be lost, not late.
+    assert spin_until(ex, lambda: probe.cmd.get_subscription_count() >= 1 and probe.applied, 5.0)
     t_hold = probe.command(HELD)
     assert spin_until(ex, lambda: probe.applied_at(t_hold) is not None and len(probe.held_from(t_hold, HELD)) > 50,
                       5.0)
@@ -164,7 +166,9 @@ def test_a_repeated_failing_command_is_answered_from_the_cache(rclpy_context, tm
     ex.add_node(probe.node)
     n = 300
     try:
-        assert spin_until(ex, lambda: probe.cmd.get_subscription_count() >= 1 and len(probe.samples) > 10, 30.0), \
+        # Both directions matched (see the test above): the probe has heard the model's applied wrench.
+        assert spin_until(ex, lambda: probe.cmd.get_subscription_count() >= 1 and len(probe.samples) > 10
+                          and probe.applied, 30.0), \
             (tmp_path / 'model.log').read_text() + (tmp_path / 'cell.log').read_text()
         t_hold = probe.command(HELD)
         assert spin_until(ex, lambda: probe.applied_at(t_hold) is not None, 10.0)
