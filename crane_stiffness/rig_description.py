@@ -122,7 +122,9 @@ NODES: tuple[RigNode, ...] = (
     RigNode('modbus_emulator', ('drivers',), condition='sim_sensors', when=_DRIVERS, reads=(topics.PLATFORM_POSE,)),
     RigNode('netft', ('drivers',), when=_DRIVERS),
     RigNode('modbus_lvdt', ('drivers',), when=_DRIVERS),
-    RigNode('stiffness_estimator', ('crane', 'sensors'), reads=(topics.WRENCH_COMMAND, *_STREAMS),
+    # With transport:=drivers the estimator also reads the drivers file (after sensors: it overrides): how to pair
+    # depends on the drivers' rates (a 1 kHz F/T sensor and a 100 Hz DAQ: pairing interpolate_force).
+    RigNode('stiffness_estimator', ('crane', 'sensors', 'drivers'), reads=(topics.WRENCH_COMMAND, *_STREAMS),
             machine='analysis'),
     RigNode('session_recorder', ('crane', 'sensors', 'program'), arguments={'session': 'session'},
             condition='record', reads=(topics.WRENCH_COMMAND, topics.APPLIED_WRENCH, topics.REJECTED_COMMAND,
@@ -222,7 +224,8 @@ def rig_nodes(config_dir: str | os.PathLike, given: Mapping[str, str | bool] | N
     started = [node for node in NODES if (node.condition is None or flag(values[node.condition]))
                and all(str(values[arg]) == value for arg, value in node.when)]
     # load_program waits for the whole rig, the other machine's nodes too.
-    return [NodeStart(node.name, node.executable, tuple(files[f] for f in node.files),
+    return [NodeStart(node.name, node.executable,
+                      tuple(files[f] for f in node.files if f != 'drivers' or values['transport'] == 'drivers'),
                       {**{param: str(values[arg]) for param, arg in node.arguments.items()},
                        **(readiness(started) if node.runs_program else {})}, node.remappings, node.runs_program,
                       node.machine)

@@ -49,7 +49,8 @@ def test_settings_validation_names_the_value() -> None:
                          ({'slop_s': -1.0}, 'slop_s'), ({'slop_s': 0.2, 'max_age_s': 0.1}, 'max_age_s'),
                          ({'forgetting': 1.5}, 'forgetting'), ({'dropout_factor': 0.5}, 'dropout_factor'),
                          ({'displacement_gain': 0.0}, 'displacement_gain'), ({'hysteresis': math.nan}, 'hysteresis'),
-                         ({'branch_source': 'psychic'}, 'branch_source'), ({'max_abs_force': 0.0}, 'max_abs_force')]:
+                         ({'branch_source': 'psychic'}, 'branch_source'), ({'max_abs_force': 0.0}, 'max_abs_force'),
+                         ({'pairing': 'closest'}, 'pairing'), ({'max_interpolation_gap_s': 0.0}, 'max_interpolation_gap_s')]:
         with pytest.raises(ParameterError) as info:
             LiveSettings.from_params(values)
         assert info.value.field == name and repr(values[name]) in str(info.value)
@@ -207,3 +208,47 @@ def test_published_records_the_lag_of_the_newest_pair() -> None:
     assert live.lag.n == 1 and live.lag.max_s == pytest.approx(0.0025)
     pairs = dict(live.input_report()[2])
     assert pairs['lag_n'] == '1' and float(pairs['lag_p50_ms']) == pytest.approx(2.6, abs=0.11)
+
+
+@pytest.mark.parametrize('pairing', ['interpolate_force', 'interpolate_displacement'])
+def test_interpolated_pairing_live_equals_the_vectorised_pairs(pairing) -> None:
+    """A 1 kHz F/T sensor and a 100 Hz Modbus LVDT off its grid (or the other way round): LiveStiffness fits the
+    pairs live_pairs finds (the slow stream's samples, the fast one interpolated), to the last bit of the fit;
+    every message is accounted for."""
+    from crane_stiffness.estimation.inputs import Samples
+    from crane_stiffness.estimation.live import live_pairs
+
+    rng = np.random.default_rng(9)
+    fast_force = pairing == 'interpolate_force'
+    t_fast = T0 + np.arange(4000) * 1e-3 + rng.normal(0, 2e-5, 4000)
+    t_slow = T0 + 4.3e-3 + np.arange(400) * 1e-2 + rng.normal(0, 5e-5, 400)
+    t_f, t_d = (t_fast, t_slow) if fast_force else (t_slow, t_fast)
+    load = lambda t: np.interp(t, [T0, T0 + 2, T0 + 4], [0.0, 4.0, 0.0])  # noqa: E731  a 2 s ramp up and down
+    force = load(t_f) + rng.normal(0, 0.01, t_f.size)
+    x = (load(t_d) - C) / K + rng.normal(0, 1e-7, t_d.size)
+    arrival_f = np.maximum.accumulate(t_f + rng.uniform(1e-4, 2e-3, t_f.size))
+    arrival_d = np.maximum.accumulate(t_d + rng.uniform(1e-4, 2e-2, t_d.size))
+    settings = LiveSettings(pairing=pairing, max_interpolation_gap_s=2e-3, window=5000, hysteresis=0.05)
+    live = LiveStiffness(settings)
+    for _, kind, i in sorted([(a, 0, i) for i, a in enumerate(arrival_f)] + [(a, 1, i) for i, a in enumerate(arrival_d)]):
+        if kind == 0:
+            live.add_force(t_f[i], _wrench(force[i]), arrival_f[i])
+        else:
+            live.add_displacement(t_d[i], x[i], arrival_d[i])
+    ns = lambda a: np.round(a * 1e9).astype(np.int64)  # noqa: E731
+    pairs = live_pairs(settings, Samples(t_f, ns(arrival_f), force), Samples(t_d, ns(arrival_d), x), None)
+    n_slow = 400
+    assert live.counters.pairs_fitted == pairs.stamp.size > 0.95 * n_slow
+    values = live.values()
+    for branch, sel in ((0, pairs.loading), (1, ~pairs.loading)):
+        ref = fit_line(pairs.displacement[sel], pairs.force[sel])
+        row = _row(values, branch)
+        assert row['n'] == sel.sum()
+        assert row['stiffness'] == pytest.approx(ref.stiffness, rel=1e-12)
+        assert row['stiffness'] == pytest.approx(K, rel=0.01)
+    acc = live.accounting()
+    for stream in ('force', 'displacement'):
+        parts = sum(acc[f'{stream}_{k}'] for k in ('paired', 'out_of_order', 'non_finite', 'stale', 'unmatched',
+                                                  'discarded', 'pending'))
+        assert acc[f'{stream}_passed_checks'] == parts == acc[f'{stream}_received'] - acc[f'{stream}_dropped']
+    assert acc['pairs'] == acc['pairs_fitted']

@@ -1,5 +1,5 @@
-"""Interpolated pairing and the time offset between the force and displacement streams (issue 10, part 5):
-crane_stiffness.estimation.offset, pure numpy.
+"""The time offset between the force and displacement streams (issue 10, part 5): crane_stiffness.estimation.offset,
+pure numpy (the interpolated pairing the slopes are fitted from is sync.pair_by_interpolation, tested in test_sync).
 
 The streams are the lab's: force at 7 kHz (Net F/T), displacement at 100 Hz (Modbus polls), realistic noise and
 quantization, a ramp program on the lab model's side stiffness. The displacement stream is stamped 3 ms late; the
@@ -14,8 +14,8 @@ import pytest
 from crane_stiffness.estimation.branch import branch_labels
 from crane_stiffness.estimation.errors import DataError, ParameterError
 from crane_stiffness.estimation.fit import fit_line
-from crane_stiffness.estimation.offset import (InterpolatingPairer, correct_stamps, estimate_delay, interpolate_at,
-                                               pair_interpolated)
+from crane_stiffness.estimation.offset import correct_stamps, estimate_delay, interpolate_at
+from crane_stiffness.estimation.sync import pair_by_interpolation
 
 K = 53793.5          # the lab model's side stiffness [N/m]
 FORCE_RATE = 7000.0  # [Hz]
@@ -45,10 +45,14 @@ def lab_streams(seed: int, delay: float = DELAY, seconds: float = 15.0):
 def branch_slopes(t_f, f, t_d, x) -> tuple[float, float, float]:
     """(loading slope, unloading slope, their stderr combined) [N/m] of the interpolated pairs, branches by the
     estimator's rule (branch.branch_labels on the paired force)."""
-    pairs = pair_interpolated(t_d, x, t_f, f, max_gap_s=0.002)
-    loading = branch_labels(pairs.fast, threshold=0.2)
-    up = fit_line(pairs.slow[loading], pairs.fast[loading])
-    down = fit_line(pairs.slow[~loading], pairs.fast[~loading])
+    def ns(t):
+        return np.round(t * 1e9).astype(np.int64)  # arrival = stamp: nothing stale, nothing out of order
+
+    pairs = pair_by_interpolation(t_f, ns(t_f), t_d, ns(t_d), 'force', f, max_gap=0.002, max_age=1.0)
+    force, x = pairs.fast_value, x[pairs.slow_index]
+    loading = branch_labels(force, threshold=0.2)
+    up = fit_line(x[loading], force[loading])
+    down = fit_line(x[~loading], force[~loading])
     return up.stiffness, down.stiffness, float(np.hypot(up.stderr, down.stderr))
 
 
@@ -105,7 +109,7 @@ def test_no_load_change_is_reported_not_guessed():
         estimate_delay(t_f[::-1], t_f, t_d, t_d)
 
 
-def test_interpolation_is_linear_and_leaves_out_what_it_cannot_bracket():
+def test_interpolation_of_the_delay_refinement_is_linear_and_marks_what_it_cannot_bracket():
     t = np.array([0.0, 1.0, 2.0, 5.0])
     y = np.array([[0.0, 10.0], [1.0, 20.0], [3.0, 30.0], [6.0, 60.0]])
     values, inside, gap_ok = interpolate_at(t, y, [0.5, 1.5, 2.0, 3.5, -0.1, 5.0], max_gap_s=2.0)
@@ -113,32 +117,3 @@ def test_interpolation_is_linear_and_leaves_out_what_it_cannot_bracket():
     assert np.isnan(values[3:]).all()  # outside, or across a gap wider than max_gap_s: no value
     assert inside.tolist() == [True, True, True, True, False, True]
     assert gap_ok.tolist() == [True, True, True, False, True, False]
-    pairs = pair_interpolated([-0.1, 0.5, 3.5, 4.9, 6.0], [1, 2, 3, 4, 5], t, y[:, 0], max_gap_s=2.0)
-    assert pairs.index.tolist() == [1] and pairs.unpaired_outside == 2 and pairs.unpaired_gap == 2
-    assert pairs.fast.tolist() == [0.5]
-
-
-@pytest.mark.parametrize('seed', [0, 1, 2])
-def test_streaming_pairer_matches_the_vectorised_form(seed):
-    """The two streams fed in a random interleaving (each in order, the slow one up to 50 ms behind or ahead),
-    with a dropout in the fast stream: the same pairs, values and counts as pair_interpolated."""
-    rng = np.random.default_rng(seed)
-    t_f, f, t_d, x = lab_streams(seed, seconds=3.0)
-    keep = (t_f < 1.2) | (t_f > 1.25)   # a 50 ms dropout
-    t_f, f = t_f[keep], f[keep]
-    want = pair_interpolated(t_d, x, t_f, f, max_gap_s=0.002)
-    pairer = InterpolatingPairer(max_gap_s=0.002, keep_s=0.5)
-    arrival_f = t_f + rng.uniform(0, 0.002, t_f.size)
-    arrival_d = t_d + rng.uniform(-0.05, 0.05, t_d.size)
-    arrival_d = np.maximum.accumulate(arrival_d)   # a stream arrives in its own order
-    events = sorted([(a, 0, i) for i, a in enumerate(np.maximum.accumulate(arrival_f))] +
-                    [(a, 1, i) for i, a in enumerate(arrival_d)])
-    got = []
-    for _, kind, i in events:
-        got += pairer.add_fast(t_f[i], f[i]) if kind == 0 else pairer.add_slow(t_d[i], x[i])
-    pairer.finish()
-    assert [g[0] for g in got] == want.index.tolist()
-    np.testing.assert_allclose([g[3] for g in got], want.fast, rtol=0, atol=1e-12)
-    np.testing.assert_array_equal([g[2] for g in got], want.slow)
-    assert (pairer.unpaired_outside, pairer.unpaired_gap) == (want.unpaired_outside, want.unpaired_gap)
-    assert want.unpaired_gap >= 4   # the dropout left slow samples out, counted

@@ -35,6 +35,11 @@ def test_transport_argument_chooses_the_nodes():
                              'stiffness_estimator', 'session_recorder', 'load_program']
     for name in ('rdt_emulator', 'modbus_emulator', 'netft', 'modbus_lvdt'):
         assert drivers[name].parameter_files == (str(CONFIG / 'drivers_emulated.yaml'),)
+    # The estimator reads the drivers file last (its pairing suits the drivers' rates), and only through drivers.
+    assert drivers['stiffness_estimator'].parameter_files == tuple(
+        str(CONFIG / f) for f in ('crane_lab.yaml', 'sensors.yaml', 'drivers_emulated.yaml'))
+    assert {n.name: n for n in rig_nodes(CONFIG)}['stiffness_estimator'].parameter_files == tuple(
+        str(CONFIG / f) for f in ('crane_lab.yaml', 'sensors.yaml'))
     # The program waits for the emulators to hold the applied load and the pose (nothing of them may be lost), and
     # for both streams from the drivers.
     waits = drivers['load_program'].parameters
@@ -74,9 +79,9 @@ def test_every_drivers_file_has_only_parameters_the_nodes_declare():
     nodes' ParamSpecs here, without a process."""
     import yaml
 
-    from crane_stiffness.nodes import modbus_emulator, modbus_lvdt, netft, rdt_emulator
+    from crane_stiffness.nodes import modbus_emulator, modbus_lvdt, netft, rdt_emulator, stiffness_estimator
     declared = {'rdt_emulator': rdt_emulator.PARAMS, 'netft': netft.PARAMS, 'modbus_emulator': modbus_emulator.PARAMS,
-                'modbus_lvdt': modbus_lvdt.PARAMS}
+                'modbus_lvdt': modbus_lvdt.PARAMS, 'stiffness_estimator': stiffness_estimator.PARAMS}
     files = sorted(CONFIG.glob('drivers_*.yaml'))
     assert {f.name for f in files} >= {'drivers_emulated.yaml', 'drivers_ati_labjack.yaml',
                                        'drivers_onrobot_labjack.yaml'}
@@ -134,10 +139,33 @@ def test_side_force_through_the_drivers_gives_the_prediction(install_tree, tmp_p
     assert daq['published'] > 50 * duration and daq['failures'] <= 3, daq
     assert modbus['published'] >= daq['published'], (modbus, daq)
     assert 'http_port' in logs['netft'] or 'counts/N' in logs['netft']  # calibration read from /netftapi2.xml
+    # Interpolated pairing (drivers_emulated.yaml): one pair per LVDT reading, the force interpolated at its stamp,
+    # not one per force sample. (LVDT readings before netft's first sample pair with nothing: modbus_lvdt may start
+    # publishing seconds earlier, so the share paired is bounded loosely.)
+    est_counters = _final_counters(logs['stiffness_estimator'])
+    assert 'pairing interpolate_force' in logs['stiffness_estimator'], logs['stiffness_estimator'][-2000:]
+    assert est_counters['pairs'] > 0.6 * est_counters['displacement_passed_checks'], est_counters
+    assert est_counters['pairs'] < 0.2 * est_counters['force_passed_checks'], est_counters
     est = summary['estimate']['loading']
+    print('through the drivers:', summary['relative_error'], est, est_counters)
     assert abs(summary['relative_error']) < 0.02, (summary['relative_error'], est, summary['prediction'])
     assert est['n'] > 500, est
     assert summary['bag'] is not None
+    # analyze pairs the recorded streams the same way (the recorded estimator parameters): over the time the
+    # estimator reported on, as many pairs as it made, and the live window fitted offline gives the live estimate.
+    # Not to the bit: the recorder and the estimator match the sensors' writers at different instants of the start
+    # (best effort), so the first samples of the loading window differ (measured: 1,173 live, 1,178 offline,
+    # stiffness 0.002 % apart; the unloading window, later, the same to 1e-11).
+    from crane_stiffness.analysis.analyze import analyze_session
+    analysis = analyze_session(summary['bag'], write_files=False)
+    assert analysis.settings['pairing'] == 'interpolate_force' and analysis.live is not None
+    live = analysis.live
+    print('offline:', analysis.pairing, live.inputs, live.max_rel_diff)
+    assert 0 < analysis.pairing['pairs'] < 0.2 * analysis.pairing['force_messages'], analysis.pairing
+    assert abs(live.inputs['offline_pairs'] - live.inputs['live_pairs']) <= 0.01 * live.inputs['live_pairs'], \
+        live.inputs
+    for branch in ('loading', 'unloading'):
+        assert live.offline[branch]['stiffness'] == pytest.approx(live.live[branch]['stiffness'], rel=0.002), branch
 
 
 def test_a_driver_waits_for_a_device_that_starts_after_it():

@@ -347,6 +347,13 @@ def _default_out(bag: Path) -> Path:
     return Path('out') / 'analysis' / bag.name
 
 
+def _pairing_rule(settings) -> str:
+    """The estimator's pairing rule, for people."""
+    if settings.interpolated is None:
+        return f'nearest stamps within slop_s = {settings.slop_s} s'
+    return f'{settings.pairing} across gaps up to max_interpolation_gap_s = {settings.max_interpolation_gap_s} s'
+
+
 def analyze_session(bag_path: str | Path, out_dir: str | Path | None = None, *, formats: Sequence[str] = ('png',),
                     reports: Sequence[str] = ('md',), write_json: bool = True, axis: str | None = None,
                     settle_fraction: float = 0.3, model_points: int = 41, progress: bool = False,
@@ -397,7 +404,7 @@ def analyze_session(bag_path: str | Path, out_dir: str | Path | None = None, *, 
             pairs = live_pairs(data.settings, force, disp, commands)
             if pairs.stamp.size < 3:
                 raise SessionAnalysisError(
-                    f'{path}: only {pairs.stamp.size} load-cell/LVDT pair(s) within slop_s = {data.settings.slop_s} s '
+                    f'{path}: only {pairs.stamp.size} load-cell/LVDT pair(s) by {_pairing_rule(data.settings)} '
                     f'({force.stamp.size} force and {disp.stamp.size} displacement samples usable)')
             bar.done()
             bar.stage('steps')

@@ -62,7 +62,9 @@ def session_blocks(a: SessionAnalysis, images: Sequence[str] = ()) -> list[Block
         rows.append(['geometry', f'a = {fmt(g["a"])} m, b = {fmt(g["b"])} m, h = {fmt(g["height"])} m, '
                                  f'W = {fmt(g["weight"])} N, l0 = {fmt(g["l0"])} m, k = {fmt(g["k"])} N/m'])
     s = a.settings
-    rows.append(['estimator settings', f'slop {fmt(s["slop_s"])} s, max age {fmt(s["max_age_s"])} s, window '
+    pairing = (f'slop {fmt(s["slop_s"])} s' if s.get('pairing', 'nearest') == 'nearest' else
+               f'{s["pairing"]} (gaps up to {fmt(s["max_interpolation_gap_s"])} s)')
+    rows.append(['estimator settings', f'pairing {pairing}, max age {fmt(s["max_age_s"])} s, window '
                                        f'{s["window"]} pairs, hysteresis {fmt(s["hysteresis"])}, branch from '
                                        f'{s["branch_source"]}'])
     blocks.append(('table', ['', ''], rows))

@@ -20,8 +20,10 @@ publishing one:
    whose sequence numbers start again (a restart, which zeroes the sensor) starts a new fit segment
    (:meth:`LiveStiffness.new_segment`), and so does a re-zero or tare without a restart: a change of the sensor's
    zero epoch (:meth:`LiveStiffness.zero_epoch`, topics.LVDT_ZERO / LOAD_CELL_TARE).
-2. Pairing by header stamp with :class:`~crane_stiffness.estimation.sync.ApproximateTimeSync` (``slop_s``,
-   ``max_age_s``, ``expected_period_s``, ``dropout_factor``): out-of-order and stale samples are counted there and
+2. Pairing by header stamp (``pairing``): by nearest stamp with :class:`~crane_stiffness.estimation.sync.
+   ApproximateTimeSync` (``slop_s``), or each sample of the slower stream with the faster one interpolated at its
+   stamp with :class:`~crane_stiffness.estimation.sync.InterpolatingSync` (``max_interpolation_gap_s``); both with
+   ``max_age_s``, ``expected_period_s``, ``dropout_factor``: out-of-order and stale samples are counted there and
    never fitted; dropouts are counted.
 3. Fitting each pair with :class:`~crane_stiffness.estimation.fit.StiffnessEstimator` (windowed least squares and
    RLS with forgetting, loading and unloading branches apart). The branch follows the commanded load (the
@@ -63,10 +65,15 @@ from crane_stiffness.commands import command_fault
 from crane_stiffness.estimation.inputs import (CommandHold, CommandSeries, InputCounters, Samples, StreamHealth,
                                                command_inputs, input_faults, stream_health_of)
 from crane_stiffness.status import ERROR, OK, STALE, WARN
-from crane_stiffness.estimation.sync import (DISPLACEMENT, FORCE, ApproximateTimeSync, Pair, SyncCounters,
-                                             pair_by_stamp, pair_stamp)
+from crane_stiffness.estimation.sync import (DISPLACEMENT, FORCE, ApproximateTimeSync, InterpolatingSync, Pair,
+                                             SyncCounters, pair_by_interpolation, pair_by_stamp, pair_stamp)
 
 BRANCH_SOURCES = ('auto', 'force')
+#: Pairing rules (``pairing``): 'nearest' pairs samples whose stamps are mutual nearest within ``slop_s``
+#: (sync.ApproximateTimeSync: both sensors on one clock grid, as the simulated rig); 'interpolate_force' pairs
+#: every displacement sample with the force interpolated at its stamp, 'interpolate_displacement' the other way
+#: round (sync.InterpolatingSync: drivers at different rates, e.g. a 1 kHz F/T sensor and a 100 Hz Modbus LVDT).
+PAIRINGS = {'nearest': None, 'interpolate_force': FORCE, 'interpolate_displacement': DISPLACEMENT}
 
 #: Columns of one row of :meth:`LiveStiffness.values` (one row per branch, in the order of ``BRANCHES``).
 #: Units: stiffness, ci95_*, stderr, rls_* and prediction in N/m (N·m/rad for a moment axis); intercept and
@@ -103,7 +110,9 @@ class LiveSettings:
     """Settings of :class:`LiveStiffness` (the node's parameters of the same names; units in the field comments)."""
 
     force_axis: str = 'fy'               # wrench component fitted: fx fy fz [N] or mx my mz [N·m]
-    slop_s: float = 0.0006               # largest stamp difference of a pair [s]
+    pairing: str = 'nearest'             # 'nearest' | 'interpolate_force' | 'interpolate_displacement' (PAIRINGS)
+    slop_s: float = 0.0006               # nearest: largest stamp difference of a pair [s]
+    max_interpolation_gap_s: float = 0.005  # interpolated: widest bracket of the fast stream interpolated across [s]
     max_age_s: float = 0.1               # staleness limit and pairing latency bound [s]
     expected_period_s: float = 0.0       # sample period of both streams [s]; 0 = estimated online
     dropout_factor: float = 3.0          # a gap above this many periods is a dropout [-]; 0 = not detected
@@ -140,6 +149,8 @@ class LiveSettings:
         v = {f.name: values.get(f.name, f.default) for f in fields(cls)}
         if v['force_axis'] not in AXES:
             raise ParameterError('force_axis', v['force_axis'], f'must be one of {", ".join(AXES)}')
+        if v['pairing'] not in PAIRINGS:
+            raise ParameterError('pairing', v['pairing'], f'must be one of {", ".join(PAIRINGS)}')
         if v['branch_source'] not in BRANCH_SOURCES:
             raise ParameterError('branch_source', v['branch_source'], f'must be one of {", ".join(BRANCH_SOURCES)}')
         window = v['window']
@@ -173,7 +184,8 @@ class LiveSettings:
         return cls(sensor_rotation=tuple(float(x) for x in np.ravel(v['sensor_rotation'])),
                    sensor_position=tuple(float(x) for x in mount.position), sensor_reaction=mount.reaction,
                    displacement_delay_s=delay, max_stream_delay_s=_number(v, 'max_stream_delay_s', above=0.0),
-                   delay_window_s=window_s,
+                   delay_window_s=window_s, pairing=v['pairing'],
+                   max_interpolation_gap_s=_number(v, 'max_interpolation_gap_s', above=0.0),
                    force_axis=v['force_axis'], slop_s=slop, max_age_s=max_age, expected_period_s=period,
                    dropout_factor=dropout, min_silence_s=min_silence, window=window, forgetting=forgetting,
                    hysteresis=_number(v, 'hysteresis', minimum=0.0), branch_source=v['branch_source'],
@@ -213,17 +225,25 @@ class LiveSettings:
     def stiffness_unit(self) -> str:
         return 'N/m' if self.force_axis.startswith('f') else 'N·m/rad'
 
-    def make_sync(self) -> ApproximateTimeSync:
-        return ApproximateTimeSync(self.slop_s, max_age=self.max_age_s,
-                                   expected_period=self.expected_period_s or None,
-                                   dropout_factor=self.dropout_factor or None)
+    @property
+    def interpolated(self) -> str | None:
+        """The stream interpolated (FORCE or DISPLACEMENT), or None for nearest-stamp pairing."""
+        return PAIRINGS[self.pairing]
+
+    def make_sync(self) -> ApproximateTimeSync | InterpolatingSync:
+        period, dropout = self.expected_period_s or None, self.dropout_factor or None
+        if self.interpolated is not None:
+            return InterpolatingSync(self.interpolated, max_gap=self.max_interpolation_gap_s, max_age=self.max_age_s,
+                                     expected_period=period, dropout_factor=dropout)
+        return ApproximateTimeSync(self.slop_s, max_age=self.max_age_s, expected_period=period,
+                                   dropout_factor=dropout)
 
     def make_estimator(self) -> StiffnessEstimator:
         return StiffnessEstimator(self.hysteresis, self.window, self.forgetting, nonlinearity=False)
 
     def fit_key(self) -> tuple:
         """The settings whose change restarts pairing and fitting (the others are thresholds)."""
-        return (self.force_axis, self.slop_s, self.max_age_s, self.expected_period_s, self.dropout_factor,
+        return (self.force_axis, self.pairing, self.slop_s, self.max_interpolation_gap_s, self.max_age_s, self.expected_period_s, self.dropout_factor,
                 self.window, self.forgetting, self.hysteresis, self.branch_source, self.displacement_gain,
                 self.displacement_offset, self.sensor_rotation, self.sensor_position, self.sensor_reaction,
                 self.displacement_delay_s)
@@ -381,7 +401,7 @@ class LiveStiffness:
         self.prediction = math.nan
         self.lag = LagHistogram()
         self._settings = settings or LiveSettings()
-        self._sync: ApproximateTimeSync | None = None
+        self._sync: ApproximateTimeSync | InterpolatingSync | None = None
         self._zero_epochs: dict[str, float] = {}  # the last zero epoch seen per stream (see zero_epoch)
         self._build()
 
@@ -816,7 +836,8 @@ class LivePairs:
     fit_log: np.ndarray
     """When the live estimator fits each pair: the arrival (log) time of the later of its two samples, ns."""
     counters: dict[str, int]
-    """The pairing's counters (:func:`~crane_stiffness.estimation.sync.pair_by_stamp`)."""
+    """The pairing's counters (:func:`~crane_stiffness.estimation.sync.pair_by_stamp` or
+    :func:`~crane_stiffness.estimation.sync.pair_by_interpolation`)."""
 
 
 def live_pairs(settings: LiveSettings, force: Samples, displacement: Samples,
@@ -825,20 +846,33 @@ def live_pairs(settings: LiveSettings, force: Samples, displacement: Samples,
     the input checks (:func:`~crane_stiffness.estimation.inputs.checked_samples`), vectorized. Pairs made while a
     rejected command was in force are left out (counted as ``pairs_rejected_command``)."""
     s = settings
-    result = pair_by_stamp(force.stamp, force.arrival_ns, displacement.stamp, displacement.arrival_ns, s.slop_s,
-                           s.max_age_s)
-    fi, di = result.force_index, result.displacement_index
-    stamp = pair_stamp(force.stamp[fi], displacement.stamp[di])
-    fit_log = np.maximum(force.arrival_ns[fi], displacement.arrival_ns[di])
+    if s.interpolated is None:
+        result = pair_by_stamp(force.stamp, force.arrival_ns, displacement.stamp, displacement.arrival_ns, s.slop_s,
+                               s.max_age_s)
+        fi, di = result.force_index, result.displacement_index
+        stamp = pair_stamp(force.stamp[fi], displacement.stamp[di])
+        fit_log = np.maximum(force.arrival_ns[fi], displacement.arrival_ns[di])
+        value, disp_value = force.value[fi], displacement.value[di]
+    else:
+        fast = s.interpolated
+        result = pair_by_interpolation(force.stamp, force.arrival_ns, displacement.stamp, displacement.arrival_ns,
+                                       fast, (force if fast == FORCE else displacement).value,
+                                       s.max_interpolation_gap_s, s.max_age_s)
+        slow_samples, fast_samples = (displacement, force) if fast == FORCE else (force, displacement)
+        si = result.slow_index
+        stamp = result.stamp
+        # A pair forms once its slow sample and the fast sample closing its bracket have both arrived.
+        fit_log = np.maximum(slow_samples.arrival_ns[si], fast_samples.arrival_ns[result.fast_index])
+        slow_value = slow_samples.value[si]
+        value, disp_value = (result.fast_value, slow_value) if fast == FORCE else (slow_value, result.fast_value)
     counters = dict(result.counters)
     if commands is not None:
         rejected = commands.rejected_at(stamp, fit_log)
         counters['pairs_rejected_command'] = int(rejected.sum())
         keep = ~rejected
-        fi, di, stamp, fit_log = fi[keep], di[keep], stamp[keep], fit_log[keep]
+        value, disp_value, stamp, fit_log = value[keep], disp_value[keep], stamp[keep], fit_log[keep]
     else:
         counters['pairs_rejected_command'] = 0
-    value = force.value[fi]
     load = value
     if commands is not None and s.branch_source == 'auto':
         held_load, held = commands.at(stamp, fit_log)
@@ -846,7 +880,7 @@ def live_pairs(settings: LiveSettings, force: Samples, displacement: Samples,
     for name, samples in (('force', force), ('displacement', displacement)):
         counters[f'{name}_received_fraction'] = stream_health_of(samples.stamp,
                                                                  s.expected_period_s or None).received_fraction
-    return LivePairs(stamp, value, displacement.value[di], branch_labels(load, s.hysteresis), fit_log, counters)
+    return LivePairs(stamp, value, disp_value, branch_labels(load, s.hysteresis), fit_log, counters)
 
 
 def _increasing(stamp: np.ndarray) -> np.ndarray:

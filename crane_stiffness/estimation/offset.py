@@ -1,34 +1,26 @@
-"""Streams at different rates and with a time offset: interpolated pairing, and the offset estimated from the data.
+"""The time offset between the force and displacement streams, estimated from the data.
 
 Two drivers stamp with different clocks and latencies and run at different rates (e.g. a 7 kHz F/T sensor and a
-100 Hz Modbus LVDT). Two rules, pure numpy, no ROS:
+100 Hz Modbus LVDT). Pairing them, interpolated or by nearest stamp, is :mod:`crane_stiffness.estimation.sync`;
+this module finds how far apart their clocks are. Pure numpy, no ROS.
 
-**Interpolated pairing.** Each sample of the *slower* stream is paired with the *faster* stream linearly
-interpolated at its stamp (not only the nearest sample within a slop): :func:`pair_interpolated` does a whole
-recording at once, :class:`InterpolatingPairer` the same sample by sample as they arrive (the live form; the tests
-pin one to the other). A slow sample is paired only when fast samples bracket its stamp no more than ``max_gap_s``
-apart: across a dropout nothing is invented; such samples are counted, never silently paired.
-
-**Time offset.** :func:`estimate_delay` finds how much later one stream's stamps are than the other's for the same
-physical instant, from the data: during load ramps and steps both streams change together, so the normalised
-cross-correlation of their time derivatives (both resampled on one uniform grid and smoothed to the slower
-stream's bandwidth) peaks at the delay; a parabola through the peak refines it below the grid step, and a bounded
-least-squares search (the lag that makes the slow stream the best straight-line function of the fast one at the
-shifted stamps) refines it further. :func:`correct_stamps` applies it. The result says how sure it is
-(:attr:`DelayEstimate.ok`, ``reason``): without load changes there is nothing to correlate, and it says so.
+:func:`estimate_delay` finds how much later one stream's stamps are than the other's for the same physical instant:
+during load ramps and steps both streams change together, so the normalised cross-correlation of their time
+derivatives (both resampled on one uniform grid and smoothed to the slower stream's bandwidth) peaks at the delay;
+a parabola through the peak refines it below the grid step, and a bounded least-squares search (the lag that makes
+the slow stream the best straight-line function of the fast one at the shifted stamps) refines it further.
+:func:`correct_stamps` applies it. The result says how sure it is (:attr:`DelayEstimate.ok`, ``reason``): without
+load changes there is nothing to correlate, and it says so.
 
 Sign convention: ``delay_s`` > 0 means stream ``b``'s stamps are late: the sample of ``b`` stamped ``s`` was taken
 at ``s − delay_s`` (a displacement driver that stamps at the end of a slow request, say). Correct with
 ``correct_stamps(b_stamps, delay) = b_stamps − delay``.
 
 Units: stamps in seconds (any common clock), values in the streams' own units (N, N·m, m). The live estimator uses
-:func:`estimate_delay` and the stamp correction (estimation.live.StreamDelay, stream_delay_of, displacement_delay_s);
-interpolated pairing is not wired into it yet.
+:func:`estimate_delay` and the stamp correction (estimation.live.StreamDelay, stream_delay_of, displacement_delay_s).
 """
 from __future__ import annotations
 
-import bisect
-from collections import deque
 from dataclasses import dataclass
 from typing import Iterable
 
@@ -37,34 +29,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from crane_stiffness.estimation.errors import DataError, ParameterError
 
-__all__ = ['DelayEstimate', 'InterpolatedPairs', 'InterpolatingPairer', 'correct_stamps', 'estimate_delay',
-           'interpolate_at', 'pair_interpolated']
-
-
-# --- interpolated pairing --------------------------------------------------------------------------------------
-
-@dataclass(frozen=True)
-class InterpolatedPairs:
-    """Pairs of a slow stream with the fast stream interpolated at its stamps.
-
-    Attributes:
-        stamp: Stamps of the paired slow samples [s], shape (n,).
-        slow: Their values, shape (n,) or (n, k).
-        fast: The fast stream linearly interpolated at those stamps, shape (n,) or (n, k).
-        index: Index of each pair's sample in the slow input, shape (n,).
-        unpaired_outside: Slow samples before the first or after the last fast sample (no bracket).
-        unpaired_gap: Slow samples whose bracketing fast samples are more than ``max_gap_s`` apart (a dropout).
-    """
-
-    stamp: NDArray[np.float64]
-    slow: NDArray[np.float64]
-    fast: NDArray[np.float64]
-    index: NDArray[np.int64]
-    unpaired_outside: int
-    unpaired_gap: int
-
-    def __len__(self) -> int:
-        return int(self.stamp.size)
+__all__ = ['DelayEstimate', 'correct_stamps', 'estimate_delay', 'interpolate_at']
 
 
 def _check_stream(name: str, t: ArrayLike, y: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -115,99 +80,6 @@ def interpolate_at(t_fast: ArrayLike, y_fast: ArrayLike, t_query: ArrayLike,
         values = values.copy()
         values[bad] = np.nan
     return values, inside, gap_ok
-
-
-def pair_interpolated(t_slow: ArrayLike, y_slow: ArrayLike, t_fast: ArrayLike, y_fast: ArrayLike,
-                      max_gap_s: float = np.inf) -> InterpolatedPairs:
-    """Each slow sample paired with the fast stream interpolated at its stamp (vectorised; the live form is
-    :class:`InterpolatingPairer`). Slow samples without two fast samples around them at most ``max_gap_s``
-    apart are left out and counted (:class:`InterpolatedPairs`). Raises DataError for non-finite or
-    non-increasing stamps."""
-    if not max_gap_s > 0:
-        raise ParameterError('max_gap_s', max_gap_s, 'must be > 0 [s]')
-    t_slow, y_slow = _check_stream('slow stream', t_slow, y_slow)
-    values, inside, gap_ok = interpolate_at(t_fast, y_fast, t_slow, max_gap_s)
-    ok = inside & gap_ok
-    index = np.nonzero(ok)[0]
-    return InterpolatedPairs(t_slow[index], y_slow[index], values[index], index.astype(np.int64),
-                             int(np.count_nonzero(~inside)), int(np.count_nonzero(inside & ~gap_ok)))
-
-
-class InterpolatingPairer:
-    """The live form of :func:`pair_interpolated`: feed both streams as they arrive (each in stamp order, the two
-    interleaved in any way); :meth:`add_slow` and :meth:`add_fast` return the pairs that became complete, as
-    (index of the slow sample, its stamp [s], slow value, interpolated fast value). A slow sample waits until a
-    fast sample at or after its stamp arrives; it is dropped and counted (``unpaired_outside``) if its stamp is
-    before the oldest fast sample kept, and ``unpaired_gap`` if the bracketing fast samples are more than
-    ``max_gap_s`` apart. ``keep_s``: how much fast history is kept behind the newest fast stamp [s] (slow samples
-    may arrive that much later than the fast ones they need). :meth:`finish` drops what still waits (no fast
-    sample after it will come) as ``unpaired_outside``, as the vectorised form counts it.
-    """
-
-    def __init__(self, max_gap_s: float = np.inf, keep_s: float = 1.0) -> None:
-        if not max_gap_s > 0:
-            raise ParameterError('max_gap_s', max_gap_s, 'must be > 0 [s]')
-        if not keep_s > 0:
-            raise ParameterError('keep_s', keep_s, 'must be > 0 [s]')
-        self.max_gap_s, self.keep_s = float(max_gap_s), float(keep_s)
-        # Fast history as lists from index _start on (bisect on a list; the dropped head is cut off now and then).
-        self._fast_t: list[float] = []
-        self._fast_y: list[np.ndarray | float] = []
-        self._start = 0
-        self._waiting: deque[tuple[int, float, object]] = deque()
-        self._slow_count = 0
-        self._last_slow = -np.inf
-        self._last_fast = -np.inf
-        self.unpaired_outside = 0
-        self.unpaired_gap = 0
-
-    def add_fast(self, stamp_s: float, value) -> list[tuple[int, float, object, object]]:
-        """A fast sample (stamp [s], value); returns the pairs it completes."""
-        if not stamp_s > self._last_fast:
-            raise DataError(f'fast stream: stamp {stamp_s!r} s does not follow {self._last_fast!r} s')
-        self._last_fast = stamp_s
-        ft = self._fast_t
-        ft.append(float(stamp_s))
-        self._fast_y.append(np.asarray(value, dtype=float) if np.ndim(value) else float(value))
-        while len(ft) - self._start > 2 and ft[self._start + 1] < stamp_s - self.keep_s:
-            self._start += 1
-        if self._start > 4096 and self._start > len(ft) // 2:
-            del ft[:self._start], self._fast_y[:self._start]
-            self._start = 0
-        return self._drain()
-
-    def add_slow(self, stamp_s: float, value) -> list[tuple[int, float, object, object]]:
-        """A slow sample (stamp [s], value); returns the pairs that are complete (it waits for a fast sample at or
-        after its stamp)."""
-        if not stamp_s > self._last_slow:
-            raise DataError(f'slow stream: stamp {stamp_s!r} s does not follow {self._last_slow!r} s')
-        self._last_slow = stamp_s
-        self._waiting.append((self._slow_count, float(stamp_s), value))
-        self._slow_count += 1
-        return self._drain()
-
-    def _drain(self) -> list[tuple[int, float, object, object]]:
-        out = []
-        ft, fy, lo = self._fast_t, self._fast_y, self._start
-        while self._waiting and len(ft) > lo and self._waiting[0][1] <= ft[-1]:
-            i, t, value = self._waiting.popleft()
-            if t < ft[lo]:
-                self.unpaired_outside += 1
-                continue
-            # The right-hand bracket as interpolate_at finds it: ft[j-1] < t <= ft[j].
-            j = min(max(bisect.bisect_left(ft, t, lo), lo + 1), len(ft) - 1)
-            t0, t1 = ft[j - 1], ft[j]
-            if t1 - t0 > self.max_gap_s:
-                self.unpaired_gap += 1
-                continue
-            w = (t - t0) / (t1 - t0)
-            out.append((i, t, value, fy[j - 1] + w * (fy[j] - fy[j - 1])))
-        return out
-
-    def finish(self) -> None:
-        """The streams ended: what still waits cannot be bracketed."""
-        self.unpaired_outside += len(self._waiting)
-        self._waiting.clear()
 
 
 # --- time offset -----------------------------------------------------------------------------------------------

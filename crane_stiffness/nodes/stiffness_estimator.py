@@ -79,7 +79,14 @@ PARAMS = (
               "in m, header stamp) or 'float64' (Float64 in V, stamped on arrival) [-]"),
     ParamSpec('displacement_gain', _D.displacement_gain, 'float64 channel: metres per volt [m/V]'),
     ParamSpec('displacement_offset', _D.displacement_offset, 'float64 channel: metres at 0 V [m]'),
-    ParamSpec('slop_s', _D.slop_s, 'largest stamp difference of a force/displacement pair [s]'),
+    ParamSpec('pairing', _D.pairing, "how force and displacement samples are paired: 'nearest' (mutual nearest "
+              "stamps within slop_s: both sensors on one clock grid), 'interpolate_force' (each displacement sample "
+              "with the force interpolated at its stamp: a fast F/T sensor, a slow DAQ), 'interpolate_displacement' "
+              "(the other way round) [-]"),
+    ParamSpec('slop_s', _D.slop_s, "pairing 'nearest': largest stamp difference of a force/displacement pair [s]"),
+    ParamSpec('max_interpolation_gap_s', _D.max_interpolation_gap_s, 'interpolated pairing: widest gap between the '
+              'two samples of the faster stream interpolated across; a slow sample in a wider gap (a dropout) is '
+              'not paired [s]', rule='> 0'),
     ParamSpec('max_age_s', _D.max_age_s, 'samples older than the other stream by more than this are stale; also '
               'the longest a sample waits for its partner [s]'),
     ParamSpec('expected_period_s', _D.expected_period_s, 'sample period of both streams, 0 = estimated online [s]'),
@@ -185,8 +192,10 @@ class StiffnessEstimatorNode(Node):
             self.core = LiveStiffness(settings)
         if first or self.core.configure(settings):
             where = 'at the platform centre' if settings.force_row() is None else 'moved to the platform centre'
-            self.get_logger().info(f'fitting {settings.force_axis}: window {settings.window} pairs, slop '
-                                   f'{settings.slop_s} s, branch from {settings.branch_source}, wrench {where}, '
+            pairing = (f'slop {settings.slop_s} s' if settings.interpolated is None else
+                       f'{settings.pairing} (gaps up to {settings.max_interpolation_gap_s} s)')
+            self.get_logger().info(f'fitting {settings.force_axis}: window {settings.window} pairs, pairing '
+                                   f'{pairing}, branch from {settings.branch_source}, wrench {where}, '
                                    f'displacement stamps - {settings.displacement_delay_s:g} s')
         if values['displacement_type'] != self.settings.get('displacement_type'):
             if self.sub_displacement is not None:
