@@ -202,6 +202,26 @@ class _SyncBase:
         except KeyError:
             raise SyncError(f'stream = {stream!r}: must be one of {", ".join(STREAMS)}') from None
 
+    def push(self, stream: str, stamp_s: float, value: Any) -> list[Pair]:
+        """Add one sample; returns the pairs completed by it (often none, sometimes more than one)."""
+        i = self._stream_index(stream)
+        own = self._streams[i]
+        stamp_s = float(stamp_s)
+        if not self._admit(own, self._streams[1 - i], stamp_s, value):
+            return []
+        return self._take(i, own, stamp_s, value)
+
+    def _take(self, i: int, own: _Stream, stamp_s: float, value: Any) -> list[Pair]:
+        """An admitted sample of stream ``i``: queue it, return the pairs it completes (per pairing rule)."""
+        raise NotImplementedError
+
+    def _enqueue(self, own: _Stream, stamp_s: float, value: Any) -> None:
+        """Queue a sample; past ``max_queue`` the oldest is dropped as unmatched."""
+        own.queue.append((stamp_s, value))
+        if len(own.queue) > self._max_queue:
+            own.queue.popleft()
+            own.counters.unmatched += 1
+
     def _admit(self, own: _Stream, other: _Stream, stamp_s: float, value: Any) -> bool:
         """Count a sample and apply the admission rule (module docstring): False if it is dropped (counted)."""
         counters = own.counters
@@ -260,17 +280,8 @@ class ApproximateTimeSync(_SyncBase):
         super().__init__(max_age=max_age, expected_period=expected_period, dropout_factor=dropout_factor,
                          max_queue=max_queue, min_age=slop, min_age_name='slop')
 
-    def push(self, stream: str, stamp_s: float, value: Any) -> list[Pair]:
-        """Add one sample; returns the pairs completed by it (often none, sometimes more than one)."""
-        i = self._stream_index(stream)
-        own = self._streams[i]
-        stamp_s = float(stamp_s)
-        if not self._admit(own, self._streams[1 - i], stamp_s, value):
-            return []
-        own.queue.append((stamp_s, value))
-        if len(own.queue) > self._max_queue:
-            own.queue.popleft()
-            own.counters.unmatched += 1
+    def _take(self, i: int, own: _Stream, stamp_s: float, value: Any) -> list[Pair]:
+        self._enqueue(own, stamp_s, value)
         return self._match(flush=False)
 
     def flush(self) -> list[Pair]:
@@ -387,6 +398,19 @@ def _stale(stamp: np.ndarray, log: np.ndarray, other_stamp: np.ndarray, other_lo
     return stamp < newest[np.searchsorted(other_log, log, side='left')] - max_age
 
 
+def _admitted(force_stamp: np.ndarray, force_log: np.ndarray, disp_stamp: np.ndarray, disp_log: np.ndarray,
+              max_age: float) -> tuple[np.ndarray, np.ndarray, dict[str, int]]:
+    """The vectorised form of ``_SyncBase._admit`` for inputs that passed the input checks: indices of the samples
+    admitted per stream (in order, not stale) and the out-of-order and stale counts."""
+    f_ok = _in_order(force_stamp)
+    d_ok = _in_order(disp_stamp)
+    f_stale = _stale(force_stamp, force_log, disp_stamp, disp_log, max_age) & f_ok
+    d_stale = _stale(disp_stamp, disp_log, force_stamp, force_log, max_age) & d_ok
+    counters = {'force_out_of_order': int((~f_ok).sum()), 'displacement_out_of_order': int((~d_ok).sum()),
+                'force_stale': int(f_stale.sum()), 'displacement_stale': int(d_stale.sum())}
+    return np.flatnonzero(f_ok & ~f_stale), np.flatnonzero(d_ok & ~d_stale), counters
+
+
 @dataclass
 class PairResult:
     """Indices of paired samples (into the arrays given) and the counters of the live synchroniser."""
@@ -424,14 +448,7 @@ def pair_by_stamp(force_stamp: np.ndarray, force_log: np.ndarray, disp_stamp: np
     only when a stream stops for longer than ``max_age``. The last pair is included even though the live
     synchroniser emits it only when a later sample arrives.
     """
-    f_ok = _in_order(force_stamp)
-    d_ok = _in_order(disp_stamp)
-    f_stale = _stale(force_stamp, force_log, disp_stamp, disp_log, max_age) & f_ok
-    d_stale = _stale(disp_stamp, disp_log, force_stamp, force_log, max_age) & d_ok
-    f_idx = np.flatnonzero(f_ok & ~f_stale)
-    d_idx = np.flatnonzero(d_ok & ~d_stale)
-    counters = {'force_out_of_order': int((~f_ok).sum()), 'displacement_out_of_order': int((~d_ok).sum()),
-                'force_stale': int(f_stale.sum()), 'displacement_stale': int(d_stale.sum())}
+    f_idx, d_idx, counters = _admitted(force_stamp, force_log, disp_stamp, disp_log, max_age)
     if f_idx.size == 0 or d_idx.size == 0:
         counters.update(pairs=0, force_unmatched=int(f_idx.size), displacement_unmatched=int(d_idx.size),
                         replayed_stretches=0)
@@ -541,13 +558,8 @@ class InterpolatingSync(_SyncBase):
         fast.discarded += len(self._ft) - self._start - used
         super().restart()
 
-    def push(self, stream: str, stamp_s: float, value: Any) -> list[Pair]:
-        """Add one sample; returns the pairs completed by it (a slow sample waits for a fast one at or after it)."""
-        i = self._stream_index(stream)
-        own = self._streams[i]
-        stamp_s = float(stamp_s)
-        if not self._admit(own, self._streams[1 - i], stamp_s, value):
-            return []
+    def _take(self, i: int, own: _Stream, stamp_s: float, value: Any) -> list[Pair]:
+        # A slow sample waits for a fast one at or after its stamp; a fast one may complete waiting slow samples.
         if i == self._fast_i:
             self._ft.append(stamp_s)
             self._fy.append(value)
@@ -555,10 +567,7 @@ class InterpolatingSync(_SyncBase):
             pairs = self._drain()
             self._retire(stamp_s)
             return pairs
-        own.queue.append((stamp_s, value))
-        if len(own.queue) > self._max_queue:
-            own.queue.popleft()
-            own.counters.unmatched += 1
+        self._enqueue(own, stamp_s, value)
         return self._drain()
 
     def flush(self) -> list[Pair]:
@@ -642,14 +651,7 @@ def pair_by_interpolation(force_stamp: np.ndarray, force_log: np.ndarray, disp_s
     """
     if fast not in STREAMS:
         raise ParameterError('fast', fast, f'must be one of {", ".join(STREAMS)}')
-    f_ok = _in_order(force_stamp)
-    d_ok = _in_order(disp_stamp)
-    f_stale = _stale(force_stamp, force_log, disp_stamp, disp_log, max_age) & f_ok
-    d_stale = _stale(disp_stamp, disp_log, force_stamp, force_log, max_age) & d_ok
-    f_idx = np.flatnonzero(f_ok & ~f_stale)
-    d_idx = np.flatnonzero(d_ok & ~d_stale)
-    counters = {'force_out_of_order': int((~f_ok).sum()), 'displacement_out_of_order': int((~d_ok).sum()),
-                'force_stale': int(f_stale.sum()), 'displacement_stale': int(d_stale.sum())}
+    f_idx, d_idx, counters = _admitted(force_stamp, force_log, disp_stamp, disp_log, max_age)
     fast_idx, slow_idx = (f_idx, d_idx) if fast == FORCE else (d_idx, f_idx)
     fast_stamp, slow_stamp = (force_stamp, disp_stamp) if fast == FORCE else (disp_stamp, force_stamp)
     tf = fast_stamp[fast_idx]
