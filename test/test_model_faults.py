@@ -15,6 +15,7 @@ import time
 
 import numpy as np
 import pytest
+import rclpy.duration
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, WrenchStamped
 from rclpy.executors import SingleThreadedExecutor
@@ -31,6 +32,7 @@ from crane_stiffness.nodes.crane_model import CraneModel
 from crane_stiffness.nodes.load_cell import LoadCell
 from crane_stiffness.nodes.lvdt import Lvdt
 from crane_stiffness.nodes.rdt_emulator import STATUS_NOT_READY, RdtEmulator
+from crane_stiffness.status import OK, WARN
 from test_driver_nodes import final_counters, start_node, stop_node
 from test_sensor_nodes import collect_for, isolated, stamp_ns
 
@@ -309,3 +311,56 @@ def test_zero_tare_and_restart_are_visible_on_diagnostics(rclpy_context):
     d = lc_probe.diag(lc_name)
     assert int(d['tared_at']) > int(d['started_at']) > 0 and d['offset'].startswith('[0.5, 0.0, 0.0')
     ex.shutdown()
+
+
+@pytest.mark.parametrize('kind', ['rdt_emulator', 'modbus_emulator'])
+def test_an_emulator_serving_late_physics_says_so(rclpy_context, kind):
+    """A device emulator serves the newest physics its executor delivered: physics that reached it long after its
+    stamp (a starved machine) is WARN on its /diagnostics with the lag, not a silently stale device; timely physics
+    is OK again from the next report."""
+    from crane_stiffness.nodes.modbus_emulator import ModbusEmulator
+    name, prefix, args = isolated(kind)
+    LIMIT = Parameter('max_input_lag_s', value=0.3)  # timely messages in this busy test process stay well below
+    if kind == 'rdt_emulator':
+        emu = RdtEmulator(context=rclpy_context, cli_args=args, parameter_overrides=[
+            Parameter('port', value=0), Parameter('sample_rate_hz', value=1000.0), LIMIT])
+        topic, msg_type = topics.APPLIED_WRENCH, WrenchStamped
+    else:
+        emu = ModbusEmulator(context=rclpy_context, cli_args=args, parameter_overrides=[Parameter('port', value=0), LIMIT])
+        topic, msg_type = topics.PLATFORM_POSE, PoseStamped
+    probe = Probe(rclpy_context, prefix)
+    pub = probe.node.create_publisher(msg_type, prefix + topic, RELIABLE_QOS)
+    ex = SingleThreadedExecutor(context=rclpy_context)
+    ex.add_node(emu)
+    ex.add_node(probe.node)
+
+    def send(age_s: float) -> None:
+        msg = msg_type()
+        msg.header.stamp = (probe.node.get_clock().now() - rclpy.duration.Duration(seconds=age_s)).to_msg()
+        if msg_type is PoseStamped:
+            msg.pose.orientation.w = 1.0
+        pub.publish(msg)
+
+    def report(pred) -> dict:
+        probe.diagnostics.clear()
+        assert spin_until(ex, lambda: probe.diag(name) is not None and pred(probe.diag(name)), 5.0), probe.diag(name)
+        return probe.diag(name)
+
+    try:
+        assert spin_until(ex, lambda: pub.get_subscription_count() >= 1, 5.0)
+        send(0.0)
+        report(lambda d: d['late_inputs'] == '0' and float(d['input_lag_max_ms']) < 300.0 and 'serving' in d['message'])
+        send(2.0)  # two seconds late
+        late = report(lambda d: d['late_inputs'] == '1')
+        levels = [s.level for s in probe.diagnostics if s.hardware_id == name]
+        assert levels and levels[-1] == bytes([WARN]), levels
+        assert 'after its stamp (> max_input_lag_s 300 ms)' in late['message'] and 'stale' in late['message']
+        assert 2000.0 <= float(late['input_lag_max_ms']) < 5000.0
+        send(0.0)
+        ok = report(lambda d: float(d['input_lag_max_ms']) < 300.0)  # the next period: timely again
+        assert 'serving' in ok['message'] and float(ok['input_lag_run_max_ms']) >= 2000.0
+        levels = [s.level for s in probe.diagnostics if s.hardware_id == name]
+        assert levels[-1] == bytes([OK]), levels
+    finally:
+        ex.shutdown()
+        emu.close()

@@ -21,12 +21,12 @@ from crane_stiffness.config import ParamSpec
 from crane_stiffness.devices.modbus_device import ModbusDevice
 from crane_stiffness.drivers.errors import ParameterError
 from crane_stiffness.nodes import lvdt
-from crane_stiffness.nodes.common import RELIABLE_QOS, Diagnostics, SensorCounters, run
-from crane_stiffness.nodes.parameters import Params, check
-from crane_stiffness.nodes.device_params import check_address, check_start_only
+from crane_stiffness.nodes.common import RELIABLE_QOS, Diagnostics, InputLag, SensorCounters, run
+from crane_stiffness.nodes.parameters import Params, check, positive
+from crane_stiffness.nodes.device_params import MAX_INPUT_LAG, check_address, check_start_only
 from crane_stiffness.nodes.modbus_lvdt import CHANNEL_PARAMS, channel_from
 from crane_stiffness.sim.sensors import LvdtModel
-from crane_stiffness.status import OK
+from crane_stiffness.status import OK, WARN
 
 MODEL_PARAMS = tuple(s for s in lvdt.PARAMS if s.name in lvdt.MODEL_KEYS + ('seed', 'zero_on_first_pose'))
 PARAMS = (
@@ -35,6 +35,7 @@ PARAMS = (
     ParamSpec('port', 5020, 'TCP port; 0 = a free port (logged and on /diagnostics). 502, the Modbus port, needs '
               'root [-]', low=0, high=65535),
     *CHANNEL_PARAMS,
+    MAX_INPUT_LAG,
     *MODEL_PARAMS,
 )
 START_ONLY = ('host', 'port', 'unit_id')
@@ -44,6 +45,7 @@ REST_POSE = np.concatenate([np.zeros(3), np.eye(3).ravel()])
 def _validate(values: dict[str, Any]):
     check_address(values, allow_zero=True)
     check(1 <= values['unit_id'] <= 247, 'unit_id', values['unit_id'], 'must be in 1..247')
+    positive(values, 'max_input_lag_s')
     try:
         channel = channel_from(values)
     except ParameterError as exc:
@@ -65,6 +67,7 @@ class ModbusEmulator(Node):
         self.device: ModbusDevice | None = None
         self.settings: dict[str, Any] = {}
         self.params = Params(self, PARAMS, self._validate, self._apply)
+        self.lag = InputLag()
         self.create_subscription(PoseStamped, topics.PLATFORM_POSE, self._on_pose, RELIABLE_QOS)
         self.diagnostics = Diagnostics(self, self._report)
 
@@ -99,6 +102,7 @@ class ModbusEmulator(Node):
 
     def _on_pose(self, msg: PoseStamped) -> None:
         self.counters.received += 1
+        self.lag.add(msg.header.stamp, self.get_clock().now().nanoseconds * 1e-9, self.settings['max_input_lag_s'])
         pose = lvdt._pose_vector(msg)
         if pose is None:
             self.counters.dropped_non_finite += 1
@@ -111,9 +115,12 @@ class ModbusEmulator(Node):
 
     def _report(self):
         self.counters.published = self.device.reads
+        late, lag_pairs = self.lag.status('the platform pose', self.settings['max_input_lag_s'])
         pairs = self.counters.as_pairs() + [('port', str(self.device.port)),
                                             ('zeroed', str(self.zero_pose is not None).lower()),
-                                            ('zero_offset_m', repr(self.model.zero_offset))]
+                                            ('zero_offset_m', repr(self.model.zero_offset))] + lag_pairs
+        if late:
+            return WARN, late, pairs
         return OK, f'serving Modbus TCP on {self.device.host}:{self.device.port}, {self.device.reads} reads', pairs
 
     def close(self) -> None:

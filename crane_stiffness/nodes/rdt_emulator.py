@@ -26,11 +26,11 @@ from crane_stiffness.config import ParamSpec
 from crane_stiffness.devices.rdt_device import RdtDevice
 from crane_stiffness.drivers import rdt
 from crane_stiffness.nodes import load_cell
-from crane_stiffness.nodes.common import RELIABLE_QOS, Counters, Diagnostics, finite, run
+from crane_stiffness.nodes.common import RELIABLE_QOS, Counters, Diagnostics, InputLag, finite, run
 from crane_stiffness.nodes.parameters import Params, check, positive
-from crane_stiffness.nodes.device_params import check_address, check_start_only
+from crane_stiffness.nodes.device_params import MAX_INPUT_LAG, check_address, check_start_only
 from crane_stiffness.sim.sensors import LoadCellModel
-from crane_stiffness.status import ERROR, OK
+from crane_stiffness.status import ERROR, OK, WARN
 
 #: Status word of the records served before the first applied wrench: bit 31, the summary error bit of an RDT
 #: status word (crane_stiffness.drivers.rdt: 0 = healthy), and bit 16, this emulator's "no load known yet".
@@ -48,6 +48,7 @@ PARAMS = (
     ParamSpec('counts_per_force', 1.0e6, 'counts per newton [counts/N]'),
     ParamSpec('counts_per_torque', 1.0e6, 'counts per newton-metre [counts/(N·m)]'),
     ParamSpec('records_per_packet', 10, 'records per datagram when a client asks for a buffered stream [-]'),
+    MAX_INPUT_LAG,
     *MODEL_PARAMS,
 )
 START_ONLY = ('host', 'port', 'http_port', 'sample_rate_hz', 'clock_ppm', 'counts_per_force', 'counts_per_torque',
@@ -56,7 +57,7 @@ START_ONLY = ('host', 'port', 'http_port', 'sample_rate_hz', 'clock_ppm', 'count
 
 def _validate(values: dict[str, Any]) -> LoadCellModel:
     check_address(values, allow_zero=True)
-    positive(values, 'sample_rate_hz', 'counts_per_force', 'counts_per_torque')
+    positive(values, 'sample_rate_hz', 'counts_per_force', 'counts_per_torque', 'max_input_lag_s')
     check(abs(values['clock_ppm']) < 1e5, 'clock_ppm', values['clock_ppm'], 'must be within ±100000 ppm')
     check(1 <= values['records_per_packet'] <= 40, 'records_per_packet', values['records_per_packet'],
           'must be in 1..40')
@@ -88,6 +89,7 @@ class RdtEmulator(Node):
         self.settings: dict[str, Any] = {}
         self.t0 = time.monotonic()
         self.params = Params(self, PARAMS, self._validate, self._apply)
+        self.lag = InputLag()
         self.create_subscription(WrenchStamped, topics.APPLIED_WRENCH, self._on_applied, RELIABLE_QOS)
         self.diagnostics = Diagnostics(self, self._report)
         self.get_logger().info(f'{load_cell.WAITING_FOR}: until then every record has status '
@@ -127,6 +129,7 @@ class RdtEmulator(Node):
 
     def _on_applied(self, msg: WrenchStamped) -> None:
         self.counters.received += 1
+        self.lag.add(msg.header.stamp, self.get_clock().now().nanoseconds * 1e-9, self.settings['max_input_lag_s'])
         f, m = msg.wrench.force, msg.wrench.torque
         wrench = (f.x, f.y, f.z, m.x, m.y, m.z)
         if not finite(wrench):
@@ -142,12 +145,15 @@ class RdtEmulator(Node):
         self.counters.published = dev.records_sent
         self.counters.stream_requests = sum(1 for c, _ in dev.requests if c in rdt.STREAM_COMMANDS.values())
         self.counters.bias_commands = sum(1 for c, _ in dev.requests if c == rdt.CMD_BIAS)
+        late, lag_pairs = self.lag.status('the applied wrench', self.settings['max_input_lag_s'])
         pairs = self.counters.as_pairs() + [('port', str(dev.port)), ('http_port', str(dev.http_port)),
-                                            ('streaming', str(dev.streaming).lower())]
+                                            ('streaming', str(dev.streaming).lower())] + lag_pairs
         if dev.bad_requests:
             return ERROR, f'{dev.bad_requests} malformed RDT requests received', pairs
         if self.applied is None:
             return OK, f'{load_cell.WAITING_FOR}; records have status 0x{STATUS_NOT_READY:08x}', pairs
+        if late:
+            return WARN, late, pairs
         return OK, f'serving RDT on {dev.host}:{dev.port}, {"streaming" if dev.streaming else "idle"}', pairs
 
     def close(self) -> None:
