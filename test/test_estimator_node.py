@@ -302,15 +302,25 @@ def test_estimator_in_its_own_process_keeps_up_with_1khz(rclpy_context):
     """
     name, prefix, args = isolated()
     probe = Probe(rclpy_context, prefix, values_only=True)
+    # Ready once the probe has received a periodic /stiffness/estimate from the estimator: that proves its writers
+    # (created with the values writer, announced after it) matched the probe's readers, which the graph
+    # (count_publishers) does not; an estimate published before that match would be lost, not late.
+    heard: list[DiagnosticArray] = []
+    probe.node.create_subscription(DiagnosticArray, prefix + topics.STIFFNESS_ESTIMATE, heard.append, RELIABLE_QOS)
     rig = SyntheticRig(rclpy_context, prefix, rate_hz=1000.0, burst_hz=200.0, ramp_s=0.75, seed=3)
     done = run_in_own_process(rclpy_context, rig, args, nodes=[probe.node],
-                              ready=lambda: probe.node.count_publishers(prefix + topics.STIFFNESS_VALUES) >= 1)
+                              ready=lambda: probe.node.count_publishers(prefix + topics.STIFFNESS_VALUES) >= 1
+                              and len(heard) > 0)
     assert done.returncode == 0, done.stderr.decode()[-2000:]
     lat = latencies_ms(probe, rig)
+    bursts = len(rig.burst_newest)
     print(f'latency at 1 kHz (200 Hz bursts, own process): median {np.median(lat):.2f} ms, '
-          f'p95 {np.percentile(lat, 95):.2f} ms, max {lat.max():.2f} ms, n = {len(lat)}; '
+          f'p95 {np.percentile(lat, 95):.2f} ms, max {lat.max():.2f} ms, n = {len(lat)} of {bursts} bursts; '
           f'k = {probe.last(0)["stiffness"]:.1f} N/m')
-    assert len(lat) > 200
+    # The estimator publishes once per drained batch: when it is starved, several bursts share one estimate (only
+    # the newest burst's stamp is then an estimate's). Half of the bursts with their own estimate still proves it
+    # publishes per batch, not only at diagnostics_rate_hz (5 Hz: ~8 estimates over the program).
+    assert len(lat) > 0.5 * bursts, (len(lat), bursts)
     assert probe.last(0)['stiffness'] == pytest.approx(K, rel=0.01)
     assert probe.last(1)['stiffness'] == pytest.approx(K, rel=0.01)
 

@@ -155,7 +155,9 @@ def test_load_program_plays_pauses_and_stops(rclpy_context):
     fy = np.array([c.wrench.force.y for c in probe.commands])
     assert fy.max() == pytest.approx(2.0, abs=0.03)
     assert fy[-1] == pytest.approx(0.0, abs=1e-12)
-    assert len(fy) == pytest.approx(1.5 * 200, rel=0.25)
+    # 1.5 s at 200 Hz is 300 ticks; the timer skips missed periods when the process is starved of CPU (it never
+    # catches up, so no more than ~300 come): half of them proves the program played at its rate.
+    assert 0.5 * 300 < len(fy) <= 1.25 * 300, len(fy)
     # Changing the program is validated: a bad axis is rejected, naming it.
     bad = prog.set_parameters([Parameter('segments.axis', value=['fy', 'fq', 'fy'])])[0]
     assert not bad.successful and 'fq' in bad.reason
@@ -174,7 +176,8 @@ def test_load_program_plays_pauses_and_stops(rclpy_context):
     assert spin_until(ex, lambda: probe.commands[-1].wrench.force.y > 1.0, 5)
     assert call(cli_pause).success
     n = len(probe.commands)
-    spin_until(ex, lambda: len(probe.commands) > n + 40, 2)
+    assert spin_until(ex, lambda: len(probe.commands) > n + 40, 10), \
+        f'the paused program sent {len(probe.commands) - n} commands in 10 s (it holds at rate_hz)'
     held = [c.wrench.force.y for c in probe.commands[n + 2:]]
     assert max(held) - min(held) < 1e-9 and held[0] > 1.0
     r = call(cli_stop)

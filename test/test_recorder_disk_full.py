@@ -159,12 +159,25 @@ def _run_on_small_disk(disk: Path, env: dict, ctx, tmp_path: Path) -> None:
 
         # room again: ~/start records a new bag, complete
         filler.unlink()
+        # The stopped recording unsubscribed: wait until this publisher has seen that reader go, or the count
+        # below could still be the old reader's and the new bag's first commands go to nobody.
+        assert spin_until(ex, lambda: pub.get_subscription_count() == 0, 30), pub.get_subscription_count()
         res = call_trigger(ex, node, '/session_recorder/start', 10)
         assert res.success and res.message == f'recording to {out / "full_2"}', res.message
         assert spin_until(ex, lambda: pub.get_subscription_count() >= 1, 10)
         for i in range(500):
             pub.publish(_wrench(t0 + (sent + i) * 1_000_000, -float(i)))
-        spin_until(ex, lambda: False, 1.0)
+
+        def new_bag_count() -> str | None:
+            """The recorder's own count of commands in full_2, from its latest /diagnostics report of it."""
+            for r in reversed(reports):
+                values = {kv.key: kv.value for kv in r.values}
+                if values.get('bag') == str(out / 'full_2'):
+                    return values.get(topics.WRENCH_COMMAND)
+            return None
+
+        # Stop once the recorder says it has all 500 (not after a fixed time: a starved recorder lags).
+        assert spin_until(ex, lambda: new_bag_count() == '500', 30), (new_bag_count(), procs.log('rec')[-2000:])
         res = call_trigger(ex, node, '/session_recorder/stop', 10)
         assert res.success and res.message == f'closed {out / "full_2"}: 500 messages', res.message
         n = len(reports)

@@ -166,7 +166,10 @@ def test_ros2_run_in_any_order_model_last(install_tree, tmp_path):
     assert 'waiting (' in logs['load_program'] and 'crane_model subscribed to /crane/wrench_command' in \
         logs['load_program']
     sent = _final_counters(logs['load_program'])['published']
-    assert sent >= 290 and _final_counters(logs['crane_model'])['received'] == sent
+    received = _final_counters(logs['crane_model'])['received']
+    # 3 s at 100 Hz is 300 ticks, but the timer skips missed periods under CPU starvation (up to ~21 %, see
+    # _check_run): half of them proves the program ran; the real check is that the model got every one sent.
+    assert sent > 150 and received == sent, (sent, received)
     # Nothing started while the model was missing (checked above); load_program says when it found the rig ready.
     assert 'rig ready after' in logs['load_program'] and observer.predicted_at is not None
 
