@@ -171,6 +171,9 @@ class BagWriter:
         """The write error that stopped the writer, None while every write succeeded."""
         self.lost_messages = 0
         """Messages accepted by :meth:`write` but not on disk because a write error lost their chunk."""
+        self.failed_write_on_disk = False
+        """After a write error: the message whose :meth:`write` raised is on disk all the same (its chunk was
+        written whole; the error came on a record after it). Counted in :attr:`message_count` and its topic."""
         self.metadata_path: Path | None = None
         """metadata.yaml once ``close()`` wrote it."""
         self._cut_file: _OpenFile | None = None
@@ -416,10 +419,13 @@ class BagWriter:
             except OSError:
                 pass
         lost = 0
-        for topic, accepted in opened.counts.items():
-            missing = max(0, accepted - disk.get(topic, 0))
-            self._topics[topic].count -= missing
-            lost += missing
+        for topic in set(opened.counts) | set(disk):
+            accepted, kept = opened.counts.get(topic, 0), disk.get(topic, 0)
+            # kept > accepted: the message whose write raised went out whole with its chunk (the error came on a
+            # later record); it is in the bag, so it is counted, and the caller must not count it as refused.
+            self._topics[topic].count += kept - accepted
+            lost += max(0, accepted - kept)
+            self.failed_write_on_disk |= kept > accepted
         opened.stats.message_count = sum(disk.values())
         opened.stats.start_ns, opened.stats.end_ns = (start, end) if disk else (None, None)
         return lost

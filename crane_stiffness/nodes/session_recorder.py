@@ -27,7 +27,8 @@ A write the operating system refuses (disk full, I/O error) stops the recording,
 on /diagnostics with the error, the file cut after its last complete chunk, metadata.yaml written from what is on
 disk or its absence reported; ~/start opens a new bag once there is room. Every message received is accounted for
 (FINAL_COUNTERS and /diagnostics): ``received = written + dropped_*``, one counter per reason (``not_recording``:
-arrived after the bag was closed; ``write_error``: refused by the disk; ``lost_with_chunk``: accepted, then lost with
+arrived after the bag was closed; ``write_error``: refused by the disk (the message whose write failed, unless its
+chunk reached the disk whole before the error); ``lost_with_chunk``: accepted, then lost with
 the chunk a write error cut; ``rejected``: refused by the writer).
 """
 from __future__ import annotations
@@ -472,8 +473,11 @@ class SessionRecorder(Node):
             stamp = header_stamp_ns(data) if channel.stamped else None
             writer.write(channel.topic, data, now_ns, stamp if stamp is not None else now_ns)
         except BagWriteFailedError as exc:
-            self.dropped['write_error'] += 1
-            self._write_failed(exc)
+            self._write_failed(exc)  # closes the bag as far as the disk allows: what is on disk is known after it
+            if writer.failed_write_on_disk:
+                channel.count += 1  # its chunk went out whole before the error: in the bag, not refused
+            else:
+                self.dropped['write_error'] += 1
             return
         except BagError as exc:
             self.dropped['rejected'] += 1
