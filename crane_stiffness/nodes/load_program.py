@@ -22,6 +22,7 @@ import time
 from typing import Any, Callable
 
 from geometry_msgs.msg import WrenchStamped
+from rclpy.duration import Duration
 from rclpy.node import Node
 from std_msgs.msg import Float64, String
 from std_srvs.srv import Trigger
@@ -41,6 +42,8 @@ from crane_stiffness.status import OK, WARN
 _FULL_RIG = readiness(list(RIG_NODES))
 DEFAULT_WAIT_FOR_MESSAGES = tuple(_FULL_RIG['wait_for_messages'])
 DEFAULT_WAIT_FOR_SUBSCRIBERS = tuple(_FULL_RIG['wait_for_subscribers'])
+#: Longest exit_on_done waits for every reader to acknowledge the last commands and state [s].
+EXIT_ACK_TIMEOUT_S = 5.0
 #: How the log names the source of a topic waited for.
 SOURCES = {topics.PREDICTED_AXIS_STIFFNESS: "crane_model's prediction", topics.LOAD_CELL_WRENCH: 'the load cell',
            topics.LVDT_DISPLACEMENT: 'the LVDT'}
@@ -287,9 +290,17 @@ class LoadProgramNode(Node):
             self.get_logger().info(f'program {self.program.name!r} finished')
             if self.params['exit_on_done']:
                 # Linger a moment so the final state and command reach every subscriber before the exit.
-                self.create_timer(1.0, self._exit)
+                self._exit_timer = self.create_timer(1.0, self._exit)
 
     def _exit(self) -> None:
+        self.destroy_timer(self._exit_timer)
+        # A reliable command lost at a busy reader's socket is sent again only at the writer's next heartbeat
+        # (Fast DDS: 3 s): leaving before every reader acknowledged would take the repair with it, and a recorder
+        # would miss a command for good.
+        for pub, what in ((self.pub_cmd, 'commands'), (self.pub_state, 'program state')):
+            if not pub.wait_for_all_acked(Duration(seconds=EXIT_ACK_TIMEOUT_S)):
+                self.get_logger().warning(f'exiting although not every reader acknowledged the {what} within '
+                                          f'{EXIT_ACK_TIMEOUT_S:g} s: a reader may miss the last ones')
         self.exit_requested = True  # common.run ends the spin and exits with status 0
 
     def _publish_state(self) -> None:
