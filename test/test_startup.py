@@ -233,7 +233,7 @@ def test_launch_file_fails_at_once_for_an_unknown_program_or_a_missing_file(monk
     program = next(n for n in _launch(monkeypatch, record='false') if n.kwargs['name'] == 'load_program')
     waits = program.kwargs['parameters'][-1]
     assert waits['wait_for_messages'] == [topics.PREDICTED_AXIS_STIFFNESS, topics.LOAD_CELL_WRENCH,
-                                          topics.LVDT_DISPLACEMENT]
+                                          topics.LVDT_DISPLACEMENT, topics.STIFFNESS_VALUES]  # the estimator pairing
     assert not any('session_recorder' in entry for entry in waits['wait_for_subscribers'])
     assert f'{topics.WRENCH_COMMAND}: crane_model stiffness_estimator' in waits['wait_for_subscribers']
     # The load cell applies the load crane_model has in force, never the raw command.

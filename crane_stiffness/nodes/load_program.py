@@ -46,7 +46,7 @@ DEFAULT_WAIT_FOR_SUBSCRIBERS = tuple(_FULL_RIG['wait_for_subscribers'])
 EXIT_ACK_TIMEOUT_S = 5.0
 #: How the log names the source of a topic waited for.
 SOURCES = {topics.PREDICTED_AXIS_STIFFNESS: "crane_model's prediction", topics.LOAD_CELL_WRENCH: 'the load cell',
-           topics.LVDT_DISPLACEMENT: 'the LVDT'}
+           topics.LVDT_DISPLACEMENT: 'the LVDT', topics.STIFFNESS_VALUES: 'the estimator, pairing both streams'}
 
 PARAMS = (
     ParamSpec('name', 'hold_zero', 'program name, recorded with the session'),
