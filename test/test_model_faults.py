@@ -89,6 +89,13 @@ class Probe:
         first = next((i for i, (_, w) in enumerate(later) if np.array_equal(w, value)), len(later))
         return np.array([w for _, w in later[first:]]).reshape(-1, 6)
 
+    def wait_diag(self, ex, hardware_id: str, pred, timeout_s: float = 5.0) -> dict:
+        """The first report of ``hardware_id`` from now on for which ``pred(report)`` holds."""
+        self.diagnostics.clear()
+        assert spin_until(ex, lambda: self.diag(hardware_id) is not None and pred(self.diag(hardware_id)),
+                          timeout_s), self.diag(hardware_id)
+        return self.diag(hardware_id)
+
     def diag(self, hardware_id: str) -> dict | None:
         for s in reversed(self.diagnostics):
             if s.hardware_id == hardware_id:
@@ -270,9 +277,7 @@ def test_zero_tare_and_restart_are_visible_on_diagnostics(rclpy_context):
         pose_pub.publish(msg)
 
     def wait_diag(pred) -> dict:
-        probe.diagnostics.clear()
-        assert spin_until(ex, lambda: probe.diag(name) is not None and pred(probe.diag(name)), 5.0), probe.diag(name)
-        return probe.diag(name)
+        return probe.wait_diag(ex, name, pred)
 
     first = Lvdt(context=ctx, cli_args=args, parameter_overrides=[Parameter('noise_std', value=0.0)])
     ex.add_node(first)
@@ -345,9 +350,7 @@ def test_an_emulator_serving_late_physics_says_so(rclpy_context, kind):
         pub.publish(msg)
 
     def report(pred) -> dict:
-        probe.diagnostics.clear()
-        assert spin_until(ex, lambda: probe.diag(name) is not None and pred(probe.diag(name)), 5.0), probe.diag(name)
-        return probe.diag(name)
+        return probe.wait_diag(ex, name, pred)
 
     try:
         assert spin_until(ex, lambda: pub.get_subscription_count() >= 1, 5.0)
