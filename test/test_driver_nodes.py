@@ -155,6 +155,10 @@ def test_netft_reads_the_rdt_emulator_across_processes(rclpy_context, tmp_path):
     try:
         assert spin_until(ex, lambda: probe.cmd.get_subscription_count() >= 1, 20.0), (tmp_path / 'emu.log').read_text()
         probe.command(np.zeros(6))  # the load in force at rest (crane_model sends it to a reader that joins)
+        # netft starts once the emulator holds it (its diagnostics count it used): records streamed before that are
+        # rightly marked not ready, and the status checked below must be that of a device that never was.
+        assert spin_until(ex, lambda: (probe.status(emu_name) or (None, {}))[1].get('used') == '1', 20.0), \
+            (tmp_path / 'emu.log').read_text()
         ft = start_node('netft', ft_args + [
             '-p', 'host:=127.0.0.1', '-p', f'port:={port}', '-p', 'counts_per_force:=1000000.0', '-p',
             'counts_per_torque:=1000000.0', '-p', 'publish_rate_hz:=1000.0', '-p', 'frame_id:=ft_test',
