@@ -391,7 +391,9 @@ class BagWriter:
             info = None
             meta = (f'metadata.yaml NOT written ({os_error_text(exc)}): run `crane-stiffness recover {self.path}` once '
                     'there is room')
-        self.salvage = (f'{on_disk} message(s) on disk in complete chunks, {lost} lost with the chunk being '
+        saved = (' (the message being written when the error came among them: its chunk went out whole)'
+                 if self.failed_write_on_disk else '')
+        self.salvage = (f'{on_disk} message(s) on disk in complete chunks{saved}, {lost} lost with the chunk being '
                         f'written; {meta}')
         return info
 
