@@ -183,18 +183,17 @@ class SyntheticRig:
 class Probe:
     """Records the estimator's outputs; publishes the latched model prediction."""
 
-    def __init__(self, ctx, prefix: str, values_only: bool = False):
+    def __init__(self, ctx, prefix: str):
         self.node = Node(f'probe{prefix.replace("/", "_")}', context=ctx)
         self.values: list[tuple[int, list[float]]] = []  # (publication time at the estimator ns, data)
         self.stiffness: list[float] = []
         self.estimates: list[DiagnosticArray] = []
         n = self.node
         n.create_subscription(Float64MultiArray, prefix + topics.STIFFNESS_VALUES, self._on_values, SENSOR_QOS)
-        if not values_only:
-            n.create_subscription(Float64, prefix + topics.STIFFNESS, lambda m: self.stiffness.append(m.data),
-                                  RELIABLE_QOS)
-            n.create_subscription(DiagnosticArray, prefix + topics.STIFFNESS_ESTIMATE, self.estimates.append,
-                                  RELIABLE_QOS)
+        n.create_subscription(Float64, prefix + topics.STIFFNESS, lambda m: self.stiffness.append(m.data),
+                              RELIABLE_QOS)
+        n.create_subscription(DiagnosticArray, prefix + topics.STIFFNESS_ESTIMATE, self.estimates.append,
+                              RELIABLE_QOS)
         self.pub_prediction = n.create_publisher(Float64, prefix + topics.PREDICTED_AXIS_STIFFNESS, LATCHED_QOS)
 
     def _on_values(self, msg: Float64MultiArray, info: dict) -> None:
@@ -301,16 +300,14 @@ def test_estimator_in_its_own_process_keeps_up_with_1khz(rclpy_context):
     a same-run baseline, by benchmarks/bench_rig.py: a timing bound would make this test depend on machine load.
     """
     name, prefix, args = isolated()
-    probe = Probe(rclpy_context, prefix, values_only=True)
+    probe = Probe(rclpy_context, prefix)
     # Ready once the probe has received a periodic /stiffness/estimate from the estimator: that proves its writers
     # (created with the values writer, announced after it) matched the probe's readers, which the graph
     # (count_publishers) does not; an estimate published before that match would be lost, not late.
-    heard: list[DiagnosticArray] = []
-    probe.node.create_subscription(DiagnosticArray, prefix + topics.STIFFNESS_ESTIMATE, heard.append, RELIABLE_QOS)
     rig = SyntheticRig(rclpy_context, prefix, rate_hz=1000.0, burst_hz=200.0, ramp_s=0.75, seed=3)
     done = run_in_own_process(rclpy_context, rig, args, nodes=[probe.node],
                               ready=lambda: probe.node.count_publishers(prefix + topics.STIFFNESS_VALUES) >= 1
-                              and len(heard) > 0)
+                              and len(probe.estimates) > 0)
     assert done.returncode == 0, done.stderr.decode()[-2000:]
     lat = latencies_ms(probe, rig)
     bursts = len(rig.burst_newest)

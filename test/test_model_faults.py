@@ -349,21 +349,19 @@ def test_an_emulator_serving_late_physics_says_so(rclpy_context, kind):
             msg.pose.orientation.w = 1.0
         pub.publish(msg)
 
-    def report(pred) -> dict:
-        return probe.wait_diag(ex, name, pred)
-
     try:
         assert spin_until(ex, lambda: pub.get_subscription_count() >= 1, 5.0)
         send(0.0)
-        report(lambda d: d['late_inputs'] == '0' and float(d['input_lag_max_ms']) < 300.0 and 'serving' in d['message'])
+        probe.wait_diag(ex, name, lambda d: d['late_inputs'] == '0' and float(d['input_lag_max_ms']) < 300.0
+                        and 'serving' in d['message'])
         send(2.0)  # two seconds late
-        late = report(lambda d: d['late_inputs'] == '1')
+        late = probe.wait_diag(ex, name, lambda d: d['late_inputs'] == '1')
         levels = [s.level for s in probe.diagnostics if s.hardware_id == name]
         assert levels and levels[-1] == bytes([WARN]), levels
         assert 'after its stamp (> max_input_lag_s 300 ms)' in late['message'] and 'stale' in late['message']
         assert 2000.0 <= float(late['input_lag_max_ms']) < 5000.0
         send(0.0)
-        ok = report(lambda d: float(d['input_lag_max_ms']) < 300.0)  # the next period: timely again
+        ok = probe.wait_diag(ex, name, lambda d: float(d['input_lag_max_ms']) < 300.0)  # next period: timely again
         assert 'serving' in ok['message'] and float(ok['input_lag_run_max_ms']) >= 2000.0
         levels = [s.level for s in probe.diagnostics if s.hardware_id == name]
         assert levels[-1] == bytes([OK]), levels

@@ -355,9 +355,7 @@ def test_the_recorder_counts_a_message_its_chunk_saved_as_written_not_refused(rc
             sent += 1
             ex.spin_once(timeout_sec=0.0)
         assert spin_until(ex, lambda: recorder.writer is None, 10)  # the write error stopped the recording
-        end = time.monotonic() + 0.5  # what was on its way (the recording unsubscribed when it stopped)
-        while time.monotonic() < end:
-            ex.spin_once(timeout_sec=0.05)
+        spin_until(ex, lambda: False, 0.5)  # what was on its way (the recording unsubscribed when it stopped)
         c = recorder.counters
     finally:
         ex.shutdown()
