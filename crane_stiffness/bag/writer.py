@@ -174,6 +174,10 @@ class BagWriter:
         self.failed_write_on_disk = False
         """After a write error: the message whose :meth:`write` raised is on disk all the same (its chunk was
         written whole; the error came on a record after it). Counted in :attr:`message_count` and its topic."""
+        self.failed_write_counted = False
+        """After a write error: the message whose :meth:`write` raised had been accepted before the error (a failing
+        flush): it is counted on disk or in :attr:`lost_messages`, not refused."""
+        self._failed_topic: str | None = None
         self.metadata_path: Path | None = None
         """metadata.yaml once ``close()`` wrote it."""
         self._cut_file: _OpenFile | None = None
@@ -280,6 +284,7 @@ class BagWriter:
             with self._io('creating', None):
                 current = self._open_file()
         # the per-message path: a plain try (not ``self._io``, a generator-based context manager per message)
+        counted = False
         try:
             sequence = current.sequences[topic] = current.sequences[topic] + 1
             position = current.stream.tell()
@@ -288,6 +293,7 @@ class BagWriter:
             current.stats.add(log_time_ns)
             current.counts[topic] = current.counts.get(topic, 0) + 1
             entry.count += 1
+            counted = True
             if self._flush_ns is not None:
                 if current.stream.tell() != position:
                     current.pending_since_ns = None  # the chunk holding this message was just written
@@ -297,6 +303,8 @@ class BagWriter:
                     current.mcap.flush()
                     current.pending_since_ns = None
         except OSError as exc:
+            if self.failure is None:
+                self._failed_topic, self.failed_write_counted = topic, counted
             raise self._fail('writing', current, exc) from exc
 
     def flush(self) -> None:
@@ -427,7 +435,7 @@ class BagWriter:
             # later record); it is in the bag, so it is counted, and the caller must not count it as refused.
             self._topics[topic].count += kept - accepted
             lost += max(0, accepted - kept)
-            self.failed_write_on_disk |= kept > accepted
+            self.failed_write_on_disk |= topic == self._failed_topic and kept > accepted
         opened.stats.message_count = sum(disk.values())
         opened.stats.start_ns, opened.stats.end_ns = (start, end) if disk else (None, None)
         return lost

@@ -297,8 +297,9 @@ class LoadProgramNode(Node):
         # A reliable command lost at a busy reader's socket is sent again only at the writer's next heartbeat
         # (Fast DDS: 3 s): leaving before every reader acknowledged would take the repair with it, and a recorder
         # would miss a command for good.
+        deadline = time.monotonic() + EXIT_ACK_TIMEOUT_S  # one limit for both
         for pub, what in ((self.pub_cmd, 'commands'), (self.pub_state, 'program state')):
-            if not pub.wait_for_all_acked(Duration(seconds=EXIT_ACK_TIMEOUT_S)):
+            if not pub.wait_for_all_acked(Duration(seconds=max(0.0, deadline - time.monotonic()))):
                 self.get_logger().warning(f'exiting although not every reader acknowledged the {what} within '
                                           f'{EXIT_ACK_TIMEOUT_S:g} s: a reader may miss the last ones')
         self.exit_requested = True  # common.run ends the spin and exits with status 0

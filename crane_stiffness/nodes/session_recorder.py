@@ -474,8 +474,8 @@ class SessionRecorder(Node):
             writer.write(channel.topic, data, now_ns, stamp if stamp is not None else now_ns)
         except BagWriteFailedError as exc:
             self._write_failed(exc)  # closes the bag as far as the disk allows: what is on disk is known after it
-            if writer.failed_write_on_disk:
-                channel.count += 1  # its chunk went out whole before the error: in the bag, not refused
+            if writer.failed_write_on_disk or writer.failed_write_counted:
+                channel.count += 1  # in the bag (its chunk went out whole) or accepted before the error: not refused
             else:
                 self.dropped['write_error'] += 1
             return
