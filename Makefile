@@ -10,8 +10,9 @@ SOURCES := $(shell find crane_stiffness config launch nodes_bin -type f \( -name
 # DDS stays on this machine: loopback discovery only, and a domain id of its own for every run.
 export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
 export ROS_DOMAIN_ID ?= $(shell $(PYTHON) -c 'import random; print(random.randint(1, 100))')
-# The venv is the ament prefix that holds rclpy and the message packages.
-export AMENT_PREFIX_PATH := $(CURDIR)/$(VENV)
+# The venv is the ament prefix that holds rclpy and the message packages (first; prefixes a sourced ROS setup file
+# put there, e.g. the one of the genuine ros2 command line, stay behind it).
+export AMENT_PREFIX_PATH := $(CURDIR)/$(VENV)$(if $(AMENT_PREFIX_PATH),:$(AMENT_PREFIX_PATH))
 export RMW_IMPLEMENTATION := rmw_fastrtps_cpp
 export MPLBACKEND := Agg
 export PYTHONDONTWRITEBYTECODE := 1

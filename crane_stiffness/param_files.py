@@ -28,6 +28,24 @@ import yaml
 PARAMETERS_KEY = 'ros__parameters'
 
 
+class ParamLoader(yaml.SafeLoader):
+    """``yaml.SafeLoader`` that also reads the tuples ``yaml.dump`` writes as ``!!python/tuple`` sequences (as lists).
+
+    launch_ros turns every sequence of a launch file's parameter dict into a tuple and writes the dict to a
+    temporary ``--params-file`` with ``yaml.dump``; rcl reads the tag as a plain sequence, and so does this reader.
+    Nothing else of PyYAML's Python tags is accepted (no object construction).
+    """
+
+
+ParamLoader.add_constructor('tag:yaml.org,2002:python/tuple',
+                           lambda loader, node: loader.construct_sequence(node, deep=True))
+
+
+def load_yaml(text: str) -> Any:
+    """Parse a parameter file's text with :class:`ParamLoader`; raises yaml.YAMLError."""
+    return yaml.load(text, Loader=ParamLoader)  # noqa: S506 - a SafeLoader subclass
+
+
 def flatten_params(values: Mapping[str, Any], prefix: str = '') -> dict[str, Any]:
     """Nested mappings as dotted parameter names, the way rclpy flattens a parameter file
     (``{geometry: {a: 0.1}}`` → ``{'geometry.a': 0.1}``)."""
@@ -96,7 +114,7 @@ class ParamFile:
         and why in their own terms)."""
         path = Path(path)
         text = path.read_text(encoding='utf-8')
-        return cls(path, text, yaml.safe_load(text))
+        return cls(path, text, load_yaml(text))
 
     @property
     def is_mapping(self) -> bool:

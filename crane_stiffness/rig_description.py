@@ -42,7 +42,7 @@ from crane_stiffness import PACKAGE, topics
 from crane_stiffness.errors import CraneStiffnessError
 
 __all__ = ['ARGUMENTS', 'MACHINES', 'NODES', 'PACKAGE', 'TRANSPORTS', 'Argument', 'NodeStart', 'RigError', 'RigNode',
-           'argument_values', 'config_files', 'flag', 'known_programs', 'program_file', 'readiness', 'rig_nodes']
+           'argument_values', 'config_files', 'config_path', 'flag', 'known_programs', 'program_file', 'readiness', 'rig_nodes']
 
 
 class RigError(CraneStiffnessError, ValueError):
@@ -61,15 +61,17 @@ class Argument:
 
 ARGUMENTS: tuple[Argument, ...] = (
     Argument('program', 'side_force', 'test program name or file'),
-    Argument('crane', 'crane_lab.yaml', 'crane geometry parameters (ROS parameter YAML)', config_file=True),
-    Argument('sensors', 'sensors.yaml', 'sensor and estimator parameters', config_file=True),
+    Argument('crane', 'crane_lab.yaml', 'crane geometry parameters (ROS parameter YAML; a bare file name is one of '
+             "the package's config/)", config_file=True),
+    Argument('sensors', 'sensors.yaml', "sensor and estimator parameters (a bare file name is one of config/)",
+             config_file=True),
     Argument('sim_sensors', 'true', 'start the simulated sensors'),
     Argument('record', 'true', 'record the session to bags/'),
     Argument('session', '', 'bag name (default: time stamped)'),
     Argument('transport', 'sim', "how the sensor readings reach the estimator: 'sim' = the simulated sensors publish "
              "them; 'drivers' = through the device protocols (RDT, Modbus TCP) and the drivers netft, modbus_lvdt"),
     Argument('drivers', 'drivers_emulated.yaml', 'driver (and device emulator) parameters, read with '
-             'transport:=drivers', config_file=True),
+             'transport:=drivers (a bare file name is one of config/)', config_file=True),
     Argument('machine', 'all', "start the nodes of one lab machine only: 'daq' (model, program, sensors, drivers), "
              "'analysis' (estimator, recorder), or 'all'"),
 )
@@ -181,8 +183,18 @@ def argument_values(config_dir: str | os.PathLike, given: Mapping[str, str | boo
     if unknown:
         raise RigError(f'unknown rig argument(s) {", ".join(sorted(unknown))}; known: '
                          f'{", ".join(a.name for a in ARGUMENTS)}')
-    return {a.name: given[a.name] if a.name in given else
-            os.path.join(config_dir, a.default) if a.config_file else a.default for a in ARGUMENTS}
+    values = {a.name: given.get(a.name, a.default) for a in ARGUMENTS}
+    for a in ARGUMENTS:
+        if a.config_file:
+            values[a.name] = config_path(values[a.name], config_dir)
+    return values
+
+
+def config_path(value: str | bool, config_dir: str | os.PathLike) -> str:
+    """A parameter-file argument as a path: a bare file name (no directory part, as the defaults are) names a file
+    in the package's config/ directory; anything else is a path as given (``./mine.yaml`` for one here)."""
+    value = str(value)
+    return os.path.join(config_dir, value) if value and os.path.basename(value) == value else value
 
 
 def config_files(config_dir: str | os.PathLike, given: Mapping[str, str | bool] | None = None) -> dict[str, str]:

@@ -32,8 +32,8 @@ def rig(context):
 
 def generate_launch_description() -> LaunchDescription:
     return LaunchDescription([
-        *(DeclareLaunchArgument(a.name, description=a.description,
-                                default_value=PathJoinSubstitution([CONFIG, a.default]) if a.config_file else a.default)
-          for a in ARGUMENTS),
+        # Plain defaults (`--show-args` prints them as written): a bare file name names a file of the package's
+        # config/ (rig_description.config_path).
+        *(DeclareLaunchArgument(a.name, description=a.description, default_value=a.default) for a in ARGUMENTS),
         OpaqueFunction(function=rig),
     ])

@@ -100,3 +100,33 @@ def publish_wrench_now(node, publisher, wrench, frame_id: str = 'crane_base') ->
     f.x, f.y, f.z, m.x, m.y, m.z = (float(v) for v in wrench)
     publisher.publish(msg)
     return now.nanoseconds
+
+
+# --- The genuine ros2 command line -----------------------------------------------------------------------------
+# Tests marked ``genuine_cli`` drive the real `ros2` (ros2cli, launch, launch_ros) the way a ROS user has it: on
+# PATH from a sourced setup file. Without it they cannot run; they are left out and the run says so in one line.
+GENUINE_CLI = __import__('shutil').which('ros2')
+_NOT_RUN: list[str] = []
+
+
+def pytest_configure(config):
+    config.addinivalue_line('markers', 'genuine_cli: drives the genuine ros2 CLI (needs `ros2` on PATH)')
+
+
+def pytest_collection_modifyitems(config, items):
+    if GENUINE_CLI:
+        return
+    kept = [item for item in items if item.get_closest_marker('genuine_cli') is None]
+    _NOT_RUN.extend(item.nodeid for item in items if item.get_closest_marker('genuine_cli') is not None)
+    if _NOT_RUN:
+        config.hook.pytest_deselected(items=[item for item in items if item not in kept])
+        items[:] = kept
+
+
+def pytest_terminal_summary(terminalreporter):
+    if _NOT_RUN:
+        terminalreporter.write_line(
+            f'genuine ros2 CLI not on PATH (source its setup file to run them): {len(_NOT_RUN)} check(s) not run: '
+            + ', '.join(n.split('::')[-1] for n in _NOT_RUN))
+    elif GENUINE_CLI:
+        terminalreporter.write_line(f'genuine ros2 CLI: {GENUINE_CLI}')

@@ -3,13 +3,11 @@ from __future__ import annotations
 
 import ast
 import importlib
-import importlib.util
 import json
 import os
 import subprocess
 import sys
 import time
-import types
 from pathlib import Path
 
 import pytest
@@ -153,71 +151,3 @@ def test_every_rig_node_runs_from_the_install_tree_and_its_topics_echo(install_t
     assert received[topics.LOAD_CELL_WRENCH].header.frame_id == 'load_cell'
     assert received[topics.PLATFORM_POSE].header.frame_id == topics.FRAME_BASE
     assert all(code == 0 for code in codes.values()), codes
-
-
-class _Recorded:
-    """Stands in for a launch / launch_ros class: keeps its arguments; a substitution also performs itself."""
-
-    def __init__(self, *args, **kwargs):
-        self.args, self.kwargs = args, kwargs
-
-    def perform(self, context: dict) -> str:
-        kind = type(self).__name__
-        if kind == 'LaunchConfiguration':
-            return context[self.args[0]]
-        if kind == 'FindPackageShare':
-            return str(REPO)  # the source tree holds config/ as share/crane_stiffness does
-        assert kind == 'PathJoinSubstitution', kind
-        return os.path.join(*(p if isinstance(p, str) else p.perform(context) for p in self.args[0]))
-
-
-def _launch(monkeypatch, **arguments: str) -> list[_Recorded]:
-    """Evaluate launch/rig.launch.py as `ros2 launch crane_stiffness rig.launch.py name:=value ...` would, with
-    stand-ins for launch and launch_ros (not installable here); returns the Node actions it starts."""
-    names = {'launch': ['LaunchDescription'], 'launch.actions': ['DeclareLaunchArgument', 'OpaqueFunction'],
-             'launch.substitutions': ['LaunchConfiguration', 'PathJoinSubstitution'],
-             'launch_ros.actions': ['Node'], 'launch_ros.substitutions': ['FindPackageShare']}
-    for module_name, classes in names.items():
-        module = types.ModuleType(module_name)
-        for cls in classes:
-            setattr(module, cls, type(cls, (_Recorded,), {}))
-        monkeypatch.setitem(sys.modules, module_name, module)
-    spec = importlib.util.spec_from_file_location('rig_launch', REPO / 'launch/rig.launch.py')
-    launch_file = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(launch_file)
-    context: dict[str, str] = {}
-    started = []
-    for action in launch_file.generate_launch_description().args[0]:
-        if type(action).__name__ == 'DeclareLaunchArgument':
-            default = action.kwargs['default_value']
-            context[action.args[0]] = default if isinstance(default, str) else default.perform(context)
-            context.update({k: v for k, v in arguments.items() if k == action.args[0]})
-        else:
-            started += action.kwargs['function'](context)
-    return started
-
-
-def test_launch_file_starts_every_rig_node_with_existing_config(monkeypatch):
-    """`launch` is not installable here: evaluate the file against stand-ins: each Node() names a real executable
-    and is given existing parameter files."""
-    nodes = _launch(monkeypatch)
-    executables = {n.kwargs['executable'] for n in nodes}
-    assert executables == {'crane_model', 'load_cell', 'lvdt', 'stiffness_estimator', 'session_recorder',
-                           'load_program'}
-    assert executables <= set(NODES)
-    files = [Path(f) for n in nodes for f in n.kwargs['parameters'] if isinstance(f, str)]
-    for cfg in ('crane_lab.yaml', 'sensors.yaml'):
-        assert cfg in {f.name for f in files} and (REPO / 'config' / cfg).is_file()
-    assert all(f.is_file() for f in files) and REPO / 'config/program_side_force.yaml' in files
-    text = (REPO / 'launch/rig.launch.py').read_text()
-    compile(text, 'rig.launch.py', 'exec')
-    # The arguments choose the nodes and their files as rig_description says, the way the process rig starts them.
-    nodes = _launch(monkeypatch, program='moment_z', sim_sensors='false', record='False', session='s1')
-    assert [n.kwargs['executable'] for n in nodes] == ['crane_model', 'stiffness_estimator', 'load_program']
-    assert nodes[-1].kwargs['parameters'][0] == str(REPO / 'config/program_moment_z.yaml')
-    assert set(nodes[-1].kwargs['parameters'][1]) == {'wait_for_messages', 'wait_for_subscribers'}
-    recorder = next(n for n in _launch(monkeypatch, session='s1') if n.kwargs['name'] == 'session_recorder')
-    assert recorder.kwargs['parameters'][-1] == {'session': 's1'}
-    started = {n.kwargs['name']: n.kwargs['parameters'] for n in _launch(monkeypatch)}
-    assert started == {n.name: [*n.parameter_files, *([n.parameters] if n.parameters else [])]
-                       for n in rig_nodes(REPO / 'config')}
