@@ -115,18 +115,21 @@ _SIM = (('transport', 'sim'),)
 _DRIVERS = (('transport', 'drivers'),)
 
 NODES: tuple[RigNode, ...] = (
-    RigNode('crane_model', ('crane',), reads=(topics.WRENCH_COMMAND,)),
+    RigNode('crane_model', ('crane', 'program'), reads=(topics.WRENCH_COMMAND,)),
     RigNode('load_cell', ('sensors',), condition='sim_sensors', when=_SIM, reads=(topics.APPLIED_WRENCH,)),
-    RigNode('lvdt', ('sensors',), condition='sim_sensors', when=_SIM, reads=(topics.PLATFORM_POSE,)),
+    RigNode('lvdt', ('sensors', 'program'), condition='sim_sensors', when=_SIM, reads=(topics.PLATFORM_POSE,)),
     # transport:=drivers: the simulated physics served as devices (only with sim_sensors), read by the drivers.
     RigNode('rdt_emulator', ('drivers',), condition='sim_sensors', when=_DRIVERS,
             reads=(topics.APPLIED_WRENCH,)),
-    RigNode('modbus_emulator', ('drivers',), condition='sim_sensors', when=_DRIVERS, reads=(topics.PLATFORM_POSE,)),
+    RigNode('modbus_emulator', ('drivers', 'program'), condition='sim_sensors', when=_DRIVERS,
+            reads=(topics.PLATFORM_POSE,)),
     RigNode('netft', ('drivers',), when=_DRIVERS),
     RigNode('modbus_lvdt', ('drivers',), when=_DRIVERS),
-    # With transport:=drivers the estimator also reads the drivers file (after sensors: it overrides): how to pair
-    # depends on the drivers' rates (a 1 kHz F/T sensor and a 100 Hz DAQ: pairing interpolate_force).
-    RigNode('stiffness_estimator', ('crane', 'sensors', 'drivers'), reads=(topics.WRENCH_COMMAND, *_STREAMS),
+    # The program file holds its series' measuring arrangement (the LVDT's axis and contact point, the fitted axis,
+    # the prediction's axis): the model, the displacement sensor and the estimator read it after their own files.
+    # With transport:=drivers the estimator reads the drivers file last: how to pair depends on the drivers' rates
+    # (a 1 kHz F/T sensor and a 100 Hz DAQ: pairing interpolate_force), and a lab's file may set its lever arm.
+    RigNode('stiffness_estimator', ('crane', 'sensors', 'program', 'drivers'), reads=(topics.WRENCH_COMMAND, *_STREAMS),
             machine='analysis'),
     RigNode('session_recorder', ('crane', 'sensors', 'program'), arguments={'session': 'session'},
             condition='record', reads=(topics.WRENCH_COMMAND, topics.APPLIED_WRENCH, topics.REJECTED_COMMAND,

@@ -84,7 +84,10 @@ def test_rig_arguments_choose_the_nodes_and_their_files():
     assert [n.name for n in nodes] == ['crane_model', 'load_cell', 'lvdt', 'stiffness_estimator',
                                        'session_recorder', 'load_program']
     assert all(Path(f).is_file() for n in nodes for f in n.parameter_files)
-    assert nodes[0].parameter_files == (str(CONFIG / 'crane_lab.yaml'),)
+    # The program file carries its series' measuring arrangement: the model, the LVDT and the estimator read it too.
+    assert nodes[0].parameter_files == (str(CONFIG / 'crane_lab.yaml'), str(CONFIG / 'program_side_force.yaml'))
+    assert {n.name for n in nodes if str(CONFIG / 'program_side_force.yaml') in n.parameter_files} == {
+        'crane_model', 'lvdt', 'stiffness_estimator', 'session_recorder', 'load_program'}
     nodes = rig_nodes(CONFIG, {'program': 'moment_z', 'sim_sensors': 'false', 'record': 'False', 'session': 's1'})
     assert [n.name for n in nodes] == ['crane_model', 'stiffness_estimator', 'load_program']
     assert nodes[-1].parameter_files[0] == str(CONFIG / 'program_moment_z.yaml')
@@ -92,7 +95,7 @@ def test_rig_arguments_choose_the_nodes_and_their_files():
     recorder = next(n for n in rig_nodes(CONFIG, {'session': 's1'}) if n.name == 'session_recorder')
     assert recorder.parameters == {'session': 's1'}
     # A bare file name is a file of config/; anything with a directory part is a path as given.
-    assert rig_nodes(CONFIG, {'crane': 'crane_lab.yaml'})[0].parameter_files == (str(CONFIG / 'crane_lab.yaml'),)
+    assert rig_nodes(CONFIG, {'crane': 'crane_lab.yaml'})[0].parameter_files[0] == str(CONFIG / 'crane_lab.yaml')
     with pytest.raises(RigError, match=r'crane file \./nowhere\.yaml not found'):
         rig_nodes(CONFIG, {'crane': './nowhere.yaml'})
     with pytest.raises(RigError, match="unknown program 'nothing'.*force_z, moment_z, side_force"):

@@ -61,6 +61,7 @@ from crane_stiffness.bag import BagDamageWarning
 from crane_stiffness.commands import command_faults
 from crane_stiffness.config import geometry_from_params
 from crane_stiffness.estimation.branch import BRANCHES, LOADING, UNLOADING
+from crane_stiffness.estimation import quality
 from crane_stiffness.estimation.errors import DataError
 from crane_stiffness.estimation.fit import LineFit, RecursiveLeastSquares, fit_line
 from crane_stiffness.estimation.inputs import INPUT_CHECKS, CommandSeries, Samples, checked_samples
@@ -112,10 +113,10 @@ def _inputs(data: SessionData) -> tuple[Samples, Samples, dict[str, int]]:
     d = data.disp
     if 'stamp_s' in d.dtype.names:
         d_stamp = d['stamp_s']
-        d_value = d['x'].astype(float)
+        d_value = s.reading_to_displacement(d['x'].astype(float))
     else:  # std_msgs/Float64 in volts, stamped on arrival by the estimator
         d_stamp = d['log_time_ns'] * 1e-9
-        d_value = s.volts_to_displacement(d['data'])
+        d_value = s.reading_to_displacement(s.volts_to_displacement(d['data']))
     d_stamp = correct_stamps(d_stamp, s.displacement_delay_s)  # the instants the samples were taken, as live
     disp, d_counts = checked_samples(d_stamp, d['log_time_ns'], d_value, np.isfinite(d_value) & np.isfinite(d_stamp),
                                      s.max_abs_displacement, s.max_clock_skew_s)
@@ -203,6 +204,35 @@ def _branch_fits(pairs: LivePairs, lo: int, hi: int) -> dict[str, LineFit | None
     sel = slice(lo, hi)
     x, y, loading = pairs.displacement[sel], pairs.force[sel], pairs.loading[sel]
     return {LOADING: _fit(x[loading], y[loading]), UNLOADING: _fit(x[~loading], y[~loading])}
+
+
+def _fit_quality(data: SessionData, pairs: LivePairs, lo: int, hi: int, fits: dict[str, LineFit | None],
+                 problems: list[str]) -> dict[str, float]:
+    """The live estimator's trust rules (estimation.quality) on each branch fit and on the loaded axis: problems
+    appended; returns each branch's scatter ratio."""
+    s = data.settings
+    c = data.command
+    if c is not None and c.size:
+        wrench = np.column_stack([c[k].astype(float) for k in AXES])
+        wrench = wrench[np.isfinite(wrench).all(axis=1) & ~command_faults(wrench)]
+        if wrench.size:
+            axis_problem = quality.axis_problem(s.force_axis, wrench.min(axis=0), wrench.max(axis=0))
+            if axis_problem:
+                problems.append(axis_problem)
+    scatter = {}
+    loading = pairs.loading[lo:hi]
+    for branch, fit in fits.items():
+        scatter[branch] = math.nan
+        if fit is None:
+            continue
+        chosen = loading if branch == LOADING else ~loading
+        scatter[branch] = quality.scatter_ratio(pairs.displacement[lo:hi][chosen], pairs.force[lo:hi][chosen],
+                                                float(fit.stiffness), float(fit.residual_rms))
+        found = quality.fit_problems(float(fit.stiffness), float(fit.ci95_low), float(fit.ci95_high),
+                                     scatter[branch], s.max_scatter_ratio)
+        if found:
+            problems.append(f'{branch} fit not trusted: ' + '; '.join(found))
+    return scatter
 
 
 def _window_fit(pairs: LivePairs, cut: int, branch: str, window: int, forgetting: float) -> dict[str, float]:
@@ -302,6 +332,8 @@ def _model(data: SessionData, steps: list[Step], commands: CommandSeries | None,
     peak = float(levels[np.argmax(np.abs(levels))]) if levels.size and np.abs(levels).max() > 0 else 0.0
     lvdt = data.sensors.get('lvdt') or data.sensors.get('/lvdt')
     scale = lvdt_scale(axis, lvdt)
+    if scale is not None and data.settings.lever_arm_m > 0.0:
+        scale /= data.settings.lever_arm_m  # readings converted to angles (LiveSettings.reading_to_displacement)
     if scale is None:
         scale = 1.0
         if lvdt is not None:
@@ -418,6 +450,7 @@ def analyze_session(bag_path: str | Path, out_dir: str | Path | None = None, *, 
             else:
                 lo, hi = 0, pairs.stamp.size
             branch_fits = _branch_fits(pairs, int(lo), int(hi))
+            _fit_quality(data, pairs, int(lo), int(hi), branch_fits, problems)
             hold_fits = {}
             for approach in BRANCHES:
                 sel = [s for s in steps if s.approach == approach and s.n > 0]

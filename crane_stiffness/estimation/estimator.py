@@ -11,6 +11,7 @@ from typing import Any
 from crane_stiffness.estimation.branch import BRANCHES, Branch, BranchTracker
 from crane_stiffness.estimation.errors import ParameterError
 from crane_stiffness.estimation.fit import LineFit, RecursiveLeastSquares, WindowedLeastSquares
+from crane_stiffness.estimation.quality import scatter_ratio
 
 _LINE_FIT_FIELDS = tuple(f.name for f in fields(LineFit))
 
@@ -108,6 +109,16 @@ class StiffnessEstimator:
         ``nonlinearity``); NaN while the window cannot be fitted."""
         fit = self._windows[branch].result(nonlinearity=True)
         return math.nan if fit is None else float(fit.nonlinearity)
+
+    def scatter_ratio(self, branch: Branch) -> float:
+        """``branch``'s residual rms over what the noise of both series explains (:func:`~crane_stiffness.
+        estimation.quality.scatter_ratio`, pairs in arrival order); NaN while the window cannot be fitted."""
+        window = self._windows[branch]
+        fit = window.result(nonlinearity=False)
+        if fit is None:
+            return math.nan
+        x, y = window.data()
+        return scatter_ratio(x, y, float(fit.stiffness), float(fit.residual_rms))
 
     def estimate(self, branch: Branch | None = None) -> Estimate | None:
         """Estimate of ``branch`` (default: the current one), or None while its window cannot be fitted."""

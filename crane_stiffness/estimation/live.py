@@ -60,6 +60,7 @@ from crane_stiffness.estimation.errors import DataError, ParameterError
 from crane_stiffness.estimation.offset import DelayEstimate, estimate_delay
 from crane_stiffness.estimation.estimator import Estimate, StiffnessEstimator
 from crane_stiffness.estimation.fit import t_quantile
+from crane_stiffness.estimation.quality import CommandRange, fit_problems
 from crane_stiffness.estimation.frames import SensorMount
 from crane_stiffness.commands import command_fault
 from crane_stiffness.estimation.inputs import (CommandHold, CommandSeries, InputCounters, Samples, StreamHealth,
@@ -125,6 +126,10 @@ class LiveSettings:
     max_abs_displacement: float = 0.1    # larger |displacement| samples are absurd and dropped [m or rad]
     displacement_gain: float = 1.0       # volts channel: metres per volt [m/V]
     displacement_offset: float = 0.0     # volts channel: metres at 0 V [m]
+    # A moment axis measured with an LVDT tangential to the rotation at this distance from the axis: a reading d [m]
+    # is the angle asin(d / lever_arm_m) [rad] (quality.py and the docs: the moment series). 0: fitted as read.
+    lever_arm_m: float = 0.0             # [m]
+    max_scatter_ratio: float = 3.0       # a fit scattered more than this x the sensors' noise is not OK [-]
     nonlinearity_warn: float = 0.2       # WARN when a branch's nonlinearity exceeds this [-]
     max_clock_skew_s: float = 0.1        # samples stamped further ahead of their arrival are dropped [s]
     max_loss_fraction: float = 0.01      # WARN when a stream lost more of its samples than this [-]
@@ -173,6 +178,10 @@ class LiveSettings:
         if skew > max_age:
             raise ParameterError('max_clock_skew_s', skew, f'must be <= max_age_s = {max_age} (seconds): a sample '
                                  'stamped that far ahead holds the pairing up for as long')
+        lever_arm = _number(v, 'lever_arm_m', minimum=0.0)
+        if lever_arm > 0.0 and not v['force_axis'].startswith('m'):
+            raise ParameterError('lever_arm_m', lever_arm, f'must be 0 for the force axis {v["force_axis"]} (a lever '
+                                 'arm turns a tangential reading into an angle, for a moment axis mx my mz)')
         mount = SensorMount.from_params(v)  # ParameterError naming sensor_rotation / _position / _reaction
         delay = _number(v, 'displacement_delay_s')
         if abs(delay) > max_age:
@@ -193,7 +202,8 @@ class LiveSettings:
                    max_abs_displacement=_number(v, 'max_abs_displacement', above=0.0),
                    displacement_gain=gain, displacement_offset=_number(v, 'displacement_offset'),
                    nonlinearity_warn=_number(v, 'nonlinearity_warn', above=0.0), max_clock_skew_s=skew,
-                   max_loss_fraction=_number(v, 'max_loss_fraction', minimum=0.0, maximum=1.0))
+                   max_loss_fraction=_number(v, 'max_loss_fraction', minimum=0.0, maximum=1.0),
+                   lever_arm_m=lever_arm, max_scatter_ratio=_number(v, 'max_scatter_ratio', above=1.0))
 
     @property
     def mount(self) -> SensorMount:
@@ -216,6 +226,22 @@ class LiveSettings:
     def volts_to_displacement(self, volts: Any) -> Any:
         """Displacement, m (or rad), of a reading in volts (a float, or element-wise an array)."""
         return self.displacement_gain * volts + self.displacement_offset
+
+    def reading_to_displacement(self, reading: Any) -> Any:
+        """The fitted displacement of displacement readings (a float, or element-wise an array): the reading itself
+        (m, or rad), or with ``lever_arm_m`` > 0 the angle ``asin(reading / lever_arm_m)`` [rad] (NaN beyond the arm).
+        The live estimator and ``analyze`` both convert with this."""
+        if self.lever_arm_m == 0.0:
+            return reading
+        if isinstance(reading, float):
+            ratio = reading / self.lever_arm_m
+            return math.asin(ratio) if -1.0 <= ratio <= 1.0 else math.nan
+        with np.errstate(invalid='ignore'):
+            return np.arcsin(np.asarray(reading, dtype=float) / self.lever_arm_m)
+
+    @property
+    def displacement_unit(self) -> str:
+        return 'm' if self.force_axis.startswith('f') else 'rad'
 
     @property
     def axis_index(self) -> int:
@@ -246,7 +272,7 @@ class LiveSettings:
         return (self.force_axis, self.pairing, self.slop_s, self.max_interpolation_gap_s, self.max_age_s, self.expected_period_s, self.dropout_factor,
                 self.window, self.forgetting, self.hysteresis, self.branch_source, self.displacement_gain,
                 self.displacement_offset, self.sensor_rotation, self.sensor_position, self.sensor_reaction,
-                self.displacement_delay_s)
+                self.displacement_delay_s, self.lever_arm_m)
 
 
 @dataclass(frozen=True)
@@ -416,6 +442,7 @@ class LiveStiffness:
             self._sync.carry_counters(old)
         self._estimator = s.make_estimator()
         self._commands = CommandHold()
+        self._command_range = CommandRange()
         for dof in range(1, min(s.window - 1, _T_CACHE)):  # fill scipy's t quantiles now, not one per pair later
             t_quantile(dof)
         self._last_report: dict[str, tuple[int, ...]] = {}  # input_report's previous problem counts per consumer
@@ -431,6 +458,7 @@ class LiveStiffness:
 
     def _clear_outputs(self) -> None:
         self._nonlinearity = {b: math.nan for b in BRANCHES}
+        self._scatter = {b: math.nan for b in BRANCHES}
         self._rows: dict[Branch, list[float]] = {b: self._row(None) for b in BRANCHES}
         self._dirty: set[Branch] = set()
         self._current: Branch | None = None
@@ -473,6 +501,7 @@ class LiveStiffness:
         self._sync.restart()
         if commands:
             self._commands = CommandHold()
+        self._command_range.reset()
         self._new_health()
         self._clear_outputs()
         self.counters.fit_restarts += 1
@@ -519,6 +548,7 @@ class LiveStiffness:
             return False
         self.counters.command_used += 1
         self._commands.add(float(stamp), load)
+        self._command_range.add(wrench)
         return True
 
     def add_rejected(self, stamp_s: float, wrench: Sequence[float], arrival_s: float) -> None:
@@ -559,7 +589,7 @@ class LiveStiffness:
                          sequence: int | None = None) -> int:
         """A displacement sample, m (or rad); returns the number of pairs it completed and fitted."""
         self.counters.displacement_received += 1
-        value = float(value_m)
+        value = self._settings.reading_to_displacement(float(value_m))
         finite = math.isfinite(value) and math.isfinite(stamp_s)
         stamp_s -= self._delay_correction  # displacement_delay_s: the instant the sample was taken
         return self._sample(DISPLACEMENT, finite, stamp_s, value, self._settings.max_abs_displacement, arrival_s,
@@ -569,7 +599,7 @@ class LiveStiffness:
         """A displacement sample in volts, converted with displacement_gain and displacement_offset, stamped on its
         arrival (``stamp_s`` is the arrival)."""
         self.counters.displacement_received += 1
-        value = self._settings.volts_to_displacement(float(volts))
+        value = self._settings.reading_to_displacement(self._settings.volts_to_displacement(float(volts)))
         finite = math.isfinite(value) and math.isfinite(stamp_s)
         return self._sample(DISPLACEMENT, finite, stamp_s - self._delay_correction, value,
                             self._settings.max_abs_displacement, stamp_s, sequence)
@@ -691,6 +721,7 @@ class LiveStiffness:
         """Recompute the nonlinearity indicator of each branch's window (sorts the window: call it slowly)."""
         for branch in BRANCHES:
             self._nonlinearity[branch] = self._estimator.nonlinearity(branch)
+            self._scatter[branch] = self._estimator.scatter_ratio(branch)
         self._delay.update()
         return dict(self._nonlinearity)
 
@@ -728,6 +759,10 @@ class LiveStiffness:
         if delay_problem:
             level = max(level, WARN)
             reasons.append(delay_problem)
+        axis_problem = self._command_range.problem(s.force_axis)
+        if axis_problem:
+            level = max(level, WARN)
+            reasons.append(axis_problem)
         return level, reasons
 
     def report(self, now_s: float = math.nan) -> list[BranchReport]:
@@ -744,10 +779,10 @@ class LiveStiffness:
         for branch in BRANCHES:
             row = dict(zip(VALUE_FIELDS, self._rows[branch]))
             row['nonlinearity'] = nl = self._nonlinearity[branch]
-            pairs = [(k, _fmt(row[k])) for k in names]
+            pairs = [(k, _fmt(row[k])) for k in names] + [('scatter_ratio', _fmt(self._scatter[branch]))]
             if math.isnan(row['stiffness']):
                 level, message = STALE, 'no estimate yet (needs 3 pairs with spread in displacement)'
-                pairs = [(k, 'nan') for k in names]
+                pairs = [(k, 'nan') for k in names] + [('scatter_ratio', 'nan')]
                 pairs[names.index('prediction')] = ('prediction', _fmt(self.prediction))
             else:
                 message = (f'k = {row["stiffness"]:.6g} {unit} (95 %: {row["ci95_low"]:.6g} .. '
@@ -756,6 +791,11 @@ class LiveStiffness:
                 if nl > s.nonlinearity_warn:
                     level = WARN
                     message = f'nonlinear (slack wire?): nonlinearity {nl:.3g} > {s.nonlinearity_warn:g}; ' + message
+                meaningless = fit_problems(row['stiffness'], row['ci95_low'], row['ci95_high'],
+                                           self._scatter[branch], s.max_scatter_ratio)
+                if meaningless:
+                    level = WARN
+                    message = 'fit not trusted: ' + '; '.join(meaningless) + '; ' + message
             if problem_level == ERROR:
                 level = STALE
                 message = 'inputs invalid, estimate frozen: ' + '; '.join(problems) + '; last ' + message

@@ -79,6 +79,11 @@ PARAMS = (
               "in m, header stamp) or 'float64' (Float64 in V, stamped on arrival) [-]"),
     ParamSpec('displacement_gain', _D.displacement_gain, 'float64 channel: metres per volt [m/V]'),
     ParamSpec('displacement_offset', _D.displacement_offset, 'float64 channel: metres at 0 V [m]'),
+    ParamSpec('lever_arm_m', _D.lever_arm_m, 'moment axis: the LVDT reads the tangential displacement at this '
+              'distance from the rotation axis, converted to the angle asin(d / lever_arm_m) [rad]; 0 = the reading '
+              'is fitted as it is (m, or rad from an angle sensor) [m]', low=0.0),
+    ParamSpec('max_scatter_ratio', _D.max_scatter_ratio, "a branch fit whose residual rms exceeds this many times "
+              "what the sensors' noise explains (estimated from the data) is not OK [-]", rule='> 1'),
     ParamSpec('pairing', _D.pairing, "how force and displacement samples are paired: 'nearest' (mutual nearest "
               "stamps within slop_s: both sensors on one clock grid), 'interpolate_force' (each displacement sample "
               "with the force interpolated at its stamp: a fast F/T sensor, a slow DAQ), 'interpolate_displacement' "

@@ -20,7 +20,9 @@ from std_msgs.msg import Float64, Float64MultiArray, String
 from crane_stiffness import __version__, topics
 from crane_stiffness.status import NAMES as LEVEL_NAMES
 from crane_stiffness.config import geometry_from_params, load_params
-from crane_stiffness.model import axis_stiffness, rest_pose, tangent_stiffness
+from crane_stiffness.analysis.sweep import unit
+from crane_stiffness.model import (axis_stiffness, directional_stiffness, paper_stiffness, rest_pose,
+                                   tangent_stiffness)
 from crane_stiffness.nodes.common import LATCHED_QOS, RELIABLE_QOS
 from crane_stiffness.rig_description import PACKAGE, NodeStart, rig_nodes
 from crane_stiffness.rig_description import config_files as rig_config_files
@@ -173,19 +175,23 @@ def summarize(share: Path, program: str, session: str, bags: Path, observer: Obs
         raise RosRunError('the estimator published no estimate')
     est = decode_values(observer.values)
     predicted = axis_stiffness(tangent_stiffness(g, rest_pose(g)), axis)
+    eq18 = directional_stiffness(paper_stiffness(g), unit(axis))
     loading = est['loading']['stiffness']
+    force_unit, stiffness_unit = ('N', 'N/m') if axis.startswith('f') else ('N·m', 'N·m/rad')
     bag = bags / session
     levels = prog.levels(axis)
     return {
         'software_version': __version__,
         'geometry': {**g.to_dict(), 'l0': g.l0, 'k': g.k},
-        'program': {'name': prog.name, 'axis': axis, 'peak': float(np.abs(levels).max()),
+        'program': {'name': prog.name, 'axis': axis, 'unit': force_unit, 'peak': float(np.abs(levels).max()),
                     'levels': levels.tolist(), 'duration_s': prog.duration_s, 'file': str(cfg['program'])},
         'estimate': est,
         'status': {part: {'level': level, 'message': message} for part, (level, message) in observer.statuses.items()},
-        'prediction': {'stiffness': predicted, 'from_node': observer.predicted,
+        'unit': stiffness_unit,
+        'prediction': {'stiffness': predicted, 'eq18': eq18, 'unit': stiffness_unit, 'from_node': observer.predicted,
                        'what': f'exact tangent of the nonlinear model at the rest pose under W, along {axis} with '
-                               'the other DOFs free (equals eq. 19 K_j for fy)'},
+                               'the other DOFs free (eq. 18 at the loaded rest: K_j (eq. 19) for fy, K_3 for fz, '
+                               'K_5 for mz)'},
         'relative_error': (loading - predicted) / predicted,
         'estimates_received': observer.values_count,
         'bag': str(bag) if bag.exists() else None,
