@@ -11,10 +11,12 @@ from pathlib import Path
 
 import pytest
 
+from conftest import REPO as _REPO
+
 from crane_stiffness import topics
 from crane_stiffness.rig_description import RigError, rig_nodes
 from crane_stiffness.testing import rosrun
-from crane_stiffness.testing.rig import Observer, start_node, start_rig, summarize, wait_for_program_start
+from crane_stiffness.testing.rig import Observer, run_rig, start_node, wait_for_program_start
 
 KERNEL_CACHE = ('*.nbi', '*.nbc')
 
@@ -73,35 +75,9 @@ def test_colcon_build_installs_the_compiled_kernels_and_a_node_loads_them(instal
 
 def _run_rig(install: Path, env: dict, tmp_path: Path, program: str = 'side_force', record: bool = True,
              ready_timeout_s: float = 120.0) -> tuple[dict, Observer, float, dict]:
-    """Every node of rig.launch.py started at once; returns (summary, observer, launch-to-program-start [s],
-    exit codes)."""
-    import rclpy
-    share = _share(install)
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx)
-    observer = Observer(context=ctx)
-    try:
-        with rosrun.Processes(env, tmp_path / 'logs') as procs:
-            launched = time.monotonic()
-            prog = start_rig(procs, share, program, 'startup', tmp_path / 'bags', record=record,
-                             ready_timeout_s=ready_timeout_s)
-            wait_for_program_start(observer, procs, ready_timeout_s + 30)
-            started_after = observer.running_at - launched
-            deadline = time.monotonic() + prog.duration_s + 60
-            while procs.procs['load_program'].poll() is None and time.monotonic() < deadline:
-                procs.check_alive(allow_exit=('load_program',))
-                observer.spin_once(0.1)
-            assert procs.procs['load_program'].poll() == 0, procs.log('load_program')[-3000:]
-            end = time.monotonic() + 1.5  # the last samples reach the estimator
-            while time.monotonic() < end:
-                observer.spin_once(0.05)
-            codes = procs.stop()
-            logs = {name: procs.log(name) for name in procs.procs}
-        summary = summarize(share, program, 'startup', tmp_path / 'bags', observer, codes)
-    finally:
-        observer.destroy_node()
-        rclpy.shutdown(context=ctx)
-    return summary, observer, started_after, logs
+    """Every node of rig.launch.py started at once (crane_stiffness.testing.rig.run_rig)."""
+    return run_rig(_share(install), env, tmp_path, program, session='startup', record=record,
+                   ready_timeout_s=ready_timeout_s)
 
 
 def _check_run(summary: dict, observer: Observer, logs: dict) -> None:
@@ -219,19 +195,20 @@ def test_load_program_rejects_a_malformed_wait_entry(install_tree, tmp_path):
     assert out.returncode == 2 and 'wait_for_subscribers' in out.stderr and 'TOPIC: NODE' in out.stderr
 
 
-def test_launch_file_fails_at_once_for_an_unknown_program_or_a_missing_file(monkeypatch, tmp_path):
-    from test_install_tree import _launch
+def test_launch_file_fails_at_once_for_an_unknown_program_or_a_missing_file(tmp_path):
+    """What rig.launch.py evaluates (rig_description.rig_nodes): a bad argument fails before any node starts."""
+    config = _REPO / 'config'
     with pytest.raises(RigError, match=r"unknown program 'bogus': no file .*program_bogus\.yaml; known programs: "
                                        r'force_z, moment_z, side_force, side_force_slack'):
-        _launch(monkeypatch, program='bogus')
+        rig_nodes(config, {'program': 'bogus'})
     missing = tmp_path / 'my_crane.yaml'
     with pytest.raises(RigError, match=f'crane file {missing} not found'):
-        _launch(monkeypatch, crane=str(missing))
+        rig_nodes(config, {'crane': str(missing)})
     with pytest.raises(RigError, match='program file .*nope.yaml not found'):
-        _launch(monkeypatch, program=str(tmp_path / 'nope.yaml'))
+        rig_nodes(config, {'program': str(tmp_path / 'nope.yaml')})
     # The launch file passes load_program what to wait for, for the nodes it starts.
-    program = next(n for n in _launch(monkeypatch, record='false') if n.kwargs['name'] == 'load_program')
-    waits = program.kwargs['parameters'][-1]
+    program = next(n for n in rig_nodes(config, {'record': 'false'}) if n.name == 'load_program')
+    waits = program.parameters
     assert waits['wait_for_messages'] == [topics.PREDICTED_AXIS_STIFFNESS, topics.LOAD_CELL_WRENCH,
                                           topics.LVDT_DISPLACEMENT, topics.STIFFNESS_VALUES]  # the estimator pairing
     assert not any('session_recorder' in entry for entry in waits['wait_for_subscribers'])

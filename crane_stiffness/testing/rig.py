@@ -197,3 +197,38 @@ def summarize(share: Path, program: str, session: str, bags: Path, observer: Obs
         'bag': str(bag) if bag.exists() else None,
         'node_exit_codes': exit_codes,
     }
+
+
+def run_rig(share: Path, env: Mapping[str, str], out: Path, program: str, session: str = 'rig', record: bool = True,
+            ready_timeout_s: float = 120.0, overrides: Mapping[str, Mapping[str, Any]] | None = None
+            ) -> tuple[dict[str, Any], Observer, float, dict[str, str]]:
+    """Every node of the rig started at once (:func:`start_rig`) in a DDS context of its own, the program played to
+    its end: (summary, observer, launch-to-program-start [s], each node's log). Logs in ``out/logs``, bags in
+    ``out/bags``."""
+    import rclpy
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    observer = Observer(context=ctx)
+    try:
+        with Processes(env, out / 'logs') as procs:
+            launched = time.monotonic()
+            prog = start_rig(procs, share, program, session, out / 'bags', record=record,
+                             ready_timeout_s=ready_timeout_s, overrides=overrides)
+            wait_for_program_start(observer, procs, ready_timeout_s + 30)
+            started_after = observer.running_at - launched
+            deadline = time.monotonic() + prog.duration_s + 60
+            while procs.procs['load_program'].poll() is None and time.monotonic() < deadline:
+                procs.check_alive(allow_exit=('load_program',))
+                observer.spin_once(0.1)
+            if procs.procs['load_program'].poll() != 0:
+                raise RosRunError(f'load_program did not finish: {procs.log("load_program")[-3000:]}')
+            end = time.monotonic() + 1.5  # the last samples reach the estimator
+            while time.monotonic() < end:
+                observer.spin_once(0.05)
+            codes = procs.stop()
+            logs = {name: procs.log(name) for name in procs.procs}
+        summary = summarize(share, program, session, out / 'bags', observer, codes)
+    finally:
+        observer.destroy_node()
+        rclpy.shutdown(context=ctx)
+    return summary, observer, started_after, logs
