@@ -33,13 +33,16 @@ def test_transport_argument_chooses_the_nodes():
     drivers = {n.name: n for n in rig_nodes(CONFIG, {'transport': 'drivers'})}
     assert list(drivers) == ['crane_model', 'rdt_emulator', 'modbus_emulator', 'netft', 'modbus_lvdt',
                              'stiffness_estimator', 'session_recorder', 'load_program']
-    for name in ('rdt_emulator', 'modbus_emulator', 'netft', 'modbus_lvdt'):
+    for name in ('rdt_emulator', 'netft', 'modbus_lvdt'):
         assert drivers[name].parameter_files == (str(CONFIG / 'drivers_emulated.yaml'),)
+    # The LVDT's emulator takes its series' arrangement (axis, contact point) from the program file.
+    assert drivers['modbus_emulator'].parameter_files == tuple(
+        str(CONFIG / f) for f in ('drivers_emulated.yaml', 'program_side_force.yaml'))
     # The estimator reads the drivers file last (its pairing suits the drivers' rates), and only through drivers.
     assert drivers['stiffness_estimator'].parameter_files == tuple(
-        str(CONFIG / f) for f in ('crane_lab.yaml', 'sensors.yaml', 'drivers_emulated.yaml'))
+        str(CONFIG / f) for f in ('crane_lab.yaml', 'sensors.yaml', 'program_side_force.yaml', 'drivers_emulated.yaml'))
     assert {n.name: n for n in rig_nodes(CONFIG)}['stiffness_estimator'].parameter_files == tuple(
-        str(CONFIG / f) for f in ('crane_lab.yaml', 'sensors.yaml'))
+        str(CONFIG / f) for f in ('crane_lab.yaml', 'sensors.yaml', 'program_side_force.yaml'))
     # The program waits for the emulators to hold the applied load and the pose (nothing of them may be lost), and
     # for both streams from the drivers.
     waits = drivers['load_program'].parameters
