@@ -222,11 +222,16 @@ def test_modbus_lvdt_reads_the_modbus_emulator_across_processes(rclpy_context, t
     lv = None
     try:
         assert spin_until(ex, lambda: probe.pose.get_subscription_count() >= 1, 20.0), (tmp_path / 'emu.log').read_text()
-        rest = np.array([0.0, 0.0, 2.4e-5])
-        probe.publish_pose(rest)  # the first pose: the emulator's LVDT zeroes on it
         lv = start_node('modbus_lvdt', lv_args + channel + [
             '-p', 'host:=127.0.0.1', '-p', f'port:={port}', '-p', 'poll_rate_hz:=200.0', '-p', 'frame_id:=lvdt_mb'],
             tmp_path / 'lvdt.log')
+        # No pose yet: the emulator answers "server device busy" and the driver publishes nothing (a reading of a
+        # pose nobody measured would let a load program start before the chain is live).
+        lv_log = tmp_path / 'lvdt.log'
+        assert spin_until(ex, lambda: 'server device busy' in lv_log.read_text(), 30.0), lv_log.read_text()
+        assert not spin_until(ex, lambda: len(probe.points) > 0, 1.0), probe.points[:3]
+        rest = np.array([0.0, 0.0, 2.4e-5])
+        probe.publish_pose(rest)  # the first pose: the emulator's LVDT zeroes on it
         assert spin_until(ex, lambda: len(probe.points) > 50, 20.0), (tmp_path / 'lvdt.log').read_text()
         assert np.abs(probe.points_after(0)).max() < 1e-9
         probe.publish_pose(rest + [0.0, 5e-5, 0.0])  # 50 µm along the LVDT's axis (y)

@@ -8,7 +8,7 @@ import threading
 import pytest
 
 from crane_stiffness.devices.modbus_device import ModbusDevice
-from crane_stiffness.drivers.errors import DeviceAddressError, DeviceResponseError, DeviceSilentError
+from crane_stiffness.drivers.errors import DeviceAddressError, DeviceBusyError, DeviceResponseError, DeviceSilentError
 from crane_stiffness.drivers.modbus import Channel, ModbusPoller
 
 READING_M = 0.0012345  # what the simulated LVDT reads
@@ -41,6 +41,35 @@ def test_adam_style_int16_counts_scaled_from_input_registers():
         assert r.metres == pytest.approx(-0.0042, abs=gain)
         value['m'] = 0.02  # beyond the int16 range: saturates at +32767 counts
         assert poller.read().raw == 32767.0
+        poller.close()
+
+
+def test_a_device_without_a_value_yet_is_busy_and_waited_for():
+    """A source with no value yet (None) answers exception 6, "server device busy": a DeviceBusyError, which a
+    driver's first contact waits out like a device still booting, while other exceptions stop it at once."""
+    from crane_stiffness.nodes.device_params import wait_for_device
+    value: dict[str, float | None] = {'m': None}
+    ch = Channel(register=0)
+    with ModbusDevice(lambda: value['m'], channel=ch) as dev:
+        poller = ModbusPoller('127.0.0.1', dev.port, 1, ch)
+        with pytest.raises(DeviceBusyError, match='exception 6 \\(server device busy\\)'):
+            poller.read()
+        logged: list[str] = []
+        tries = {'n': 0}
+
+        def read():
+            tries['n'] += 1
+            if tries['n'] == 3:
+                value['m'] = READING_M
+            return poller.read()
+        assert wait_for_device(read, 5.0, logged.append, retry_interval_s=0.01).metres == pytest.approx(READING_M)
+        assert tries['n'] == 3 and len(logged) == 1 and 'server device busy' in logged[0]
+        value['m'] = None
+        with pytest.raises(DeviceBusyError, match='tried for 0.05 s'):
+            wait_for_device(poller.read, 0.05, retry_interval_s=0.01)
+        dev.fail_with = 4
+        with pytest.raises(DeviceResponseError, match='server device failure'):
+            wait_for_device(poller.read, 5.0, retry_interval_s=0.01)
         poller.close()
 
 

@@ -2,7 +2,8 @@
 
 :class:`ModbusDevice` serves one :class:`~crane_stiffness.drivers.modbus.Channel`: every read of its registers
 (holding or input, function 3 or 4: the block is shared, as on a LabJack) first asks ``source()`` for the current
-reading [m] and writes it encoded as the channel says (float32 volts in either word order, int16 counts, …; raw =
+reading [m] (None: no value yet, answered "server device busy" as a device still settling does) and writes it encoded
+as the channel says (float32 volts in either word order, int16 counts, …; raw =
 (metres − offset) / gain). Registers ``0 .. registers-1`` exist; others answer "illegal data address"; other unit
 ids get an exception response. ``fail_with`` (a Modbus
 exception code, 0 = none) makes every read fail, for tests.
@@ -27,7 +28,8 @@ class ModbusDevice:
     def __init__(self, source: Callable[[], float], *, channel: Channel = Channel(), host: str = '127.0.0.1',
                  port: int = 0, unit_id: int = 1, registers: int = 64) -> None:
         """Args:
-            source: Returns the current reading [m].
+            source: Returns the current reading [m], or None while there is none yet (reads answer exception 6,
+                "server device busy").
             channel: Register, data type, word order and scaling of the served value.
             host, port: Where to listen (port 0: a free port).
             unit_id: The Modbus unit (device) id it answers to, 1..247.
@@ -56,8 +58,11 @@ class ModbusDevice:
             return ExcCodes(self.fail_with)
         ch = self.channel
         if values is None and address <= ch.register + ch.count - 1 and ch.register < address + count:
+            value = self.source()
+            if value is None:
+                return ExcCodes.DEVICE_BUSY
             offset = ch.register - start_address
-            registers[offset:offset + ch.count] = ch.encode(float(self.source()))
+            registers[offset:offset + ch.count] = ch.encode(float(value))
         return None
 
     def start(self) -> ModbusDevice:

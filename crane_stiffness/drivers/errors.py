@@ -23,4 +23,9 @@ class DeviceSilentError(DriverError, TimeoutError):
 
 class DeviceResponseError(DriverError):
     """The device answered with an error (a Modbus exception response, an unreadable configuration)."""
-__all__ = ['DeviceAddressError', 'DeviceResponseError', 'DeviceSilentError', 'DriverError', 'ParameterError', 'ProtocolError']
+
+
+class DeviceBusyError(DeviceResponseError):
+    """The device answered "server device busy" (Modbus exception 6): it is there but has no value yet (booting,
+    a channel still settling); the standard's advice is to ask again later."""
+__all__ = ['DeviceAddressError', 'DeviceBusyError', 'DeviceResponseError', 'DeviceSilentError', 'DriverError', 'ParameterError', 'ProtocolError']

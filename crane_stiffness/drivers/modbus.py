@@ -20,8 +20,8 @@ import time
 from dataclasses import dataclass
 from typing import Any, Callable, Mapping, Sequence
 
-from crane_stiffness.drivers.errors import (DeviceAddressError, DeviceResponseError, DeviceSilentError,
-                                            ParameterError)
+from crane_stiffness.drivers.errors import (DeviceAddressError, DeviceBusyError, DeviceResponseError,
+                                            DeviceSilentError, ParameterError)
 
 MODBUS_TCP_PORT = 502
 #: data type → (registers, struct format of the value's bytes, most significant word first)
@@ -34,6 +34,8 @@ REGISTER_TYPES = ('holding', 'input')
 EXCEPTION_NAMES = {1: 'illegal function', 2: 'illegal data address', 3: 'illegal data value',
                    4: 'server device failure', 5: 'acknowledge', 6: 'server device busy',
                    10: 'gateway path unavailable', 11: 'gateway target device failed to respond'}
+#: "server device busy": not an error of the request, the device has no value yet (DeviceBusyError).
+DEVICE_BUSY = 6
 
 
 def register_count(data_type: str) -> int:
@@ -212,7 +214,8 @@ class ModbusPoller:
         end = self._clock()
         if response.isError():
             code = getattr(response, 'exception_code', None)
-            raise DeviceResponseError(
+            error = DeviceBusyError if code == DEVICE_BUSY else DeviceResponseError
+            raise error(
                 f'{self.where} answered Modbus exception {code} ({EXCEPTION_NAMES.get(code, "unknown")}) to a read '
                 f'of {ch.count} {ch.register_type} register(s) at {ch.register}')
         registers = list(response.registers)

@@ -7,7 +7,7 @@ import time
 from typing import Any, Callable, Mapping, Sequence, TypeVar
 
 from crane_stiffness.config import ParamSpec
-from crane_stiffness.drivers.errors import DeviceAddressError, DeviceSilentError
+from crane_stiffness.drivers.errors import DeviceAddressError, DeviceBusyError, DeviceSilentError
 from crane_stiffness.nodes.parameters import check
 
 T = TypeVar('T')
@@ -44,15 +44,16 @@ def wait_for_device(action: Callable[[], T], wait_s: float, log: Callable[[str],
                     retry_interval_s: float = 0.25) -> T:
     """``action()`` (a first contact with a device: a read, a request), tried again every ``retry_interval_s``
     while it raises DeviceAddressError or DeviceSilentError (nothing there yet: the device still booting, or its
-    emulator still starting when every node of a launch starts at once) until ``wait_s`` has passed; then the last
-    error is raised with the time waited. A DeviceResponseError (a device that answers wrongly) is raised at once.
+    emulator still starting when every node of a launch starts at once) or DeviceBusyError (there, but no value yet)
+    until ``wait_s`` has passed; then the last error is raised with the time waited. Any other DeviceResponseError (a
+    device that answers wrongly) is raised at once.
     ``log`` gets one line when the first attempt fails."""
     deadline = time.monotonic() + wait_s
     first = True
     while True:
         try:
             return action()
-        except (DeviceAddressError, DeviceSilentError) as exc:
+        except (DeviceAddressError, DeviceSilentError, DeviceBusyError) as exc:
             if time.monotonic() + retry_interval_s > deadline:
                 raise type(exc)(f'{exc} (tried for {wait_s:g} s: wait_for_device_s)') from None
             if first and log is not None:

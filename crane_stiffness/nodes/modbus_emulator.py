@@ -5,8 +5,12 @@ Subscribes /crane/platform_pose (PoseStamped, crane_base), held from arrival on,
 on ``host:port`` (port 0 = a free port, logged and on /diagnostics): every read of the channel's registers is the
 LVDT model's reading of the held pose (axis, contact point, noise, resolution, stroke: the ``lvdt`` parameters of
 the same names), encoded as the channel parameters say (``register``, ``data_type``, ``word_order``, raw =
-(metres − ``offset``) / ``gain``: the same parameters ``modbus_lvdt`` decodes with). Before the first pose it reads
-the rest pose. ``zero_on_first_pose`` zeroes the model at the first pose received.
+(metres − ``offset``) / ``gain``: the same parameters ``modbus_lvdt`` decodes with). Until the first pose arrives
+every read answers "server device busy" (Modbus exception 6), as a DAQ channel still settling does, so the driver
+publishes no reading of a pose nobody measured: a load program that waits for /lvdt/displacement then starts only
+once the whole chain is live, and ``zero_on_first_pose`` zeroes the model at the unloaded pose (had the emulator
+served the rest pose and met the crane's poses only during the first ramp, it zeroed under load: every reading
+offset by the load at that instant, a stiffness several per cent off).
 """
 from __future__ import annotations
 
@@ -39,7 +43,6 @@ PARAMS = (
     *MODEL_PARAMS,
 )
 START_ONLY = ('host', 'port', 'unit_id')
-REST_POSE = np.concatenate([np.zeros(3), np.eye(3).ravel()])
 
 
 def _validate(values: dict[str, Any]):
@@ -61,7 +64,7 @@ class ModbusEmulator(Node):
         super().__init__('modbus_emulator', **kwargs)
         # received = poses = used + dropped_non_finite; published = register reads served
         self.counters = SensorCounters()
-        self.pose = REST_POSE.copy()
+        self.pose: np.ndarray | None = None  # the held pose: u (3) then Q row-major (9)
         self.zero_pose: np.ndarray | None = None
         self.model: LvdtModel | None = None
         self.device: ModbusDevice | None = None
@@ -94,9 +97,12 @@ class ModbusEmulator(Node):
             self.device.channel = channel
         self.settings = values
 
-    def _reading(self) -> float:
-        """The LVDT model's reading of the held pose [m] (the server thread calls this on every read)."""
+    def _reading(self) -> float | None:
+        """The LVDT model's reading of the held pose [m], None before the first pose (the server thread calls this
+        on every read)."""
         pose = self.pose
+        if pose is None:
+            return None
         reading, _ = self.model.measure(pose[:3], pose[3:].reshape(3, 3))
         return reading
 
@@ -121,6 +127,8 @@ class ModbusEmulator(Node):
                                             ('zero_offset_m', repr(self.model.zero_offset))] + lag_pairs
         if late:
             return WARN, late, pairs
+        if self.pose is None:
+            return WARN, f'no platform pose yet on {topics.PLATFORM_POSE}: every read answers "server device busy"', pairs
         return OK, f'serving Modbus TCP on {self.device.host}:{self.device.port}, {self.device.reads} reads', pairs
 
     def close(self) -> None:
