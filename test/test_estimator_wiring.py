@@ -221,7 +221,8 @@ def test_stream_delay_live_window_matches_the_offline_estimate(correction):
     """LiveStiffness fed sample by sample (estimates at its slow refresh) and stream_delay_of over the same samples
     find the same delay, and say the same about it, when the window holds the whole recording."""
     from crane_stiffness.estimation.inputs import Samples
-    from crane_stiffness.estimation.live import LiveStiffness, stream_delay_of
+    from crane_stiffness.estimation.live import LiveStiffness
+    from crane_stiffness.estimation.stream_delay import stream_delay_of
     from crane_stiffness.status import OK, WARN
     rng = np.random.default_rng(2)
     t = np.arange(0.0, 2.1, 0.001) + 100.0
@@ -250,6 +251,36 @@ def test_stream_delay_live_window_matches_the_offline_estimate(correction):
         assert level == WARN and problem and problem in message and kv['stream_delay_ok'] == 'false'
     else:                   # 0.5 ms left
         assert level == OK and problem == '' and kv['stream_delay_ok'] == 'true'
+
+
+def test_stream_delay_of_a_long_recording_looks_where_the_load_moves():
+    """Over a recording many windows long (10 min of holds with a few load cycles, 1 kHz) the offline estimate uses
+    the windows where the force moves (moving_windows) and finds the delay to the same accuracy as over one window,
+    while a recording without load changes is not trusted and says why."""
+    from crane_stiffness.estimation.inputs import Samples
+    from crane_stiffness.estimation.stream_delay import DELAY_WINDOWS, moving_windows, stream_delay_of
+    rng = np.random.default_rng(5)
+    t = np.arange(0.0, 600.0, 0.001) + 50.0
+    cycle_starts = [37.0, 211.0, 402.5, 555.0]        # four 2.1 s load cycles in 10 min of holds
+    load = np.zeros(t.size)
+    for c in cycle_starts:
+        inside = (t - 50.0 >= c) & (t - 50.0 < c + 2.1)
+        load[inside] = [delayed_load(s) for s in t[inside] - 50.0 - c]
+    f = load + rng.normal(0.0, 0.01, t.size)
+    x = load / K + rng.normal(0.0, 2e-7, t.size)
+    settings = LiveSettings.from_params({'delay_window_s': 5.0})
+    windows = moving_windows(t, f, 5.0, DELAY_WINDOWS)
+    assert len(windows) == DELAY_WINDOWS and windows == sorted(windows)
+    for c in cycle_starts:  # every cycle lies (at least partly) in a chosen window
+        assert any(start <= 50.0 + c + 1.0 < end for start, end in windows), (c, windows)
+    none = np.zeros(t.size, np.int64)
+    estimate, problem, values = stream_delay_of(settings, Samples(t, none, f), Samples(t + DELAY, none, x))
+    assert estimate is not None and estimate.ok and estimate.delay_s == pytest.approx(DELAY, abs=0.5e-3)
+    assert 'ms late' in problem and dict(values)['stream_delay_ok'] == 'false'  # 3 ms > max_stream_delay_s 2 ms
+    flat = rng.normal(0.0, 0.01, t.size)
+    estimate, problem, values = stream_delay_of(settings, Samples(t, none, flat),
+                                                Samples(t + DELAY, none, rng.normal(0.0, 2e-7, t.size)))
+    assert estimate is None and problem == '' and 'too little load change' in dict(values)['stream_delay_note']
 
 
 def test_mount_and_delay_parameters_validated_on_start_and_on_change(rclpy_context):

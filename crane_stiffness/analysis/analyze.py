@@ -15,7 +15,7 @@ decode):
    left out, and the fraction of each stream's samples received (from its own stamps) is reported, as live.
    The wrench is moved from the sensor's frame to the platform centre and the displacement stamps corrected by
    ``displacement_delay_s`` as live; the delay left between the streams is estimated over the whole recording
-   (:func:`~crane_stiffness.estimation.live.stream_delay_of`, the live input status's stream_delay_*) and named
+   (:func:`~crane_stiffness.estimation.stream_delay.stream_delay_of`, the live input status's stream_delay_*) and named
    among the problems above ``max_stream_delay_s``.
    Not reproduced offline: fit segments started by a sensor restart (the bag does not record publishers), nor by a
    re-zero or tare (/lvdt/zero, /load_cell/tare are recorded now, but the offline fit is one regression per step
@@ -65,10 +65,11 @@ from crane_stiffness.estimation import quality
 from crane_stiffness.estimation.errors import DataError
 from crane_stiffness.estimation.fit import LineFit, RecursiveLeastSquares, fit_line
 from crane_stiffness.estimation.inputs import INPUT_CHECKS, CommandSeries, Samples, checked_samples
-from crane_stiffness.estimation.live import AXES, VALUE_FIELDS, LivePairs, live_pairs, stream_delay_of
+from crane_stiffness.estimation.live import AXES, VALUE_FIELDS, LivePairs, live_pairs
+from crane_stiffness.estimation.stream_delay import stream_delay_of
 from crane_stiffness.estimation.offset import correct_stamps
 
-STAGES = ('open+decode', 'pair', 'steps', 'fits', 'model', 'figures', 'report')
+STAGES = ('open+decode', 'pair', 'stream delay', 'steps', 'fits', 'model', 'summary', 'figures', 'report')
 #: Pairs of a branch fed to the recursive least squares for the live comparison (its memory is ~1/(1-λ)).
 RLS_REPLAY_PAIRS = 20_000
 #: Shortest run of equal commands taken as a hold [s].
@@ -439,6 +440,9 @@ def analyze_session(bag_path: str | Path, out_dir: str | Path | None = None, *, 
                     f'{path}: only {pairs.stamp.size} load-cell/LVDT pair(s) by {_pairing_rule(data.settings)} '
                     f'({force.stamp.size} force and {disp.stamp.size} displacement samples usable)')
             bar.done()
+            bar.stage('stream delay')
+            _, delay_problem, delay_values = stream_delay_of(data.settings, force, disp)
+            bar.done()
             bar.stage('steps')
             t0 = float(commands.stamp[0]) if commands is not None else float(pairs.stamp[0])
             steps = _steps(data, pairs, commands, t0, settle_fraction, problems)
@@ -473,6 +477,7 @@ def analyze_session(bag_path: str | Path, out_dir: str | Path | None = None, *, 
             bar.stage('model')
             model = _model(data, steps, commands, model_points, problems)
             bar.done()
+        bar.stage('summary')
         damage = []
         for w in caught:
             if issubclass(w.category, BagDamageWarning):
@@ -505,7 +510,6 @@ def analyze_session(bag_path: str | Path, out_dir: str | Path | None = None, *, 
             except ValueError as exc:
                 problems.append(f'recorded geometry invalid: {exc}')
         counters = {**input_counters, **pairs.counters}
-        _, delay_problem, delay_values = stream_delay_of(data.settings, force, disp)
         if delay_problem:
             problems.append(delay_problem)
         # The live estimator's warnings, offline: what it would have said about these inputs.
@@ -530,6 +534,7 @@ def analyze_session(bag_path: str | Path, out_dir: str | Path | None = None, *, 
             settings=asdict(data.settings), counts=data.counts, pairing=counters, branch_fits=branch_fits,
             hold_fits=hold_fits, cycle_fits=cycles, steps=steps, live=live, model=model, problems=problems,
             missing_topics=missing, stream_delay=dict(delay_values))
+        bar.done()
         if write_files:
             out = Path(out_dir) if out_dir is not None else _default_out(path)
             out.mkdir(parents=True, exist_ok=True)

@@ -8,7 +8,7 @@ publishing one:
    ``sensor_reaction``; :class:`~crane_stiffness.estimation.frames.SensorMount`: one row of its 6×6 matrix per
    sample, nothing when the sensor is at the centre, aligned); a displacement sample is a reading in m (or rad), or a
    voltage converted by ``x = displacement_gain · V + displacement_offset``, its stamp corrected to
-   ``t − displacement_delay_s``. :class:`StreamDelay` estimates the delay left between the streams from the recent
+   ``t − displacement_delay_s``. :class:`~crane_stiffness.estimation.stream_delay.StreamDelay` estimates the delay left between the streams from the recent
    data (:func:`~crane_stiffness.estimation.offset.estimate_delay`) and WARNs above ``max_stream_delay_s``.
    Dropped and counted (:class:`~crane_stiffness.estimation.inputs.InputCounters`): a NaN/Inf anywhere in the
    sample, a zero (or negative) stamp, a stamp more than ``max_clock_skew_s`` ahead of its arrival (node clock), a
@@ -56,11 +56,11 @@ import numpy as np
 
 from crane_stiffness.axes import AXES
 from crane_stiffness.estimation.branch import BRANCHES, LOADING, Branch, branch_labels
-from crane_stiffness.estimation.errors import DataError, ParameterError
-from crane_stiffness.estimation.offset import DelayEstimate, estimate_delay
+from crane_stiffness.estimation.errors import ParameterError
 from crane_stiffness.estimation.estimator import Estimate, StiffnessEstimator
 from crane_stiffness.estimation.fit import t_quantile
 from crane_stiffness.estimation.quality import CommandRange, fit_problems
+from crane_stiffness.estimation.stream_delay import DELAY_MAX_LAG_S, StreamDelay
 from crane_stiffness.estimation.frames import SensorMount
 from crane_stiffness.commands import command_fault
 from crane_stiffness.estimation.inputs import (CommandHold, CommandSeries, InputCounters, Samples, StreamHealth,
@@ -83,9 +83,6 @@ PAIRINGS = {'nearest': None, 'interpolate_force': FORCE, 'interpolate_displaceme
 VALUE_FIELDS = ('stiffness', 'intercept', 'stderr', 'ci95_low', 'ci95_high', 'r2', 'n', 'residual_rms',
                 'nonlinearity', 'rls_stiffness', 'rls_stderr', 'prediction', 'relative_error', 'current',
                 'sample_stamp')
-
-#: Delays searched by the stream-delay estimate: ±this [s] (offset.estimate_delay's max_lag_s).
-DELAY_MAX_LAG_S = 0.05
 
 # Student-t quantiles computed ahead when a fit starts (t_quantile's cache holds 1024).
 _T_CACHE = 1000
@@ -320,103 +317,6 @@ class LagHistogram:
             if seen >= rank:
                 return (i + 1) * self.BIN_S
         return math.inf  # not reached
-
-
-def _delay_problem(settings: LiveSettings, estimate: DelayEstimate | None) -> str:
-    """The WARN reason for a trusted delay estimate whose remaining (uncorrected) part exceeds max_stream_delay_s,
-    else ''. ``estimate`` is of the corrected stamps: what displacement_delay_s has not removed."""
-    if estimate is None or not estimate.ok or abs(estimate.delay_s) <= settings.max_stream_delay_s:
-        return ''
-    total = estimate.delay_s + settings.displacement_delay_s
-    return (f'displacement stamps {estimate.delay_s * 1e3:+.3g} ms late against force after correction (estimated '
-            f'from the data, peak correlation {estimate.peak_correlation:.2f}) > max_stream_delay_s '
-            f'{settings.max_stream_delay_s * 1e3:g} ms: loading and unloading are skewed; set displacement_delay_s '
-            f'= {total:.6g}')
-
-
-def _delay_values(settings: LiveSettings, estimate: DelayEstimate | None, attempt: DelayEstimate | None,
-                  note: str) -> list[tuple[str, str]]:
-    nan = math.nan
-    residual = estimate.delay_s if estimate is not None else nan
-    return [('stream_delay_s', _fmt(residual + settings.displacement_delay_s)),
-            ('stream_delay_residual_s', _fmt(residual)),
-            ('displacement_delay_s', _fmt(settings.displacement_delay_s)),
-            ('stream_delay_ok', str(estimate is not None and not _delay_problem(settings, estimate)).lower()),
-            ('stream_delay_peak_correlation', _fmt(estimate.peak_correlation if estimate is not None else nan)),
-            ('stream_delay_note', note or (attempt.reason if attempt is not None else 'not estimated yet'))]
-
-
-class StreamDelay:
-    """The delay of the displacement stream's stamps against the force stream's, estimated live from the last
-    ``delay_window_s`` of accepted samples (stamps already corrected by ``displacement_delay_s``) with
-    :func:`~crane_stiffness.estimation.offset.estimate_delay`. :meth:`update` (from the slow timer) estimates again
-    when there is new data: every quarter window while data flows, and once when the streams pause (the end of a
-    load change). The last trusted estimate (``ok``: load changes to correlate) is kept through holds. The vectorised
-    form over a whole recording is :func:`stream_delay_of`."""
-
-    def __init__(self, settings: LiveSettings) -> None:
-        self.settings = settings
-        self.enabled = settings.delay_window_s > 0.0
-        self._data = {FORCE: deque(), DISPLACEMENT: deque()}
-        self._new = 0                # samples since the last estimate
-        self._new_at_update = -1     # _new at the previous update: unchanged = the streams pause
-        self._last_newest = -math.inf
-        self.estimate: DelayEstimate | None = None   # last trusted estimate (ok)
-        self.attempt: DelayEstimate | None = None    # last estimate made, trusted or not
-        self.note = ''
-        self.runs = 0
-
-    def add(self, stream: str, stamp_s: float, value: float) -> None:
-        """An accepted sample (stamp corrected, s; value in its unit): kept while within the window."""
-        if not self.enabled:
-            return
-        q = self._data[stream]
-        if q and stamp_s <= q[-1][0]:
-            return  # out of order: the pairing counts it; the correlation needs increasing stamps
-        q.append((stamp_s, value))
-        horizon = stamp_s - self.settings.delay_window_s
-        while q[0][0] < horizon:
-            q.popleft()
-        self._new += 1
-
-    def update(self) -> DelayEstimate | None:
-        """Estimate again if it is time (see the class docstring); returns the new estimate or None."""
-        if not self.enabled or self._new == 0:
-            return None
-        f, d = self._data[FORCE], self._data[DISPLACEMENT]
-        if not f or not d:
-            return None
-        newest = min(f[-1][0], d[-1][0])
-        if newest - max(f[0][0], d[0][0]) < 4 * DELAY_MAX_LAG_S:
-            return None  # too little overlap yet to search ±DELAY_MAX_LAG_S
-        paused = self._new == self._new_at_update
-        self._new_at_update = self._new
-        if not paused and newest - self._last_newest < max(self.settings.delay_window_s / 4.0, 0.5):
-            return None
-        self._last_newest = newest
-        self._new, self._new_at_update = 0, -1
-        tf, yf = np.array(f).T
-        td, yd = np.array(d).T
-        try:
-            result = estimate_delay(tf, yf, td, yd, max_lag_s=DELAY_MAX_LAG_S)
-        except (DataError, ParameterError) as exc:
-            self.note = f'not estimated: {exc}'
-            return None
-        self.runs += 1
-        self.attempt = result
-        self.note = ''
-        if result.ok:
-            self.estimate = result
-        return result
-
-    def problem(self) -> str:
-        return _delay_problem(self.settings, self.estimate)
-
-    def values(self) -> list[tuple[str, str]]:
-        if not self.enabled:
-            return [('stream_delay_note', 'not estimated (delay_window_s = 0)'),
-                    ('displacement_delay_s', _fmt(self.settings.displacement_delay_s))]
-        return _delay_values(self.settings, self.estimate, self.attempt, self.note)
 
 
 class LiveStiffness:
@@ -921,30 +821,3 @@ def live_pairs(settings: LiveSettings, force: Samples, displacement: Samples,
         counters[f'{name}_received_fraction'] = stream_health_of(samples.stamp,
                                                                  s.expected_period_s or None).received_fraction
     return LivePairs(stamp, value, disp_value, branch_labels(load, s.hysteresis), fit_log, counters)
-
-
-def _increasing(stamp: np.ndarray) -> np.ndarray:
-    """Samples stamped after every earlier one (those :meth:`StreamDelay.add` keeps)."""
-    if stamp.size == 0:
-        return np.zeros(0, bool)
-    before = np.maximum.accumulate(np.concatenate([[-np.inf], stamp[:-1]]))
-    return stamp > before
-
-
-def stream_delay_of(settings: LiveSettings, force: Samples, displacement: Samples
-                    ) -> tuple[DelayEstimate | None, str, list[tuple[str, str]]]:
-    """The delay between the streams over a whole recording (the vectorised form of :class:`StreamDelay`; samples
-    that passed the input checks, displacement stamps already corrected by ``displacement_delay_s``): (the
-    estimate or None, the WARN reason or '', the key/values the live input status reports)."""
-    estimate, note = None, ''
-    if settings.delay_window_s <= 0.0:
-        return None, '', [('stream_delay_note', 'not estimated (delay_window_s = 0)'),
-                          ('displacement_delay_s', _fmt(settings.displacement_delay_s))]
-    try:
-        fi, di = _increasing(force.stamp), _increasing(displacement.stamp)
-        estimate = estimate_delay(force.stamp[fi], force.value[fi], displacement.stamp[di], displacement.value[di],
-                                  max_lag_s=DELAY_MAX_LAG_S)
-    except (DataError, ParameterError) as exc:
-        note = f'not estimated: {exc}'
-    trusted = estimate if estimate is not None and estimate.ok else None
-    return trusted, _delay_problem(settings, trusted), _delay_values(settings, trusted, estimate, note)

@@ -17,7 +17,7 @@ at ``s − delay_s`` (a displacement driver that stamps at the end of a slow req
 ``correct_stamps(b_stamps, delay) = b_stamps − delay``.
 
 Units: stamps in seconds (any common clock), values in the streams' own units (N, N·m, m). The live estimator uses
-:func:`estimate_delay` and the stamp correction (estimation.live.StreamDelay, stream_delay_of, displacement_delay_s).
+:func:`estimate_delay` and the stamp correction (estimation.stream_delay, displacement_delay_s).
 """
 from __future__ import annotations
 
