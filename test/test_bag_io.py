@@ -328,6 +328,41 @@ def test_flush_interval_puts_slow_topics_on_disk(tmp_path):
     assert len(on_disk) >= 30 and np.array_equal(on_disk, np.arange(len(on_disk), dtype=float))
 
 
+def test_chunk_indexes_wait_on_disk_so_memory_stays_flat(tmp_path):
+    """A chunk every 0.5 s all day: the writer keeps each chunk's index on disk until the summary (the library kept
+    ~2 KB of objects per chunk in memory, 15 MB per hour); the file's summary holds every chunk index, as the
+    library writes it, and an independent reader finds every message through them."""
+    import tracemalloc
+    from mcap.reader import make_reader
+    from crane_stiffness.bag.index_spool import ChunkIndexSpool
+    data = serialize(Float64(data=1.0))
+
+    def write_chunks(writer: BagWriter, first: int, n: int) -> None:
+        for i in range(first, first + n):
+            writer.write('/program/setpoint', data, T0 + i * 1000)
+            writer._file.mcap.flush()  # one chunk per message, as flush_interval_s does on a slow topic
+
+    writer = BagWriter(tmp_path / 'day', chunk_size=1 << 20)
+    writer.add_topic('/program/setpoint', 'std_msgs/msg/Float64')
+    assert isinstance(writer._file.index_spool, ChunkIndexSpool)
+    write_chunks(writer, 0, 500)  # warm-up
+    tracemalloc.start()
+    before = tracemalloc.get_traced_memory()[0]
+    write_chunks(writer, 500, 4000)
+    grown = tracemalloc.get_traced_memory()[0] - before
+    tracemalloc.stop()
+    assert len(writer._file.index_spool) == 4500
+    assert grown < 100_000, f'{grown} bytes kept for 4,000 chunks'   # the library's list: ~8 MB
+    writer.close()
+    with open(tmp_path / 'day' / 'day_0.mcap', 'rb') as stream:
+        reader = make_reader(stream)
+        summary = reader.get_summary()
+        assert len(summary.chunk_indexes) == 4500 and summary.statistics.chunk_count == 4500
+        offsets = [c.chunk_start_offset for c in summary.chunk_indexes]
+        assert offsets == sorted(offsets) and all(c.message_index_offsets for c in summary.chunk_indexes)
+        assert sum(1 for _ in reader.iter_messages()) == 4500
+
+
 # ------------------------------------------------------------------------------------------ crash safety --
 def test_truncated_copy_reads_complete_chunks_and_recovers(tmp_path, bag, messages):
     source = bag / 'session_0.mcap'
