@@ -148,9 +148,11 @@ class _Playback(threading.Thread):
         topics = list(self.publishers)
         stats = self.player.stats
         while not self.stop_event.is_set():
-            wall0 = time.monotonic_ns()
+            wall0 = None
             last_clock = None
             for msg in self.reader.messages(topics, start_ns=base_ns):
+                if wall0 is None:  # the clock starts once the first chunk is read: its read made the start late
+                    wall0 = time.monotonic_ns()
                 stats['read'] += 1
                 self.pending = True
                 due = wall0 + int((msg.log_time_ns - base_ns) / self.rate)
