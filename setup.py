@@ -15,6 +15,10 @@ import sys
 from glob import glob
 
 from setuptools import find_packages, setup
+try:
+    from setuptools.command.build_scripts import build_scripts
+except ImportError:  # setuptools without its own (it uses distutils')
+    from distutils.command.build_scripts import build_scripts
 from setuptools.command.install import install
 
 PACKAGE = 'crane_stiffness'
@@ -28,6 +32,41 @@ NODES = (
     # Real-hardware drivers and the device emulators that serve the simulated physics through the same protocols.
     'netft', 'modbus_lvdt', 'rdt_emulator', 'modbus_emulator',
 )
+
+
+# A signal in the first milliseconds of a Python process, while the interpreter itself starts (before any line of
+# ours, in its `site` import), ends it with "Fatal Python error ... KeyboardInterrupt" or kills it (-2): `ros2 launch`
+# starts every node at once and a Ctrl-C then reaches all of them. So each built node script is a small sh prologue
+# that ignores SIGINT/SIGTERM and execs the interpreter on the same file: an ignored signal stays ignored through exec
+# and the interpreter's start, until crane_stiffness.entry installs its own handlers (from then on a signal is noted
+# and the node ends cleanly). A signal in that window is dropped; launch forwards SIGINT once more and escalates to
+# SIGTERM after 5 s, which the node then ends on. To Python the prologue is a string literal.
+SH_PROLOGUE = '''#!/bin/sh
+\'\'\':'
+trap '' INT TERM
+exec {python} "$0" "$@"
+\'\'\'
+'''
+
+
+class BuildNodeScripts(build_scripts):
+    """``build_scripts``, then each node script (its shebang already the interpreter's) behind SH_PROLOGUE."""
+
+    def run(self):
+        super().run()
+        for name in NODES:
+            path = os.path.join(self.build_dir, name)
+            with open(path) as f:
+                shebang, body = f.readline(), f.read()
+            if not shebang.startswith('#!') or shebang.startswith('#!/bin/sh'):
+                continue
+            python = shebang[2:].strip()
+            if os.path.isabs(python):
+                python = "'" + python.replace("'", "'\\''") + "'"
+            else:  # a wheel's '#!python', rewritten by pip on install: the scripts go beside the interpreter
+                python = '"${0%/*}/python"'
+            with open(path, 'w') as f:
+                f.write(SH_PROLOGUE.format(python=python) + body)
 
 
 class InstallAndCompileKernels(install):
@@ -48,7 +87,7 @@ class InstallAndCompileKernels(install):
 
 setup(
     name=PACKAGE,
-    cmdclass={'install': InstallAndCompileKernels},
+    cmdclass={'install': InstallAndCompileKernels, 'build_scripts': BuildNodeScripts},
     version='0.1.0',
     packages=find_packages(exclude=['test', 'test.*', 'benchmarks']),
     data_files=[

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import os
 import random
+import signal
 import sys
 import time
 from typing import Callable
@@ -18,6 +19,11 @@ os.environ.setdefault('ROS_DOMAIN_ID', str(random.Random(os.getpid() ^ time.time
 os.environ.setdefault('AMENT_PREFIX_PATH', sys.prefix)  # the venv is the ament prefix with rclpy and the msgs
 os.environ.setdefault('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp')
 os.environ.setdefault('MPLBACKEND', 'Agg')
+# A test run started in the background (`make test &`, a CI step without job control) inherits SIGINT ignored,
+# and so would every node it starts: Ctrl-C (the SIGINT the tests send) would do nothing before a node installs its
+# own handler. The processes the tests start get SIGINT as a terminal gives it (exec resets a handled signal).
+if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 _DOMAINS = __import__('itertools').cycle(list(range(int(os.environ['ROS_DOMAIN_ID']), 101))
