@@ -5,7 +5,7 @@ Every node starts the way `ros2 run` starts it, from a colcon install tree, all 
 the resident set size (RSS, /proc/<pid>/status VmRSS, the node's process and any children) of every node is
 sampled. Reported per node: RSS at the start of the steady state (``--warmup`` s after the program started: start-up,
 JIT compilation and DDS discovery are over), at the end, the growth between them [MB] and the least-squares slope
-over the steady state [MB/min]. Target (issue 9): growth ≤ 5 MB per node over a 10-minute run.
+over the steady state [MB/min]. Target: growth ≤ 5 MB per node over a 10-minute run.
 
 Run: .venv/bin/python benchmarks/bench_soak.py [--seconds 600] [--rate 1000] [--every 10] [--json out.json]
 Exit status 1 when a node grew more than ``--max-growth-mb`` or a node died.

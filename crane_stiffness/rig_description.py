@@ -19,7 +19,7 @@ session (bag name), transport and drivers (below).
   nodes reads the ``drivers`` file (default config/drivers_emulated.yaml: the addresses, ports, rates and
   calibration of both sides). With ``sim_sensors:=false`` the emulators do not start and the drivers talk to real
   hardware: give a drivers file with the devices' addresses (config/drivers_ati_labjack.yaml,
-  config/drivers_onrobot_labjack.yaml; see README, "Real drivers").
+  config/drivers_onrobot_labjack.yaml; see docs/hardware.md).
 
 Each node also says which machine of the lab it belongs on (:attr:`RigNode.machine`): 'daq' (the rig PC: model,
 program, sensors, drivers and emulators) or 'analysis' (estimator and recorder). ``machine`` (all | daq |

@@ -39,7 +39,7 @@ LVDT_DISPLACEMENT = '/lvdt/displacement'
 # ``~/tare``) operations since the sensor node started [-] (0 = none yet; a whole number held in a float). Published
 # at start (the simulated LVDT zeroing at its first pose: 1 then instead) and after every zero/tare, also by the
 # real drivers (modbus_lvdt, netft). The estimator starts a new fit
-# segment when the epoch changes while it holds readings of that sensor (issue 9, case 3): a re-zero without a
+# segment when the epoch changes while it holds readings of that sensor: a re-zero without a
 # restart steps the readings, and the two zero points must not share a window. They are topics of their own: a user
 # who remaps a sensor topic must remap its zero topic alongside (nothing does it for them); without them the
 # estimator still works, it only cannot see a re-zero (a restart it sees by the sequence numbers).

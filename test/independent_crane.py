@@ -1,7 +1,7 @@
 """Independent reference model of the NIST six-wire robot crane (quasi-static, nonlinear).
 
 Written from the paper (Dagalakis et al., "Stiffness study of a parallel link robot crane for shipbuilding
-applications") and /work/shared/reference/NOTES.md only.  It deliberately shares no code with the
+applications") and its corrections (docs/physics.md) only.  It deliberately shares no code with the
 ``crane_stiffness`` package: it imports numpy, scipy and the standard library and nothing else, so that the
 agreement test in ``test_independent_agreement.py`` compares two implementations written apart.
 
@@ -353,7 +353,7 @@ def weighted_height(a, b, h, k, weight) -> float:
 
 
 def paper_stiffness(a, b, h, k, weight) -> np.ndarray:
-    """Linearized stiffness of eq. (18) with h_w from the implicit vertical balance (NOTES.md)."""
+    """Linearized stiffness of eq. (18) with h_w from the implicit vertical balance (docs/physics.md)."""
     l0 = nominal_l0(a, b, h)
     hw = weighted_height(a, b, h, k, weight)
     lw = math.sqrt(hw * hw + 4.0 * (a * a + b * b - a * b) / 3.0)

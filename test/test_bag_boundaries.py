@@ -1,4 +1,4 @@
-"""Bag content stays inside the bag, and the player's ends and counters (issue 9 cases 5 and 6).
+"""Bag content stays inside the bag, and the player's ends and counters.
 
 - Files: metadata.yaml's ``relative_file_paths`` and the ``*.mcap`` found in a bag directory are read only inside
   that directory (``..``, absolute paths and symlinks leading out are refused, naming the entry), by the reader,

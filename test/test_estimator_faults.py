@@ -1,4 +1,4 @@
-"""Issue 9, the estimator's part: the estimate is never silently wrong. Each fault is injected into a running
+"""The estimator's part of "never silently wrong": the estimate is never silently wrong. Each fault is injected into a running
 stiffness_estimator over real DDS (the SyntheticRig/Probe of test_estimator_node), and the rule asserted, including
 that no estimate is published with status OK while its inputs are invalid. The symptom of case 1 is reproduced on the
 pure core, and a bag holding these faults is analysed offline and agrees with the live core.
@@ -408,7 +408,7 @@ def test_analyze_agrees_with_the_live_estimator_on_a_bag_with_these_faults(tmp_p
     nf = len(VALUE_FIELDS)
     dims = [('branch', 2, 2 * nf), ('field', nf, nf)]
     path = tmp_path / 'faults'
-    meta = session_metadata(rig=None, program=None, start_time_ns=t0, notes='issue 9 faults',
+    meta = session_metadata(rig=None, program=None, start_time_ns=t0, notes='injected faults',
                             session='faults', sensors={'stiffness_estimator': {**settings, 'force_axis': 'fy'}})
     last_values = None
     with BagWriter(path, metadata={SESSION_METADATA: meta}) as w:

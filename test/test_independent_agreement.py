@@ -1,6 +1,6 @@
 """The ``crane-stiffness`` CLI against an independent reference implementation (``independent_crane.py``).
 
-The reference was written from the paper and /work/shared/reference/NOTES.md without reading, importing or
+The reference was written from the paper and its corrections (docs/physics.md) without reading, importing or
 copying anything from the ``crane_stiffness`` package.  The ``test_reference_*`` tests check the reference on its
 own (finite differences, an energy formulation, the closed form of eq. 18); the ``test_cli_*`` tests run the CLI
 as a subprocess and compare its JSON with the reference.
@@ -18,7 +18,7 @@ Assumptions about the CLI contract (documented here because the contract leaves 
 * ``tangent`` is -dw/dx of the NET wrench (wires + weight + external load), rotations perturbed in the fixed
   frame, F and M fixed in space.  The external force therefore contributes -[F]x[Q p]x to the moment block when
   a ``--load-point`` p is given (the moment arm of F turns with the platform); M contributes nothing.
-* ``paper`` is eq. (18) as a formula of a, b, h, k and W (h_w from the implicit balance of NOTES.md); it
+* ``paper`` is eq. (18) as a formula of a, b, h, k and W (h_w from the implicit balance of docs/physics.md); it
   ignores ``--com``, ``--load-point`` and ``--length-offsets``.
 * ``euler_zxy`` angles are compared modulo 2*pi (all cases here stay far from gimbal lock).
 * ``wire_lengths`` are compared to 3e-9 m: a pose error of 1e-9 per component moves an attachment point by up to
@@ -338,7 +338,7 @@ def test_reference_rotation_convention():
                                     (0.3, 0.05, 2.0, 1e5, 200.0), (0.2, 0.1, 0.7, 3e4, 75.0),
                                     (0.1143, 0.1143, 0.4, None, 150.0)])
 def test_reference_paper_eq18_closed_form(params):
-    """NOTES.md: with h_w from the implicit balance, eq. (18) IS the exact tangent at the loaded rest pose."""
+    """docs/physics.md: with h_w from the implicit balance, eq. (18) IS the exact tangent at the loaded rest pose."""
     a, b, h, k, W = params
     crane = (ic.make_crane(a, b, h, W, k=k) if k else
              ic.make_crane(a, b, h, W, wire_diameter=LAB_D, youngs_modulus=LAB_E))
@@ -352,7 +352,7 @@ def test_reference_paper_eq18_closed_form(params):
     K = ic.tangent_stiffness(crane, eq.displacement, eq.rotation)
     P = ic.paper_stiffness(a, b, h, crane.k, W)
     assert np.abs(K - P).max() <= 1e-11 * np.abs(P).max()
-    # eq. (19) reading of NOTES.md: K1 - K2^2/K4 is 1/C_yy with C = K^-1
+    # eq. (19) reading of docs/physics.md: K1 - K2^2/K4 is 1/C_yy with C = K^-1
     assert P[1, 1] - P[1, 3] ** 2 / P[3, 3] == pytest.approx(1 / np.linalg.inv(P)[1, 1], rel=1e-9)
     # appendix I: the elastic part at W -> 0 is eq. (28); appendix II: the pendulum part
     K1p = 4 * crane.k * (a * a + b * b - a * b) / crane.l0_nominal ** 2

@@ -1,4 +1,4 @@
-"""The lab network (issue 10, part 6): the DAQ PC runs the model, the program, the device emulators and the drivers;
+"""The lab network: the DAQ PC runs the model, the program, the device emulators and the drivers;
 the analysis PC runs the estimator and the recorder. Here the two PCs are two Linux network namespaces joined by a
 veth pair whose addresses exist only inside them (made and removed by the test, unique names). DDS is opened by
 the one documented switch, set only inside the namespaces; the analysis namespace's veth counters show that the

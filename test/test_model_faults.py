@@ -1,4 +1,4 @@
-"""Faults injected into the running model and simulated sensors over real DDS (issue 9, cases 1, 3 and 6).
+"""Faults injected into the running model and simulated sensors over real DDS.
 
 - A command the model rejects (absurd, or without an equilibrium) reaches no simulated sensor: crane_model says
   which load is in force after every command (/crane/applied_wrench, the command's stamp) and republishes the

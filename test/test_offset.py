@@ -1,4 +1,4 @@
-"""The time offset between the force and displacement streams (issue 10, part 5): crane_stiffness.estimation.offset,
+"""The time offset between the force and displacement streams: crane_stiffness.estimation.offset,
 pure numpy (the interpolated pairing the slopes are fitted from is sync.pair_by_interpolation, tested in test_sync).
 
 The streams are the lab's: force at 7 kHz (Net F/T), displacement at 100 Hz (Modbus polls), realistic noise and

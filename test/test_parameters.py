@@ -1,4 +1,4 @@
-"""Parameters as the genuine tools see them (issue #11).
+"""Parameters as the genuine tools see them.
 
 At start: nodes started the way ``ros2 run`` does (crane_stiffness.testing.rosrun, from the colcon install tree)
 with ``--ros-args -p`` / ``--params-file``; exit status and stderr. At runtime: the parameter services

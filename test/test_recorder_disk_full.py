@@ -1,4 +1,4 @@
-"""A full disk stops the recording, not the recorder (issue 9 case 4).
+"""A full disk stops the recording, not the recorder.
 
 The recorder runs as a process (started as ``ros2 run`` starts it) over real DDS and records onto a 2 MiB tmpfs the
 test mounts, most of it taken by a filler file. When the disk fills: ERROR on /diagnostics and in the log naming the

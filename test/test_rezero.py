@@ -1,4 +1,4 @@
-"""Issue 9, case 3: a sensor re-zeroed without a restart starts a new fit segment (real DDS).
+"""A sensor re-zeroed without a restart starts a new fit segment (real DDS).
 
 The LVDT publishes its zero epoch (the number of zeros since it started) latched on /lvdt/zero; the estimator starts
 a new segment when it changes while the segment holds LVDT readings, so the window never mixes two zero points.

@@ -1,4 +1,4 @@
-"""The rig through the drivers (issue 10, part 3): ``rig.launch.py transport:=drivers`` runs load_cell's physics
+"""The rig through the drivers: ``rig.launch.py transport:=drivers`` runs load_cell's physics
 as an RDT F/T device (rdt_emulator) read by netft, and the LVDT's as a Modbus TCP analog input (modbus_emulator)
 read by modbus_lvdt, instead of the simulated sensors' direct topics. The side-force program, every node started
 the way ``ros2 run`` starts it from the colcon install tree, all at the same instant, gives the estimate within 2 %

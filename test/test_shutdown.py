@@ -1,4 +1,4 @@
-"""Shutdown as the genuine tools cause it (issue #11): every node ends on SIGINT or SIGTERM, once or repeated, with
+"""Shutdown as the genuine tools cause it: every node ends on SIGINT or SIGTERM, once or repeated, with
 exit status 0, no traceback, no FATAL line, its FINAL_COUNTERS line, and its files closed.
 
 The rig is started the way ``ros2 launch`` starts it: every node at the same instant (no start order, no waiting for

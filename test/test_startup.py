@@ -1,4 +1,4 @@
-"""Start-up of the rig the way the tools start it (issue #11): every process at the same instant from a fresh
+"""Start-up of the rig the way the tools start it: every process at the same instant from a fresh
 install tree, cold (no compiled-kernel cache) or warm; the launch file's refusals; the compiled-kernel cache."""
 from __future__ import annotations
 
@@ -45,7 +45,7 @@ def _cache_files(install: Path) -> list[Path]:
 @pytest.fixture
 def cold_install(colcon_install, tmp_path, ros_domain):
     """A fresh copy of the colcon install tree with no compiled-kernel cache: what a build without the cache step
-    (the state before issue #11) gives, so crane_model compiles its kernels for ~15 s at start."""
+    (an install tree without the kernel cache) gives, so crane_model compiles its kernels for ~15 s at start."""
     install = tmp_path / 'install'
     shutil.copytree(colcon_install, install, ignore=shutil.ignore_patterns(*KERNEL_CACHE), symlinks=True)
     assert not _cache_files(install)
@@ -96,7 +96,7 @@ def _check_run(summary: dict, observer: Observer, logs: dict) -> None:
 
 
 def test_cold_launch_all_nodes_at_once_waits_for_the_model(cold_install, tmp_path):
-    """Issue #11 reproduced: every process started at the same instant from a fresh install tree with no compiled
+    """Every process started at the same instant from a fresh install tree with no compiled
     kernels; crane_model compiles for many seconds while the sensors, the estimator and the recorder are up."""
     install, env = cold_install
     summary, observer, started_after, logs = _run_rig(install, env, tmp_path)

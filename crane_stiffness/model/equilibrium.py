@@ -1,4 +1,4 @@
-"""Nonlinear quasi-static equilibrium of the platform (paper eqs. 4–16, corrected as in NOTES.md).
+"""Nonlinear quasi-static equilibrium of the platform (paper eqs. 4–16, corrected as in docs/physics.md).
 
 Given the geometry (with the suspended weight W along +z) and an external wrench held fixed in space, find the
 pose (u, Q) at which the six unilateral wire forces, the weight and the load balance. The equilibrium wanted is the

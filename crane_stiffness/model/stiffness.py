@@ -65,7 +65,7 @@ def loaded_height(geometry: CraneGeometry) -> tuple[float, float]:
     """(h_w, l_w): height and wire length at the rest pose under W alone [m].
 
     Solves the vertical balance 6·k·(l_w − l0)·h_w/l_w = W with l_w = sqrt(h_w² + 4(a² + b² − ab)/3) (eq. 32;
-    the printed "h_w = W/(6k(l_w − l0))" is dimensionally wrong, see NOTES.md).
+    the printed "h_w = W/(6k(l_w − l0))" is dimensionally wrong, see docs/physics.md).
     """
     from scipy.optimize import brentq  # deferred: importing scipy.optimize costs a quarter second at start-up
 

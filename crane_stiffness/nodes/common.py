@@ -356,7 +356,7 @@ def final_counters(node: Node) -> None:
 class ZeroEpoch:
     """The latched zero epoch of a sensor (topics.LVDT_ZERO, topics.LOAD_CELL_TARE): std_msgs/Float64, the number of
     zero/tare operations since the node started [-]. Published at once (0) and again by :meth:`step` after every
-    zero or tare, so the estimator starts a new fit segment when a re-zero steps the readings (issue 9, case 3).
+    zero or tare, so the estimator starts a new fit segment when a re-zero steps the readings.
     ``publish=False``: nothing at once (a sensor that zeroes itself before its first reading publishes epoch 1 then,
     so the estimator never sees 0 -> 1 race its first readings)."""
 

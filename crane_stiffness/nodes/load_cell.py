@@ -11,7 +11,7 @@ k/publish_rate_hz, see nodes.common.create_grid_timer). Service ~/tare (std_srvs
 the sensor on the mean of ``tare_samples`` readings at the current load; the reply states the offsets. Overload is
 reported on /diagnostics (WARN).
 
-A re-zero is visible to a consumer (issue 9, case 3): /diagnostics carries the tare ``offset``, ``tare_count`` and
+A re-zero is visible to a consumer: /diagnostics carries the tare ``offset``, ``tare_count`` and
 ``tared_at`` (node-clock stamp of the last tare [ns], 0 = none) and ``started_at`` (the node's start [ns]), so a
 restart or a tare shows as a new start time or a new count. The tare count is also published, latched, on
 /load_cell/tare (std_msgs/Float64, at start and after every tare): the estimator starts a new fit segment on it. Counters: received = used + dropped_non_finite

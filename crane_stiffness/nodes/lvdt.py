@@ -9,7 +9,7 @@ on the grid k/publish_rate_hz, together with the load cell's).
 Nothing is published before the first pose. Service ~/zero (std_srvs/Trigger) zeroes at the current pose;
 ``zero_on_first_pose`` zeroes at the first pose received (the loaded rest pose).
 
-A re-zero is visible to a consumer (issue 9, case 3): /diagnostics carries ``zero_offset_m`` (where the zero lies
+A re-zero is visible to a consumer: /diagnostics carries ``zero_offset_m`` (where the zero lies
 along the axis from the rest pose [m]; a re-zero at another pose steps it), ``zero_count``, ``zeroed_at`` (node-clock
 stamp of the last zero [ns], 0 = none) and ``started_at`` (the node's start [ns]): a restarted LVDT, which zeroes
 itself again, shows a new start time. The zero count is also published, latched, on /lvdt/zero (std_msgs/Float64,
