@@ -36,6 +36,7 @@ demo: $(STAMP)
 	$(BIN)/python scripts/demo.py
 
 test: $(STAMP)
+	$(BIN)/ruff check crane_stiffness test benchmarks scripts launch setup.py
 	$(BIN)/python -m pytest -q -p no:cacheprovider test
 
 bench: $(STAMP)

@@ -142,7 +142,8 @@ def run(rate: float, publish_rate: float, seconds: float, log_dir: Path, command
         'observer_stamp_gaps_over_1.5_periods': int((gaps > 1.5 * period).sum()),
         'observer_rate_hz': round(steady.shape[0] / wall, 1),
         'cpu_driver': round(cpu[ft.pid], 3), 'cpu_emulator': round(cpu[emu.pid], 3),
-        'lag_ms_p50': round(float(np.percentile(lag_ms, 50)), 2), 'lag_ms_p99': round(float(np.percentile(lag_ms, 99)), 2),
+        'lag_ms_p50': round(float(np.percentile(lag_ms, 50)), 2),
+        'lag_ms_p99': round(float(np.percentile(lag_ms, 99)), 2),
     }
 
 
@@ -160,7 +161,8 @@ def main(argv: list[str] | None = None) -> int:
         results.append(r)
         print(json.dumps(r), flush=True)
     for r in results:
-        print(f"{r['command']}: {r['rate_hz']:.0f} Hz in, {r['publish_rate_hz']:.0f} Hz out, {r['seconds']} s: records sent "
+        print(f"{r['command']}: {r['rate_hz']:.0f} Hz in, {r['publish_rate_hz']:.0f} Hz out, {r['seconds']} s: "
+              f"records sent "
               f"{r['records_sent']}, received {r['records_received']}, lost {r['records_lost']}, out of order "
               f"{r['records_out_of_order']}; published {r['published']}, observer got {r['observer_received']} "
               f"({r['observer_stamp_gaps_over_1.5_periods']} stamp gaps); CPU driver {100 * r['cpu_driver']:.1f} % "

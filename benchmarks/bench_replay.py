@@ -11,7 +11,8 @@ crane_stiffness.testing.synthetic, or ``--bag`` for a recorded one) is played tw
 A subscriber in this process takes each message's DDS source timestamp (the instant its publisher wrote it) and
 compares it with the message's log time in the bag; after the median is removed, the p50/p99/max of the absolute
 deviation and the messages missing are reported (those lost once the listener had matched the publisher fail it;
-those before, DDS discovery's doing, are only reported). Target: the player's p99 ≤ 1 ms (``ros2 bag play`` class), or, on a
+those before, DDS discovery's doing, are only reported). Target: the player's p99 ≤ 1 ms (``ros2 bag play`` class),
+or, on a
 machine whose own jitter (the baseline's p99) is above 1 ms, no more than 1.2× the baseline's. Exits 1 on a miss.
 
     python benchmarks/bench_replay.py [--bag BAG] [--offset 20] [--seconds 15] [--json OUT]

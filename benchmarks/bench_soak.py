@@ -157,7 +157,8 @@ def main(argv=None) -> int:
         limit = args.max_recorder_growth_mb if name == 'session_recorder' else args.max_growth_mb
         ok = n['growth_mb'] <= limit
         failed += [] if ok else [name]
-        print(f"  {name:20s} RSS {n['rss_start_mb']:7.1f} -> {n['rss_end_mb']:7.1f} MB: growth {n['growth_mb']:+6.2f} MB, "
+        print(f"  {name:20s} RSS {n['rss_start_mb']:7.1f} -> {n['rss_end_mb']:7.1f} MB: "
+              f"growth {n['growth_mb']:+6.2f} MB, "
               f"slope {n['slope_mb_per_min']:+.3f} MB/min, max {n['rss_max_mb']:.1f} MB"
               f"{'' if ok else f'  (over target {limit} MB)'}")
     if res['died_during_run']:

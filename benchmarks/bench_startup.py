@@ -9,7 +9,8 @@ is the time until a load can be applied.
 - cold: the first launch from a fresh `colcon build` (the build compiles the model's kernels into the install tree,
   crane_stiffness.model.kernel_cache); nothing of the package has run from that tree before;
 - warm: later launches from the same tree;
-- no kernel cache (an install tree as built without the cache): a copy of the fresh tree without the compiled kernels, so
+- no kernel cache (an install tree as built without the cache): a copy of the fresh tree without the compiled kernels,
+so
   crane_model compiles them at its start.
 
 The OS page cache cannot be dropped without root, so "cold" means cold for the package, not for the disk. The

@@ -42,7 +42,8 @@ from crane_stiffness import PACKAGE, topics
 from crane_stiffness.errors import CraneStiffnessError
 
 __all__ = ['ARGUMENTS', 'MACHINES', 'NODES', 'PACKAGE', 'TRANSPORTS', 'Argument', 'NodeStart', 'RigError', 'RigNode',
-           'argument_values', 'config_files', 'config_path', 'flag', 'known_programs', 'program_file', 'readiness', 'rig_nodes']
+           'argument_values', 'config_files', 'config_path', 'flag', 'known_programs', 'program_file', 'readiness',
+           'rig_nodes']
 
 
 class RigError(CraneStiffnessError, ValueError):

@@ -426,8 +426,11 @@ def _stable(crane, x, force, load_point):
 
 
 def _corrector(crane, x0, force, moment, load_point):
-    fun = lambda x: net_wrench(crane, *_pose(x), force, moment, load_point)
-    jac = lambda x: _euler_jacobian(crane, x, force, load_point)
+    def fun(x):
+        return net_wrench(crane, *_pose(x), force, moment, load_point)
+
+    def jac(x):
+        return _euler_jacobian(crane, x, force, load_point)
     sol = root(fun, x0, jac=jac, method="hybr", options={"xtol": 1e-9, "maxfev": 400})
     x = sol.x
     r = fun(x)
@@ -449,7 +452,7 @@ def _corrector(crane, x0, force, moment, load_point):
 def _continue(crane_of, load_of, x, *, max_step_rot=0.03, max_steps=4000):
     """Follow the equilibrium from s = 0 (x known) to s = 1; crane_of(s), load_of(s) -> (F, M, p)."""
     s, ds, steps = 0.0, 0.125, 0
-    x_prev = None
+    x_prev, s_prev_step = None, 1.0
     while s < 1.0:
         steps += 1
         if steps > max_steps:

@@ -148,8 +148,8 @@ def test_the_player_refuses_a_type_outside_the_index(rclpy_context, tmp_path, ca
     with BagWriter(only) as w:
         w.add_topic('/evil', 'this/msg/Foo', message_definition_text='int32 x', type_hash='')
         w.write('/evil', b'\0\1\0\0\7\0\0\0', T0)
-    with pytest.raises(ValueError, match=r"no topic of .* to play; /evil not played: message type 'this/msg/Foo' is not an "
-                       r"installed interface"):
+    with pytest.raises(ValueError, match=r"no topic of .* to play; /evil not played: message type 'this/msg/Foo' "
+                       r"is not an installed interface"):
         SessionPlayer(context=ctx, parameter_overrides=[Parameter('bag', value=str(only))])
     assert 'this' not in sys.modules and 'Zen of Python' not in capfd.readouterr().out
 

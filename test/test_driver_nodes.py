@@ -221,7 +221,8 @@ def test_modbus_lvdt_reads_the_modbus_emulator_across_processes(rclpy_context, t
     ex.add_node(probe.node)
     lv = None
     try:
-        assert spin_until(ex, lambda: probe.pose.get_subscription_count() >= 1, 20.0), (tmp_path / 'emu.log').read_text()
+        assert spin_until(ex, lambda: probe.pose.get_subscription_count() >= 1, 20.0), \
+            (tmp_path / 'emu.log').read_text()
         lv = start_node('modbus_lvdt', lv_args + channel + [
             '-p', 'host:=127.0.0.1', '-p', f'port:={port}', '-p', 'poll_rate_hz:=200.0', '-p', 'frame_id:=lvdt_mb'],
             tmp_path / 'lvdt.log')

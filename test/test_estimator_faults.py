@@ -1,4 +1,5 @@
-"""The estimator's part of "never silently wrong": the estimate is never silently wrong. Each fault is injected into a running
+"""The estimator's part of "never silently wrong": the estimate is never silently wrong. Each fault is injected into a
+running
 stiffness_estimator over real DDS (the SyntheticRig/Probe of test_estimator_node), and the rule asserted, including
 that no estimate is published with status OK while its inputs are invalid. The symptom of case 1 is reproduced on the
 pure core, and a bag holding these faults is analysed offline and agrees with the live core.

@@ -47,7 +47,8 @@ def isolated(extra_remaps: dict[str, str] | None = None) -> tuple[str, str, list
     prefix = f'/{name}_t'
     args = ['--ros-args', '-r', f'__node:={name}']
     for topic in (topics.WRENCH_COMMAND, topics.REJECTED_COMMAND, topics.LOAD_CELL_WRENCH, topics.LVDT_DISPLACEMENT,
-                  topics.LVDT_ZERO, topics.LOAD_CELL_TARE, topics.PREDICTED_AXIS_STIFFNESS, topics.STIFFNESS_ESTIMATE, topics.STIFFNESS_VALUES,
+                  topics.LVDT_ZERO, topics.LOAD_CELL_TARE, topics.PREDICTED_AXIS_STIFFNESS, topics.STIFFNESS_ESTIMATE,
+                  topics.STIFFNESS_VALUES,
                   topics.STIFFNESS, topics.DIAGNOSTICS):
         target = (extra_remaps or {}).get(topic, prefix + topic)
         args += ['-r', f'{topic}:={target}']

@@ -1,4 +1,5 @@
-"""Sensor frames and stream delay wired into the live estimator (real rclpy + DDS) and its offline counterpart (analyze):
+"""Sensor frames and stream delay wired into the live estimator (real rclpy + DDS) and its offline counterpart
+(analyze):
 
 * sensor frames: an F/T sensor rotated 90° about z, mounted 50 mm off the platform centre and measuring the reaction
   gives the same estimate as one at the centre, aligned (sensor_rotation, sensor_position, sensor_reaction);

@@ -50,7 +50,8 @@ def test_settings_validation_names_the_value() -> None:
                          ({'forgetting': 1.5}, 'forgetting'), ({'dropout_factor': 0.5}, 'dropout_factor'),
                          ({'displacement_gain': 0.0}, 'displacement_gain'), ({'hysteresis': math.nan}, 'hysteresis'),
                          ({'branch_source': 'psychic'}, 'branch_source'), ({'max_abs_force': 0.0}, 'max_abs_force'),
-                         ({'pairing': 'closest'}, 'pairing'), ({'max_interpolation_gap_s': 0.0}, 'max_interpolation_gap_s')]:
+                         ({'pairing': 'closest'}, 'pairing'),
+                         ({'max_interpolation_gap_s': 0.0}, 'max_interpolation_gap_s')]:
         with pytest.raises(ParameterError) as info:
             LiveSettings.from_params(values)
         assert info.value.field == name and repr(values[name]) in str(info.value)
@@ -230,7 +231,8 @@ def test_interpolated_pairing_live_equals_the_vectorised_pairs(pairing) -> None:
     arrival_d = np.maximum.accumulate(t_d + rng.uniform(1e-4, 2e-2, t_d.size))
     settings = LiveSettings(pairing=pairing, max_interpolation_gap_s=2e-3, window=5000, hysteresis=0.05)
     live = LiveStiffness(settings)
-    for _, kind, i in sorted([(a, 0, i) for i, a in enumerate(arrival_f)] + [(a, 1, i) for i, a in enumerate(arrival_d)]):
+    arrivals = [(a, 0, i) for i, a in enumerate(arrival_f)] + [(a, 1, i) for i, a in enumerate(arrival_d)]
+    for _, kind, i in sorted(arrivals):
         if kind == 0:
             live.add_force(t_f[i], _wrench(force[i]), arrival_f[i])
         else:

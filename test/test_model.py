@@ -35,7 +35,8 @@ def random_geometry(rng: np.random.Generator, **extra) -> CraneGeometry:
 
 @pytest.mark.parametrize('seed', range(8))
 def test_eq18_equals_exact_tangent_at_loaded_rest_pose(seed):
-    """docs/physics.md: with h_w from the implicit balance, eq. (18) is the exact tangent at the rest pose, any a, b, W."""
+    """docs/physics.md: with h_w from the implicit balance, eq. (18) is the exact tangent at the rest pose, any a, b,
+    W."""
     g = random_geometry(np.random.default_rng(seed))
     eq = rest_pose(g)
     kt = tangent_stiffness(g, eq)

@@ -334,7 +334,8 @@ def test_an_emulator_serving_late_physics_says_so(rclpy_context, kind):
             Parameter('port', value=0), Parameter('sample_rate_hz', value=1000.0), LIMIT])
         topic, msg_type = topics.APPLIED_WRENCH, WrenchStamped
     else:
-        emu = ModbusEmulator(context=rclpy_context, cli_args=args, parameter_overrides=[Parameter('port', value=0), LIMIT])
+        emu = ModbusEmulator(context=rclpy_context, cli_args=args,
+                             parameter_overrides=[Parameter('port', value=0), LIMIT])
         topic, msg_type = topics.PLATFORM_POSE, PoseStamped
     probe = Probe(rclpy_context, prefix)
     pub = probe.node.create_publisher(msg_type, prefix + topic, RELIABLE_QOS)

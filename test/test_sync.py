@@ -171,7 +171,7 @@ def test_throughput_two_5khz_streams() -> None:
 # ------------------------------------------------------------------------------------------- vectorized --
 def _streaming_pairs(fs, fl, ds, dl, slop, max_age):
     sync = ApproximateTimeSync(slop, max_age=max_age)
-    events = sorted([(l, 0, i) for i, l in enumerate(fl)] + [(l, 1, i) for i, l in enumerate(dl)])
+    events = sorted([(t, 0, i) for i, t in enumerate(fl)] + [(t, 1, i) for i, t in enumerate(dl)])
     out = []
     for _, kind, i in events:
         out += sync.push('force', fs[i], i) if kind == 0 else sync.push('displacement', ds[i], i)

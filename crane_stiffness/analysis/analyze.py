@@ -19,7 +19,8 @@ decode):
    among the problems above ``max_stream_delay_s``.
    Not reproduced offline: fit segments started by a sensor restart (the bag does not record publishers), nor by a
    re-zero or tare (/lvdt/zero, /load_cell/tare are recorded now, but the offline fit is one regression per step
-   over whole streams; a session with a re-zero inside a step mixes the two zero points there). The estimator's parameters
+   over whole streams; a session with a re-zero inside a step mixes the two zero points there). The estimator's
+   parameters
    are those recorded with the session: read from the running node (``crane_stiffness/node_parameters``), else the
    ``stiffness_estimator`` section of its parameter file (:mod:`crane_stiffness.analysis.load`).
 2. **Branches.** Each pair is labelled loading or unloading as the live estimator labels it (hysteresis on |load|,

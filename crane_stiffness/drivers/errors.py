@@ -28,4 +28,5 @@ class DeviceResponseError(DriverError):
 class DeviceBusyError(DeviceResponseError):
     """The device answered "server device busy" (Modbus exception 6): it is there but has no value yet (booting,
     a channel still settling); the standard's advice is to ask again later."""
-__all__ = ['DeviceAddressError', 'DeviceBusyError', 'DeviceResponseError', 'DeviceSilentError', 'DriverError', 'ParameterError', 'ProtocolError']
+__all__ = ['DeviceAddressError', 'DeviceBusyError', 'DeviceResponseError', 'DeviceSilentError', 'DriverError',
+           'ParameterError', 'ProtocolError']

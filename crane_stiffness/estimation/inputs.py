@@ -196,7 +196,8 @@ class CommandSeries:
         stamp, value, arrival, rej = stamp[usable], np.asarray(load, float)[usable], arrival_ns[usable], rej[usable]
         model = np.zeros(stamp.size, np.int8)  # 1: a rejection by the model
         if rejected_stamp_s is not None and rejected_stamp_s.size:
-            r_ok, r_stamp = command_inputs(rejected_stamp_s, rejected_arrival_ns * 1e-9, np.zeros(rejected_stamp_s.size))
+            r_ok, r_stamp = command_inputs(rejected_stamp_s, rejected_arrival_ns * 1e-9,
+                                           np.zeros(rejected_stamp_s.size))
             n = int(r_ok.sum())
             stamp = np.concatenate([stamp, r_stamp[r_ok]])
             value = np.concatenate([value, np.full(n, np.nan)])

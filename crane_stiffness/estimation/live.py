@@ -8,7 +8,8 @@ publishing one:
    ``sensor_reaction``; :class:`~crane_stiffness.estimation.frames.SensorMount`: one row of its 6×6 matrix per
    sample, nothing when the sensor is at the centre, aligned); a displacement sample is a reading in m (or rad), or a
    voltage converted by ``x = displacement_gain · V + displacement_offset``, its stamp corrected to
-   ``t − displacement_delay_s``. :class:`~crane_stiffness.estimation.stream_delay.StreamDelay` estimates the delay left between the streams from the recent
+   ``t − displacement_delay_s``. :class:`~crane_stiffness.estimation.stream_delay.StreamDelay` estimates the delay
+   left between the streams from the recent
    data (:func:`~crane_stiffness.estimation.offset.estimate_delay`) and WARNs above ``max_stream_delay_s``.
    Dropped and counted (:class:`~crane_stiffness.estimation.inputs.InputCounters`): a NaN/Inf anywhere in the
    sample, a zero (or negative) stamp, a stamp more than ``max_clock_skew_s`` ahead of its arrival (node clock), a
@@ -16,7 +17,8 @@ publishing one:
    (:func:`~crane_stiffness.estimation.inputs.input_faults`), and a message its reader could not decode
    (:meth:`LiveStiffness.add_malformed`). Each stream's health (:class:`~crane_stiffness.estimation.inputs.
    StreamHealth`): the fraction of its samples received (WARN above ``max_loss_fraction`` lost) and, given the node
-   clock, silence (longer than ``dropout_factor`` delivery periods and ``min_silence_s``: ERROR, both branches STALE). A sensor publisher
+   clock, silence (longer than ``dropout_factor`` delivery periods and ``min_silence_s``: ERROR, both branches STALE).
+   A sensor publisher
    whose sequence numbers start again (a restart, which zeroes the sensor) starts a new fit segment
    (:meth:`LiveStiffness.new_segment`), and so does a re-zero or tare without a restart: a change of the sensor's
    zero epoch (:meth:`LiveStiffness.zero_epoch`, topics.LVDT_ZERO / LOAD_CELL_TARE).
@@ -47,7 +49,6 @@ each streaming rule (:mod:`~crane_stiffness.estimation.inputs`, :func:`~crane_st
 from __future__ import annotations
 
 import math
-from collections import deque
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, fields
 from typing import Any
@@ -266,7 +267,8 @@ class LiveSettings:
 
     def fit_key(self) -> tuple:
         """The settings whose change restarts pairing and fitting (the others are thresholds)."""
-        return (self.force_axis, self.pairing, self.slop_s, self.max_interpolation_gap_s, self.max_age_s, self.expected_period_s, self.dropout_factor,
+        return (self.force_axis, self.pairing, self.slop_s, self.max_interpolation_gap_s, self.max_age_s,
+                self.expected_period_s, self.dropout_factor,
                 self.window, self.forgetting, self.hysteresis, self.branch_source, self.displacement_gain,
                 self.displacement_offset, self.sensor_rotation, self.sensor_position, self.sensor_reaction,
                 self.displacement_delay_s, self.lever_arm_m)

@@ -1,7 +1,8 @@
 """Compiled kernels of the nonlinear model: net wrench, its Jacobian and damped Newton on SO(3).
 
 This is the single implementation of the platform's force and moment balance (paper eqs. 13–16 as corrected in
-docs/physics.md); everything else (solver front end, tangent stiffness, residual for scipy) calls it. Scalar loops over the
+docs/physics.md); everything else (solver front end, tangent stiffness, residual for scipy) calls it. Scalar loops
+over the
 six wires, compiled with numba when it is installed (about 100× faster than numpy on 6×6 problems, where numpy's
 per-call overhead dominates); without numba the same code runs as plain Python, slower but identical.
 

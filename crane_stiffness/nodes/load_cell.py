@@ -3,7 +3,8 @@
 Subscribes /crane/applied_wrench (WrenchStamped, reliable) = the load crane_model has in force after each command
 (never the raw command: a command the model rejects reaches no sensor), held from its header stamp on. Nothing is
 published before the first applied wrench (crane_model sends the load in force to a reader that joins, so a load
-cell started before crane_model waits for it, says so on /diagnostics and in its log, and starts then). Publishes /load_cell/wrench (WrenchStamped [N, N·m], sensor QoS, frame ``frame_id``) sampled at
+cell started before crane_model waits for it, says so on /diagnostics and in its log, and starts then). Publishes
+/load_cell/wrench (WrenchStamped [N, N·m], sensor QoS, frame ``frame_id``) sampled at
 ``sample_rate_hz`` with noise, bias, drift, cross-talk, quantization and overload saturation; a timer at
 ``publish_rate_hz`` publishes the samples taken since its last tick, each stamped with its own sample instant on the
 grid k/sample_rate_hz of the node clock (like a DAQ delivering buffers; the timer ticks on the grid
@@ -14,7 +15,8 @@ reported on /diagnostics (WARN).
 A re-zero is visible to a consumer: /diagnostics carries the tare ``offset``, ``tare_count`` and
 ``tared_at`` (node-clock stamp of the last tare [ns], 0 = none) and ``started_at`` (the node's start [ns]), so a
 restart or a tare shows as a new start time or a new count. The tare count is also published, latched, on
-/load_cell/tare (std_msgs/Float64, at start and after every tare): the estimator starts a new fit segment on it. Counters: received = used + dropped_non_finite
+/load_cell/tare (std_msgs/Float64, at start and after every tare): the estimator starts a new fit segment on it.
+Counters: received = used + dropped_non_finite
 (applied wrenches); published = samples; waiting_samples = sample instants passed before the first applied wrench.
 """
 from __future__ import annotations

@@ -13,7 +13,8 @@ A re-zero is visible to a consumer: /diagnostics carries ``zero_offset_m`` (wher
 along the axis from the rest pose [m]; a re-zero at another pose steps it), ``zero_count``, ``zeroed_at`` (node-clock
 stamp of the last zero [ns], 0 = none) and ``started_at`` (the node's start [ns]): a restarted LVDT, which zeroes
 itself again, shows a new start time. The zero count is also published, latched, on /lvdt/zero (std_msgs/Float64,
-after every zero, and 0 at start unless ``zero_on_first_pose``): the estimator starts a new fit segment on it. Counters: received = used + dropped_non_finite (poses); published = samples.
+after every zero, and 0 at start unless ``zero_on_first_pose``): the estimator starts a new fit segment on it.
+Counters: received = used + dropped_non_finite (poses); published = samples.
 """
 from __future__ import annotations
 

@@ -128,7 +128,8 @@ class ModbusEmulator(Node):
         if late:
             return WARN, late, pairs
         if self.pose is None:
-            return WARN, f'no platform pose yet on {topics.PLATFORM_POSE}: every read answers "server device busy"', pairs
+            return (WARN, f'no platform pose yet on {topics.PLATFORM_POSE}: every read answers "server device busy"',
+                    pairs)
         return OK, f'serving Modbus TCP on {self.device.host}:{self.device.port}, {self.device.reads} reads', pairs
 
     def close(self) -> None:

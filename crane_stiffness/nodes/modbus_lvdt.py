@@ -9,7 +9,8 @@ stamped at the middle of the request (the DAQ has no clock of its own to stamp w
 each request against the ideal grid: p50, p99, max [µs]; late polls). After a failure the device is asked again
 every ``reconnect_interval_s``. Service ~/zero (std_srvs/Trigger) zeroes on the mean of the last ``zero_samples``
 readings; the number of zeros since start is published, latched, on /lvdt/zero (std_msgs/Float64, at start and
-after every zero) so the estimator starts a new fit segment. At start a wrong address or a silent device stops the node (exit 2) with the reason, after trying for
+after every zero) so the estimator starts a new fit segment. At start a wrong address or a silent device stops the
+node (exit 2) with the reason, after trying for
 ``wait_for_device_s``.
 """
 from __future__ import annotations

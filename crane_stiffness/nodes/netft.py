@@ -90,7 +90,8 @@ def _validate(values: dict[str, Any]) -> dict[str, Any]:
           'publish_rate_hz', values['publish_rate_hz'], '0 (every record) or a rate up to sample_rate_hz')
     check(isinstance(values['frame_id'], str) and values['frame_id'] != '', 'frame_id', values['frame_id'],
           'must be a non-empty string')
-    check(values['tare_mode'] in TARE_MODES, 'tare_mode', values['tare_mode'], f'must be one of {", ".join(TARE_MODES)}')
+    check(values['tare_mode'] in TARE_MODES, 'tare_mode', values['tare_mode'],
+          f'must be one of {", ".join(TARE_MODES)}')
     return values
 
 

@@ -15,7 +15,8 @@ Pairs samples by header stamp, fits loading and unloading branches apart (window
   /stiffness/estimate (DiagnosticArray: one status per branch plus an input status with the counters) and again
   /stiffness/stiffness at ``diagnostics_rate_hz``.
 Inputs are judged at every report: a stream silent for more than ``dropout_factor`` delivery periods (and at least
-``min_silence_s``) makes the input status ERROR and both branches STALE; a stream that lost more than ``max_loss_fraction`` of its samples, or a
+``min_silence_s``) makes the input status ERROR and both branches STALE; a stream that lost more than
+``max_loss_fraction`` of its samples, or a
 rejected command in force, makes them WARN. A sensor publisher whose sequence numbers start again (a restarted
 sensor, which zeroes itself) or a new publisher on a sensor topic starts a new fit segment (the old window is
 dropped), named in every status; so does a re-zero without a restart: a change of the latched zero epoch on
