@@ -11,6 +11,7 @@ part is used. What is inside a chunk (decompression, the CRC check, the vectoris
 from __future__ import annotations
 
 import os
+import threading
 import warnings
 import zlib
 from collections.abc import Collection, Iterator
@@ -65,7 +66,7 @@ class McapFile:
         """Offset of a chunk record cut short by the end of the file (its start is on disk)."""
         self.start_ns: int | None = None
         self.end_ns: int | None = None
-        self._zstd: Any = None
+        self._zstd = threading.local()  # a ZstdDecompressor per thread: one instance is not thread safe
         try:
             self._file: Any = open(self.path, 'rb')
         except FileNotFoundError:
@@ -341,7 +342,8 @@ class McapFile:
 
     # -- chunk contents --
     def chunk_data(self, chunk: ChunkRef) -> np.ndarray | None:
-        """The chunk's uncompressed records as a uint8 array, or None (with a warning) when damaged."""
+        """The chunk's uncompressed records as a uint8 array, or None (with a warning) when damaged. Safe to call
+        from several threads at once (reads with pread, a decompressor per thread)."""
         if chunk.loose:
             return np.frombuffer(self._read_at(chunk.records_offset, chunk.compressed_size), dtype=np.uint8)
         try:
@@ -357,10 +359,11 @@ class McapFile:
                           'skipped')
             return None
         try:
-            if record.compression == 'zstd' and self._zstd is None:
+            zstd = getattr(self._zstd, 'decompressor', None)
+            if record.compression == 'zstd' and zstd is None:
                 import zstandard
-                self._zstd = zstandard.ZstdDecompressor()
-            data = decompress(record.compression, record.data, record.uncompressed_size, self._zstd)
+                zstd = self._zstd.decompressor = zstandard.ZstdDecompressor()
+            data = decompress(record.compression, record.data, record.uncompressed_size, zstd)
         except Exception as exc:  # zstd/lz4 raise their own error types on damaged input
             self._problem(f'chunk at offset {chunk.offset} does not decompress ({exc}); its messages are skipped')
             return None

@@ -20,6 +20,8 @@ from __future__ import annotations
 
 import heapq
 import itertools
+from collections import deque
+from concurrent.futures import ThreadPoolExecutor
 import re
 import warnings
 from collections.abc import Iterable, Iterator, Sequence
@@ -36,6 +38,11 @@ from .errors import BagCorruptError, BagDamageWarning, BagNotFoundError, TopicNo
 from .chunks import ChunkRef
 from .mcapfile import McapFile
 from .metadata import METADATA_FILENAME, ROSBAG2_METADATA, file_in_bag, read_metadata_yaml
+
+
+#: Chunks read and decompressed ahead of the bulk decoder, and the threads doing it (BagReader._read_ahead).
+READ_AHEAD_CHUNKS = 4
+READ_THREADS = 2
 
 
 class RawMessage(NamedTuple):
@@ -278,8 +285,7 @@ class BagReader:
                                            f'handle (supported: {", ".join(SUPPORTED_TYPES)}); use messages()')
             decoders[topic] = decoder
         parts: dict[str, list[dict[str, np.ndarray]]] = {t: [] for t in topics}
-        for mcap_file, chunk, channels in self._chunks(per_file, start_ns, end_ns):
-            data = mcap_file.chunk_data(chunk)
+        for mcap_file, chunk, channels, data in self._read_ahead(self._chunks(per_file, start_ns, end_ns)):
             if data is None:
                 continue
             for cid, found in mcap_file.chunk_messages(chunk, data, channels).items():
@@ -298,7 +304,29 @@ class BagReader:
                 cols = {k: v[valid] for k, v in cols.items()}
                 cols['log_time_ns'] = found.log_time[valid].astype(np.int64)
                 parts[topic].append(cols)
-        return {topic: self._assemble(decoders[topic], parts[topic], start_ns, end_ns) for topic in topics}
+        # Each topic's columns into one structured array: numpy's copies release the GIL, so the big topics (the
+        # two sensor streams) are assembled side by side.
+        with ThreadPoolExecutor(max_workers=READ_THREADS, thread_name_prefix='bag_assemble') as pool:
+            arrays = pool.map(lambda t: self._assemble(decoders[t], parts[t], start_ns, end_ns), topics)
+            return dict(zip(topics, arrays))
+
+    @staticmethod
+    def _read_ahead(refs: Iterator[tuple[McapFile, ChunkRef, dict[int, str]]], ahead: int = READ_AHEAD_CHUNKS
+                    ) -> Iterator[tuple[McapFile, ChunkRef, dict[int, str], np.ndarray | None]]:
+        """``refs`` in order, each with its chunk's data (``McapFile.chunk_data``) read and decompressed up to
+        ``ahead`` chunks in advance on worker threads: pread, zstd/lz4 and the CRC release the GIL, so on two cores
+        decompression overlaps the decoding of the chunk before (a bounded window: an hour's chunks decompressed at
+        once would take gigabytes)."""
+        with ThreadPoolExecutor(max_workers=READ_THREADS, thread_name_prefix='bag_read') as pool:
+            pending: deque = deque()
+            for ref in refs:
+                pending.append((ref, pool.submit(ref[0].chunk_data, ref[1])))
+                if len(pending) > ahead:
+                    done, future = pending.popleft()
+                    yield (*done, future.result())
+            while pending:
+                done, future = pending.popleft()
+                yield (*done, future.result())
 
     @staticmethod
     def _assemble(decoder: Decoder, parts: list[dict[str, np.ndarray]], start_ns: int | None,
