@@ -42,6 +42,7 @@ from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension
 from std_srvs.srv import Trigger
 
 from crane_stiffness import topics
+from crane_stiffness.axes import AXES
 from crane_stiffness.serde import CdrError, decode_float64, decode_stamped, stamp_seconds
 from crane_stiffness.config import ParamSpec
 from crane_stiffness.estimation.branch import BRANCHES
@@ -75,9 +76,11 @@ def _take_queued(subscription) -> tuple[Any, dict] | None:
         return subscription.handle.take_message(subscription.msg_type, subscription.raw)
 
 PARAMS = (
-    ParamSpec('force_axis', _D.force_axis, 'wrench component fitted as the load: fx fy fz [N] or mx my mz [N·m]'),
+    ParamSpec('force_axis', _D.force_axis, 'wrench component fitted as the load: fx fy fz [N] or mx my mz [N·m]',
+              rule='one of ' + ', '.join(AXES)),
     ParamSpec('displacement_type', 'point_stamped', "displacement message: 'point_stamped' (PointStamped, point.x "
-              "in m, header stamp) or 'float64' (Float64 in V, stamped on arrival) [-]"),
+              "in m, header stamp) or 'float64' (Float64 in V, stamped on arrival) [-]",
+              rule='one of ' + ', '.join(DISPLACEMENT_TYPES)),
     ParamSpec('displacement_gain', _D.displacement_gain, 'float64 channel: metres per volt [m/V]'),
     ParamSpec('displacement_offset', _D.displacement_offset, 'float64 channel: metres at 0 V [m]'),
     ParamSpec('lever_arm_m', _D.lever_arm_m, 'moment axis: the LVDT reads the tangential displacement at this '
