@@ -566,7 +566,8 @@ def test_message_definition_rules(tmp_path):
     share.mkdir(parents=True)
     (share / 'Sample.msg').write_text('Header header\nPoint[] points\nstring<=8 tag\nwstring w\nuint8 A=1\n')
     (share / 'Point.msg').write_text('float64 x\n')
-    text = message_definition('rig_msgs/msg/Sample', [tmp_path, Path(os.environ['AMENT_PREFIX_PATH'])])
+    prefixes = [Path(p) for p in os.environ['AMENT_PREFIX_PATH'].split(os.pathsep) if p]  # a sourced ROS adds more
+    text = message_definition('rig_msgs/msg/Sample', [tmp_path, *prefixes])
     headers = [line for line in text.split('\n') if line.startswith('MSG: ')]
     assert headers == ['MSG: rig_msgs/Point', 'MSG: std_msgs/Header', 'MSG: builtin_interfaces/Time']
     assert text.startswith('Header header\n') and f'\n\n{SEPARATOR}\nMSG: rig_msgs/Point\nfloat64 x\n' in text

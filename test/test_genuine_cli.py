@@ -24,7 +24,7 @@ from conftest import spin_until
 from crane_stiffness.param_files import ParamFile
 from crane_stiffness.rig_description import rig_nodes
 from crane_stiffness.testing.rig import Observer, decode_values
-from crane_stiffness.testing.rosrun import installed_config
+from crane_stiffness.testing.rosrun import command, installed_config
 from test_shutdown import UNCLEAN, assert_bag_complete
 
 pytestmark = pytest.mark.genuine_cli
@@ -178,3 +178,33 @@ def test_launch_ros_writes_parameter_dicts_our_reader_reads(install_tree, monkey
                                                       for k, v in start.parameters.items()}, path.read_text()
             finally:
                 path.unlink()
+
+
+def test_ros2_run_a_node_and_ctrl_c(install_tree, tmp_path):
+    """`ros2 run crane_stiffness crane_model --ros-args --params-file .../crane_lab.yaml` (docs/running.md), then
+    Ctrl-C in its terminal: the node says what it runs, then ends with its counters, and `ros2 run` exits 0."""
+    install, env = install_tree
+    argv = command('crane_stiffness', 'crane_model',
+                   ['--ros-args', '--params-file', str(installed_config(install) / 'crane_lab.yaml')],
+                   env, use_ros2_cli=True)
+    assert argv[:2] == ['ros2', 'run']
+    log = tmp_path / 'run.log'
+    with open(log, 'w') as out:
+        proc = subprocess.Popen(argv, env=env, cwd=tmp_path, stdout=out, stderr=subprocess.STDOUT,
+                                stdin=subprocess.DEVNULL, process_group=0)
+    try:
+        deadline = time.monotonic() + 60
+        while 'geometry: a = ' not in log.read_text():
+            assert proc.poll() is None and time.monotonic() < deadline, log.read_text()[-3000:]
+            time.sleep(0.1)
+        os.killpg(proc.pid, signal.SIGINT)
+        code = proc.wait(30)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    text = log.read_text()
+    assert code == 0, text[-3000:]
+    assert 'FINAL_COUNTERS crane_model' in text, text[-3000:]
+    for sign in UNCLEAN:
+        assert sign not in text, text[-3000:]

@@ -1,15 +1,17 @@
 """Start nodes the way ``ros2 run`` does, with or without the ros2 CLI installed.
 
 ``ros2 run PKG EXE`` finds PKG's prefix through the ament index (the first prefix in AMENT_PREFIX_PATH holding
-``share/ament_index/resource_index/packages/PKG``) and executes ``<prefix>/lib/PKG/EXE``. :func:`command` uses the
-real ``ros2`` when it is on PATH and otherwise performs exactly that look-up, so the demo and the tests start every
-node from the colcon install tree in the same way. ``python -m crane_stiffness.testing.rosrun PKG EXE [args]`` is the
-command-line form. :class:`Processes` runs a set of such nodes and stops them cleanly.
+``share/ament_index/resource_index/packages/PKG``) and executes ``<prefix>/lib/PKG/EXE``. :func:`command` performs
+exactly that look-up and runs the executable itself, as ``ros2 launch`` does (launch starts a node's executable, not
+``ros2 run``), so the demo and the tests start every node from the colcon install tree the same way with or without
+a ROS install, and the signals they send reach the node, not a wrapper (the genuine ``ros2 run`` dies at once on
+SIGTERM, leaving its node to end on its own). ``use_ros2_cli=True`` runs the genuine ``ros2 run`` instead.
+``python -m crane_stiffness.testing.rosrun PKG EXE [args]`` is the command-line form. :class:`Processes` runs a set
+of such nodes and stops them cleanly.
 """
 from __future__ import annotations
 
 import os
-import shutil
 import signal
 import subprocess
 import sys
@@ -44,10 +46,9 @@ def executable_path(package: str, executable: str, ament_prefix_path: str | None
 
 
 def command(package: str, executable: str, args: Sequence[str] = (), env: Mapping[str, str] | None = None,
-            use_ros2_cli: bool | None = None) -> list[str]:
-    """argv that runs a node like ``ros2 run package executable args...``."""
-    if use_ros2_cli is None:
-        use_ros2_cli = shutil.which('ros2', path=(env or os.environ).get('PATH')) is not None
+            use_ros2_cli: bool = False) -> list[str]:
+    """argv that runs a node like ``ros2 run package executable args...``: the executable itself, or with
+    ``use_ros2_cli`` the genuine ``ros2 run`` (which must be on PATH)."""
     if use_ros2_cli:
         return ['ros2', 'run', package, executable, *args]
     apath = (env or os.environ).get('AMENT_PREFIX_PATH', '')
