@@ -40,8 +40,10 @@ class _Record:
 class ChunkIndexSpool:
     """A list of chunk indexes that lives in a temporary file: ``append`` serialises, iteration reads back."""
 
-    def __init__(self) -> None:
-        self._file = tempfile.TemporaryFile(prefix='crane_stiffness_chunk_index_')
+    def __init__(self, directory: str | None = None) -> None:
+        """``directory``: where the unnamed file lives (the bag's own directory: the same disk, so a full disk is
+        the recording's write error, not a surprise elsewhere); None = the system's temporary directory."""
+        self._file = tempfile.TemporaryFile(prefix='.chunk_index_', dir=directory)
         self._builder = RecordBuilder()
         self._count = 0
 
@@ -66,12 +68,13 @@ class ChunkIndexSpool:
         self._file.close()
 
 
-def spool_chunk_indexes(writer: Any) -> ChunkIndexSpool | None:
+def spool_chunk_indexes(writer: Any, directory: str | None = None) -> ChunkIndexSpool | None:
     """Replace ``writer``'s in-memory chunk index list (an ``mcap.writer.Writer`` before ``start()``) by a
-    :class:`ChunkIndexSpool`; None (nothing changed) if this version of the library keeps them elsewhere."""
+    :class:`ChunkIndexSpool` in ``directory``; None (nothing changed) if this version of the library keeps them
+    elsewhere."""
     current = getattr(writer, _WRITER_ATTRIBUTE, None)
     if not isinstance(current, list) or current:
         return None
-    spool = ChunkIndexSpool()
+    spool = ChunkIndexSpool(directory)
     setattr(writer, _WRITER_ATTRIBUTE, spool)
     return spool

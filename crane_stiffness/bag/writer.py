@@ -462,7 +462,7 @@ class BagWriter:
         mcap = McapWriter(stream, chunk_size=self.chunk_size, compression=COMPRESSIONS[self.compression],
                           enable_crcs=True)
         # Chunk indexes on disk until the summary: the library's list grows ~15 MB per hour of 0.5 s chunks.
-        opened = _OpenFile(stats=stats, stream=stream, mcap=mcap, index_spool=spool_chunk_indexes(mcap))
+        opened = _OpenFile(stats=stats, stream=stream, mcap=mcap, index_spool=spool_chunk_indexes(mcap, str(self.path)))
         self._files.append(stats)
         self._file = opened  # before the first write, so that a write error finds the file to cut
         mcap.start(profile='ros2', library=LIBRARY)
