@@ -263,7 +263,10 @@ def test_known_stiffness_interval_prediction_outputs_and_reset(rclpy_context):
     counters = estimator.core.counters
     assert counters.dropped == 0 and estimator.core.sync_counters.total('out_of_order') == 0
     assert counters.pairs_fitted >= rig.sent - 2
-    # The DiagnosticArray for people: one status per branch plus the input status.
+    # The DiagnosticArray for people: one status per branch plus the input status. The rig has stopped: its
+    # newest report is the one after the estimator noticed the silence (min_silence_s after the last sample; on a
+    # loaded machine that report comes late, so wait for it, up to 5 s).
+    spin_until(ex, lambda: probe.estimates[-1].status[0].level == b'\x03', 5.0)
     last = probe.estimates[-1]
     assert [s.name for s in last.status] == [f'/{name}: loading', f'/{name}: unloading', f'/{name}: input']
     kv = {k.key: k.value for k in last.status[0].values}
