@@ -65,7 +65,10 @@ class ChunkIndexSpool:
         self._file.seek(0, 2)  # appends go on at the end
 
     def close(self) -> None:
-        self._file.close()
+        try:
+            self._file.close()
+        except OSError:  # its unflushed bytes on a full disk: the file is being discarded, nothing is lost
+            pass
 
 
 def spool_chunk_indexes(writer: Any, directory: str | None = None) -> ChunkIndexSpool | None:
