@@ -26,7 +26,11 @@ $(STAMP): requirements.txt requirements-test.txt $(SOURCES)
 	$(BIN)/python -m pip install --quiet --disable-pip-version-check -r requirements-test.txt
 	@# setuptools reuses build/lib: a module moved or deleted in the tree would stay installed from it.
 	rm -rf build/lib build/bdist.* crane_stiffness.egg-info
-	$(BIN)/python -m pip install --quiet --disable-pip-version-check --no-deps --force-reinstall .
+	@# As a wheel, with the venv's pinned setuptools and wheel: the console script and the node executables go to
+	@# .venv/bin with any pip (pip < 23.1 would otherwise run the legacy `setup.py install`, which follows setup.cfg's
+	@# colcon layout and puts them in .venv/lib/crane_stiffness).
+	$(BIN)/python -m pip install --quiet --disable-pip-version-check --use-pep517 --no-build-isolation --no-deps \
+		--force-reinstall .
 	@# Compile the model's numba kernels into their cache beside the installed modules (numba keys it by the
 	@# installed files' times): no node or CLI call compiles them at run time (colcon does this in setup.py).
 	cd $(VENV) && bin/python -m crane_stiffness.model.kernel_cache
