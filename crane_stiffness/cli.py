@@ -16,7 +16,9 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from crane_stiffness.config import ConfigError, config_path, geometry_from_params, load_params
+from crane_stiffness.params.errors import ConfigError
+from crane_stiffness.params.files import config_path, load_params
+from crane_stiffness.params.geometry import GEOMETRY_PARAMS, PREFIX, geometry_from_params, geometry_to_params
 from crane_stiffness.errors import CraneStiffnessError
 from crane_stiffness.model import (AXES, WIRE_NAMES, ConvergenceError, CraneGeometry, GeometryError,
                                    NoEquilibriumError, axis_stiffness, paper_coefficients,
@@ -34,27 +36,29 @@ class UsageError(CraneStiffnessError):
 
 # --- argument groups -------------------------------------------------------------------------------------------
 
+#: Short flags kept for geometry parameters (the long form, --com-offset, works too).
+_FLAG_ALIASES = {'com_offset': '--com'}
+
+
 def _add_geometry(p: argparse.ArgumentParser) -> None:
+    """--config, --lab-model, --l0 and one flag per geometry parameter (params.geometry: its description, rule and
+    unit), e.g. ``geometry.wire_stiffness`` is ``--wire-stiffness``."""
     g = p.add_argument_group('geometry (SI units; flags override --config)')
     g.add_argument('--config', metavar='FILE', help='ROS parameter YAML with geometry.* parameters '
                    '(a path, or a name in the installed config/, e.g. crane_lab)')
     g.add_argument('--node', default=None, help='section of --config to read (default: all sections, /** first)')
     g.add_argument('--lab-model', action='store_true',
                    help="the paper's lab model: a = b = 0.1143 m, d = 1.08 mm, E = 206,831 MPa")
-    g.add_argument('--a', type=float, help='half side of the platform triangle [m]')
-    g.add_argument('--b', type=float, help='half side of the overhead triangle [m]')
-    g.add_argument('--height', type=float, help='unloaded height between the triangles [m]')
+    for spec in GEOMETRY_PARAMS:
+        name = spec.name[len(PREFIX):]
+        flags = ['--' + name.replace('_', '-')] + ([_FLAG_ALIASES[name]] if name in _FLAG_ALIASES else [])
+        rule = spec.rule_text()
+        help_text = spec.description + (f' ({rule})' if rule else '')
+        if isinstance(spec.default, list):
+            g.add_argument(*flags, dest=name, type=float, nargs=len(spec.default), metavar='V', help=help_text)
+        else:
+            g.add_argument(*flags, dest=name, type=float, help=help_text)
     g.add_argument('--l0', type=float, help='unstretched wire length instead of --height [m]')
-    g.add_argument('--weight', type=float, help='suspended weight W [N]')
-    g.add_argument('--wire-stiffness', type=float, help='wire stiffness k [N/m]')
-    g.add_argument('--wire-diameter', type=float, help='wire diameter d [m] (with --youngs-modulus)')
-    g.add_argument('--youngs-modulus', type=float, help="wire Young's modulus E [Pa]")
-    g.add_argument('--com', type=float, nargs=3, metavar=('X', 'Y', 'Z'),
-                   help='centre of mass offset, body frame [m]')
-    g.add_argument('--load-point', type=float, nargs=3, metavar=('X', 'Y', 'Z'),
-                   help='external force application point, body frame [m]')
-    g.add_argument('--length-offsets', type=float, nargs=6, metavar='D',
-                   help='unstretched length change of wires 1..6 [m]')
 
 
 def _add_load(p: argparse.ArgumentParser) -> None:
@@ -66,37 +70,34 @@ def _add_load(p: argparse.ArgumentParser) -> None:
 
 
 def geometry_from_args(args: argparse.Namespace) -> CraneGeometry:
-    """The geometry the flags and --config describe. Raises GeometryError / ConfigError naming the bad value."""
-    values: dict[str, Any] = {}
+    """The geometry the flags and --config describe, read as geometry parameters (params.geometry: the one reading of
+    ``wire_stiffness`` 0). A flag beats --config; --wire-stiffness beats a diameter and modulus from --config, and
+    --wire-diameter / --youngs-modulus beat a stiffness from it. Raises GeometryError / ConfigError / UsageError
+    naming the bad value."""
+    params: dict[str, Any] = {}
     if args.config:
-        params = load_params(config_path(args.config), args.node)
-        values = geometry_from_params(params).to_dict()
+        # every geometry parameter, those the file does not set at their defaults
+        params = geometry_to_params(geometry_from_params(load_params(config_path(args.config), args.node)))
     if args.lab_model:
-        values.update(lab_model_fields())
-        values['wire_stiffness'] = None
-    flags = {'a': args.a, 'b': args.b, 'height': args.height, 'weight': args.weight,
-             'wire_stiffness': args.wire_stiffness, 'wire_diameter': args.wire_diameter,
-             'youngs_modulus': args.youngs_modulus, 'com_offset': args.com, 'load_point': args.load_point,
-             'length_offsets': args.length_offsets}
-    given = {k: v for k, v in flags.items() if v is not None}
-    if 'wire_stiffness' in given:
-        values.pop('wire_diameter', None)
-        values.pop('youngs_modulus', None)
-    elif 'wire_diameter' in given or 'youngs_modulus' in given:
-        values['wire_stiffness'] = None
-    values.update(given)
+        params.update({PREFIX + k: v for k, v in lab_model_fields().items()})
+        params[PREFIX + 'wire_stiffness'] = 0.0
+    given = {spec.name: getattr(args, spec.name[len(PREFIX):]) for spec in GEOMETRY_PARAMS}
+    given = {k: v for k, v in given.items() if v is not None}
+    if PREFIX + 'wire_stiffness' not in given and (PREFIX + 'wire_diameter' in given or
+                                                   PREFIX + 'youngs_modulus' in given):
+        given[PREFIX + 'wire_stiffness'] = 0.0  # k from the diameter and modulus given
+    params.update(given)
     if args.l0 is not None:
         if args.height is not None:
             raise UsageError('give --height or --l0, not both')
-        values.pop('height', None)
-        values['l0'] = args.l0
-    values = {k: v for k, v in values.items() if v is not None}
+        params.pop(PREFIX + 'height', None)
+        params[PREFIX + 'l0'] = args.l0
     for name in ('a', 'b', 'weight'):
-        if name not in values:
+        if PREFIX + name not in params:
             raise UsageError(f'--{name} is required (or --config FILE / --lab-model)')
-    if 'height' not in values and 'l0' not in values:
+    if PREFIX + 'height' not in params and PREFIX + 'l0' not in params:
         raise UsageError('--height (or --l0) is required, or --config FILE')
-    return CraneGeometry.from_dict(values)
+    return geometry_from_params(params)
 
 
 # --- output ----------------------------------------------------------------------------------------------------

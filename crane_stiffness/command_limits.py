@@ -1,6 +1,6 @@
 """The absurd-command rule, shared by the crane model (which rejects such a command) and the stiffness estimator
 (which excludes the time it was in force from the fit): ONE module, the streaming and the vectorised form side by
-side, pinned together by ``test/test_commands.py``.
+side, pinned together by ``test/test_command_limits.py``.
 
 A command is a wrench [fx, fy, fz, mx, my, mz] on the platform, frame ``crane_base`` (z down), in N and N·m. It is
 absurd when a component is not finite (NaN, ±inf) or a force component exceeds ``max_abs_force`` [N] or a moment

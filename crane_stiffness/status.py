@@ -7,4 +7,11 @@ OK, WARN, ERROR, STALE = 0, 1, 2, 3
 #: The levels by name, for people.
 NAMES = {OK: 'OK', WARN: 'WARN', ERROR: 'ERROR', STALE: 'STALE'}
 
-__all__ = ['ERROR', 'NAMES', 'OK', 'STALE', 'WARN']
+
+
+def status_value(value: float) -> str:
+    """A number as a status's key/value string (6 significant digits; 'nan' for no value)."""
+    return f'{value:.6g}'
+
+
+__all__ = ['ERROR', 'NAMES', 'OK', 'STALE', 'WARN', 'status_value']

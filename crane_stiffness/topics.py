@@ -14,6 +14,8 @@ WRENCH_COMMAND = '/crane/wrench_command'
 # crane_base, reliable, stamped with that command's stamp: the command itself when accepted, the previous load when
 # the model rejected it. The simulated sensors apply this, never the raw command.
 APPLIED_WRENCH = '/crane/applied_wrench'
+#: What a simulated force sensor (and its device emulator) waits for before it measures anything.
+WAITING_FOR_LOAD = f'waiting for {APPLIED_WRENCH} (the load crane_model has in force)'
 # Every command the model rejected (absurd, or no equilibrium), republished unchanged (its stamp too), reliable;
 # the reason is on MODEL_STATUS and /diagnostics. The estimator excludes the time such a command was in force.
 REJECTED_COMMAND = '/crane/rejected_command'
@@ -99,7 +101,7 @@ RELIABLE = QoS('reliable', 'volatile', 1000)
 LATCHED = QoS('reliable', 'transient_local', 1)
 
 #: The QoS of every topic of the contract, the one table the rest is built from: the nodes' rclpy profiles
-#: (crane_stiffness.nodes.common), the recorder's and player's QoS (crane_stiffness.nodes.session_qos) and the
+#: (crane_stiffness.nodes.run), the recorder's and player's QoS (crane_stiffness.nodes.session_qos) and the
 #: offered QoS a synthetic session records (crane_stiffness.testing.synthetic).
 TOPIC_QOS: dict[str, QoS] = {
     WRENCH_COMMAND: RELIABLE,

@@ -30,7 +30,7 @@ from conftest import call_trigger, spin_until
 from crane_stiffness.bag import BagPathError, BagReader, BagWriter, UnsupportedTypeError
 from crane_stiffness.bag.msgdef import interface_prefix
 from crane_stiffness.cli import main as cli_main
-from crane_stiffness.nodes.common import SENSOR_QOS
+from crane_stiffness.nodes.qos import SENSOR_QOS
 from crane_stiffness.nodes.session_player import SessionPlayer
 from crane_stiffness.nodes.session_qos import message_class
 from crane_stiffness.testing import rosrun

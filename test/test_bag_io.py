@@ -32,7 +32,7 @@ from crane_stiffness.bag import (  # noqa: E402
     McapFile, TopicNotFoundError, UnsupportedTypeError, dump_qos_profiles, qos_profile, recover_bag,
 )
 from crane_stiffness.bag.msgdef import SEPARATOR, message_definition, type_description_hash  # noqa: E402
-from crane_stiffness.session import SESSION_METADATA, read_session, session_metadata  # noqa: E402
+from crane_stiffness.session_record import SESSION_METADATA, read_session, session_metadata  # noqa: E402
 
 rclpy_serialization = pytest.importorskip('rclpy.serialization')
 from builtin_interfaces.msg import Time  # noqa: E402

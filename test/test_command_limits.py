@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from crane_stiffness.commands import CommandLimits, command_fault, command_faults
+from crane_stiffness.command_limits import CommandLimits, command_fault, command_faults
 from crane_stiffness.errors import FieldError
 
 

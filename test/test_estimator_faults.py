@@ -17,9 +17,10 @@ from rclpy.parameter import Parameter
 from conftest import call_trigger as call
 from conftest import spin_until
 from crane_stiffness import topics
-from crane_stiffness.estimation.live import VALUE_FIELDS, LiveSettings, LiveStiffness
+from crane_stiffness.estimation.live import VALUE_FIELDS, LiveStiffness
+from crane_stiffness.estimation.settings import LiveSettings
 from crane_stiffness.estimation.sync import DISPLACEMENT, FORCE
-from crane_stiffness.nodes.common import RELIABLE_QOS, SENSOR_QOS
+from crane_stiffness.nodes.qos import RELIABLE_QOS, SENSOR_QOS
 from crane_stiffness.nodes.stiffness_estimator import StiffnessEstimatorNode
 from crane_stiffness.status import ERROR, OK, STALE, WARN
 from test_estimator_node import (C, K, NS, Probe, SyntheticRig, isolated, row, run_in_own_process, run_program,
@@ -244,7 +245,7 @@ def test_absurd_command_at_a_hold_reproduced_on_the_core() -> None:
 
 
 def test_rejected_and_absurd_commands_excluded_over_dds(rclpy_context):
-    """An absurd command (the estimator's own check, shared with the model: crane_stiffness.commands) and a command
+    """An absurd command (the estimator's own check, shared with the model: command_limits) and a command
     the model rejected (/crane/rejected_command) each hold for 0.12 s while the load cell shows a wrong load."""
     commands: list[tuple[int, bool]] = []  # (stamp ns, rejected) of every command, in order of publication
     samples: list[int] = []
@@ -361,7 +362,7 @@ def test_analyze_agrees_with_the_live_estimator_on_a_bag_with_these_faults(tmp_p
     from crane_stiffness.analysis.analyze import analyze_session
     from crane_stiffness.bag import BagWriter
     from crane_stiffness.serde import encode_float64_multiarray, encode_stamped, stamp_seconds
-    from crane_stiffness.session import SESSION_METADATA, session_metadata
+    from crane_stiffness.session_record import SESSION_METADATA, session_metadata
     from crane_stiffness.testing.synthetic import offered_qos
 
     rng = np.random.default_rng(7)

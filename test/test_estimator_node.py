@@ -28,9 +28,9 @@ from std_msgs.msg import Float64, Float64MultiArray  # noqa: E402
 from conftest import call_trigger as call  # noqa: E402
 from conftest import spin_until  # noqa: E402
 from crane_stiffness import topics  # noqa: E402
-from crane_stiffness.config import load_params  # noqa: E402
+from crane_stiffness.params.files import load_params  # noqa: E402
 from crane_stiffness.nodes import stiffness_estimator  # noqa: E402
-from crane_stiffness.nodes.common import LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS  # noqa: E402
+from crane_stiffness.nodes.qos import LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS  # noqa: E402
 from crane_stiffness.nodes.stiffness_estimator import VALUE_FIELDS, StiffnessEstimatorNode  # noqa: E402
 from crane_stiffness.sim.sampling import SampleClock  # noqa: E402
 

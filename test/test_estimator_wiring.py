@@ -19,7 +19,7 @@ from rclpy.parameter import Parameter
 
 from conftest import spin_until
 from crane_stiffness.analysis.analyze import analyze_session
-from crane_stiffness.estimation.live import LiveSettings
+from crane_stiffness.estimation.settings import LiveSettings
 from crane_stiffness.nodes.stiffness_estimator import StiffnessEstimatorNode
 from crane_stiffness.sim.program import LoadProgram, Segment
 from crane_stiffness.testing.synthetic import write_synthetic_session

@@ -21,7 +21,7 @@ import pytest
 from rclpy.executors import SingleThreadedExecutor
 
 from conftest import spin_until
-from crane_stiffness.param_files import ParamFile
+from crane_stiffness.params.files import ParamFile
 from crane_stiffness.rig_description import rig_nodes
 from crane_stiffness.testing.rig import Observer, decode_values
 from crane_stiffness.testing.rosrun import command, installed_config
@@ -153,7 +153,7 @@ def test_ctrl_c_during_start_up_ends_every_node_cleanly(install_tree, tmp_path, 
 
 def test_launch_ros_writes_parameter_dicts_our_reader_reads(install_tree, monkeypatch, tmp_path):
     """The real round trip: launch_ros's own code turns each parameter dict of the launch file into its temporary
-    params file; every node's reader (crane_stiffness.param_files) reads back the values given."""
+    params file; every node's reader (crane_stiffness.params.files) reads back the values given."""
     from launch import LaunchContext
     from launch_ros.actions import Node
 

@@ -9,7 +9,8 @@ import pytest
 
 from crane_stiffness.estimation.inputs import (INPUT_CHECKS, CommandHold, CommandSeries, checked_samples,
                                                command_inputs, input_faults)
-from crane_stiffness.estimation.live import LiveSettings, LiveStiffness
+from crane_stiffness.estimation.settings import LiveSettings
+from crane_stiffness.estimation.live import LiveStiffness
 
 
 def _samples(rng: np.random.Generator, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -96,9 +97,9 @@ def test_volts_convert_alike_one_by_one_and_in_bulk() -> None:
 
 
 def test_rejected_commands_held_alike_live_and_vectorized() -> None:
-    """Absurd commands (crane_stiffness.commands) and the model's rejections are held as rejected until the next
+    """Absurd commands (crane_stiffness.command_limits) and the model's rejections are held as rejected until the next
     accepted command, one by one and in bulk; a rejection of equal stamp wins over its command."""
-    from crane_stiffness.commands import command_faults
+    from crane_stiffness.command_limits import command_faults
     rng = np.random.default_rng(8)
     n = 400
     stamp = 10.0 + np.arange(n) * 0.01

@@ -19,7 +19,7 @@ from crane_stiffness import topics
 from crane_stiffness.rig_description import rig_nodes
 from crane_stiffness.testing import rosrun
 from crane_stiffness.testing.rig import start_node
-from crane_stiffness.nodes.common import RELIABLE_QOS
+from crane_stiffness.nodes.qos import RELIABLE_QOS
 
 # The node executables setup.py declares (read, not imported: importing it would run setup()).
 NODES = next(ast.literal_eval(n.value) for n in ast.parse((REPO / 'setup.py').read_text()).body

@@ -20,7 +20,8 @@ import yaml
 from crane_stiffness.testing import rosrun
 from crane_stiffness.testing.lab import LabNetwork, LabNetworkError, NamespacedProcesses, start_rig_with
 from crane_stiffness.testing.rig import decode_values
-from crane_stiffness.config import geometry_from_params, load_params
+from crane_stiffness.params.geometry import geometry_from_params
+from crane_stiffness.params.files import load_params
 from crane_stiffness.model import axis_stiffness, rest_pose, tangent_stiffness
 from crane_stiffness.rig_description import rig_nodes
 

@@ -2,7 +2,7 @@
 
 launch_ros writes each parameter dict of a ``Node(parameters=[...])`` to a temporary ``--params-file`` with
 ``yaml.dump`` (sequences become tuples first, dumped as ``!!python/tuple``); every node reads its parameter files
-with crane_stiffness.param_files. Pure Python: PyYAML and our reader, for every argument set the README shows. The
+with crane_stiffness.params.files. Pure Python: PyYAML and our reader, for every argument set the README shows. The
 real round trip through launch_ros and the genuine ``ros2 launch`` are in test_genuine_cli.py.
 """
 from __future__ import annotations
@@ -13,7 +13,7 @@ import pytest
 import yaml
 
 from conftest import REPO
-from crane_stiffness.param_files import ParamFile, load_yaml
+from crane_stiffness.params.files import ParamFile, load_yaml
 from crane_stiffness.rig_description import ARGUMENTS, RigError, rig_nodes
 
 CONFIG = REPO / 'config'

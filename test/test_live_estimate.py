@@ -9,7 +9,9 @@ import pytest
 from crane_stiffness.estimation.branch import BranchTracker
 from crane_stiffness.estimation.errors import ParameterError
 from crane_stiffness.estimation.fit import fit_line
-from crane_stiffness.estimation.live import VALUE_FIELDS, LagHistogram, LiveSettings, LiveStiffness
+from crane_stiffness.estimation.live import VALUE_FIELDS, LiveStiffness
+from crane_stiffness.estimation.lag import LagHistogram
+from crane_stiffness.estimation.settings import LiveSettings
 from crane_stiffness.status import OK, STALE, WARN
 
 K = 2000.0      # N/m
@@ -217,7 +219,7 @@ def test_interpolated_pairing_live_equals_the_vectorised_pairs(pairing) -> None:
     pairs live_pairs finds (the slow stream's samples, the fast one interpolated), to the last bit of the fit;
     every message is accounted for."""
     from crane_stiffness.estimation.inputs import Samples
-    from crane_stiffness.estimation.live import live_pairs
+    from crane_stiffness.estimation.live_pairs import live_pairs
 
     rng = np.random.default_rng(9)
     fast_force = pairing == 'interpolate_force'

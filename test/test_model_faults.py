@@ -27,7 +27,7 @@ from conftest import publish_wrench_now, call_trigger as call
 from conftest import spin_until
 from crane_stiffness import topics
 from crane_stiffness.drivers import rdt
-from crane_stiffness.nodes.common import LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS
+from crane_stiffness.nodes.qos import LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS
 from crane_stiffness.nodes.crane_model import CraneModel
 from crane_stiffness.nodes.load_cell import LoadCell
 from crane_stiffness.nodes.lvdt import Lvdt

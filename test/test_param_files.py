@@ -5,8 +5,9 @@ from pathlib import Path
 
 import pytest
 
-from crane_stiffness.config import ConfigError, load_params
-from crane_stiffness.param_files import (NodeSections, applicable_sections, params_files_from_args,
+from crane_stiffness.params.errors import ConfigError
+from crane_stiffness.params.files import load_params
+from crane_stiffness.params.files import (NodeSections, applicable_sections, params_files_from_args,
                                          read_params_files, section_applies)
 from crane_stiffness.sim.program import load_program_file
 

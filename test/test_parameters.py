@@ -248,7 +248,7 @@ def test_the_shared_config_files_hold_only_keys_some_node_knows():
     for nodes that do not declare it) and names the closest key for a misspelt one."""
     import importlib
 
-    from crane_stiffness.config import share_dir
+    from crane_stiffness.params.files import share_dir
     from crane_stiffness.nodes.parameters import NODE_MODULES, RCLPY_PARAMS, check_params_files
     files = sorted(str(p) for p in (share_dir() / 'config').glob('*.yaml'))
     assert files

@@ -26,7 +26,7 @@ from crane_stiffness import topics
 from crane_stiffness.analysis.analyze import analyze_session
 from crane_stiffness.bag import BagReader, BagWriter, dump_qos_profiles, qos_profile
 from crane_stiffness.estimation.live import VALUE_FIELDS
-from crane_stiffness.nodes.common import LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS
+from crane_stiffness.nodes.qos import LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS
 from crane_stiffness.nodes.crane_model import CraneModel
 from crane_stiffness.nodes.load_cell import LoadCell
 from crane_stiffness.nodes.load_program import LoadProgramNode
@@ -35,7 +35,7 @@ from crane_stiffness.nodes.session_player import SessionPlayer
 from crane_stiffness.nodes.session_recorder import SessionRecorder
 from crane_stiffness.nodes.stiffness_estimator import StiffnessEstimatorNode
 from crane_stiffness.serde import decode_float64_multiarray
-from crane_stiffness.session import NODE_PARAMETERS_METADATA
+from crane_stiffness.session_record import NODE_PARAMETERS_METADATA
 
 NS = 1_000_000_000
 T0 = 1_700_000_000 * NS
@@ -184,7 +184,7 @@ def test_clock_loop_and_exit_on_end(rclpy_context, small_bag):
     assert player.stats['loops'] >= 2 and player.stop() and player.state == 'stopped'
     ex.remove_node(player)
     player.destroy_node()
-    # exit_on_end: the node asks to end (exit_requested, read by common.run's spin loop, as the other nodes do)
+    # exit_on_end: the node asks to end (exit_requested, read by run.run's spin loop, as the other nodes do)
     # with exit status 0 once the bag has been played; a process exits with it (test_shutdown.py)
     player = SessionPlayer(context=ctx, parameter_overrides=[
         Parameter('bag', value=str(small_bag)), Parameter('rate', value=10.0), Parameter('start_delay_s', value=0.1)])

@@ -102,7 +102,8 @@ def test_paper_programs_load_and_fit_the_demo() -> None:
 
 def test_linear_programs_keep_every_wire_taut_on_the_lab_rig_and_the_slack_program_does_not() -> None:
     """The paper's series test the linear range; Fig. 9's slack behaviour has its own program."""
-    from crane_stiffness.config import geometry_from_params, load_params
+    from crane_stiffness.params.geometry import geometry_from_params
+    from crane_stiffness.params.files import load_params
     from crane_stiffness.model import solve_path
 
     g = geometry_from_params(load_params(CONFIG / 'crane_lab.yaml'))

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from crane_stiffness.estimation.errors import ParameterError
-from crane_stiffness.estimation.live import LiveSettings, LiveStiffness
+from crane_stiffness.estimation.settings import LiveSettings
+from crane_stiffness.estimation.live import LiveStiffness
 from crane_stiffness.estimation.quality import (CommandRange, axis_problem, fit_problems, moved_axes, noise_std,
                                                 scatter_ratio)
 from crane_stiffness.status import OK, WARN

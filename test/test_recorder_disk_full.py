@@ -30,7 +30,7 @@ from conftest import call_trigger, spin_until
 from crane_stiffness import topics
 from crane_stiffness.bag import BagDamageWarning, BagReader
 from crane_stiffness.cli import main as cli_main
-from crane_stiffness.nodes.common import RELIABLE_QOS
+from crane_stiffness.nodes.qos import RELIABLE_QOS
 from crane_stiffness.testing import rosrun
 
 NS = 1_000_000_000

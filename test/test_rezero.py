@@ -14,7 +14,7 @@ from conftest import spin_until
 from crane_stiffness import topics
 from crane_stiffness.estimation.live import LiveStiffness
 from crane_stiffness.estimation.sync import DISPLACEMENT, FORCE
-from crane_stiffness.nodes.common import LATCHED_QOS
+from crane_stiffness.nodes.qos import LATCHED_QOS
 from crane_stiffness.nodes.stiffness_estimator import StiffnessEstimatorNode
 from test_estimator_faults import identity, statuses
 from test_estimator_node import C, K, Probe, SyntheticRig, isolated, setup

@@ -24,10 +24,10 @@ from rclpy.parameter import Parameter  # noqa: E402
 from conftest import publish_wrench_now, call_trigger as call  # noqa: E402
 from conftest import spin_until  # noqa: E402
 from crane_stiffness import topics  # noqa: E402
-from crane_stiffness.config import load_params  # noqa: E402
+from crane_stiffness.params.files import load_params  # noqa: E402
 from crane_stiffness.model.rotation import euler_zxy_to_matrix, matrix_to_quaternion  # noqa: E402
 from crane_stiffness.nodes import load_cell, lvdt  # noqa: E402
-from crane_stiffness.nodes.common import LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS  # noqa: E402
+from crane_stiffness.nodes.qos import LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS  # noqa: E402
 from std_msgs.msg import Float64  # noqa: E402
 
 _ids = itertools.count()
@@ -360,7 +360,8 @@ def test_grid_timer_ticks_fall_on_multiples_of_the_period(rclpy_context):
     Not a timing bound: a free-running timer's phase is uniform over the period (median ~ half of it); on the grid
     it is the dispatch delay, a small fraction even on a loaded machine.
     """
-    from crane_stiffness.nodes.common import create_grid_timer, make_executor
+    from crane_stiffness.nodes.sensor_timing import create_grid_timer
+    from crane_stiffness.nodes.run import make_executor
     node = Node(f'grid_{os.getpid()}_{next(_ids)}', context=rclpy_context)
     period_ns = 20 * MS
     phases: list[int] = []

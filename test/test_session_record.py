@@ -1,11 +1,11 @@
-"""The session record (crane_stiffness.session): built from plain values, read back from a bag's metadata records."""
+"""The session record (session_record): built from plain values, read back from a bag's metadata records."""
 from __future__ import annotations
 
 import json
 from types import SimpleNamespace
 
-from crane_stiffness.session import (NODE_PARAMETERS_METADATA, SESSION_METADATA, read_node_parameters, read_session,
-                                     session_record)
+from crane_stiffness.session_record import (NODE_PARAMETERS_METADATA, SESSION_METADATA, read_node_parameters,
+                                            read_session, session_record)
 from crane_stiffness.sim.program import LoadProgram
 
 PROGRAM_KEYS = ('name', 'rate_hz', 'repeats', 'segments.kind', 'segments.axis', 'segments.target',

@@ -7,11 +7,11 @@ decode):
 
 1. **Pairing.** Load-cell and LVDT samples are paired by header stamp as the live estimator pairs them
    (crane_stiffness.estimation.live.LiveStiffness), by its own rules in their vectorized form
-   (crane_stiffness.estimation.live.live_pairs): the same input checks (NaN/Inf, zero stamp, absurd values), then
+   (crane_stiffness.estimation.live_pairs.live_pairs): the same input checks (NaN/Inf, zero stamp, absurd values), then
    the synchroniser's pairing over the whole arrays (arrival = the recorded log time). The clock-skew check
    (a stamp more than ``max_clock_skew_s`` ahead of its arrival at the node) takes the recorder's log time of the
    message as the arrival: the recorder receives on the same clock, a few ms from the estimator. Pairs made while a
-   rejected command was in force (absurd by :mod:`crane_stiffness.commands`, or on /crane/rejected_command) are
+   rejected command was in force (absurd by :mod:`crane_stiffness.command_limits`, or on /crane/rejected_command) are
    left out, and the fraction of each stream's samples received (from its own stamps) is reported, as live.
    The wrench is moved from the sensor's frame to the platform centre and the displacement stamps corrected by
    ``displacement_delay_s`` as live; the delay left between the streams is estimated over the whole recording
@@ -54,25 +54,25 @@ import numpy as np
 from crane_stiffness import __version__, topics
 from crane_stiffness.analysis import report
 from crane_stiffness.analysis.errors import SessionAnalysisError
+from crane_stiffness.analysis.live_check import live_comparison
 from crane_stiffness.analysis.load import SessionData, load_session
+from crane_stiffness.analysis.model_summary import accepted_commands, model_summary
 from crane_stiffness.analysis.progress import Progress
-from crane_stiffness.analysis.results import (COMPARED_FIELDS, WINDOW_FIT_FIELDS, CycleFits, LiveComparison,
-                                              ModelSummary, SessionAnalysis, Step)
+from crane_stiffness.analysis.results import (CycleFits, SessionAnalysis, Step)
 from crane_stiffness.bag import BagDamageWarning
-from crane_stiffness.commands import command_faults
-from crane_stiffness.config import geometry_from_params
+from crane_stiffness.command_limits import command_faults
+from crane_stiffness.params.geometry import geometry_from_params
 from crane_stiffness.estimation.branch import BRANCHES, LOADING, UNLOADING
 from crane_stiffness.estimation import quality
-from crane_stiffness.estimation.errors import DataError
-from crane_stiffness.estimation.fit import LineFit, RecursiveLeastSquares, fit_line
+from crane_stiffness.estimation.fit import LineFit, fit_or_none
 from crane_stiffness.estimation.inputs import INPUT_CHECKS, CommandSeries, Samples, checked_samples
-from crane_stiffness.estimation.live import AXES, VALUE_FIELDS, LivePairs, live_pairs
+from crane_stiffness.axes import AXES
+from crane_stiffness.estimation.live_pairs import LivePairs, live_pairs
+from crane_stiffness.estimation.settings import LiveSettings
 from crane_stiffness.estimation.stream_delay import stream_delay_of
 from crane_stiffness.estimation.offset import correct_stamps
 
 STAGES = ('open+decode', 'pair', 'stream delay', 'steps', 'fits', 'model', 'summary', 'figures', 'report')
-#: Pairs of a branch fed to the recursive least squares for the live comparison (its memory is ~1/(1-λ)).
-RLS_REPLAY_PAIRS = 20_000
 #: Shortest run of equal commands taken as a hold [s].
 MIN_HOLD_S = 0.2
 
@@ -88,15 +88,6 @@ def hold_runs(stamp: np.ndarray, value: np.ndarray, min_hold_s: float = MIN_HOLD
         if b - a >= 2 and stamp[b - 1] - stamp[a] >= min_hold_s:
             out.append((a, b))
     return out
-
-
-def _fit(x: np.ndarray, y: np.ndarray) -> LineFit | None:
-    if len(x) < 3:
-        return None
-    try:
-        return fit_line(x, y)
-    except DataError:
-        return None
 
 
 def _inputs(data: SessionData) -> tuple[Samples, Samples, dict[str, int]]:
@@ -128,7 +119,7 @@ def _inputs(data: SessionData) -> tuple[Samples, Samples, dict[str, int]]:
 
 
 def _commands(data: SessionData) -> CommandSeries | None:
-    """The commands as the live estimator holds them: absurd ones (crane_stiffness.commands, the model's own check)
+    """The commands as the live estimator holds them: absurd ones (command_limits, the model's own check)
     and the model's rejections (/crane/rejected_command, decoded with the other streams) held as rejected."""
     c = data.command
     if c is None or c.size == 0:
@@ -142,18 +133,11 @@ def _commands(data: SessionData) -> CommandSeries | None:
                             command_faults(wrench), r_stamp, r_log)
 
 
-def _accepted(commands: CommandSeries) -> tuple[np.ndarray, np.ndarray]:
-    """(stamps, loads) of the accepted commands: the program's steps (absurd and rejected ones left out)."""
-    if commands.rejected is None:
-        return commands.stamp, commands.value
-    return commands.stamp[~commands.rejected], commands.value[~commands.rejected]
-
-
 def _steps(data: SessionData, pairs: LivePairs, commands: CommandSeries | None, t0: float, settle_fraction: float,
            problems: list[str]) -> list[Step]:
     if commands is None:
         return []
-    stamp, value = _accepted(commands)
+    stamp, value = accepted_commands(commands)
     runs = hold_runs(stamp, value)
     period = float(np.median(np.diff(stamp))) if stamp.size > 1 else 0.0
     holds = data.program.holds(data.settings.force_axis) if data.program is not None else []
@@ -205,7 +189,7 @@ def _steps(data: SessionData, pairs: LivePairs, commands: CommandSeries | None, 
 def _branch_fits(pairs: LivePairs, lo: int, hi: int) -> dict[str, LineFit | None]:
     sel = slice(lo, hi)
     x, y, loading = pairs.displacement[sel], pairs.force[sel], pairs.loading[sel]
-    return {LOADING: _fit(x[loading], y[loading]), UNLOADING: _fit(x[~loading], y[~loading])}
+    return {LOADING: fit_or_none(x[loading], y[loading]), UNLOADING: fit_or_none(x[~loading], y[~loading])}
 
 
 def _fit_quality(data: SessionData, pairs: LivePairs, lo: int, hi: int, fits: dict[str, LineFit | None],
@@ -237,129 +221,6 @@ def _fit_quality(data: SessionData, pairs: LivePairs, lo: int, hi: int, fits: di
     return scatter
 
 
-def _window_fit(pairs: LivePairs, cut: int, branch: str, window: int, forgetting: float) -> dict[str, float]:
-    sel = np.flatnonzero(pairs.loading[:cut] == (branch == LOADING))
-    nan = math.nan
-    out = {k: nan for k in COMPARED_FIELDS}
-    if sel.size < 3:
-        return out
-    last = sel[-window:]
-    fit = _fit(pairs.displacement[last], pairs.force[last])
-    if fit is not None:
-        out.update({k: float(getattr(fit, k)) for k in WINDOW_FIT_FIELDS})
-    rls = RecursiveLeastSquares(forgetting)
-    tail = sel[-RLS_REPLAY_PAIRS:]
-    for x, y in zip(pairs.displacement[tail].tolist(), pairs.force[tail].tolist()):
-        rls.add(x, y)
-    result = rls.result()
-    out['rls_stiffness'] = nan if result is None else result.stiffness
-    return out
-
-
-def _live(data: SessionData, pairs: LivePairs) -> LiveComparison | None:
-    if data.live_values is None:
-        return None
-    log, rows = data.live_values
-    s = data.settings
-    index = {f: i for i, f in enumerate(VALUE_FIELDS)}
-    stamp = float(rows[0, index['sample_stamp']])
-    cut = int(np.searchsorted(pairs.stamp, stamp, side='right')) if math.isfinite(stamp) else pairs.stamp.size
-    live, offline, worst = {}, {}, {}
-    for b, branch in enumerate(BRANCHES):
-        live[branch] = {f: float(rows[b, index[f]]) for f in COMPARED_FIELDS}
-        offline[branch] = _window_fit(pairs, cut, branch, s.window, s.forgetting)
-        diffs = []
-        for f in WINDOW_FIT_FIELDS:
-            a, o = live[branch][f], offline[branch][f]
-            if math.isfinite(a) and math.isfinite(o):
-                diffs.append(abs(o - a) / max(abs(a), 1e-300) if f not in ('intercept',) else
-                             abs(o - a) / max(abs(live[branch]['residual_rms']), abs(a), 1e-300))
-        worst[branch] = max(diffs) if diffs else math.nan
-    comparison = LiveComparison(sample_stamp_s=stamp, log_time_s=log * 1e-9, live=live, offline=offline,
-                                max_rel_diff=worst)
-    if len(data.live_inputs) == 2:
-        (t_a, a), (t_b, b) = data.live_inputs
-        try:
-            received = int(b['force_received']) - int(a['force_received'])
-            paired = int(b['pairs']) - int(a['pairs'])
-        except (KeyError, ValueError):
-            return comparison
-        in_bag = int(((data.force['log_time_ns'] > t_a) & (data.force['log_time_ns'] <= t_b)).sum())
-        offline_pairs = int(((pairs.fit_log > t_a) & (pairs.fit_log <= t_b)).sum())
-        comparison.inputs = {'from_s': t_a * 1e-9, 'to_s': t_b * 1e-9, 'live_force_received': received,
-                             'bag_force_messages': in_bag, 'live_pairs': paired, 'offline_pairs': offline_pairs}
-    return comparison
-
-
-def lvdt_scale(axis: str, lvdt: dict[str, Any] | None) -> float | None:
-    """LVDT reading per unit displacement (m) or rotation (rad) along ``axis`` for small motions.
-
-    The reading is ``a · (δu + δθ × p)`` for the unit measuring direction ``a`` and contact point ``p``; None when
-    the LVDT parameters were not recorded.
-    """
-    if not lvdt or 'axis' not in lvdt:
-        return None
-    a = np.asarray(lvdt.get('axis'), dtype=float)
-    if a.shape != (3,) or not np.isfinite(a).all() or not np.linalg.norm(a):
-        return None
-    a = a / np.linalg.norm(a)
-    p = np.asarray(lvdt.get('contact_point', [0.0, 0.0, 0.0]), dtype=float)
-    i = AXES.index(axis)
-    return float(a[i]) if i < 3 else float(np.cross(p, a)[i - 3])
-
-
-def _model(data: SessionData, steps: list[Step], commands: CommandSeries | None, points: int,
-           problems: list[str]) -> ModelSummary | None:
-    if data.geometry_params is None:
-        return None
-    from crane_stiffness.analysis.sweep import force_displacement, unit
-    from crane_stiffness.model import (ModelError, axis_stiffness, directional_stiffness, elastic_stiffness,
-                                       paper_stiffness, rest_pose, single_wire_pendulum_stiffness,
-                                       tangent_stiffness)
-    axis = data.settings.force_axis
-    try:
-        g = geometry_from_params(data.geometry_params)
-        d = unit(axis)
-        tangent = axis_stiffness(tangent_stiffness(g, rest_pose(g)), axis)
-        eq18 = directional_stiffness(paper_stiffness(g), d)
-        elastic = directional_stiffness(elastic_stiffness(g), d)
-        pendulum = single_wire_pendulum_stiffness(g) if axis in ('fx', 'fy') and g.weight > 0 else math.nan
-    except (ModelError, ValueError) as exc:
-        problems.append(f'model of the recorded geometry failed: {exc}')
-        return None
-    recorded = math.nan
-    if data.prediction is not None and data.prediction.size:
-        recorded = float(data.prediction['data'][0])
-    levels = np.array([s.level for s in steps]) if steps else (_accepted(commands)[1] if commands else np.zeros(0))
-    peak = float(levels[np.argmax(np.abs(levels))]) if levels.size and np.abs(levels).max() > 0 else 0.0
-    lvdt = data.sensors.get('lvdt') or data.sensors.get('/lvdt')
-    scale = lvdt_scale(axis, lvdt)
-    if scale is not None and data.settings.lever_arm_m > 0.0:
-        scale /= data.settings.lever_arm_m  # readings converted to angles (LiveSettings.reading_to_displacement)
-    if scale is None:
-        scale = 1.0
-        if lvdt is not None:
-            problems.append('the recorded LVDT parameters are incomplete: readings taken as displacement along '
-                            f'{axis}')
-    elif abs(scale) < 1e-9:
-        problems.append(f'the LVDT (axis {lvdt.get("axis")}, contact point {lvdt.get("contact_point")}) does not see '
-                        f'motion along {axis}: measured points are not comparable with the model curves')
-    summary = ModelSummary(axis=axis, unit='N/m' if axis.startswith('f') else 'N·m/rad', tangent_at_rest=tangent,
-                           eq18=eq18, elastic_w0=elastic, single_wire_w6=pendulum, recorded_prediction=recorded,
-                           lvdt_scale=scale)
-    if peak != 0.0:
-        try:
-            curves = force_displacement(g, axis, peak, points)
-            summary.curves = {k: np.asarray(v, dtype=float).tolist() for k, v in curves.columns().items()}
-            for step in steps:  # in LVDT reading units, comparable with displacement_mean
-                same_side = step.level * peak >= 0
-                step.model_displacement = float(np.interp(abs(step.level), np.abs(curves.load), curves.nonlinear)) \
-                    * scale if same_side else math.nan
-        except (ModelError, ValueError) as exc:
-            problems.append(f'model curves up to {peak:g} on {axis} failed: {exc}')
-    return summary
-
-
 def _cycles(data: SessionData, pairs: LivePairs, steps: list[Step], t0: float) -> list[CycleFits]:
     if data.program is None or data.program.repeats < 2 or not steps or steps[0].repeat is None:
         return []
@@ -379,13 +240,6 @@ def _cycles(data: SessionData, pairs: LivePairs, steps: list[Step], t0: float) -
 
 def _default_out(bag: Path) -> Path:
     return Path('out') / 'analysis' / bag.name
-
-
-def _pairing_rule(settings) -> str:
-    """The estimator's pairing rule, for people."""
-    if settings.interpolated is None:
-        return f'nearest stamps within slop_s = {settings.slop_s} s'
-    return f'{settings.pairing} across gaps up to max_interpolation_gap_s = {settings.max_interpolation_gap_s} s'
 
 
 def analyze_session(bag_path: str | Path, out_dir: str | Path | None = None, *, formats: Sequence[str] = ('png',),
@@ -414,14 +268,7 @@ def analyze_session(bag_path: str | Path, out_dir: str | Path | None = None, *, 
         TopicNotFoundError: a sensor topic is missing (named, with the topics present).
         SessionAnalysisError: nothing to pair or fit.
     """
-    for fmt in formats:
-        if fmt not in ('png', 'svg'):
-            raise ValueError(f'format = {fmt!r}: must be png or svg')
-    for kind in reports:
-        if kind not in ('md', 'html'):
-            raise ValueError(f'report = {kind!r}: must be md or html')
-    if not 0.0 <= settle_fraction < 1.0:
-        raise ValueError(f'settle_fraction = {settle_fraction!r}: must be in [0, 1)')
+    _check_options(formats, reports, settle_fraction)
     path = Path(bag_path)
     problems: list[str] = []
     missing: list[str] = []
@@ -438,7 +285,7 @@ def analyze_session(bag_path: str | Path, out_dir: str | Path | None = None, *, 
             pairs = live_pairs(data.settings, force, disp, commands)
             if pairs.stamp.size < 3:
                 raise SessionAnalysisError(
-                    f'{path}: only {pairs.stamp.size} load-cell/LVDT pair(s) by {_pairing_rule(data.settings)} '
+                    f'{path}: only {pairs.stamp.size} load-cell/LVDT pair(s) by {data.settings.pairing_text()} '
                     f'({force.stamp.size} force and {disp.stamp.size} displacement samples usable)')
             bar.done()
             bar.stage('stream delay')
@@ -449,92 +296,25 @@ def analyze_session(bag_path: str | Path, out_dir: str | Path | None = None, *, 
             steps = _steps(data, pairs, commands, t0, settle_fraction, problems)
             bar.done()
             bar.stage('fits')
-            if commands is not None:
-                lo = np.searchsorted(pairs.stamp, commands.stamp[0], side='left')
-                hi = np.searchsorted(pairs.stamp, commands.stamp[-1], side='right')
-            else:
-                lo, hi = 0, pairs.stamp.size
-            branch_fits = _branch_fits(pairs, int(lo), int(hi))
-            _fit_quality(data, pairs, int(lo), int(hi), branch_fits, problems)
-            hold_fits = {}
-            for approach in BRANCHES:
-                sel = [s for s in steps if s.approach == approach and s.n > 0]
-                hold_fits[approach] = _fit(np.array([s.displacement_mean for s in sel]),
-                                           np.array([s.force_mean for s in sel]))
-            cycles = _cycles(data, pairs, steps, t0)
-            live = _live(data, pairs)
-            if live is not None and live.inputs:
-                got, kept = live.inputs['live_force_received'], live.inputs['bag_force_messages']
-                # Samples seen by only one of them matter only if they were fitted (not before the program).
-                reproduced = all(d <= 1e-6 for d in live.max_rel_diff.values())
-                if abs(got - kept) > max(3, 0.002 * kept) and not reproduced:
-                    problems.append(
-                        f'over the {live.inputs["to_s"] - live.inputs["from_s"]:.1f} s the estimator reported on, it '
-                        f'received {got} load-cell samples and the bag holds {kept}: one of them lost samples '
-                        f'(best-effort delivery under load), so its live estimate cannot be reproduced exactly '
-                        f'from the bag')
-
+            fits = _fits(data, pairs, commands, steps, t0, problems)
             bar.done()
             bar.stage('model')
-            model = _model(data, steps, commands, model_points, problems)
+            model = model_summary(data, steps, commands, model_points, problems)
             bar.done()
         bar.stage('summary')
-        damage = []
-        for w in caught:
-            if issubclass(w.category, BagDamageWarning):
-                damage.append(str(w.message))
-                warnings.warn(str(w.message), BagDamageWarning, stacklevel=2)
-            else:
-                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-        problems[:0] = damage
-        for topic in missing:
-            problems.append(f'topic {topic} is not in the bag' + {
-                topics.WRENCH_COMMAND: ': no test steps; branches follow the measured force',
-                topics.STIFFNESS_VALUES: ': no live estimate to compare with',
-                topics.PROGRAM_STATE: ': program state unknown',
-            }.get(topic, ''))
-        session = data.session
-        start_ns = int(session.get('start_time_ns') or data.start_ns or 0)
-        program = None
-        if data.program is not None:
-            p = data.program
-            program = {**p.to_params(), 'duration_s': p.duration_s,
-                       'levels': p.levels(data.settings.force_axis).tolist(),
-                       'source': (data.program_record or {}).get('source', '')}
-            final = [s for _, s in data.states]
-            program['final_state'] = final[-1].get('state') if final else None
-        geometry = None
-        if data.geometry_params is not None:
-            try:
-                g = geometry_from_params(data.geometry_params)
-                geometry = {**g.to_dict(), 'l0': g.l0, 'k': g.k}
-            except ValueError as exc:
-                problems.append(f'recorded geometry invalid: {exc}')
+        problems[:0] = _rewarn(caught)
         counters = {**input_counters, **pairs.counters}
-        if delay_problem:
-            problems.append(delay_problem)
-        # The live estimator's warnings, offline: what it would have said about these inputs.
-        st = data.settings
-        if counters.get('dropped_clock_skew'):
-            problems.append(f'{counters["dropped_clock_skew"]} sensor sample(s) stamped more than max_clock_skew_s = '
-                            f'{st.max_clock_skew_s:g} s ahead of their log time were dropped (a skewed sensor clock)')
-        if counters.get('pairs_rejected_command'):
-            problems.append(f'{counters["pairs_rejected_command"]} pair(s) made while a rejected command (absurd, or '
-                            f'rejected by the crane model) was in force were not fitted')
-        for stream in ('force', 'displacement'):
-            fraction = counters.get(f'{stream}_received_fraction', math.nan)
-            if fraction < 1.0 - st.max_loss_fraction:
-                problems.append(f'{stream}: the bag holds {fraction:.2%} of the samples its stamps say were sent '
-                                f'(more than max_loss_fraction = {st.max_loss_fraction:.2%} lost)')
+        problems += _missing_topic_problems(missing) + ([delay_problem] if delay_problem else [])
+        problems += _input_problems(counters, data.settings)
         result = SessionAnalysis(
-            bag=str(path), session=str(session.get('session') or path.name), notes=str(session.get('notes', '')),
-            recorded_with=str(session.get('software_version', '')), analysed_with=__version__,
-            start_time_utc=datetime.fromtimestamp(start_ns / 1e9, tz=timezone.utc).isoformat() if start_ns else '',
+            bag=str(path), session=str(data.session.get('session') or path.name),
+            notes=str(data.session.get('notes', '')), recorded_with=str(data.session.get('software_version', '')),
+            analysed_with=__version__, start_time_utc=_start_time_utc(data),
             duration_s=((data.end_ns or 0) - (data.start_ns or 0)) * 1e-9, axis=data.settings.force_axis,
-            unit=data.settings.stiffness_unit, program=program, geometry=geometry,
-            settings=asdict(data.settings), counts=data.counts, pairing=counters, branch_fits=branch_fits,
-            hold_fits=hold_fits, cycle_fits=cycles, steps=steps, live=live, model=model, problems=problems,
-            missing_topics=missing, stream_delay=dict(delay_values))
+            unit=data.settings.stiffness_unit, program=_program_summary(data),
+            geometry=_geometry_summary(data, problems), settings=asdict(data.settings), counts=data.counts,
+            pairing=counters, steps=steps, model=model, problems=problems, missing_topics=missing,
+            stream_delay=dict(delay_values), **fits)
         bar.done()
         if write_files:
             out = Path(out_dir) if out_dir is not None else _default_out(path)
@@ -554,3 +334,109 @@ def analyze_session(bag_path: str | Path, out_dir: str | Path | None = None, *, 
         return result
     finally:
         bar.close()
+
+
+def _check_options(formats: Sequence[str], reports: Sequence[str], settle_fraction: float) -> None:
+    for fmt in formats:
+        if fmt not in ('png', 'svg'):
+            raise ValueError(f'format = {fmt!r}: must be png or svg')
+    for kind in reports:
+        if kind not in ('md', 'html'):
+            raise ValueError(f'report = {kind!r}: must be md or html')
+    if not 0.0 <= settle_fraction < 1.0:
+        raise ValueError(f'settle_fraction = {settle_fraction!r}: must be in [0, 1)')
+
+
+def _fits(data: SessionData, pairs: LivePairs, commands: CommandSeries | None, steps: list[Step], t0: float,
+          problems: list[str]) -> dict[str, Any]:
+    """The 'fits' stage: each branch over the program, the hold means of each approach, each repeat's branches, and
+    the live estimate checked (SessionAnalysis fields)."""
+    if commands is not None:
+        lo = int(np.searchsorted(pairs.stamp, commands.stamp[0], side='left'))
+        hi = int(np.searchsorted(pairs.stamp, commands.stamp[-1], side='right'))
+    else:
+        lo, hi = 0, int(pairs.stamp.size)
+    branch_fits = _branch_fits(pairs, lo, hi)
+    _fit_quality(data, pairs, lo, hi, branch_fits, problems)
+    hold_fits = {}
+    for approach in BRANCHES:
+        sel = [s for s in steps if s.approach == approach and s.n > 0]
+        hold_fits[approach] = fit_or_none(np.array([s.displacement_mean for s in sel]),
+                                          np.array([s.force_mean for s in sel]))
+    live = live_comparison(data, pairs)
+    if live is not None and live.inputs:
+        got, kept = live.inputs['live_force_received'], live.inputs['bag_force_messages']
+        # Samples seen by only one of them matter only if they were fitted (not before the program).
+        reproduced = all(d <= 1e-6 for d in live.max_rel_diff.values())
+        if abs(got - kept) > max(3, 0.002 * kept) and not reproduced:
+            problems.append(
+                f'over the {live.inputs["to_s"] - live.inputs["from_s"]:.1f} s the estimator reported on, it '
+                f'received {got} load-cell samples and the bag holds {kept}: one of them lost samples '
+                f'(best-effort delivery under load), so its live estimate cannot be reproduced exactly '
+                f'from the bag')
+    return {'branch_fits': branch_fits, 'hold_fits': hold_fits, 'cycle_fits': _cycles(data, pairs, steps, t0),
+            'live': live}
+
+
+def _rewarn(caught: list[warnings.WarningMessage]) -> list[str]:
+    """Warnings caught while reading, raised again for the caller; the bag's damage, as problems."""
+    damage = []
+    for w in caught:
+        if issubclass(w.category, BagDamageWarning):
+            damage.append(str(w.message))
+            warnings.warn(str(w.message), BagDamageWarning, stacklevel=3)
+        else:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    return damage
+
+
+def _missing_topic_problems(missing: list[str]) -> list[str]:
+    return [f'topic {topic} is not in the bag' + {
+        topics.WRENCH_COMMAND: ': no test steps; branches follow the measured force',
+        topics.STIFFNESS_VALUES: ': no live estimate to compare with',
+        topics.PROGRAM_STATE: ': program state unknown',
+    }.get(topic, '') for topic in missing]
+
+
+def _input_problems(counters: dict[str, Any], st: LiveSettings) -> list[str]:
+    """The live estimator's warnings about its inputs, offline: what it would have said about these."""
+    problems = []
+    if counters.get('dropped_clock_skew'):
+        problems.append(f'{counters["dropped_clock_skew"]} sensor sample(s) stamped more than max_clock_skew_s = '
+                        f'{st.max_clock_skew_s:g} s ahead of their log time were dropped (a skewed sensor clock)')
+    if counters.get('pairs_rejected_command'):
+        problems.append(f'{counters["pairs_rejected_command"]} pair(s) made while a rejected command (absurd, or '
+                        f'rejected by the crane model) was in force were not fitted')
+    for stream in ('force', 'displacement'):
+        fraction = counters.get(f'{stream}_received_fraction', math.nan)
+        if fraction < 1.0 - st.max_loss_fraction:
+            problems.append(f'{stream}: the bag holds {fraction:.2%} of the samples its stamps say were sent '
+                            f'(more than max_loss_fraction = {st.max_loss_fraction:.2%} lost)')
+    return problems
+
+
+def _start_time_utc(data: SessionData) -> str:
+    start_ns = int(data.session.get('start_time_ns') or data.start_ns or 0)
+    return datetime.fromtimestamp(start_ns / 1e9, tz=timezone.utc).isoformat() if start_ns else ''
+
+
+def _program_summary(data: SessionData) -> dict[str, Any] | None:
+    if data.program is None:
+        return None
+    p = data.program
+    program = {**p.to_params(), 'duration_s': p.duration_s, 'levels': p.levels(data.settings.force_axis).tolist(),
+               'source': (data.program_record or {}).get('source', '')}
+    final = [s for _, s in data.states]
+    program['final_state'] = final[-1].get('state') if final else None
+    return program
+
+
+def _geometry_summary(data: SessionData, problems: list[str]) -> dict[str, Any] | None:
+    if data.geometry_params is None:
+        return None
+    try:
+        g = geometry_from_params(data.geometry_params)
+    except ValueError as exc:
+        problems.append(f'recorded geometry invalid: {exc}')
+        return None
+    return {**g.to_dict(), 'l0': g.l0, 'k': g.k}

@@ -21,7 +21,7 @@ if TYPE_CHECKING:
     from crane_stiffness.analysis.load import SessionData
     from crane_stiffness.analysis.results import SessionAnalysis
     from crane_stiffness.estimation.inputs import CommandSeries
-    from crane_stiffness.estimation.live import LivePairs
+    from crane_stiffness.estimation.live_pairs import LivePairs
 
 #: Largest number of points drawn per series in a figure.
 PLOT_POINTS = 20_000

@@ -15,9 +15,11 @@ import numpy as np
 from crane_stiffness import topics
 from crane_stiffness.analysis.errors import SessionAnalysisError
 from crane_stiffness.bag import BagReader, TopicNotFoundError
-from crane_stiffness.estimation.live import AXES, VALUE_FIELDS, LiveSettings
+from crane_stiffness.axes import AXES
+from crane_stiffness.estimation.live import VALUE_FIELDS
+from crane_stiffness.estimation.settings import LiveSettings
 from crane_stiffness.serde import CdrError, decode_diagnostic_array, decode_float64_multiarray, decode_string
-from crane_stiffness.session import read_node_parameters, read_session
+from crane_stiffness.session_record import read_node_parameters, read_session
 from crane_stiffness.sim.program import LoadProgram
 
 REQUIRED_TOPICS = (topics.LOAD_CELL_WRENCH, topics.LVDT_DISPLACEMENT)

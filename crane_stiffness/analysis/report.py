@@ -13,6 +13,7 @@ from typing import Any, Sequence
 
 from crane_stiffness.analysis.results import SessionAnalysis, SessionComparison
 from crane_stiffness.estimation.fit import LineFit
+from crane_stiffness.estimation.settings import pairing_text
 
 Block = tuple
 
@@ -62,9 +63,8 @@ def session_blocks(a: SessionAnalysis, images: Sequence[str] = ()) -> list[Block
         rows.append(['geometry', f'a = {fmt(g["a"])} m, b = {fmt(g["b"])} m, h = {fmt(g["height"])} m, '
                                  f'W = {fmt(g["weight"])} N, l0 = {fmt(g["l0"])} m, k = {fmt(g["k"])} N/m'])
     s = a.settings
-    pairing = (f'slop {fmt(s["slop_s"])} s' if s.get('pairing', 'nearest') == 'nearest' else
-               f'{s["pairing"]} (gaps up to {fmt(s["max_interpolation_gap_s"])} s)')
-    rows.append(['estimator settings', f'pairing {pairing}, max age {fmt(s["max_age_s"])} s, window '
+    pairing = pairing_text(s.get('pairing', 'nearest'), s['slop_s'], s.get('max_interpolation_gap_s', math.nan))
+    rows.append(['estimator settings', f'pairing: {pairing}, max age {fmt(s["max_age_s"])} s, window '
                                        f'{s["window"]} pairs, hysteresis {fmt(s["hysteresis"])}, branch from '
                                        f'{s["branch_source"]}'])
     blocks.append(('table', ['', ''], rows))

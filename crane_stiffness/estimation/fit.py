@@ -219,6 +219,16 @@ def fit_line(x: ArrayLike, y: ArrayLike) -> LineFit:
     return _assemble(n, xm, ym, sxx, sxy, syy, sse, nonlinearity)
 
 
+def fit_or_none(x: ArrayLike, y: ArrayLike) -> LineFit | None:
+    """:func:`fit_line`, or None when there is nothing to fit (fewer than 3 points, no spread in x, NaN/Inf)."""
+    if len(x) < 3:
+        return None
+    try:
+        return fit_line(x, y)
+    except DataError:
+        return None
+
+
 class WindowedLeastSquares:
     """Least-squares line over the last ``window`` (x, y) pairs, updated in O(1) per sample.
 

@@ -31,7 +31,7 @@ publishing one:
    RLS with forgetting, loading and unloading branches apart). The branch follows the commanded load (the
    ``force_axis`` component of the wrench command in effect at the pair's stamp) once a command has been seen and
    ``branch_source`` is ``'auto'``, else the measured force. A pair stamped while a rejected command is in force
-   (absurd by :mod:`crane_stiffness.commands`, the crane model's own rule, or republished by the model on
+   (absurd by :mod:`crane_stiffness.command_limits`, the crane model's own rule, or republished by the model on
    /crane/rejected_command; from its stamp to the next accepted command) is not fitted, and the statuses say so
    (WARN, never OK).
 4. Outputs. :meth:`LiveStiffness.values` is the cheap O(1) numeric estimate (rows ``BRANCHES`` × ``VALUE_FIELDS``)
@@ -49,33 +49,23 @@ each streaming rule (:mod:`~crane_stiffness.estimation.inputs`, :func:`~crane_st
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field, fields
-from typing import Any
 
-import numpy as np
 
-from crane_stiffness.axes import AXES
-from crane_stiffness.estimation.branch import BRANCHES, LOADING, Branch, branch_labels
-from crane_stiffness.estimation.errors import ParameterError
-from crane_stiffness.estimation.estimator import Estimate, StiffnessEstimator
+from crane_stiffness.estimation.branch import BRANCHES, LOADING, Branch
+from crane_stiffness.estimation.estimator import Estimate
 from crane_stiffness.estimation.fit import t_quantile
 from crane_stiffness.estimation.quality import CommandRange, fit_problems
-from crane_stiffness.estimation.stream_delay import DELAY_MAX_LAG_S, StreamDelay
-from crane_stiffness.estimation.frames import SensorMount
-from crane_stiffness.commands import command_fault
-from crane_stiffness.estimation.inputs import (CommandHold, CommandSeries, InputCounters, Samples, StreamHealth,
-                                               command_inputs, input_faults, stream_health_of)
-from crane_stiffness.status import ERROR, OK, STALE, WARN
+from crane_stiffness.estimation.settings import LiveSettings
+from crane_stiffness.estimation.stream_delay import StreamDelay
+from crane_stiffness.command_limits import command_fault
+from crane_stiffness.estimation.lag import LagHistogram
+from crane_stiffness.estimation.inputs import (CommandHold, InputCounters, StreamHealth,
+                                               command_inputs, input_faults)
+from crane_stiffness.status import ERROR, OK, STALE, WARN, status_value
 from crane_stiffness.estimation.sync import (DISPLACEMENT, FORCE, ApproximateTimeSync, InterpolatingSync, Pair,
-                                             SyncCounters, pair_by_interpolation, pair_by_stamp, pair_stamp)
-
-BRANCH_SOURCES = ('auto', 'force')
-#: Pairing rules (``pairing``): 'nearest' pairs samples whose stamps are mutual nearest within ``slop_s``
-#: (sync.ApproximateTimeSync: both sensors on one clock grid, as the simulated rig); 'interpolate_force' pairs
-#: every displacement sample with the force interpolated at its stamp, 'interpolate_displacement' the other way
-#: round (sync.InterpolatingSync: drivers at different rates, e.g. a 1 kHz F/T sensor and a 100 Hz Modbus LVDT).
-PAIRINGS = {'nearest': None, 'interpolate_force': FORCE, 'interpolate_displacement': DISPLACEMENT}
+                                             SyncCounters)
 
 #: Columns of one row of :meth:`LiveStiffness.values` (one row per branch, in the order of ``BRANCHES``).
 #: Units: stiffness, ci95_*, stderr, rls_* and prediction in N/m (N·m/rad for a moment axis); intercept and
@@ -90,190 +80,6 @@ _T_CACHE = 1000
 
 
 
-def _number(values: Mapping[str, Any], name: str, *, minimum: float | None = None, above: float | None = None,
-            maximum: float | None = None) -> float:
-    value = values[name]
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise ParameterError(name, value, 'must be a finite number')
-    if minimum is not None and value < minimum:
-        raise ParameterError(name, value, f'must be >= {minimum}')
-    if above is not None and value <= above:
-        raise ParameterError(name, value, f'must be > {above}')
-    if maximum is not None and value > maximum:
-        raise ParameterError(name, value, f'must be <= {maximum}')
-    return float(value)
-
-
-@dataclass(frozen=True)
-class LiveSettings:
-    """Settings of :class:`LiveStiffness` (the node's parameters of the same names; units in the field comments)."""
-
-    force_axis: str = 'fy'               # wrench component fitted: fx fy fz [N] or mx my mz [N·m]
-    pairing: str = 'nearest'             # 'nearest' | 'interpolate_force' | 'interpolate_displacement' (PAIRINGS)
-    slop_s: float = 0.0006               # nearest: largest stamp difference of a pair [s]
-    max_interpolation_gap_s: float = 0.005  # interpolated: widest bracket of the fast stream interpolated across [s]
-    max_age_s: float = 0.1               # staleness limit and pairing latency bound [s]
-    expected_period_s: float = 0.0       # sample period of both streams [s]; 0 = estimated online
-    dropout_factor: float = 3.0          # a gap above this many periods is a dropout [-]; 0 = not detected
-    min_silence_s: float = 0.25          # a stream is silent (dead) only after this long at least [s]
-    window: int = 500                    # pairs per windowed fit [pairs]
-    forgetting: float = 0.999            # RLS forgetting factor λ in (0, 1] [-]
-    hysteresis: float = 0.2              # branch dead band [N or N·m]
-    branch_source: str = 'auto'          # 'auto': commanded load once seen, else force; 'force': measured force
-    max_abs_force: float = 1.0e4         # larger |force| samples are absurd and dropped [N or N·m]
-    max_abs_displacement: float = 0.1    # larger |displacement| samples are absurd and dropped [m or rad]
-    displacement_gain: float = 1.0       # volts channel: metres per volt [m/V]
-    displacement_offset: float = 0.0     # volts channel: metres at 0 V [m]
-    # A moment axis measured with an LVDT tangential to the rotation at this distance from the axis: a reading d [m]
-    # is the angle asin(d / lever_arm_m) [rad] (quality.py and the docs: the moment series). 0: fitted as read.
-    lever_arm_m: float = 0.0             # [m]
-    max_scatter_ratio: float = 3.0       # a fit scattered more than this x the sensors' noise is not OK [-]
-    nonlinearity_warn: float = 0.2       # WARN when a branch's nonlinearity exceeds this [-]
-    max_clock_skew_s: float = 0.1        # samples stamped further ahead of their arrival are dropped [s]
-    max_loss_fraction: float = 0.01      # WARN when a stream lost more of its samples than this [-]
-    # The F/T sensor's mounting (frames.SensorMount): wrenches are moved to the platform centre in crane_base before
-    # the force_axis component is taken.
-    sensor_rotation: tuple[float, ...] = (0.0, 0.0, 0.0, 1.0)  # sensor → crane_base, quaternion [x, y, z, w]
-    sensor_position: tuple[float, ...] = (0.0, 0.0, 0.0)       # sensor origin from the platform centre [m]
-    sensor_reaction: bool = False        # the sensor measures the reaction: negate [-]
-    # Clocks (offset.py): displacement stamps are corrected by t − displacement_delay_s before pairing; the delay
-    # between the streams is estimated from the last delay_window_s of data and WARNed above max_stream_delay_s.
-    displacement_delay_s: float = 0.0    # the displacement stamps are this late [s]
-    max_stream_delay_s: float = 0.002    # WARN when the estimated, uncorrected delay exceeds this [s]
-    delay_window_s: float = 5.0          # data the delay is estimated from [s]; 0 = not estimated
-
-    @classmethod
-    def from_params(cls, values: Mapping[str, Any]) -> LiveSettings:
-        """Validated settings from a parameter dict (keys not named here are ignored, missing ones default).
-
-        Raises:
-            ParameterError (a ValueError) naming the parameter and its value.
-        """
-        v = {f.name: values.get(f.name, f.default) for f in fields(cls)}
-        if v['force_axis'] not in AXES:
-            raise ParameterError('force_axis', v['force_axis'], f'must be one of {", ".join(AXES)}')
-        if v['pairing'] not in PAIRINGS:
-            raise ParameterError('pairing', v['pairing'], f'must be one of {", ".join(PAIRINGS)}')
-        if v['branch_source'] not in BRANCH_SOURCES:
-            raise ParameterError('branch_source', v['branch_source'], f'must be one of {", ".join(BRANCH_SOURCES)}')
-        window = v['window']
-        if isinstance(window, bool) or not isinstance(window, int) or window < 3:
-            raise ParameterError('window', window, 'must be an integer >= 3 (pairs)')
-        slop = _number(v, 'slop_s', minimum=0.0)
-        max_age = _number(v, 'max_age_s', above=0.0)
-        if max_age < slop:
-            raise ParameterError('max_age_s', max_age, f'must be >= slop_s = {slop} (seconds)')
-        period = _number(v, 'expected_period_s', minimum=0.0)
-        dropout = _number(v, 'dropout_factor', minimum=0.0)
-        if 0.0 < dropout <= 1.0:
-            raise ParameterError('dropout_factor', dropout, 'must be > 1, or 0 to disable dropout detection')
-        forgetting = _number(v, 'forgetting', above=0.0, maximum=1.0)
-        min_silence = _number(v, 'min_silence_s', minimum=0.0)
-        gain = _number(v, 'displacement_gain')
-        if gain == 0.0:
-            raise ParameterError('displacement_gain', gain, 'must be non-zero (m/V)')
-        skew = _number(v, 'max_clock_skew_s', above=0.0)
-        if skew > max_age:
-            raise ParameterError('max_clock_skew_s', skew, f'must be <= max_age_s = {max_age} (seconds): a sample '
-                                 'stamped that far ahead holds the pairing up for as long')
-        lever_arm = _number(v, 'lever_arm_m', minimum=0.0)
-        if lever_arm > 0.0 and not v['force_axis'].startswith('m'):
-            raise ParameterError('lever_arm_m', lever_arm, f'must be 0 for the force axis {v["force_axis"]} (a lever '
-                                 'arm turns a tangential reading into an angle, for a moment axis mx my mz)')
-        mount = SensorMount.from_params(v)  # ParameterError naming sensor_rotation / _position / _reaction
-        delay = _number(v, 'displacement_delay_s')
-        if abs(delay) > max_age:
-            raise ParameterError('displacement_delay_s', delay, f'must be within ±max_age_s = {max_age} (seconds)')
-        window_s = _number(v, 'delay_window_s', minimum=0.0)
-        if 0.0 < window_s < 4 * DELAY_MAX_LAG_S:
-            raise ParameterError('delay_window_s', window_s, f'must be 0 (not estimated) or >= '
-                                 f'{4 * DELAY_MAX_LAG_S:g} s (4 x the ±{DELAY_MAX_LAG_S:g} s searched)')
-        return cls(sensor_rotation=tuple(float(x) for x in np.ravel(v['sensor_rotation'])),
-                   sensor_position=tuple(float(x) for x in mount.position), sensor_reaction=mount.reaction,
-                   displacement_delay_s=delay, max_stream_delay_s=_number(v, 'max_stream_delay_s', above=0.0),
-                   delay_window_s=window_s, pairing=v['pairing'],
-                   max_interpolation_gap_s=_number(v, 'max_interpolation_gap_s', above=0.0),
-                   force_axis=v['force_axis'], slop_s=slop, max_age_s=max_age, expected_period_s=period,
-                   dropout_factor=dropout, min_silence_s=min_silence, window=window, forgetting=forgetting,
-                   hysteresis=_number(v, 'hysteresis', minimum=0.0), branch_source=v['branch_source'],
-                   max_abs_force=_number(v, 'max_abs_force', above=0.0),
-                   max_abs_displacement=_number(v, 'max_abs_displacement', above=0.0),
-                   displacement_gain=gain, displacement_offset=_number(v, 'displacement_offset'),
-                   nonlinearity_warn=_number(v, 'nonlinearity_warn', above=0.0), max_clock_skew_s=skew,
-                   max_loss_fraction=_number(v, 'max_loss_fraction', minimum=0.0, maximum=1.0),
-                   lever_arm_m=lever_arm, max_scatter_ratio=_number(v, 'max_scatter_ratio', above=1.0))
-
-    @property
-    def mount(self) -> SensorMount:
-        """The sensor's mounting (validated in from_params)."""
-        return SensorMount.from_params({k: getattr(self, k) for k in SensorMount.PARAM_NAMES})
-
-    def force_row(self) -> tuple[float, ...] | None:
-        """The fitted component as a dot product with the sensor's wrench (6 coefficients), or None when the
-        sensor is at the platform centre, aligned, without sign change: then the component is taken as is."""
-        mount = self.mount
-        return None if mount.is_identity else mount.component_row(self.axis_index)
-
-    def force_component(self, wrench: np.ndarray) -> np.ndarray:
-        """The fitted component of sensor wrenches, shape (n, 6) → (n,), moved to the platform centre (vectorised
-        form of :meth:`LiveStiffness.add_force`'s rule; the same matrix)."""
-        mount = self.mount
-        w = np.asarray(wrench, dtype=float).reshape(-1, 6)
-        return w[:, self.axis_index] if mount.is_identity else mount.component(w, self.axis_index)
-
-    def volts_to_displacement(self, volts: Any) -> Any:
-        """Displacement, m (or rad), of a reading in volts (a float, or element-wise an array)."""
-        return self.displacement_gain * volts + self.displacement_offset
-
-    def reading_to_displacement(self, reading: Any) -> Any:
-        """The fitted displacement of displacement readings (a float, or element-wise an array): the reading itself
-        (m, or rad), or with ``lever_arm_m`` > 0 the angle ``asin(reading / lever_arm_m)`` [rad] (NaN beyond the arm).
-        The live estimator and ``analyze`` both convert with this."""
-        if self.lever_arm_m == 0.0:
-            return reading
-        if isinstance(reading, float):
-            ratio = reading / self.lever_arm_m
-            return math.asin(ratio) if -1.0 <= ratio <= 1.0 else math.nan
-        with np.errstate(invalid='ignore'):
-            return np.arcsin(np.asarray(reading, dtype=float) / self.lever_arm_m)
-
-    @property
-    def displacement_unit(self) -> str:
-        return 'm' if self.force_axis.startswith('f') else 'rad'
-
-    @property
-    def axis_index(self) -> int:
-        return AXES.index(self.force_axis)
-
-    @property
-    def stiffness_unit(self) -> str:
-        return 'N/m' if self.force_axis.startswith('f') else 'N·m/rad'
-
-    @property
-    def interpolated(self) -> str | None:
-        """The stream interpolated (FORCE or DISPLACEMENT), or None for nearest-stamp pairing."""
-        return PAIRINGS[self.pairing]
-
-    def make_sync(self) -> ApproximateTimeSync | InterpolatingSync:
-        period, dropout = self.expected_period_s or None, self.dropout_factor or None
-        if self.interpolated is not None:
-            return InterpolatingSync(self.interpolated, max_gap=self.max_interpolation_gap_s, max_age=self.max_age_s,
-                                     expected_period=period, dropout_factor=dropout)
-        return ApproximateTimeSync(self.slop_s, max_age=self.max_age_s, expected_period=period,
-                                   dropout_factor=dropout)
-
-    def make_estimator(self) -> StiffnessEstimator:
-        return StiffnessEstimator(self.hysteresis, self.window, self.forgetting, nonlinearity=False)
-
-    def fit_key(self) -> tuple:
-        """The settings whose change restarts pairing and fitting (the others are thresholds)."""
-        return (self.force_axis, self.pairing, self.slop_s, self.max_interpolation_gap_s, self.max_age_s,
-                self.expected_period_s, self.dropout_factor,
-                self.window, self.forgetting, self.hysteresis, self.branch_source, self.displacement_gain,
-                self.displacement_offset, self.sensor_rotation, self.sensor_position, self.sensor_reaction,
-                self.displacement_delay_s, self.lever_arm_m)
-
-
 @dataclass(frozen=True)
 class BranchReport:
     """One branch's status for people: level (OK/WARN/STALE), a one-line message and key/value strings."""
@@ -282,43 +88,6 @@ class BranchReport:
     level: int
     message: str
     values: list[tuple[str, str]] = field(default_factory=list)
-
-
-def _fmt(value: float) -> str:
-    return f'{value:.6g}'
-
-
-class LagHistogram:
-    """Distribution of the estimate's lag (publication time − stamp of its newest pair), s, in 0.1 ms bins up to
-    ``limit_s`` (longer lags count in the last bin). O(1) per value, so the node can record every estimate."""
-
-    BIN_S = 1e-4
-
-    def __init__(self, limit_s: float = 10.0) -> None:
-        self._counts = [0] * (int(round(limit_s / self.BIN_S)) + 1)
-        self.n = 0
-        self.max_s = math.nan
-
-    def add(self, lag_s: float) -> None:
-        if not math.isfinite(lag_s):
-            return
-        i = min(len(self._counts) - 1, max(0, int(lag_s / self.BIN_S)))
-        self._counts[i] += 1
-        self.n += 1
-        if not lag_s <= self.max_s:  # also replaces the initial NaN
-            self.max_s = lag_s
-
-    def percentile(self, q: float) -> float:
-        """The ``q`` % point (0–100), s, to the upper edge of its bin; NaN while empty."""
-        if self.n == 0:
-            return math.nan
-        rank = max(1, math.ceil(q / 100.0 * self.n))
-        seen = 0
-        for i, count in enumerate(self._counts):
-            seen += count
-            if seen >= rank:
-                return (i + 1) * self.BIN_S
-        return math.inf  # not reached
 
 
 class LiveStiffness:
@@ -435,7 +204,7 @@ class LiveStiffness:
 
     def add_command(self, stamp_s: float, wrench: Sequence[float], arrival_s: float) -> bool:
         """A wrench command [N, N·m]; a zero stamp counts from ``arrival_s``. Returns False if dropped (NaN/Inf in
-        its load along the axis or its times) or rejected (absurd by :mod:`crane_stiffness.commands`: held as a
+        its load along the axis or its times) or rejected (absurd by :mod:`crane_stiffness.command_limits`: held as a
         rejected command, pairs are not fitted while it is in force)."""
         self.counters.command_received += 1
         load = float(wrench[self._axis])
@@ -681,11 +450,12 @@ class LiveStiffness:
         for branch in BRANCHES:
             row = dict(zip(VALUE_FIELDS, self._rows[branch]))
             row['nonlinearity'] = nl = self._nonlinearity[branch]
-            pairs = [(k, _fmt(row[k])) for k in names] + [('scatter_ratio', _fmt(self._scatter[branch]))]
+            pairs = [(k, status_value(row[k])) for k in names]
+            pairs.append(('scatter_ratio', status_value(self._scatter[branch])))
             if math.isnan(row['stiffness']):
                 level, message = STALE, 'no estimate yet (needs 3 pairs with spread in displacement)'
                 pairs = [(k, 'nan') for k in names] + [('scatter_ratio', 'nan')]
-                pairs[names.index('prediction')] = ('prediction', _fmt(self.prediction))
+                pairs[names.index('prediction')] = ('prediction', status_value(self.prediction))
             else:
                 message = (f'k = {row["stiffness"]:.6g} {unit} (95 %: {row["ci95_low"]:.6g} .. '
                            f'{row["ci95_high"]:.6g}), n = {int(row["n"])}')
@@ -747,11 +517,11 @@ class LiveStiffness:
         for stream, counters in ((FORCE, sc.force), (DISPLACEMENT, sc.displacement)):
             pairs += [(f'{stream}.{f.name}', str(getattr(counters, f.name))) for f in fields(counters)]
         for stream, health in self.health.items():
-            pairs += [(f'{stream}.received_fraction', _fmt(health.received_fraction())),
-                      (f'{stream}.silent_s', _fmt(health.silent_for(now_s)))]
+            pairs += [(f'{stream}.received_fraction', status_value(health.received_fraction())),
+                      (f'{stream}.silent_s', status_value(health.silent_for(now_s)))]
         pairs += [('segment', str(c.segments)), ('segment_reason', self._segment_reason)]
-        pairs += [('newest_pair_stamp', _fmt(self._newest_stamp))]
-        pairs += [(f'lag_{name}_ms', _fmt(value * 1e3)) for name, value in (
+        pairs += [('newest_pair_stamp', status_value(self._newest_stamp))]
+        pairs += [(f'lag_{name}_ms', status_value(value * 1e3)) for name, value in (
             ('p50', self.lag.percentile(50)), ('p99', self.lag.percentile(99)), ('max', self.lag.max_s))]
         pairs += [('lag_n', str(self.lag.n))]
         pairs += self._delay.values()
@@ -762,64 +532,3 @@ class LiveStiffness:
         if reasons:
             return level, '; '.join(reasons), pairs
         return OK, f'{sc.pairs} pairs, {c.pairs_fitted} fitted', pairs
-
-
-# ------------------------------------------------------------------------------------------------ vectorized --
-@dataclass(frozen=True)
-class LivePairs:
-    """The pairs :class:`LiveStiffness` fits from whole recorded streams (:func:`live_pairs`), in stamp order."""
-
-    stamp: np.ndarray
-    """Pair stamps, s."""
-    force: np.ndarray
-    displacement: np.ndarray
-    loading: np.ndarray
-    """The branch each pair is fitted to: True for loading."""
-    fit_log: np.ndarray
-    """When the live estimator fits each pair: the arrival (log) time of the later of its two samples, ns."""
-    counters: dict[str, int]
-    """The pairing's counters (:func:`~crane_stiffness.estimation.sync.pair_by_stamp` or
-    :func:`~crane_stiffness.estimation.sync.pair_by_interpolation`)."""
-
-
-def live_pairs(settings: LiveSettings, force: Samples, displacement: Samples,
-               commands: CommandSeries | None) -> LivePairs:
-    """What :class:`LiveStiffness` pairs and the branch it fits each pair to, for whole recorded streams that passed
-    the input checks (:func:`~crane_stiffness.estimation.inputs.checked_samples`), vectorized. Pairs made while a
-    rejected command was in force are left out (counted as ``pairs_rejected_command``)."""
-    s = settings
-    if s.interpolated is None:
-        result = pair_by_stamp(force.stamp, force.arrival_ns, displacement.stamp, displacement.arrival_ns, s.slop_s,
-                               s.max_age_s)
-        fi, di = result.force_index, result.displacement_index
-        stamp = pair_stamp(force.stamp[fi], displacement.stamp[di])
-        fit_log = np.maximum(force.arrival_ns[fi], displacement.arrival_ns[di])
-        value, disp_value = force.value[fi], displacement.value[di]
-    else:
-        fast = s.interpolated
-        result = pair_by_interpolation(force.stamp, force.arrival_ns, displacement.stamp, displacement.arrival_ns,
-                                       fast, (force if fast == FORCE else displacement).value,
-                                       s.max_interpolation_gap_s, s.max_age_s)
-        slow_samples, fast_samples = (displacement, force) if fast == FORCE else (force, displacement)
-        si = result.slow_index
-        stamp = result.stamp
-        # A pair forms once its slow sample and the fast sample closing its bracket have both arrived.
-        fit_log = np.maximum(slow_samples.arrival_ns[si], fast_samples.arrival_ns[result.fast_index])
-        slow_value = slow_samples.value[si]
-        value, disp_value = (result.fast_value, slow_value) if fast == FORCE else (slow_value, result.fast_value)
-    counters = dict(result.counters)
-    if commands is not None:
-        rejected = commands.rejected_at(stamp, fit_log)
-        counters['pairs_rejected_command'] = int(rejected.sum())
-        keep = ~rejected
-        value, disp_value, stamp, fit_log = value[keep], disp_value[keep], stamp[keep], fit_log[keep]
-    else:
-        counters['pairs_rejected_command'] = 0
-    load = value
-    if commands is not None and s.branch_source == 'auto':
-        held_load, held = commands.at(stamp, fit_log)
-        load = np.where(held & np.isfinite(held_load), held_load, value)
-    for name, samples in (('force', force), ('displacement', displacement)):
-        counters[f'{name}_received_fraction'] = stream_health_of(samples.stamp,
-                                                                 s.expected_period_s or None).received_fraction
-    return LivePairs(stamp, value, disp_value, branch_labels(load, s.hysteresis), fit_log, counters)

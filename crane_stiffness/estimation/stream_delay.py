@@ -28,18 +28,15 @@ from crane_stiffness.estimation.errors import DataError, ParameterError
 from crane_stiffness.estimation.inputs import Samples
 from crane_stiffness.estimation.offset import DelayEstimate, estimate_delay
 from crane_stiffness.estimation.sync import DISPLACEMENT, FORCE
+from crane_stiffness.status import status_value
 
 if TYPE_CHECKING:
-    from crane_stiffness.estimation.live import LiveSettings
+    from crane_stiffness.estimation.settings import LiveSettings
 
 #: Delays searched by the stream-delay estimate: ±this [s] (offset.estimate_delay's max_lag_s).
 DELAY_MAX_LAG_S = 0.05
 #: Windows of a recording the offline estimate looks at (those where the load moves most).
 DELAY_WINDOWS = 8
-
-
-def _fmt(value: float) -> str:
-    return f'{value:.6g}'
 
 
 def _delay_problem(settings: LiveSettings, estimate: DelayEstimate | None) -> str:
@@ -58,11 +55,11 @@ def _delay_values(settings: LiveSettings, estimate: DelayEstimate | None, attemp
                   note: str) -> list[tuple[str, str]]:
     nan = math.nan
     residual = estimate.delay_s if estimate is not None else nan
-    return [('stream_delay_s', _fmt(residual + settings.displacement_delay_s)),
-            ('stream_delay_residual_s', _fmt(residual)),
-            ('displacement_delay_s', _fmt(settings.displacement_delay_s)),
+    return [('stream_delay_s', status_value(residual + settings.displacement_delay_s)),
+            ('stream_delay_residual_s', status_value(residual)),
+            ('displacement_delay_s', status_value(settings.displacement_delay_s)),
             ('stream_delay_ok', str(estimate is not None and not _delay_problem(settings, estimate)).lower()),
-            ('stream_delay_peak_correlation', _fmt(estimate.peak_correlation if estimate is not None else nan)),
+            ('stream_delay_peak_correlation', status_value(estimate.peak_correlation if estimate is not None else nan)),
             ('stream_delay_note', note or (attempt.reason if attempt is not None else 'not estimated yet'))]
 
 
@@ -135,7 +132,7 @@ class StreamDelay:
     def values(self) -> list[tuple[str, str]]:
         if not self.enabled:
             return [('stream_delay_note', 'not estimated (delay_window_s = 0)'),
-                    ('displacement_delay_s', _fmt(self.settings.displacement_delay_s))]
+                    ('displacement_delay_s', status_value(self.settings.displacement_delay_s))]
         return _delay_values(self.settings, self.estimate, self.attempt, self.note)
 
 
@@ -178,7 +175,7 @@ def stream_delay_of(settings: LiveSettings, force: Samples, displacement: Sample
     median delay (all of its fields from that window), or the first window's reason why none could be trusted."""
     if settings.delay_window_s <= 0.0:
         return None, '', [('stream_delay_note', 'not estimated (delay_window_s = 0)'),
-                          ('displacement_delay_s', _fmt(settings.displacement_delay_s))]
+                          ('displacement_delay_s', status_value(settings.displacement_delay_s))]
     fi, di = _increasing(force.stamp), _increasing(displacement.stamp)
     tf, yf = force.stamp[fi], np.asarray(force.value[fi], dtype=float)
     td, yd = displacement.stamp[di], np.asarray(displacement.value[di], dtype=float)

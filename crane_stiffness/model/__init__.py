@@ -7,7 +7,7 @@
 """
 import importlib
 
-#: The public names and the module of each. Imported on first use: importing .geometry alone (crane_stiffness.config,
+#: The public names and the module of each. Imported on first use: importing .geometry alone (params.geometry,
 #: so every node) must not import .equilibrium and numba (~0.5 s of CPU in each node process at start).
 _EXPORTS = {
     'equilibrium': ('BatchEquilibrium', 'Equilibrium', 'as_load', 'net_wrench', 'rest_pose', 'solve_batch',

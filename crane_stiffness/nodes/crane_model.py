@@ -41,12 +41,16 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension, String
 
 from crane_stiffness import topics
-from crane_stiffness.commands import CommandLimits, command_fault
-from crane_stiffness.config import GEOMETRY_PARAMS, ParamSpec, geometry_from_params
+from crane_stiffness.command_limits import CommandLimits, command_fault
+from crane_stiffness.params.geometry import GEOMETRY_PARAMS, geometry_from_params
+from crane_stiffness.params.spec import ParamSpec
 from crane_stiffness.model import (AXES, WIRE_NAMES, CraneGeometry, Equilibrium, ModelError, axis_stiffness,
                                    rest_pose, solve_equilibrium, tangent_stiffness)
 from crane_stiffness.model.rotation import matrix_to_quaternion
-from crane_stiffness.nodes.common import LATCHED_QOS, RELIABLE_QOS, Counters, Diagnostics, finite, run
+from crane_stiffness.nodes.qos import LATCHED_QOS, RELIABLE_QOS
+from crane_stiffness.nodes.diagnostics import Counters, Diagnostics
+from crane_stiffness.nodes.messages import finite
+from crane_stiffness.nodes.run import run
 from crane_stiffness.nodes.parameters import Params, check
 from crane_stiffness.status import ERROR, OK
 
@@ -78,9 +82,9 @@ PARAMS = GEOMETRY_PARAMS + (
     ParamSpec('prediction_axis', 'auto', "axis of the predicted stiffness: fx fy fz mx my mz, or 'auto' = the "
               'largest component of the command (fy until a load arrives)'),
     ParamSpec('max_abs_force', 1.0e4, 'commands with a force component above this are absurd and dropped [N]',
-              rule='> 0'),
+              above=0.0),
     ParamSpec('max_abs_moment', 1.0e3, 'commands with a moment component above this are absurd and dropped [N·m]',
-              rule='> 0'),
+              above=0.0),
 )
 
 
@@ -190,7 +194,7 @@ class CraneModel(Node):
 
     def _command_fault(self, load: np.ndarray) -> tuple[str, str] | None:
         """(counter, reason) when the command is not a load to apply, else None: the rule the estimator applies
-        too (crane_stiffness.commands)."""
+        too (crane_stiffness.command_limits)."""
         reason = command_fault(load, self.limits)
         if reason is None:
             return None

@@ -6,16 +6,16 @@ from __future__ import annotations
 import time
 from typing import Any, Callable, Mapping, Sequence, TypeVar
 
-from crane_stiffness.config import ParamSpec
+from crane_stiffness.params.spec import ParamSpec
 from crane_stiffness.drivers.errors import DeviceAddressError, DeviceBusyError, DeviceSilentError
 from crane_stiffness.nodes.parameters import check
 
 T = TypeVar('T')
 
-#: The device emulators' limit on how late their physics may arrive (nodes.common.InputLag).
+#: The device emulators' limit on how late their physics may arrive (nodes.diagnostics.InputLag).
 MAX_INPUT_LAG = ParamSpec('max_input_lag_s', 0.1, 'WARN on /diagnostics when the physics this device serves (applied '
                           'wrench or pose) arrived later than this after its stamp: a starved machine, the device '
-                          'serving stale readings [s]', rule='> 0')
+                          'serving stale readings [s]', above=0.0)
 
 
 def check_address(values: Mapping[str, Any], host: str = 'host', ports: Sequence[str] = ('port',),

@@ -8,7 +8,7 @@ cell started before crane_model waits for it, says so on /diagnostics and in its
 ``sample_rate_hz`` with noise, bias, drift, cross-talk, quantization and overload saturation; a timer at
 ``publish_rate_hz`` publishes the samples taken since its last tick, each stamped with its own sample instant on the
 grid k/sample_rate_hz of the node clock (like a DAQ delivering buffers; the timer ticks on the grid
-k/publish_rate_hz, see nodes.common.create_grid_timer). Service ~/tare (std_srvs/Trigger) zeroes
+k/publish_rate_hz, see nodes.sensor_timing.create_grid_timer). Service ~/tare (std_srvs/Trigger) zeroes
 the sensor on the mean of ``tare_samples`` readings at the current load; the reply states the offsets. Overload is
 reported on /diagnostics (WARN).
 
@@ -30,45 +30,32 @@ from std_srvs.srv import Trigger
 
 from crane_stiffness import topics
 from crane_stiffness.axes import AXES
-from crane_stiffness.config import ParamSpec
-from crane_stiffness.nodes.common import (RELIABLE_QOS, SENSOR_QOS, Diagnostics, SampleSchedule, SensorCounters,
-                                          ZeroEpoch, check_sensor_params, finite, run)
+from crane_stiffness.params.spec import ParamSpec
+from crane_stiffness.nodes.qos import RELIABLE_QOS, SENSOR_QOS
+from crane_stiffness.nodes.diagnostics import Diagnostics, SensorCounters
+from crane_stiffness.nodes.sensor_timing import SampleSchedule, ZeroEpoch, check_sensor_params
+from crane_stiffness.nodes.messages import finite
+from crane_stiffness.nodes.run import run
 from crane_stiffness.nodes.parameters import Params
 from crane_stiffness.sim.sampling import NS_PER_S, SampleClock, StampedHold
-from crane_stiffness.sim.sensors import LoadCellModel
+from crane_stiffness.sim.sensors import LOAD_CELL_PARAMS, LoadCellModel, load_cell_from_params
 from crane_stiffness.status import OK, WARN
-
-IDENTITY_6X6 = [1.0 if i == j else 0.0 for i in range(6) for j in range(6)]
 
 PARAMS = (
     ParamSpec('sample_rate_hz', 1000.0, 'sample rate; stamps are 1/sample_rate_hz apart on a grid of the node '
-              'clock [Hz]', rule='> 0'),
+              'clock [Hz]', above=0.0),
     ParamSpec('publish_rate_hz', 500.0, 'rate of the timer that publishes the samples taken since its last tick '
               '(a DAQ buffer); its ticks fall on multiples of its period of the node clock, so sensors at the same '
-              'rate deliver together. Higher: lower latency, more CPU [Hz]', rule='> 0'),
+              'rate deliver together. Higher: lower latency, more CPU [Hz]', above=0.0),
     ParamSpec('frame_id', 'load_cell', 'header.frame_id of the published wrench; axes aligned with crane_base [-]'),
-    ParamSpec('noise_std', [0.01, 0.01, 0.01, 0.0005, 0.0005, 0.0005],
-              'white-noise standard deviation per axis fx fy fz mx my mz [N, N, N, N·m, N·m, N·m]'),
-    ParamSpec('bias', [0.05, -0.03, 0.08, 0.001, -0.001, 0.0005],
-              'constant offset per axis before a tare [N, N, N, N·m, N·m, N·m]'),
-    ParamSpec('drift_per_s', [0.0] * 6, 'linear drift of the offset per axis [N/s, N/s, N/s, N·m/s, N·m/s, N·m/s]'),
-    ParamSpec('crosstalk', IDENTITY_6X6, '6x6 cross-talk matrix C, 36 numbers row-major: reading_i = '
-              'sum_j C_ij w_j [-]'),
-    ParamSpec('resolution', [0.002, 0.002, 0.002, 0.0001, 0.0001, 0.0001],
-              'quantization step per axis, 0 = none [N, N, N, N·m, N·m, N·m]'),
-    ParamSpec('full_scale', [40.0, 40.0, 120.0, 2.0, 2.0, 2.0],
-              'overload limit per axis; readings saturate at +-full_scale [N, N, N, N·m, N·m, N·m]'),
+    *LOAD_CELL_PARAMS,
     ParamSpec('tare_samples', 100, 'readings averaged by the ~/tare service [samples]', low=1),
-    ParamSpec('seed', -1, 'seed of the noise generator, -1 = random [-]', low=-1),
 )
-MODEL_KEYS = ('noise_std', 'bias', 'drift_per_s', 'crosstalk', 'resolution', 'full_scale')
-#: What a simulated force sensor waits for before it measures anything.
-WAITING_FOR = f'waiting for {topics.APPLIED_WRENCH} (the load crane_model has in force)'
 
 
 def _validate(values: dict[str, Any]) -> LoadCellModel:
-    seed = check_sensor_params(values)
-    return LoadCellModel.from_params({**{k: values[k] for k in MODEL_KEYS}, 'seed': seed})  # names a bad field
+    check_sensor_params(values)
+    return load_cell_from_params(values)  # names a bad field
 
 
 class LoadCell(Node):
@@ -91,7 +78,7 @@ class LoadCell(Node):
         self.create_subscription(WrenchStamped, topics.APPLIED_WRENCH, self._on_applied, RELIABLE_QOS)
         self.create_service(Trigger, '~/tare', self._srv_tare)
         self.diagnostics = Diagnostics(self, self._report)
-        self.get_logger().info(f'{WAITING_FOR} before publishing')
+        self.get_logger().info(f'{topics.WAITING_FOR_LOAD} before publishing')
 
     @property
     def clock(self) -> SampleClock:
@@ -156,7 +143,7 @@ class LoadCell(Node):
         now_ns = self.get_clock().now().nanoseconds
         load = self.applied.latest
         if load is None:
-            response.success, response.message = False, f'cannot tare: {WAITING_FOR}'
+            response.success, response.message = False, f'cannot tare: {topics.WAITING_FOR_LOAD}'
             return response
         readings, _ = self.model.measure(np.tile(load, (n, 1)), np.full(n, (now_ns - self.t0_ns) * 1e-9))
         offset = self.model.tare(readings)
@@ -181,7 +168,7 @@ class LoadCell(Node):
             axes = ', '.join(f'{a} ({int(n)} samples)' for a, n in zip(AXES, new) if n)
             return WARN, f'overload: {axes} saturated at full scale since the last report', pairs
         if not self.applied.has_value:
-            return OK, WAITING_FOR, pairs
+            return OK, topics.WAITING_FOR_LOAD, pairs
         return OK, f'{self.counters.published} samples published', pairs
 
 

@@ -28,12 +28,14 @@ from std_msgs.msg import Float64, String
 from std_srvs.srv import Trigger
 
 from crane_stiffness import topics
-from crane_stiffness.config import ParamSpec
-from crane_stiffness.nodes.common import LATCHED_QOS, RELIABLE_QOS, Counters, Diagnostics, rclpy_qos, run
+from crane_stiffness.params.spec import ParamSpec
+from crane_stiffness.nodes.qos import LATCHED_QOS, RELIABLE_QOS, rclpy_qos
+from crane_stiffness.nodes.diagnostics import Counters, Diagnostics
+from crane_stiffness.nodes.run import run
 from crane_stiffness.nodes.parameters import Params, check
 from crane_stiffness.rig_description import NODES as RIG_NODES
 from crane_stiffness.rig_description import readiness
-from crane_stiffness.sim.program import LoadProgram
+from crane_stiffness.sim.program import PROGRAM_KEYS, PROGRAM_PARAMS, LoadProgram
 from crane_stiffness.status import OK, WARN
 
 #: What the program waits for by default: the whole simulated rig with the recorder, as crane_stiffness.rig_description
@@ -49,14 +51,7 @@ SOURCES = {topics.PREDICTED_AXIS_STIFFNESS: "crane_model's prediction", topics.L
            topics.LVDT_DISPLACEMENT: 'the LVDT', topics.STIFFNESS_VALUES: 'the estimator, pairing both streams'}
 
 PARAMS = (
-    ParamSpec('name', 'hold_zero', 'program name, recorded with the session'),
-    ParamSpec('rate_hz', 100.0, 'command publication rate [Hz]', rule='> 0'),
-    ParamSpec('repeats', 1, 'how many times the segment list is played (>= 1)', low=1),
-    ParamSpec('segments.kind', ['hold'], 'segment kinds: ramp | hold | step'),
-    ParamSpec('segments.axis', ['fy'], 'segment axes: fx fy fz [N] or mx my mz [N·m], fixed frame (z down)'),
-    ParamSpec('segments.target', [0.0], 'segment end values [N or N·m]'),
-    ParamSpec('segments.duration', [1.0], 'segment durations [s]',
-              rule='one per segment; kind, axis, target and duration lists have the same length'),
+    *PROGRAM_PARAMS,
     ParamSpec('autostart', True, 'start the program by itself once the rig is ready (see wait_for_*), '
               'start_delay_s after that'),
     ParamSpec('start_delay_s', 0.5, 'wait between the rig being ready and an automatic start [s]', low=0.0,
@@ -75,8 +70,6 @@ PARAMS = (
     ParamSpec('ready_log_period_s', 5.0, 'while waiting for the rig, log what is still missing this often [s]'),
     ParamSpec('exit_on_done', False, 'shut the node down when the program has finished'),
 )
-PROGRAM_KEYS = ('name', 'rate_hz', 'repeats', 'segments.kind', 'segments.axis', 'segments.target',
-                'segments.duration')
 
 
 def wanted_subscribers(entries: list[str]) -> list[tuple[str, str]]:
@@ -244,7 +237,7 @@ class LoadProgramNode(Node):
                 self.get_logger().error(f'gave up after {waited:.0f} s (ready_timeout_s): the program did not start; '
                                         f'never came: {"; ".join(missing)}')
                 self.exit_status = 1
-                self.exit_requested = True  # common.run ends the spin; main returns exit_status
+                self.exit_requested = True  # run.run ends the spin; main returns exit_status
                 return
             else:
                 if now >= self._next_report:
@@ -302,7 +295,7 @@ class LoadProgramNode(Node):
             if not pub.wait_for_all_acked(Duration(seconds=max(0.0, deadline - time.monotonic()))):
                 self.get_logger().warning(f'exiting although not every reader acknowledged the {what} within '
                                           f'{EXIT_ACK_TIMEOUT_S:g} s: a reader may miss the last ones')
-        self.exit_requested = True  # common.run ends the spin and exits with status 0
+        self.exit_requested = True  # run.run ends the spin and exits with status 0
 
     def _publish_state(self) -> None:
         st = self.last
@@ -348,7 +341,7 @@ class LoadProgramNode(Node):
 
 
 def main(args=None) -> int:
-    """Runs the node (common.run, which returns its exit_status: 1 when an automatic start gave up waiting)."""
+    """Runs the node (run.run, which returns its exit_status: 1 when an automatic start gave up waiting)."""
     return run(LoadProgramNode, args)
 
 

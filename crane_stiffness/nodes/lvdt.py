@@ -18,7 +18,6 @@ Counters: received = used + dropped_non_finite (poses); published = samples.
 """
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
@@ -27,48 +26,31 @@ from rclpy.node import Node
 from std_srvs.srv import Trigger
 
 from crane_stiffness import topics
-from crane_stiffness.config import ParamSpec
-from crane_stiffness.model.rotation import quaternion_to_matrix
-from crane_stiffness.nodes.common import (RELIABLE_QOS, SENSOR_QOS, Diagnostics, SampleSchedule, SensorCounters,
-                                          ZeroEpoch, check_sensor_params, finite, run)
+from crane_stiffness.params.spec import ParamSpec
+from crane_stiffness.nodes.qos import RELIABLE_QOS, SENSOR_QOS
+from crane_stiffness.nodes.diagnostics import Diagnostics, SensorCounters
+from crane_stiffness.nodes.sensor_timing import SampleSchedule, ZeroEpoch, check_sensor_params
+from crane_stiffness.nodes.messages import pose_vector
+from crane_stiffness.nodes.run import run
 from crane_stiffness.nodes.parameters import Params
 from crane_stiffness.sim.sampling import NS_PER_S, SampleClock, StampedHold
-from crane_stiffness.sim.sensors import LvdtModel
+from crane_stiffness.sim.sensors import LVDT_PARAMS, LvdtModel, lvdt_from_params
 from crane_stiffness.status import OK, WARN
 
 PARAMS = (
     ParamSpec('sample_rate_hz', 1000.0, 'sample rate; stamps are 1/sample_rate_hz apart on a grid of the node '
-              'clock [Hz]', rule='> 0'),
+              'clock [Hz]', above=0.0),
     ParamSpec('publish_rate_hz', 500.0, 'rate of the timer that publishes the samples taken since its last tick '
               '(a DAQ buffer); its ticks fall on multiples of its period of the node clock, so sensors at the same '
-              'rate deliver together. Higher: lower latency, more CPU [Hz]', rule='> 0'),
+              'rate deliver together. Higher: lower latency, more CPU [Hz]', above=0.0),
     ParamSpec('frame_id', 'lvdt', 'header.frame_id of the published reading [-]'),
-    ParamSpec('axis', [0.0, 1.0, 0.0], 'measuring direction in crane_base (normalised; default along y) [-]'),
-    ParamSpec('contact_point', [0.0, 0.0, 0.0], 'contact point on the platform, body frame (default: its centre) '
-              '[m]'),
-    ParamSpec('noise_std', 2.0e-7, 'white-noise standard deviation of the reading [m]', low=0.0),
-    ParamSpec('resolution', 1.0e-7, 'quantization step of the reading, 0 = none [m]', low=0.0),
-    ParamSpec('range_m', [-2.5e-3, 2.5e-3], 'stroke [min, max] relative to the zero; the reading saturates '
-              'outside [m]'),
-    ParamSpec('zero_on_first_pose', True, 'zero at the first pose received, so the reading is the displacement '
-              'from the loaded rest pose [-]'),
-    ParamSpec('seed', -1, 'seed of the noise generator, -1 = random [-]', low=-1),
+    *LVDT_PARAMS,
 )
-MODEL_KEYS = ('axis', 'contact_point', 'noise_std', 'resolution', 'range_m')
 
 
 def _validate(values: dict[str, Any]) -> LvdtModel:
-    seed = check_sensor_params(values)
-    return LvdtModel.from_params({**{k: values[k] for k in MODEL_KEYS}, 'seed': seed})  # names a bad field
-
-
-def _pose_vector(msg: PoseStamped) -> np.ndarray | None:
-    """[u (3), Q row-major (9)] of a pose message, or None for NaN/Inf or a zero quaternion."""
-    p, o = msg.pose.position, msg.pose.orientation
-    values = (p.x, p.y, p.z, o.x, o.y, o.z, o.w)
-    if not finite(values) or math.hypot(o.x, o.y, o.z, o.w) < 1e-9:
-        return None
-    return np.concatenate([values[:3], quaternion_to_matrix(np.array(values[3:])).ravel()])
+    check_sensor_params(values)
+    return lvdt_from_params(values)  # names a bad field
 
 
 class Lvdt(Node):
@@ -122,7 +104,7 @@ class Lvdt(Node):
 
     def _on_pose(self, msg: PoseStamped) -> None:
         self.counters.received += 1
-        pose = _pose_vector(msg)
+        pose = pose_vector(msg)
         if pose is None:
             self.counters.dropped_non_finite += 1
             return

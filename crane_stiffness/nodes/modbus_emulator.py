@@ -21,18 +21,19 @@ from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
 
 from crane_stiffness import topics
-from crane_stiffness.config import ParamSpec
+from crane_stiffness.params.spec import ParamSpec
 from crane_stiffness.devices.modbus_device import ModbusDevice
 from crane_stiffness.drivers.errors import ParameterError
-from crane_stiffness.nodes import lvdt
-from crane_stiffness.nodes.common import RELIABLE_QOS, Diagnostics, InputLag, SensorCounters, run
+from crane_stiffness.nodes.qos import RELIABLE_QOS
+from crane_stiffness.nodes.diagnostics import Diagnostics, InputLag, SensorCounters
+from crane_stiffness.nodes.messages import pose_vector
+from crane_stiffness.nodes.run import run
 from crane_stiffness.nodes.parameters import Params, check, positive
 from crane_stiffness.nodes.device_params import MAX_INPUT_LAG, check_address, check_start_only
 from crane_stiffness.nodes.modbus_lvdt import CHANNEL_PARAMS, channel_from
-from crane_stiffness.sim.sensors import LvdtModel
+from crane_stiffness.sim.sensors import LVDT_PARAMS, LvdtModel, lvdt_from_params
 from crane_stiffness.status import OK, WARN
 
-MODEL_PARAMS = tuple(s for s in lvdt.PARAMS if s.name in lvdt.MODEL_KEYS + ('seed', 'zero_on_first_pose'))
 PARAMS = (
     ParamSpec('host', '127.0.0.1', 'address to serve Modbus TCP on (keep it on loopback or a test network '
               'namespace) [-]'),
@@ -40,7 +41,7 @@ PARAMS = (
               'root [-]', low=0, high=65535),
     *CHANNEL_PARAMS,
     MAX_INPUT_LAG,
-    *MODEL_PARAMS,
+    *LVDT_PARAMS,
 )
 START_ONLY = ('host', 'port', 'unit_id')
 
@@ -53,8 +54,7 @@ def _validate(values: dict[str, Any]):
         channel = channel_from(values)
     except ParameterError as exc:
         raise ValueError(str(exc)) from None
-    seed = None if values['seed'] < 0 else values['seed']
-    return channel, LvdtModel.from_params({**{k: values[k] for k in lvdt.MODEL_KEYS}, 'seed': seed})
+    return channel, lvdt_from_params(values)
 
 
 class ModbusEmulator(Node):
@@ -109,7 +109,7 @@ class ModbusEmulator(Node):
     def _on_pose(self, msg: PoseStamped) -> None:
         self.counters.received += 1
         self.lag.add(msg.header.stamp, self.get_clock().now().nanoseconds * 1e-9, self.settings['max_input_lag_s'])
-        pose = lvdt._pose_vector(msg)
+        pose = pose_vector(msg)
         if pose is None:
             self.counters.dropped_non_finite += 1
             return

@@ -29,11 +29,14 @@ from rclpy.node import Node
 from std_srvs.srv import Trigger
 
 from crane_stiffness import topics
-from crane_stiffness.config import ParamSpec
+from crane_stiffness.params.spec import ParamSpec
 from crane_stiffness.drivers import rdt
 from crane_stiffness.drivers.errors import DriverError
 from crane_stiffness.drivers.rdt_client import RdtPipeline, RdtReceiver, fetch_netftapi2
-from crane_stiffness.nodes.common import SENSOR_QOS, Counters, Diagnostics, ZeroEpoch, create_grid_timer, run
+from crane_stiffness.nodes.qos import SENSOR_QOS
+from crane_stiffness.nodes.diagnostics import Counters, Diagnostics
+from crane_stiffness.nodes.sensor_timing import ZeroEpoch, create_grid_timer
+from crane_stiffness.nodes.run import run
 from crane_stiffness.nodes.parameters import Params, check, positive
 from crane_stiffness.nodes.device_params import check_address, check_start_only, wait_for_device
 from crane_stiffness.sim.sampling import NS_PER_S

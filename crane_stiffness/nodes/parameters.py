@@ -19,8 +19,10 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.validate_topic_name import validate_topic_name
 
-from crane_stiffness.config import GEOMETRY_PARAMS, ParamSpec
-from crane_stiffness.param_files import ParamFile, applicable_sections, param_names_from_args, params_files_from_args
+from crane_stiffness.params.geometry import GEOMETRY_PARAMS
+from crane_stiffness.errors import ParameterError
+from crane_stiffness.params.spec import ParamSpec, check_spec
+from crane_stiffness.params.files import ParamFile, applicable_sections, param_names_from_args, params_files_from_args
 
 
 #: Modules of the package's nodes (crane_stiffness.nodes.<module>.PARAMS): the parameter names a ``/**`` section of a
@@ -87,9 +89,8 @@ def coerce(spec: ParamSpec, value: Any) -> Any:
 
 def descriptor(spec: ParamSpec) -> ParameterDescriptor:
     """The descriptor ``ros2 param describe`` shows: description, range (where the rule is an inclusive range of a
-    scalar) and the rule in words."""
+    scalar) and the whole rule in words (:meth:`ParamSpec.rule_text`)."""
     d = ParameterDescriptor(description=spec.description)
-    rules = []
     if spec.low is not None or spec.high is not None:
         if isinstance(spec.default, float):
             d.floating_point_range = [FloatingPointRange(
@@ -99,25 +100,19 @@ def descriptor(spec: ParamSpec) -> ParameterDescriptor:
             d.integer_range = [IntegerRange(from_value=int(spec.low if spec.low is not None else -2**63),
                                             to_value=int(spec.high if spec.high is not None else 2**63 - 1),
                                             step=1)]
-        rules.append(_range_text(spec))
-    if spec.rule:
-        rules.append(spec.rule)
-    d.additional_constraints = '; '.join(rules)
+    d.additional_constraints = spec.rule_text()
     return d
 
 
-def _range_text(spec: ParamSpec) -> str:
-    if spec.low is not None and spec.high is not None:
-        return f'{spec.low} .. {spec.high}'
-    return f'>= {spec.low}' if spec.low is not None else f'<= {spec.high}'
-
-
 def check_range(spec: ParamSpec, value: Any) -> None:
-    """The inclusive range of ``spec`` (low/high), in our words (rclpy enforces the same range at runtime)."""
-    if (spec.low is None and spec.high is None) or not _is_number(value):
+    """The declared rule of ``spec`` (choices, ``above``, the inclusive range low/high; rclpy enforces the range at
+    runtime too), in our words: ValueError('name = value: must be ...')."""
+    if isinstance(value, (list, tuple, array)):
         return
-    ok = math.isfinite(value) and (spec.low is None or value >= spec.low) and (spec.high is None or value <= spec.high)
-    check(ok, spec.name, value, f'must be {_range_text(spec)}')
+    try:
+        check_spec(spec, value)
+    except ParameterError as exc:
+        raise ValueError(f'{spec.name} = {show(value)}: {exc.rule}') from None
 
 
 class Params:

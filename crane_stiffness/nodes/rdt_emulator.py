@@ -22,21 +22,22 @@ from geometry_msgs.msg import WrenchStamped
 from rclpy.node import Node
 
 from crane_stiffness import topics
-from crane_stiffness.config import ParamSpec
+from crane_stiffness.params.spec import ParamSpec
 from crane_stiffness.devices.rdt_device import RdtDevice
 from crane_stiffness.drivers import rdt
-from crane_stiffness.nodes import load_cell
-from crane_stiffness.nodes.common import RELIABLE_QOS, Counters, Diagnostics, InputLag, finite, run
+from crane_stiffness.nodes.qos import RELIABLE_QOS
+from crane_stiffness.nodes.diagnostics import Counters, Diagnostics, InputLag
+from crane_stiffness.nodes.messages import finite
+from crane_stiffness.nodes.run import run
 from crane_stiffness.nodes.parameters import Params, check, positive
 from crane_stiffness.nodes.device_params import MAX_INPUT_LAG, check_address, check_start_only
-from crane_stiffness.sim.sensors import LoadCellModel
+from crane_stiffness.sim.sensors import LOAD_CELL_PARAMS, LoadCellModel, load_cell_from_params
 from crane_stiffness.status import ERROR, OK, WARN
 
 #: Status word of the records served before the first applied wrench: bit 31, the summary error bit of an RDT
 #: status word (crane_stiffness.drivers.rdt: 0 = healthy), and bit 16, this emulator's "no load known yet".
 STATUS_NOT_READY = 0x80010000
 
-MODEL_PARAMS = tuple(s for s in load_cell.PARAMS if s.name in load_cell.MODEL_KEYS + ('seed',))
 PARAMS = (
     ParamSpec('host', '127.0.0.1', 'address to serve RDT on (keep it on loopback or a test network namespace) [-]'),
     ParamSpec('port', rdt.RDT_PORT, 'UDP port; 0 = a free port (logged and reported on /diagnostics) [-]',
@@ -49,7 +50,7 @@ PARAMS = (
     ParamSpec('counts_per_torque', 1.0e6, 'counts per newton-metre [counts/(N·m)]'),
     ParamSpec('records_per_packet', 10, 'records per datagram when a client asks for a buffered stream [-]'),
     MAX_INPUT_LAG,
-    *MODEL_PARAMS,
+    *LOAD_CELL_PARAMS,
 )
 START_ONLY = ('host', 'port', 'http_port', 'sample_rate_hz', 'clock_ppm', 'counts_per_force', 'counts_per_torque',
               'records_per_packet')
@@ -61,8 +62,7 @@ def _validate(values: dict[str, Any]) -> LoadCellModel:
     check(abs(values['clock_ppm']) < 1e5, 'clock_ppm', values['clock_ppm'], 'must be within ±100000 ppm')
     check(1 <= values['records_per_packet'] <= 40, 'records_per_packet', values['records_per_packet'],
           'must be in 1..40')
-    seed = None if values['seed'] < 0 else values['seed']
-    return LoadCellModel.from_params({**{k: values[k] for k in load_cell.MODEL_KEYS}, 'seed': seed})
+    return load_cell_from_params(values)
 
 
 @dataclass
@@ -92,7 +92,7 @@ class RdtEmulator(Node):
         self.lag = InputLag()
         self.create_subscription(WrenchStamped, topics.APPLIED_WRENCH, self._on_applied, RELIABLE_QOS)
         self.diagnostics = Diagnostics(self, self._report)
-        self.get_logger().info(f'{load_cell.WAITING_FOR}: until then every record has status '
+        self.get_logger().info(f'{topics.WAITING_FOR_LOAD}: until then every record has status '
                                f'0x{STATUS_NOT_READY:08x}')
 
     def _validate(self, values: dict[str, Any]) -> LoadCellModel:
@@ -151,7 +151,7 @@ class RdtEmulator(Node):
         if dev.bad_requests:
             return ERROR, f'{dev.bad_requests} malformed RDT requests received', pairs
         if self.applied is None:
-            return OK, f'{load_cell.WAITING_FOR}; records have status 0x{STATUS_NOT_READY:08x}', pairs
+            return OK, f'{topics.WAITING_FOR_LOAD}; records have status 0x{STATUS_NOT_READY:08x}', pairs
         if late:
             return WARN, late, pairs
         return OK, f'serving RDT on {dev.host}:{dev.port}, {"streaming" if dev.streaming else "idle"}', pairs

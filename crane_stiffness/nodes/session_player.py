@@ -41,8 +41,9 @@ from std_srvs.srv import Trigger
 
 from crane_stiffness.bag import BagReader
 from crane_stiffness.bag.errors import BagDamageWarning, BagError
-from crane_stiffness.config import ParamSpec
-from crane_stiffness.nodes.common import Diagnostics, run
+from crane_stiffness.params.spec import ParamSpec
+from crane_stiffness.nodes.diagnostics import Diagnostics
+from crane_stiffness.nodes.run import run
 from crane_stiffness.nodes.parameters import Params, check, positive, valid_topic_name
 from crane_stiffness.nodes.session_qos import message_class, playback_qos
 from crane_stiffness.status import ERROR, OK, WARN
@@ -55,13 +56,13 @@ END_LINGER_S = 1.0
 
 PARAMS = (
     ParamSpec('bag', '', 'bag directory (with or without metadata.yaml) or .mcap file to play [-]'),
-    ParamSpec('rate', 1.0, 'playback speed factor: 2.0 plays twice as fast [-]', rule='> 0'),
+    ParamSpec('rate', 1.0, 'playback speed factor: 2.0 plays twice as fast [-]', above=0.0),
     ParamSpec('loop', False, 'play the bag again when it ends [-]'),
     ParamSpec('start_offset_s', 0.0, 'start this far into the bag, from its first message (log time) [s]',
               low=0.0),
     ParamSpec('publish_clock', False, "publish the bag's log time on /clock (rosgraph_msgs/Clock) for nodes "
               'running with use_sim_time [-]'),
-    ParamSpec('clock_rate_hz', 100.0, 'rate of /clock messages [Hz]', rule='> 0'),
+    ParamSpec('clock_rate_hz', 100.0, 'rate of /clock messages [Hz]', above=0.0),
     ParamSpec('autostart', True, 'start playing when the node starts (after start_delay_s); else call ~/start [-]'),
     ParamSpec('start_delay_s', 1.0, 'wait before playing so subscribers can connect [s]', low=0.0,
               high=86400.0),
@@ -209,7 +210,7 @@ class SessionPlayer(Node):
         self.reader: BagReader | None = None
         self.playing_topics: dict[str, Any] = {}
         self._prepared_key: tuple | None = None
-        self.exit_requested = False  # read by common.run: ends the node with exit_status (exit_on_end)
+        self.exit_requested = False  # read by run.run: ends the node with exit_status (exit_on_end)
         self.exit_status = 0
         self._declare_lists()
         self.params = Params(self, PARAMS, _validate, lambda built, values: None)
@@ -422,7 +423,7 @@ class SessionPlayer(Node):
 
     def _request_exit(self, status: int) -> None:
         # A flag, not SystemExit: an exception out of a callback is reported by the executor as FATAL (and the C++
-        # EventsExecutor cannot pass it through cleanly); common.run ends the spin and exits with this status.
+        # EventsExecutor cannot pass it through cleanly); run.run ends the spin and exits with this status.
         self.exit_status = status
         self.exit_requested = True
 

@@ -19,7 +19,7 @@ added on close (stop reason, end time, counts). The offline analysis prefers the
 Recording starts by itself (``autostart``) or with ~/start; ~/stop closes the bag and replies with its path and
 message count (both std_srvs/Trigger). With ``stop_on_program_done`` the recording stops ``stop_delay_s`` after
 /load_program/state reports 'done' following a run, so it covers the whole program. Ctrl-C (SIGINT) and SIGTERM
-close the bag cleanly, also when repeated (they only end the spin loop; see crane_stiffness.nodes.common.run). After
+close the bag cleanly, also when repeated (they only end the spin loop; see crane_stiffness.nodes.run.run). After
 SIGKILL every chunk written so far is readable (chunks go to the OS as they are finished, at most
 ``flush_interval_s`` apart) and ``crane-stiffness recover BAG`` rewrites the files and metadata.yaml.
 
@@ -33,7 +33,6 @@ the chunk a write error cut; ``rejected``: refused by the writer).
 """
 from __future__ import annotations
 
-import array
 import json
 import os
 import socket
@@ -42,10 +41,8 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, Sequence
 
-from rcl_interfaces.srv import GetParameters, ListParameters
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
-from rclpy.parameter import parameter_value_to_python
 from rclpy.qos import QoSProfile
 from rclpy.serialization import deserialize_message
 from std_msgs.msg import String
@@ -55,21 +52,22 @@ from crane_stiffness import __version__, topics
 from crane_stiffness.bag import BagWriter, dump_qos_profiles
 from crane_stiffness.bag.errors import BagError, BagWriteFailedError
 from crane_stiffness.bag.writer import COMPRESSIONS
-from crane_stiffness.config import GEOMETRY_PARAMS, ParamSpec, geometry_from_params
-from crane_stiffness.nodes.common import Diagnostics, run
+from crane_stiffness.params.geometry import GEOMETRY_PARAMS, geometry_from_params
+from crane_stiffness.params.spec import ParamSpec
+from crane_stiffness.nodes.diagnostics import Diagnostics
+from crane_stiffness.nodes.run import run
+from crane_stiffness.nodes.parameter_reader import NodeParameterReader, plain
 from crane_stiffness.nodes.parameters import Params, check, valid_topic_name
-from crane_stiffness.nodes.load_program import PARAMS as PROGRAM_NODE_PARAMS
-from crane_stiffness.nodes.load_program import PROGRAM_KEYS
 from crane_stiffness.nodes.session_qos import (adapted_qos, contract_qos, has_header, message_class,
                                                offered_profiles, publisher_types)
-from crane_stiffness.param_files import NodeSections, params_files_from_args, read_params_files
+from crane_stiffness.params.files import NodeSections, params_files_from_args, read_params_files
 from crane_stiffness.serde import header_stamp_ns
-from crane_stiffness.session import NODE_PARAMETERS_METADATA, SESSION_END_METADATA, SESSION_METADATA, session_record
-from crane_stiffness.sim.program import LoadProgram
+from crane_stiffness.session_record import (NODE_PARAMETERS_METADATA, SESSION_END_METADATA, SESSION_METADATA,
+                                            session_record)
+from crane_stiffness.sim.program import PROGRAM_KEYS, PROGRAM_PARAMS, LoadProgram
 from crane_stiffness.status import ERROR, OK
 
 
-PROGRAM_PARAMS = tuple(p for p in PROGRAM_NODE_PARAMS if p.name in PROGRAM_KEYS)
 PROGRAM_DEFAULTS = {p.name: p.default for p in PROGRAM_PARAMS}
 #: Sections of a parameter file that hold this node's own parameters (not recorded as another node's): ROS's rule.
 OWN_SECTIONS = NodeSections('session_recorder')
@@ -115,15 +113,6 @@ RECORDING_KEYS = ('topics', 'session', 'output_dir', 'compression', 'chunk_size'
 # rclpy puts a QoS-event handler into every wait of the executor for each subscription with the default event
 # callbacks (~15 µs each per wait): with a dozen recorded topics at a few kHz that is a large share of a core.
 _NO_EVENTS = SubscriptionEventCallbacks(use_default_callbacks=False)
-
-
-def plain(value: Any) -> Any:
-    """JSON-friendly copy of a parameter value (rclpy returns array.array for numeric arrays)."""
-    if isinstance(value, (array.array, tuple, list)):
-        return [plain(v) for v in value]
-    if isinstance(value, dict):
-        return {str(k): plain(v) for k, v in value.items()}
-    return value
 
 
 def utc_session_name(now_ns: int) -> str:
@@ -196,7 +185,7 @@ class SessionRecorder(Node):
         self.stop_timer = None
         self.exit_requested = False
         self.node_parameters: dict[str, dict[str, Any]] = {}
-        self._param_queries: dict[str, dict[str, Any]] = {}
+        self.parameter_reader: NodeParameterReader | None = None
         self._flushed_at = 0
         self._lock = threading.Lock()
         self.params_files = list(params_files)
@@ -252,7 +241,8 @@ class SessionRecorder(Node):
         try:
             self.writer.add_metadata(SESSION_METADATA, self._session_record(path.name, start_ns))
             self.node_parameters = {}
-            self._start_parameter_queries()
+            self.parameter_reader = NodeParameterReader(self, self.params['record_node_parameters'],
+                                                        self._on_node_parameters)
             self._subscribe_all()
         except BaseException as exc:
             self.stop('failed to start')
@@ -277,7 +267,9 @@ class SessionRecorder(Node):
                     self.destroy_timer(timer)
                     setattr(self, timer_name, None)
             self._unsubscribe_all()
-            self._stop_parameter_queries()
+            if self.parameter_reader is not None:
+                self.parameter_reader.close()
+                self.parameter_reader = None
             count = writer.message_count
             try:
                 writer.add_metadata(SESSION_END_METADATA, {
@@ -385,54 +377,14 @@ class SessionRecorder(Node):
             self.destroy_subscription(self.state_subscription)
             self.state_subscription = None
 
-    # --- the nodes' own parameters ---
-    def _start_parameter_queries(self) -> None:
-        self._param_queries = {}
-        for name in self.params['record_node_parameters']:
-            if not name:
-                continue
-            node = '/' + name.strip('/')
-            self._param_queries[node] = {
-                'list': self.create_client(ListParameters, f'{node}/list_parameters'),
-                'get': self.create_client(GetParameters, f'{node}/get_parameters'),
-                'future': None, 'names': None}
-
-    def _stop_parameter_queries(self) -> None:
-        for query in self._param_queries.values():
-            for key in ('list', 'get'):
-                self.destroy_client(query[key])
-        self._param_queries = {}
-
-    def _query_parameters(self) -> None:
-        """Advance the parameter reads: list the names once the node's service is up, then get the values."""
-        for node, q in list(self._param_queries.items()):
-            future = q['future']
-            if future is None:
-                if q['list'].service_is_ready():
-                    request = ListParameters.Request(depth=ListParameters.Request.DEPTH_RECURSIVE)
-                    q['future'] = q['list'].call_async(request)
-                continue
-            if not future.done():
-                continue
-            result = future.result()
-            if result is None:
-                q['future'] = None  # failed: ask again
-                continue
-            if q['names'] is None:
-                q['names'] = sorted(result.result.names)
-                q['future'] = q['get'].call_async(GetParameters.Request(names=q['names']))
-                continue
-            self.node_parameters[node.lstrip('/')] = {
-                n: plain(parameter_value_to_python(v)) for n, v in zip(q['names'], result.values)}
-            for key in ('list', 'get'):
-                self.destroy_client(q[key])
-            del self._param_queries[node]
-            if self.writer is not None:
-                try:
-                    self.writer.add_metadata(NODE_PARAMETERS_METADATA, self.node_parameters)
-                except BagWriteFailedError as exc:
-                    self._write_failed(exc)
-                    return
+    def _on_node_parameters(self, node: str, values: dict[str, Any]) -> None:
+        """A rig node's parameters, read: stored with the session (the record rewritten with every node read)."""
+        self.node_parameters[node] = values
+        if self.writer is not None:
+            try:
+                self.writer.add_metadata(NODE_PARAMETERS_METADATA, self.node_parameters)
+            except BagWriteFailedError as exc:
+                self._write_failed(exc)
 
     def _discover(self) -> None:
         """Subscribe topics outside the contract once they appear; follow a publisher whose type differs from the
@@ -440,7 +392,8 @@ class SessionRecorder(Node):
         rig nodes' parameters."""
         if self.writer is None:
             return
-        self._query_parameters()
+        if self.parameter_reader is not None:
+            self.parameter_reader.poll()
         for topic in list(self.pending):
             graph = publisher_types(self, topic)
             if len(graph) == 1:

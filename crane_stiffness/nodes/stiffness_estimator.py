@@ -42,19 +42,21 @@ from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension
 from std_srvs.srv import Trigger
 
 from crane_stiffness import topics
-from crane_stiffness.axes import AXES
 from crane_stiffness.serde import CdrError, decode_float64, decode_stamped, stamp_seconds
-from crane_stiffness.config import ParamSpec
 from crane_stiffness.estimation.branch import BRANCHES
-from crane_stiffness.estimation.live import VALUE_FIELDS, LiveSettings, LiveStiffness
+from crane_stiffness.estimation.live import VALUE_FIELDS, LiveStiffness
+from crane_stiffness.estimation.settings import ESTIMATOR_PARAMS, LiveSettings
+from crane_stiffness.params.spec import ParamSpec
 from crane_stiffness.estimation.sync import DISPLACEMENT, FORCE
-from crane_stiffness.nodes.common import LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS, Diagnostics, run, stamp_to_s
-from crane_stiffness.nodes.parameters import Params, check, positive
+from crane_stiffness.nodes.qos import LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS
+from crane_stiffness.nodes.diagnostics import Diagnostics
+from crane_stiffness.nodes.run import run
+from crane_stiffness.nodes.messages import stamp_to_s
+from crane_stiffness.nodes.parameters import Params
 
 __all__ = ['VALUE_FIELDS', 'PARAMS', 'StiffnessEstimatorNode', 'main']
 
 DISPLACEMENT_TYPES = ('point_stamped', 'float64')
-_D = LiveSettings()
 # rclpy's SingleThreadedExecutor adds QoS-event handlers to every wait set for each publisher and subscription with
 # default callbacks (a few µs each per wait). The high-rate endpoints below go without: a best-effort volatile
 # subscription matches every publisher, and a reliable volatile publisher every volatile subscriber.
@@ -75,75 +77,18 @@ def _take_queued(subscription) -> tuple[Any, dict] | None:
     with subscription.handle:
         return subscription.handle.take_message(subscription.msg_type, subscription.raw)
 
+#: The node's parameters: the live estimator's settings (declared once, in estimation.settings), and the node's own.
 PARAMS = (
-    ParamSpec('force_axis', _D.force_axis, 'wrench component fitted as the load: fx fy fz [N] or mx my mz [N·m]',
-              rule='one of ' + ', '.join(AXES)),
     ParamSpec('displacement_type', 'point_stamped', "displacement message: 'point_stamped' (PointStamped, point.x "
-              "in m, header stamp) or 'float64' (Float64 in V, stamped on arrival) [-]",
-              rule='one of ' + ', '.join(DISPLACEMENT_TYPES)),
-    ParamSpec('displacement_gain', _D.displacement_gain, 'float64 channel: metres per volt [m/V]'),
-    ParamSpec('displacement_offset', _D.displacement_offset, 'float64 channel: metres at 0 V [m]'),
-    ParamSpec('lever_arm_m', _D.lever_arm_m, 'moment axis: the LVDT reads the tangential displacement at this '
-              'distance from the rotation axis, converted to the angle asin(d / lever_arm_m) [rad]; 0 = the reading '
-              'is fitted as it is (m, or rad from an angle sensor) [m]', low=0.0),
-    ParamSpec('max_scatter_ratio', _D.max_scatter_ratio, "a branch fit whose residual rms exceeds this many times "
-              "what the sensors' noise explains (estimated from the data) is not OK [-]", rule='> 1'),
-    ParamSpec('pairing', _D.pairing, "how force and displacement samples are paired: 'nearest' (mutual nearest "
-              "stamps within slop_s: both sensors on one clock grid), 'interpolate_force' (each displacement sample "
-              "with the force interpolated at its stamp: a fast F/T sensor, a slow DAQ), 'interpolate_displacement' "
-              "(the other way round) [-]"),
-    ParamSpec('slop_s', _D.slop_s, "pairing 'nearest': largest stamp difference of a force/displacement pair [s]"),
-    ParamSpec('max_interpolation_gap_s', _D.max_interpolation_gap_s, 'interpolated pairing: widest gap between the '
-              'two samples of the faster stream interpolated across; a slow sample in a wider gap (a dropout) is '
-              'not paired [s]', rule='> 0'),
-    ParamSpec('max_age_s', _D.max_age_s, 'samples older than the other stream by more than this are stale; also '
-              'the longest a sample waits for its partner [s]'),
-    ParamSpec('expected_period_s', _D.expected_period_s, 'sample period of both streams, 0 = estimated online [s]'),
-    ParamSpec('dropout_factor', _D.dropout_factor, 'a stamp gap above this many periods counts as a dropout, '
-              '0 = not detected [-]'),
-    ParamSpec('min_silence_s', _D.min_silence_s, 'a stream silent this long at least (and dropout_factor '
-              'periods) is dead: input ERROR, branches STALE; shorter gaps are a busy machine, not a sensor [s]',
-              low=0.0),
-    ParamSpec('window', _D.window, 'pairs per windowed least-squares fit; span several load levels [pairs]'),
-    ParamSpec('forgetting', _D.forgetting, 'RLS forgetting factor in (0, 1], memory ~ 1/(1 - forgetting) [-]',
-              rule='0 < forgetting <= 1'),
-    ParamSpec('hysteresis', _D.hysteresis, 'dead band of the loading/unloading switch; above the force noise when '
-              'the branch follows the measured force [N or N·m]'),
-    ParamSpec('branch_source', _D.branch_source, "'auto': branch from /crane/wrench_command once a command is "
-              "seen, else from the measured force; 'force': always from the measured force [-]"),
-    ParamSpec('max_abs_force', _D.max_abs_force, 'force samples above this magnitude are absurd and dropped '
-              '[N or N·m]'),
-    ParamSpec('max_abs_displacement', _D.max_abs_displacement, 'displacement samples above this magnitude are '
-              'absurd and dropped [m or rad]'),
-    ParamSpec('nonlinearity_warn', _D.nonlinearity_warn, 'a branch whose nonlinearity (1 - k_upper/k_lower) '
-              'exceeds this is reported WARN: slack wires [-]'),
-    ParamSpec('max_clock_skew_s', _D.max_clock_skew_s, 'sensor samples stamped further ahead of their arrival '
-              '(node clock) are dropped as clock skew; <= max_age_s, the longest such a sample may hold the pairing '
-              'up [s]', rule='0 < max_clock_skew_s <= max_age_s'),
-    ParamSpec('max_loss_fraction', _D.max_loss_fraction, 'WARN when a sensor stream lost more than this fraction of '
-              'its samples (expected from its own stamps) [-]', rule='0 <= max_loss_fraction <= 1'),
-    ParamSpec('sensor_rotation', list(_D.sensor_rotation), 'rotation of the F/T sensor frame in crane_base (sensor -> '
-              'crane_base), quaternion [x, y, z, w]; the wrench is moved to the platform centre before force_axis is '
-              'taken [-]', rule='a non-zero quaternion, or 9 numbers of a rotation matrix'),
-    ParamSpec('sensor_position', list(_D.sensor_position), 'origin of the F/T sensor frame from the platform centre, '
-              'crane_base [m]', rule='3 finite numbers'),
-    ParamSpec('sensor_reaction', _D.sensor_reaction, 'the sensor measures the reaction of the load: negate the '
-              'wrench [-]'),
-    ParamSpec('displacement_delay_s', _D.displacement_delay_s, 'the displacement stamps are this late against the '
-              "force's: corrected to t - displacement_delay_s before pairing [s]", rule='|value| <= max_age_s'),
-    ParamSpec('max_stream_delay_s', _D.max_stream_delay_s, 'WARN when the delay between the streams estimated from '
-              'the data, after displacement_delay_s, exceeds this [s]', rule='> 0'),
-    ParamSpec('delay_window_s', _D.delay_window_s, 'recent data the stream delay is estimated from, every quarter of '
-              'it and at pauses; 0 = not estimated [s]', rule='0 or >= 0.2'),
+              "in m, header stamp) or 'float64' (Float64 in V, stamped on arrival) [-]", choices=DISPLACEMENT_TYPES),
+    *ESTIMATOR_PARAMS,
     ParamSpec('diagnostics_rate_hz', 5.0, 'rate of /stiffness/estimate and of the nonlinearity update [Hz]',
-              rule='> 0'),
+              above=0.0),
 )
 
 
 def _validate(values: dict[str, Any]) -> LiveSettings:
-    check(values['displacement_type'] in DISPLACEMENT_TYPES, 'displacement_type', values['displacement_type'],
-          f'must be one of {", ".join(DISPLACEMENT_TYPES)}')
-    positive(values, 'diagnostics_rate_hz')
+    """The settings of the live core (each value was checked against its declared rule by Params)."""
     return LiveSettings.from_params(values)  # ValueError naming the parameter; checks what the fits would
 
 
@@ -201,10 +146,8 @@ class StiffnessEstimatorNode(Node):
             self.core = LiveStiffness(settings)
         if first or self.core.configure(settings):
             where = 'at the platform centre' if settings.force_row() is None else 'moved to the platform centre'
-            pairing = (f'slop {settings.slop_s} s' if settings.interpolated is None else
-                       f'{settings.pairing} (gaps up to {settings.max_interpolation_gap_s} s)')
             self.get_logger().info(f'fitting {settings.force_axis}: window {settings.window} pairs, pairing '
-                                   f'{pairing}, branch from {settings.branch_source}, wrench {where}, '
+                                   f'{settings.pairing_text()}, branch from {settings.branch_source}, wrench {where}, '
                                    f'displacement stamps - {settings.displacement_delay_s:g} s')
         if values['displacement_type'] != self.settings.get('displacement_type'):
             if self.sub_displacement is not None:

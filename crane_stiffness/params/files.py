@@ -1,5 +1,5 @@
 """ROS 2 parameter files (the YAML of ``--params-file``): the one reader behind the offline CLI
-(crane_stiffness.config.load_params), the load programs (crane_stiffness.sim.program.load_program_file) and the
+(:func:`load_params`), the load programs (crane_stiffness.sim.program.load_program_file) and the
 files the session recorder stores with a session. No ROS import.
 
 A file maps node names to ``ros__parameters`` (``<node>: ros__parameters: {name: value}``); nested mappings flatten
@@ -24,6 +24,9 @@ from pathlib import Path
 from typing import Any, Iterable, Mapping, Sequence
 
 import yaml
+
+from crane_stiffness import PACKAGE
+from crane_stiffness.params.errors import ConfigError
 
 PARAMETERS_KEY = 'ros__parameters'
 
@@ -186,3 +189,54 @@ def read_params_files(paths: Sequence[str]) -> tuple[list[dict[str, str]], dict[
             if params is not None:
                 sections.setdefault(key, {}).update(params)
     return files, sections, problems
+
+
+def load_params(path: str | os.PathLike, node_name: str | None = None) -> dict[str, Any]:
+    """Flat parameters of a ROS parameter YAML file for the node ``node_name`` (its name, or its fully qualified
+    name), the sections applied the way ROS applies them (:func:`applicable_sections`: ``/**`` and other
+    wildcards first, then the node's own). Without ``node_name`` every section is merged in file order.
+    """
+    path = Path(path)
+    try:
+        file = ParamFile.read(path)
+    except FileNotFoundError:
+        raise ConfigError(f'{path}: no such config file') from None
+    except yaml.YAMLError as exc:
+        raise ConfigError(f'{path}: not valid YAML: {exc}') from None
+    if not file.is_mapping:
+        raise ConfigError(f'{path}: expected "<node>: ros__parameters: ..." at the top level')
+    keys = applicable_sections(file.sections, node_name)
+    for key in keys:
+        if file.sections[key] is None:
+            raise ConfigError(f'{path}: section {key!r} has no ros__parameters mapping')
+    return file.params(keys)
+
+
+def share_dir() -> Path:
+    """The package's share directory: via the ament index when available, else next to the sources."""
+    try:
+        from ament_index_python.packages import PackageNotFoundError, get_package_share_directory
+        try:
+            share = Path(get_package_share_directory(PACKAGE))
+            if (share / 'config').is_dir():
+                return share
+        except PackageNotFoundError:
+            pass
+    except ImportError:  # offline analysis without ROS
+        pass
+    candidate = Path(sys.prefix) / 'share' / PACKAGE
+    if (candidate / 'config').is_dir():
+        return candidate
+    return Path(__file__).resolve().parents[2]
+
+
+def config_path(name: str) -> Path:
+    """A file of the installed config/ directory (``name`` with or without .yaml), or ``name`` itself if it exists."""
+    p = Path(name)
+    if p.exists():
+        return p
+    fname = name if name.endswith('.yaml') else name + '.yaml'
+    found = share_dir() / 'config' / fname
+    if not found.exists():
+        raise ConfigError(f'{name}: not a file, and no {fname} in {share_dir() / "config"}')
+    return found

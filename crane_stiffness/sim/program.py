@@ -39,7 +39,8 @@ import yaml
 from numpy.typing import NDArray
 
 from crane_stiffness.axes import AXES
-from crane_stiffness.param_files import ParamFile, applicable_sections
+from crane_stiffness.params.files import ParamFile, applicable_sections
+from crane_stiffness.params.spec import ParamSpec
 from crane_stiffness.sim.errors import ParameterError, ProgramFileError
 
 KINDS = ('ramp', 'hold', 'step')
@@ -361,7 +362,7 @@ def load_program_file(path: str | PathLike[str], node: str | None = None, *, str
         path: The YAML file (``<node>: {ros__parameters: {...}}``).
         node: Node whose parameters to use: its name (in any namespace) or fully qualified name; the sections that
             apply to it are merged as ROS merges them (wildcards such as ``/**`` first; see
-            crane_stiffness.param_files). None: the first block in the file.
+            crane_stiffness.params.files). None: the first block in the file.
         strict: Passed to :meth:`LoadProgram.from_params`.
 
     Raises:
@@ -382,3 +383,19 @@ def load_program_file(path: str | PathLike[str], node: str | None = None, *, str
     if not keys:
         raise ProgramFileError(f'{path}: no parameters for node {node!r}; nodes in file: {", ".join(blocks)}')
     return LoadProgram.from_params(file.params(keys), strict=strict)
+
+
+#: A load program's parameters, declared once (the load_program node declares them, the session recorder records
+#: them; a program file holds them under ``load_program``).
+PROGRAM_PARAMS: tuple[ParamSpec, ...] = (
+    ParamSpec('name', 'hold_zero', 'program name, recorded with the session'),
+    ParamSpec('rate_hz', 100.0, 'command publication rate [Hz]', above=0.0),
+    ParamSpec('repeats', 1, 'how many times the segment list is played (>= 1)', low=1),
+    ParamSpec('segments.kind', ['hold'], 'segment kinds: ramp | hold | step'),
+    ParamSpec('segments.axis', ['fy'], 'segment axes: fx fy fz [N] or mx my mz [N·m], fixed frame (z down)'),
+    ParamSpec('segments.target', [0.0], 'segment end values [N or N·m]'),
+    ParamSpec('segments.duration', [1.0], 'segment durations [s]',
+              rule='one per segment; kind, axis, target and duration lists have the same length'),
+)
+#: Their names.
+PROGRAM_KEYS = tuple(spec.name for spec in PROGRAM_PARAMS)

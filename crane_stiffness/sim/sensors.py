@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from crane_stiffness.params.spec import ParamSpec
 from crane_stiffness.sim.errors import ParameterError
 
 RngLike = np.random.Generator | int | None
@@ -300,3 +301,55 @@ class LvdtModel:
         if contact.shape != (3,):
             raise ParameterError('u', u, 'zero() takes a single pose')
         self._reference = contact
+
+
+# --- the simulated sensors' parameters, declared once (the sensor nodes and the device emulators declare them) ---
+_IDENTITY_6X6 = [1.0 if i == j else 0.0 for i in range(6) for j in range(6)]
+#: The seed of a simulated sensor's noise generator.
+SEED_PARAM = ParamSpec('seed', -1, 'seed of the noise generator, -1 = random [-]', low=-1)
+#: :class:`LoadCellModel`'s parameters with the lab's F/T sensor as defaults (the load_cell node, rdt_emulator).
+LOAD_CELL_PARAMS: tuple[ParamSpec, ...] = (
+    ParamSpec('noise_std', [0.01, 0.01, 0.01, 0.0005, 0.0005, 0.0005],
+              'white-noise standard deviation per axis fx fy fz mx my mz [N, N, N, N·m, N·m, N·m]'),
+    ParamSpec('bias', [0.05, -0.03, 0.08, 0.001, -0.001, 0.0005],
+              'constant offset per axis before a tare [N, N, N, N·m, N·m, N·m]'),
+    ParamSpec('drift_per_s', [0.0] * 6, 'linear drift of the offset per axis [N/s, N/s, N/s, N·m/s, N·m/s, N·m/s]'),
+    ParamSpec('crosstalk', _IDENTITY_6X6, '6x6 cross-talk matrix C, 36 numbers row-major: reading_i = '
+              'sum_j C_ij w_j [-]'),
+    ParamSpec('resolution', [0.002, 0.002, 0.002, 0.0001, 0.0001, 0.0001],
+              'quantization step per axis, 0 = none [N, N, N, N·m, N·m, N·m]'),
+    ParamSpec('full_scale', [40.0, 40.0, 120.0, 2.0, 2.0, 2.0],
+              'overload limit per axis; readings saturate at +-full_scale [N, N, N, N·m, N·m, N·m]'),
+    SEED_PARAM,
+)
+#: :class:`LvdtModel`'s parameters with the lab's LVDT as defaults (the lvdt node, modbus_emulator).
+LVDT_PARAMS: tuple[ParamSpec, ...] = (
+    ParamSpec('axis', [0.0, 1.0, 0.0], 'measuring direction in crane_base (normalised; default along y) [-]'),
+    ParamSpec('contact_point', [0.0, 0.0, 0.0], 'contact point on the platform, body frame (default: its centre) '
+              '[m]'),
+    ParamSpec('noise_std', 2.0e-7, 'white-noise standard deviation of the reading [m]', low=0.0),
+    ParamSpec('resolution', 1.0e-7, 'quantization step of the reading, 0 = none [m]', low=0.0),
+    ParamSpec('range_m', [-2.5e-3, 2.5e-3], 'stroke [min, max] relative to the zero; the reading saturates '
+              'outside [m]'),
+    ParamSpec('zero_on_first_pose', True, 'zero at the first pose received, so the reading is the displacement '
+              'from the loaded rest pose [-]'),
+    SEED_PARAM,
+)
+
+
+def _seed(values: Mapping[str, Any]) -> int | None:
+    return None if values['seed'] < 0 else int(values['seed'])
+
+
+def load_cell_from_params(values: Mapping[str, Any]) -> LoadCellModel:
+    """The :class:`LoadCellModel` of parameter values (:data:`LOAD_CELL_PARAMS`; other keys ignored; seed -1 =
+    random). Raises ParameterError naming a bad value."""
+    return LoadCellModel.from_params({**{k: values[k] for k in LoadCellModel.PARAM_NAMES if k != 'seed'},
+                                      'seed': _seed(values)})
+
+
+def lvdt_from_params(values: Mapping[str, Any]) -> LvdtModel:
+    """The :class:`LvdtModel` of parameter values (:data:`LVDT_PARAMS`; other keys ignored; seed -1 = random).
+    Raises ParameterError naming a bad value."""
+    return LvdtModel.from_params({**{k: values[k] for k in LvdtModel.PARAM_NAMES if k != 'seed'},
+                                  'seed': _seed(values)})

@@ -19,11 +19,12 @@ from std_msgs.msg import Float64, Float64MultiArray, String
 
 from crane_stiffness import __version__, topics
 from crane_stiffness.status import NAMES as LEVEL_NAMES
-from crane_stiffness.config import geometry_from_params, load_params
+from crane_stiffness.params.geometry import geometry_from_params
+from crane_stiffness.params.files import load_params
 from crane_stiffness.analysis.sweep import unit
 from crane_stiffness.model import (axis_stiffness, directional_stiffness, paper_stiffness, rest_pose,
                                    tangent_stiffness)
-from crane_stiffness.nodes.common import LATCHED_QOS, RELIABLE_QOS
+from crane_stiffness.nodes.qos import LATCHED_QOS, RELIABLE_QOS
 from crane_stiffness.rig_description import PACKAGE, NodeStart, rig_nodes
 from crane_stiffness.rig_description import config_files as rig_config_files
 from crane_stiffness.sim.program import LoadProgram, load_program_file

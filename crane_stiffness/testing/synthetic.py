@@ -18,12 +18,14 @@ import numpy as np
 
 from crane_stiffness import topics
 from crane_stiffness.bag import BagWriter, dump_qos_profiles, qos_profile
-from crane_stiffness.config import geometry_to_params
-from crane_stiffness.estimation.live import AXES, VALUE_FIELDS, LiveSettings, LiveStiffness
+from crane_stiffness.params.geometry import geometry_to_params
+from crane_stiffness.axes import AXES
+from crane_stiffness.estimation.live import VALUE_FIELDS, LiveStiffness
+from crane_stiffness.estimation.settings import LiveSettings
 from crane_stiffness.model import CraneGeometry
 from crane_stiffness.serde import (encode_float64, encode_float64_multiarray, encode_stamped, encode_string,
                                    stamp_seconds)
-from crane_stiffness.session import SESSION_METADATA, session_metadata
+from crane_stiffness.session_record import SESSION_METADATA, session_metadata
 from crane_stiffness.sim.program import LoadProgram
 
 T0_NS = 1_700_000_000_000_000_000

@@ -1,0 +1,80 @@
+"""The live estimator's pairing and branch labelling for whole recorded streams at once (numpy): the pairs
+:class:`~crane_stiffness.estimation.live.LiveStiffness` would fit and the branch of each, composed of the vectorised
+forms that sit beside each streaming rule (:mod:`~crane_stiffness.estimation.inputs`,
+:func:`~crane_stiffness.estimation.sync.pair_by_stamp`, :func:`~crane_stiffness.estimation.sync.pair_by_interpolation`,
+:func:`~crane_stiffness.estimation.branch.branch_labels`). ``test/test_live_estimate.py`` pins it to the streaming
+estimator. Pure numpy, no ROS.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from crane_stiffness.estimation.branch import branch_labels
+from crane_stiffness.estimation.inputs import CommandSeries, Samples, stream_health_of
+from crane_stiffness.estimation.settings import LiveSettings
+from crane_stiffness.estimation.sync import FORCE, pair_by_interpolation, pair_by_stamp, pair_stamp
+
+
+@dataclass(frozen=True)
+class LivePairs:
+    """The pairs :class:`LiveStiffness` fits from whole recorded streams (:func:`live_pairs`), in stamp order."""
+
+    stamp: np.ndarray
+    """Pair stamps, s."""
+    force: np.ndarray
+    displacement: np.ndarray
+    loading: np.ndarray
+    """The branch each pair is fitted to: True for loading."""
+    fit_log: np.ndarray
+    """When the live estimator fits each pair: the arrival (log) time of the later of its two samples, ns."""
+    counters: dict[str, int]
+    """The pairing's counters (:func:`~crane_stiffness.estimation.sync.pair_by_stamp` or
+    :func:`~crane_stiffness.estimation.sync.pair_by_interpolation`)."""
+
+
+def live_pairs(settings: LiveSettings, force: Samples, displacement: Samples,
+               commands: CommandSeries | None) -> LivePairs:
+    """What :class:`LiveStiffness` pairs and the branch it fits each pair to, for whole recorded streams that passed
+    the input checks (:func:`~crane_stiffness.estimation.inputs.checked_samples`), vectorized. Pairs made while a
+    rejected command was in force are left out (counted as ``pairs_rejected_command``)."""
+    s = settings
+    if s.interpolated is None:
+        result = pair_by_stamp(force.stamp, force.arrival_ns, displacement.stamp, displacement.arrival_ns, s.slop_s,
+                               s.max_age_s)
+        fi, di = result.force_index, result.displacement_index
+        stamp = pair_stamp(force.stamp[fi], displacement.stamp[di])
+        fit_log = np.maximum(force.arrival_ns[fi], displacement.arrival_ns[di])
+        value, disp_value = force.value[fi], displacement.value[di]
+    else:
+        fast = s.interpolated
+        result = pair_by_interpolation(force.stamp, force.arrival_ns, displacement.stamp, displacement.arrival_ns,
+                                       fast, (force if fast == FORCE else displacement).value,
+                                       s.max_interpolation_gap_s, s.max_age_s)
+        slow_samples, fast_samples = (displacement, force) if fast == FORCE else (force, displacement)
+        si = result.slow_index
+        stamp = result.stamp
+        # A pair forms once its slow sample and the fast sample closing its bracket have both arrived.
+        fit_log = np.maximum(slow_samples.arrival_ns[si], fast_samples.arrival_ns[result.fast_index])
+        slow_value = slow_samples.value[si]
+        value, disp_value = (result.fast_value, slow_value) if fast == FORCE else (slow_value, result.fast_value)
+    counters = dict(result.counters)
+    if commands is not None:
+        rejected = commands.rejected_at(stamp, fit_log)
+        counters['pairs_rejected_command'] = int(rejected.sum())
+        keep = ~rejected
+        value, disp_value, stamp, fit_log = value[keep], disp_value[keep], stamp[keep], fit_log[keep]
+    else:
+        counters['pairs_rejected_command'] = 0
+    load = value
+    if commands is not None and s.branch_source == 'auto':
+        held_load, held = commands.at(stamp, fit_log)
+        load = np.where(held & np.isfinite(held_load), held_load, value)
+    for name, samples in (('force', force), ('displacement', displacement)):
+        counters[f'{name}_received_fraction'] = stream_health_of(samples.stamp,
+                                                                 s.expected_period_s or None).received_fraction
+    return LivePairs(stamp, value, disp_value, branch_labels(load, s.hysteresis), fit_log, counters)
+
+
+__all__ = ['LivePairs', 'live_pairs']

@@ -1,0 +1,171 @@
+"""``run``: the ``main`` of every node (start-up checks, the executor, signals, a clean shutdown, the final
+counters)."""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import sys
+import threading
+from typing import Any, Callable, Sequence
+
+import rclpy
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
+
+from crane_stiffness import entry
+from crane_stiffness.nodes import parameters
+from crane_stiffness.params.files import params_files_from_args
+
+
+def make_executor(kind: str, context: Any):
+    """'events': rclpy's EventsExecutor (in C++, about a quarter of the CPU per message of the standard one, which
+    matters at 1 kHz on two cores); 'single': SingleThreadedExecutor."""
+    if kind == 'events':
+        try:
+            from rclpy.experimental import EventsExecutor
+            return EventsExecutor(context=context)
+        except ImportError:  # an rclpy without it
+            pass
+    return SingleThreadedExecutor(context=context)
+
+
+class ShutdownRequest:
+    """SIGINT/SIGTERM as a flag the spin loop of :func:`run` reads.
+
+    rclpy's own handlers raise KeyboardInterrupt wherever the main thread is, also inside a callback that the C++
+    EventsExecutor called (pybind11 then aborts the process: ``terminate called after throwing ...
+    error_already_set``), and shut the context down under callbacks that are still running (``Exception in 'timers'
+    callback``). Here the Python handler only sets :attr:`signum`, and the signal's number, written by Python to a
+    wake-up pipe whichever thread the kernel chose, is read by a thread of its own that also wakes the executor
+    (``wake``): a main thread waiting in C++ sees the flag at once. A signal, once or repeated (Ctrl-C reaches every
+    node and ``ros2 launch`` forwards it once more), ends the spin loop after the running callback; the node closes
+    its files and exits with status 0. :meth:`ignore` keeps a late signal from killing the finished process.
+    """
+
+    SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+    def __init__(self) -> None:
+        self.signum: int | None = None
+        self.count = 0
+        self.wake: Callable[[], None] | None = None
+
+    def __bool__(self) -> bool:
+        return self.signum is not None
+
+    def handle(self, signum: int, frame: Any = None) -> None:
+        self.count += 1
+        if self.signum is None:
+            self.signum = signum
+        wake = self.wake
+        if wake is not None:
+            try:
+                wake()
+            except Exception:  # an executor already shut down: the flag is enough
+                pass
+
+    def install(self) -> bool:
+        """Install the handlers and the wake-up thread (main thread only: Python runs signal handlers there);
+        False if not possible."""
+        if threading.current_thread() is not threading.main_thread():
+            return False
+        read_fd, write_fd = os.pipe()
+        os.set_blocking(write_fd, False)
+        # The pipe first, then the handlers: a signal in between still reaches the pipe.
+        signal.set_wakeup_fd(write_fd, warn_on_full_buffer=False)
+        for sig in self.SIGNALS:
+            signal.signal(sig, lambda signum, frame: None)  # the flag is set by the thread; never an exception
+        threading.Thread(target=self._wait, args=(read_fd,), name='shutdown_signals', daemon=True).start()
+        for signum in entry.pending():  # arrived while the node's module was being imported
+            self.handle(signum)
+        return True
+
+    def _wait(self, read_fd: int) -> None:
+        while True:
+            for signum in os.read(read_fd, 64):
+                if signum in self.SIGNALS:
+                    self.handle(signum)
+
+    def ignore(self) -> None:
+        """From now on SIGINT/SIGTERM do nothing: the process is ending, and Python's finalization would reset its
+        handlers to the default (a signal then, e.g. launch forwarding Ctrl-C, would kill it with -2/-15)."""
+        if threading.current_thread() is threading.main_thread():
+            for sig in self.SIGNALS:
+                signal.signal(sig, signal.SIG_IGN)
+
+
+def run(node_factory: Callable[[], Node], args: Sequence[str] | None = None,
+        executor: str | Callable[[Node], str] = 'events') -> int:
+    """The ``main`` of every node: init, build, spin until SIGINT (Ctrl-C), SIGTERM or ``node.exit_requested``,
+    clean up; returns the exit status (``node.exit_status``, default 0).
+
+    Signals only set a flag (:class:`ShutdownRequest`; rclpy's handlers are not installed), so every exit takes
+    the same path: the spin loop ends, ``close()`` (if the node has one) runs, the node's final counters are
+    printed, the node is destroyed and rclpy shut down. A node that cannot start (bad parameter) exits with
+    status 2 and the reason on stderr. It is a process's main: SIGINT and SIGTERM are ignored after it returns.
+    """
+    name = getattr(node_factory, '__name__', 'node')
+    request = ShutdownRequest()
+    request.install()
+    argv = list(sys.argv if args is None else args)
+    # A missing or malformed --params-file would make rclpy.init raise (RCLError): say which file and why.
+    reason = next(filter(None, map(parameters.params_file_problem, params_files_from_args(argv))), None)
+    if reason is None:
+        try:
+            rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+        except Exception as exc:  # e.g. a parameter file rcl reads differently
+            reason = parameters.one_line(f'{type(exc).__name__}: {exc}')
+    if reason is not None:
+        print(f'[{name}] cannot start: {reason}', file=sys.stderr)
+        return 2
+    try:
+        with parameters.started_with(argv):
+            node = node_factory()
+        try:  # a misspelt -p name would be ignored by rclpy: the node would run with the default
+            parameters.check_command_line_params(argv, node.get_name(), set(node._parameters))
+        except ValueError:
+            node.destroy_node()
+            raise
+    except (ValueError, TypeError) as exc:
+        print(f'[{name}] cannot start: {exc}', file=sys.stderr)
+        rclpy.try_shutdown()
+        return 2
+    except Exception as exc:  # e.g. rclpy's InvalidParameterTypeException from a params file
+        print(f'[{name}] cannot start: {type(exc).__name__}: {exc}', file=sys.stderr)
+        rclpy.try_shutdown()
+        return 2
+    ex = make_executor(executor(node) if callable(executor) else executor, node.context)
+    ex.add_node(node)
+    request.wake = ex.wake
+    try:
+        while not request and rclpy.ok(context=node.context) and not getattr(node, 'exit_requested', False):
+            ex.spin_once(timeout_sec=0.1)
+    except ExternalShutdownException:
+        pass
+    finally:
+        close = getattr(node, 'close', None)
+        if close is not None:
+            close()
+        final_counters(node)
+        ex.remove_node(node)
+        ex.shutdown()
+        request.wake = None
+        node.destroy_node()
+        rclpy.try_shutdown()
+        request.ignore()
+    return int(getattr(node, 'exit_status', 0) or 0)
+
+
+def final_counters(node: Node) -> None:
+    """Print the node's message counters once at exit (``FINAL_COUNTERS <node> {json}``): the totals a benchmark or
+    an engineer reads after a run, when /diagnostics has stopped."""
+    counters = getattr(node, 'counters', None)
+    if counters is None:
+        return
+    values = counters.__dict__ if hasattr(counters, '__dict__') else counters
+    try:
+        text = json.dumps({k: v for k, v in dict(values).items() if isinstance(v, (int, float, str))})
+    except (TypeError, ValueError):
+        return
+    print(f'FINAL_COUNTERS {node.get_name()} {text}', flush=True)
