@@ -310,8 +310,14 @@ def test_rejected_and_absurd_commands_excluded_over_dds(rclpy_context):
     print(f'expected {expected} pairs under rejected commands')
     assert expected >= 30
     assert 0.8 * expected - 3 <= c.pairs_rejected_command <= expected + 3  # best effort: a few pairs may be lost
+    # A sensor sample may overtake its command on a loaded machine: the pair is fitted before the command is seen to
+    # be absurd. Then the branch holding it must say so (WARN) until it has left the window; otherwise k is right.
+    reports = {r.branch: r for r in estimator.core.report()}
     for branch in ('loading', 'unloading'):
-        assert estimator.core.estimate(branch).stiffness == pytest.approx(K, rel=0.01)
+        k = estimator.core.estimate(branch).stiffness
+        if abs(k - K) > 0.01 * K:
+            assert c.late_rejections >= 1 and reports[branch].level == WARN, (k, reports[branch].message)
+            assert 'reached the estimator after pairs stamped under it were fitted' in reports[branch].message
     for a in probe.estimates:  # never OK while a rejected command is in force
         branches, inputs = statuses(a)
         if 'in force' in inputs.message:

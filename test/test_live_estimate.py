@@ -256,3 +256,29 @@ def test_interpolated_pairing_live_equals_the_vectorised_pairs(pairing) -> None:
                                                   'discarded', 'pending'))
         assert acc[f'{stream}_passed_checks'] == parts == acc[f'{stream}_received'] - acc[f'{stream}_dropped']
     assert acc['pairs'] == acc['pairs_fitted']
+
+
+def test_a_rejection_that_arrives_after_pairs_under_it_were_fitted_is_warned_until_they_leave_the_window() -> None:
+    """A rejected command stamped before pairs already fitted (the sensor streams overtook it): those pairs are in
+    the windows, so each branch is WARN, naming it, until ``window`` more of its pairs have pushed them out. One that
+    arrives before any pair stamped under it changes nothing."""
+    n, window = 300, 100
+    command = _triangle(n)
+    live = LiveStiffness(LiveSettings(window=window, hysteresis=0.05))
+    _feed(live, command, (command - C) / K, command=command)
+    assert all(r.level == OK for r in live.report())
+    live.add_rejected(T0 + 250 * PERIOD, _wrench(2.0), T0 + n * PERIOD)  # stamped under fitted pairs
+    assert live.counters.late_rejections == 1 and live.counters.segments == 1
+    reports = live.report()
+    assert all(r.level == WARN and 'reached the estimator after pairs stamped under it were fitted' in r.message
+               for r in reports), [r.message for r in reports]
+    assert live.estimate('loading') is not None  # the fits go on
+    # window more pairs of each branch (a new triangle, after an accepted command): OK again.
+    t1 = T0 + n * PERIOD
+    _feed(live, _triangle(4 * window), (_triangle(4 * window) - C) / K, t0=t1, command=_triangle(4 * window))
+    assert all(r.level == OK for r in live.report()), [r.message for r in live.report()]
+    # Absurd, stamped in the past: the same; stamped after every fitted pair: nothing.
+    live.add_command(t1 + 5 * PERIOD, _wrench(1e30), t1 + 4 * window * PERIOD)
+    assert live.counters.late_rejections == 2
+    live.add_rejected(T0 + 100.0, _wrench(2.0), T0 + 100.0)
+    assert live.counters.late_rejections == 2

@@ -94,17 +94,22 @@ def _inputs(data: SessionData) -> tuple[Samples, Samples, dict[str, int]]:
     """The live estimator's input checks on both streams: the (force, displacement) samples kept, and the counts."""
     s = data.settings
     f = data.force
-    wrench = np.column_stack([f[k] for k in AXES]) if f.size else np.zeros((0, 6))
     f_stamp = f['stamp_s']
+    finite = np.isfinite(f_stamp)
+    for k in AXES:  # a NaN/Inf anywhere in the wrench drops the sample, as live
+        finite &= np.isfinite(f[k])
+    if s.force_row() is None:  # the sensor at the platform centre, aligned: the component as recorded
+        component = f[s.force_axis]
+    else:
+        component = s.force_component(np.column_stack([f[k] for k in AXES]) if f.size else np.zeros((0, 6)))
     # The clock-skew check: live, a stamp ahead of its arrival at the estimator; here, ahead of the recorder's log
     # time of the message (its arrival at the recorder, on the same clock; a few ms from the estimator's).
     # The wrench moved from the sensor's frame to the platform centre (sensor_rotation, _position, _reaction), the
     # live estimator's matrix, vectorised; as is when the sensor is at the centre.
-    force, f_counts = checked_samples(f_stamp, f['log_time_ns'], s.force_component(wrench),
-                                      np.isfinite(wrench).all(axis=1) & np.isfinite(f_stamp), s.max_abs_force,
+    force, f_counts = checked_samples(f_stamp, f['log_time_ns'], component, finite, s.max_abs_force,
                                       s.max_clock_skew_s)
     d = data.disp
-    if 'stamp_s' in d.dtype.names:
+    if 'stamp_s' in d:
         d_stamp = d['stamp_s']
         d_value = s.reading_to_displacement(d['x'].astype(float))
     else:  # std_msgs/Float64 in volts, stamped on arrival by the estimator
@@ -407,6 +412,9 @@ def _input_problems(counters: dict[str, Any], st: LiveSettings) -> list[str]:
     if counters.get('pairs_rejected_command'):
         problems.append(f'{counters["pairs_rejected_command"]} pair(s) made while a rejected command (absurd, or '
                         f'rejected by the crane model) was in force were not fitted')
+    if counters.get('late_rejections'):
+        problems.append(f'{counters["late_rejections"]} rejected command(s) reached the live estimator after pairs '
+                        f'stamped under them were fitted: its estimate held them (WARN) until they left its window')
     for stream in ('force', 'displacement'):
         fraction = counters.get(f'{stream}_received_fraction', math.nan)
         if fraction < 1.0 - st.max_loss_fraction:

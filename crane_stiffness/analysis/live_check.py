@@ -17,7 +17,9 @@ from crane_stiffness.estimation.live_pairs import LivePairs
 #: Pairs of a branch fed to the recursive least squares for the live comparison (its memory is ~1/(1-λ)).
 RLS_REPLAY_PAIRS = 20_000
 
-def _windowfit_or_none(pairs: LivePairs, cut: int, branch: str, window: int, forgetting: float) -> dict[str, float]:
+
+def _window_fit(pairs: LivePairs, cut: int, branch: str, window: int, forgetting: float) -> dict[str, float]:
+    """The live estimator's window and RLS fits of ``branch`` over the pairs before ``cut``."""
     sel = np.flatnonzero(pairs.loading[:cut] == (branch == LOADING))
     nan = math.nan
     out = {k: nan for k in COMPARED_FIELDS}
@@ -49,7 +51,7 @@ def live_comparison(data: SessionData, pairs: LivePairs) -> LiveComparison | Non
     live, offline, worst = {}, {}, {}
     for b, branch in enumerate(BRANCHES):
         live[branch] = {f: float(rows[b, index[f]]) for f in COMPARED_FIELDS}
-        offline[branch] = _windowfit_or_none(pairs, cut, branch, s.window, s.forgetting)
+        offline[branch] = _window_fit(pairs, cut, branch, s.window, s.forgetting)
         diffs = []
         for f in WINDOW_FIT_FIELDS:
             a, o = live[branch][f], offline[branch][f]

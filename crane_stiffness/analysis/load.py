@@ -18,6 +18,7 @@ from crane_stiffness.bag import BagReader, TopicNotFoundError
 from crane_stiffness.axes import AXES
 from crane_stiffness.estimation.live import VALUE_FIELDS
 from crane_stiffness.estimation.settings import LiveSettings
+from crane_stiffness.serde.bulk import Columns
 from crane_stiffness.serde import CdrError, decode_diagnostic_array, decode_float64_multiarray, decode_string
 from crane_stiffness.session_record import read_node_parameters, read_session
 from crane_stiffness.sim.program import LoadProgram
@@ -40,12 +41,13 @@ class SessionData:
     geometry_params: dict[str, Any] | None
     settings: LiveSettings
     sensors: dict[str, Any]
-    force: np.ndarray | None = None
-    disp: np.ndarray | None = None
-    command: np.ndarray | None = None
-    rejected: np.ndarray | None = None  # the crane model's rejected commands (/crane/rejected_command)
-    live_series: np.ndarray | None = None
-    prediction: np.ndarray | None = None
+    # The decoded streams, one column per field (serde.bulk.Columns: c['stamp_s'], c.size).
+    force: Columns | None = None
+    disp: Columns | None = None
+    command: Columns | None = None
+    rejected: Columns | None = None  # the crane model's rejected commands (/crane/rejected_command)
+    live_series: Columns | None = None
+    prediction: Columns | None = None
     states: list[tuple[int, dict[str, Any]]] = field(default_factory=list)
     live_values: tuple[int, np.ndarray] | None = None
     live_inputs: list[tuple[int, dict[str, str]]] = field(default_factory=list)
@@ -202,7 +204,7 @@ def load_session(path: Path, axis: str | None, problems: list[str], missing: lis
                                 (topics.STIFFNESS, 'std_msgs/msg/Float64')):
             if topic in known and known[topic].count and known[topic].msg_type == msg_type:
                 wanted.append(topic)
-        arrays = reader.decode_topics(wanted)
+        arrays = reader.decode_topics(wanted, columns=True)
         data.force = arrays[topics.LOAD_CELL_WRENCH]
         data.disp = arrays[topics.LVDT_DISPLACEMENT]
         data.command = arrays.get(topics.WRENCH_COMMAND)

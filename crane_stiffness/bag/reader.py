@@ -271,9 +271,11 @@ class BagReader:
         """
         return self.decode_topics([topic], start_ns=start_ns, end_ns=end_ns)[topic]
 
-    def decode_topics(self, topics: Sequence[str], *, start_ns: int | None = None,
-                      end_ns: int | None = None) -> dict[str, np.ndarray]:
-        """Like :meth:`decode` for several topics in one pass over the file (each chunk decompressed once)."""
+    def decode_topics(self, topics: Sequence[str], *, start_ns: int | None = None, end_ns: int | None = None,
+                      columns: bool = False) -> dict[str, Any]:
+        """Like :meth:`decode` for several topics in one pass over the file (each chunk decompressed once). With
+        ``columns`` each topic comes as :class:`~crane_stiffness.serde.bulk.Columns` (the same fields, no structured
+        array built)."""
         known = self.topics
         per_file = self._channels_for(topics)
         decoders: dict[str, Decoder] = {}
@@ -301,13 +303,16 @@ class BagReader:
                     self._warn(text)
                     if not valid.any():
                         continue
-                cols = {k: v[valid] for k, v in cols.items()}
-                cols['log_time_ns'] = found.log_time[valid].astype(np.int64)
+                if valid.all():
+                    cols['log_time_ns'] = found.log_time.astype(np.int64)
+                else:
+                    cols = {k: v[valid] for k, v in cols.items()}
+                    cols['log_time_ns'] = found.log_time[valid].astype(np.int64)
                 parts[topic].append(cols)
         # Each topic's columns into one structured array: numpy's copies release the GIL, so the big topics (the
         # two sensor streams) are assembled side by side.
         with ThreadPoolExecutor(max_workers=READ_THREADS, thread_name_prefix='bag_assemble') as pool:
-            arrays = pool.map(lambda t: self._assemble(decoders[t], parts[t], start_ns, end_ns), topics)
+            arrays = pool.map(lambda t: self._assemble(decoders[t], parts[t], start_ns, end_ns, columns), topics)
             return dict(zip(topics, arrays))
 
     @staticmethod
@@ -330,9 +335,9 @@ class BagReader:
 
     @staticmethod
     def _assemble(decoder: Decoder, parts: list[dict[str, np.ndarray]], start_ns: int | None,
-                  end_ns: int | None) -> np.ndarray:
+                  end_ns: int | None, as_columns: bool = False) -> Any:
         if not parts:
-            return decoder.empty()
+            return decoder.empty_columns() if as_columns else decoder.empty()
         columns = {key: np.concatenate([p[key] for p in parts]) for key in parts[0]}
         log = columns['log_time_ns']
         keep = np.ones(log.size, bool)
@@ -346,7 +351,7 @@ class BagReader:
         if log.size > 1 and not (np.diff(log) >= 0).all():
             order = np.argsort(log, kind='stable')
             columns = {k: v[order] for k, v in columns.items()}
-        return decoder.to_array(columns)
+        return decoder.to_columns(columns) if as_columns else decoder.to_array(columns)
 
 
 __all__ = ['BagReader', 'RawMessage', 'SUPPORTED_TYPES', 'TopicInfo']

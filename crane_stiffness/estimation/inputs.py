@@ -77,6 +77,7 @@ class InputCounters:
     command_rejected: int = 0       # absurd by crane_stiffness.command_limits: held as rejected
     command_used: int = 0           # held as accepted
     rejected_received: int = 0      # /crane/rejected_command messages (the model's rejections)
+    late_rejections: int = 0        # rejected commands that arrived after pairs stamped under them were fitted
     pairs_fitted: int = 0
     pairs_rejected_command: int = 0  # paired while a rejected command was in force: not fitted
     pairs_non_finite: int = 0       # paired but refused by the fit (NaN/Inf; not reached after the input checks)

@@ -134,6 +134,8 @@ class LiveStiffness:
         self._dirty: set[Branch] = set()
         self._current: Branch | None = None
         self._newest_stamp = math.nan
+        self._suspect: dict[Branch, int] = {b: 0 for b in BRANCHES}  # pairs until a late rejection leaves the window
+        self._suspect_reason = ''
 
     @property
     def settings(self) -> LiveSettings:
@@ -216,6 +218,7 @@ class LiveStiffness:
         if reason is not None:
             self.counters.command_rejected += 1
             self._commands.add(float(stamp), load, f'absurd command: {reason}')
+            self._rejected_late(float(stamp), 'an absurd command')
             return False
         self.counters.command_used += 1
         self._commands.add(float(stamp), load)
@@ -231,6 +234,20 @@ class LiveStiffness:
             return
         reason = command_fault(wrench) or 'no equilibrium'
         self._commands.add(float(stamp), math.nan, f'command rejected by the crane model ({reason})', from_model=True)
+        self._rejected_late(float(stamp), 'a command rejected by the crane model')
+
+    def _rejected_late(self, stamp_s: float, what: str) -> None:
+        """A rejected command that arrived after pairs stamped under it were fitted (the sensor streams overtook it:
+        the model answers after it has solved, a loaded machine delays a topic): those pairs, the newest of the
+        windows, are in the fits against the rule that nothing stamped while a rejected command is in force is
+        fitted. Each branch is WARN, naming it, until ``window`` more pairs of the branch have pushed them out of
+        its window (the pairs themselves are usually sound: the sensors kept the load the model held). Offline:
+        :func:`~crane_stiffness.estimation.live_pairs.late_rejections`."""
+        if self._newest_stamp >= stamp_s:
+            self.counters.late_rejections += 1
+            self._suspect = {b: self._settings.window for b in BRANCHES}
+            self._suspect_reason = (f'{what} (stamped {stamp_s:.6f} s) reached the estimator after pairs stamped '
+                                    'under it were fitted')
 
     def add_force(self, stamp_s: float, wrench: Sequence[float], arrival_s: float = math.nan,
                   sequence: int | None = None) -> int:
@@ -336,6 +353,8 @@ class LiveStiffness:
             self._dirty.add(branch)
             self._current = branch
             self._newest_stamp = stamp
+            if self._suspect[branch]:
+                self._suspect[branch] -= 1
             fitted += 1
         self.counters.pairs_fitted += fitted
         return fitted
@@ -468,6 +487,10 @@ class LiveStiffness:
                 if meaningless:
                     level = WARN
                     message = 'fit not trusted: ' + '; '.join(meaningless) + '; ' + message
+                if self._suspect[branch]:
+                    level = WARN
+                    message = (f'the window holds pairs fitted under a rejected command: {self._suspect_reason} '
+                               f'({self._suspect[branch]} more pairs until they leave it); ' + message)
             if problem_level == ERROR:
                 level = STALE
                 message = 'inputs invalid, estimate frozen: ' + '; '.join(problems) + '; last ' + message

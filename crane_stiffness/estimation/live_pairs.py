@@ -7,7 +7,7 @@ estimator. Pure numpy, no ROS.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -32,6 +32,24 @@ class LivePairs:
     counters: dict[str, int]
     """The pairing's counters (:func:`~crane_stiffness.estimation.sync.pair_by_stamp` or
     :func:`~crane_stiffness.estimation.sync.pair_by_interpolation`)."""
+    late_rejection_log: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    """When a rejected command reached the live estimator after pairs stamped under it were fitted (it WARNs until
+    they leave its windows; :func:`late_rejections`), log time ns, ascending."""
+
+
+def late_rejections(commands: CommandSeries | None, stamp: np.ndarray, fit_log: np.ndarray) -> np.ndarray:
+    """The arrival (log) times, ns, of the rejected commands (absurd, or the model's) that reached the live
+    estimator when a pair stamped at or after the command's stamp was already fitted
+    (``LiveStiffness._rejected_late``). ``stamp``/``fit_log``: the pairs fitted (s; ns). A command and a pair at the
+    same log time: the command first (the node takes commands before sensor messages)."""
+    if commands is None or commands.rejected is None or not commands.rejected.any() or stamp.size == 0:
+        return np.zeros(0, np.int64)
+    rej = np.flatnonzero(commands.rejected)
+    by_log = np.argsort(fit_log, kind='stable')
+    newest = np.maximum.accumulate(stamp[by_log])  # the newest stamp fitted, by the pairs' fit order
+    upto = np.searchsorted(fit_log[by_log], commands.arrival_ns[rej], side='left')  # pairs fitted before it came
+    late = (upto > 0) & (newest[np.maximum(upto - 1, 0)] >= commands.stamp[rej])
+    return np.sort(commands.arrival_ns[rej][late].astype(np.int64))
 
 
 def live_pairs(settings: LiveSettings, force: Samples, displacement: Samples,
@@ -74,7 +92,9 @@ def live_pairs(settings: LiveSettings, force: Samples, displacement: Samples,
     for name, samples in (('force', force), ('displacement', displacement)):
         counters[f'{name}_received_fraction'] = stream_health_of(samples.stamp,
                                                                  s.expected_period_s or None).received_fraction
-    return LivePairs(stamp, value, disp_value, branch_labels(load, s.hysteresis), fit_log, counters)
+    late = late_rejections(commands, stamp, fit_log)
+    counters['late_rejections'] = int(late.size)
+    return LivePairs(stamp, value, disp_value, branch_labels(load, s.hysteresis), fit_log, counters, late)
 
 
-__all__ = ['LivePairs', 'live_pairs']
+__all__ = ['LivePairs', 'late_rejections', 'live_pairs']

@@ -71,6 +71,20 @@ def _cdr_header(buf: np.ndarray, off: np.ndarray, dlen: np.ndarray
     return valid, head, slen, {'stamp_sec': head['sec'], 'stamp_nanosec': head['nanosec'], 'frame_id': frame}
 
 
+class Columns(dict):
+    """Decoded messages as named numpy columns of equal length (``log_time_ns`` first): what a structured array of
+    them offers the analysis (``c['stamp_s']``, ``c.size``, ``'x' in c``) without copying every field into records,
+    which costs more than the decoding itself for an hour of 1 kHz streams."""
+
+    @property
+    def size(self) -> int:
+        """The number of messages."""
+        return int(self['log_time_ns'].size)
+
+    def __len__(self) -> int:  # the number of messages, as for an array (the column names: keys())
+        return self.size
+
+
 class Decoder:
     """Bulk decoder of one message type: columns of many messages from their byte offsets."""
 
@@ -98,6 +112,22 @@ class Decoder:
     def empty(self) -> np.ndarray:
         """The array of no messages."""
         return np.zeros(0, self.dtype({'frame_id': np.zeros(0, 'S1')}))
+
+    def to_columns(self, columns: Mapping[str, np.ndarray]) -> Columns:
+        """The decoded ``columns`` (with ``log_time_ns``) as :class:`Columns`, ``log_time_ns`` first and ``stamp_s``
+        computed here, in the order of :meth:`dtype`; no copy of the columns."""
+        out = Columns(log_time_ns=columns['log_time_ns'])
+        for name in self.dtype(columns).names[1:]:
+            if name == 'stamp_s':
+                out[name] = stamp_seconds(columns['stamp_sec'], columns['stamp_nanosec'])
+            else:
+                out[name] = columns[name]
+        return out
+
+    def empty_columns(self) -> Columns:
+        """The columns of no messages."""
+        empty = self.empty()
+        return Columns({name: empty[name] for name in empty.dtype.names})
 
     def to_array(self, columns: Mapping[str, np.ndarray]) -> np.ndarray:
         """One structured array of decoded ``columns`` (with ``log_time_ns``); ``stamp_s`` is computed here."""
@@ -231,4 +261,4 @@ def new_decoder(msg_type: str) -> Decoder | None:
     return factory() if factory is not None else None
 
 
-__all__ = ['Decoder', 'SUPPORTED_TYPES', 'gather', 'new_decoder']
+__all__ = ['Columns', 'Decoder', 'SUPPORTED_TYPES', 'gather', 'new_decoder']
