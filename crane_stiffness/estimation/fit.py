@@ -26,7 +26,9 @@ from typing import Any, Union
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy import stats
+# scipy.special, not scipy.stats (its ppf calls the same functions): 0.2 s to import instead of 0.5 s, in every
+# node and CLI call that fits.
+from scipy import special
 
 from crane_stiffness.estimation.errors import DataError, ParameterError
 
@@ -53,12 +55,12 @@ def t_quantile(dof: int, confidence: float = 0.95) -> float:
 
 @lru_cache(maxsize=2048)
 def _t_quantile_exact(dof: int, confidence: float) -> float:
-    return float(stats.t.ppf(0.5 + confidence / 2.0, dof))
+    return float(special.stdtrit(dof, 0.5 + confidence / 2.0))
 
 
 @lru_cache(maxsize=16)
 def _normal_quantile(confidence: float) -> float:
-    return float(stats.norm.ppf(0.5 + confidence / 2.0))
+    return float(special.ndtri(0.5 + confidence / 2.0))
 
 
 @dataclass(frozen=True, slots=True)

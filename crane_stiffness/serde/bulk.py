@@ -36,9 +36,11 @@ def gather(buf: np.ndarray, offsets: np.ndarray, dtype: Any) -> np.ndarray:
         return gather(buf, offsets, np.dtype([('v', dt)]))['v']
     if buf.size < dt.itemsize:  # only possible when no row is valid: gather zeros at the clamped offsets
         buf = np.concatenate([buf, np.zeros(dt.itemsize, np.uint8)])
-    count = buf.size - dt.itemsize + 1
-    view = np.ndarray((count,), dtype=dt, buffer=buf, offset=0, strides=(1,))
-    return view[offsets]
+    # Rows of raw bytes copied into one contiguous block, then viewed as the items: twice as fast as indexing an
+    # unaligned view of ``dtype`` itself (numpy then copies field by field).
+    rows = np.lib.stride_tricks.as_strided(buf, shape=(buf.size - dt.itemsize + 1, dt.itemsize), strides=(1, 1),
+                                           writeable=False)[offsets]
+    return rows.view(dt).reshape(np.shape(offsets))
 
 
 def _align(value: np.ndarray, alignment: int) -> np.ndarray:
@@ -149,10 +151,42 @@ class _StampedDoubles(Decoder):
 
     def decode(self, buf: np.ndarray, off: np.ndarray, dlen: np.ndarray
                ) -> tuple[dict[str, np.ndarray], np.ndarray]:
+        fast = self._decode_uniform(buf, off, dlen)
+        if fast is not None:
+            return fast
         valid, _, slen, cols = _cdr_header(buf, off, dlen)
         start = 4 + _align(12 + slen, 8)
         valid &= start + 8 * len(self.names) <= dlen
         values = gather(buf, np.where(valid, off + start, 0), ('<f8', (len(self.names),)))
+        for i, name in enumerate(self.names):
+            cols[name] = values[:, i]
+        return cols, valid
+
+
+    def _decode_uniform(self, buf: np.ndarray, off: np.ndarray, dlen: np.ndarray
+                        ) -> tuple[dict[str, np.ndarray], np.ndarray] | None:
+        """The common case in one gather per message: every message of this buffer has the same length and the
+        same frame_id length (one sensor), so the whole layout is known from the first. None when it is not."""
+        if off.size == 0 or not (dlen == dlen[0]).all() or dlen[0] < 16:
+            return None
+        first = int(off[0])
+        if buf[first] != 0 or buf[first + 1] != 1:
+            return None
+        slen = int(buf[first + 12:first + 16].view('<u4')[0])
+        start = 4 + int(_align(np.int64(12 + slen), 8))
+        n = len(self.names)
+        if slen < 1 or start + 8 * n > int(dlen[0]):
+            return None
+        layout = np.dtype({'names': ['e0', 'e1', 'sec', 'nanosec', 'slen', 'frame', 'nul', 'values'],
+                           'formats': ['u1', 'u1', '<i4', '<u4', '<u4', f'S{max(slen - 1, 1)}', 'u1', ('<f8', (n,))],
+                           'offsets': [0, 1, 4, 8, 12, 16, 15 + slen, start], 'itemsize': start + 8 * n})
+        rows = gather(buf, off, layout)
+        valid = (rows['e0'] == 0) & (rows['e1'] == 1) & (rows['slen'] == slen) & (rows['nul'] == 0)
+        if not valid.all():
+            return None  # a message of another layout among them: the general path says which
+        frame = rows['frame'] if slen > 1 else np.zeros(off.size, 'S1')
+        cols = {'stamp_sec': rows['sec'], 'stamp_nanosec': rows['nanosec'], 'frame_id': frame}
+        values = rows['values']
         for i, name in enumerate(self.names):
             cols[name] = values[:, i]
         return cols, valid

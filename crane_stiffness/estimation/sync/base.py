@@ -224,13 +224,40 @@ def _in_order(stamp: np.ndarray) -> np.ndarray:
     return ok
 
 
-def _stale(stamp: np.ndarray, log: np.ndarray, other_stamp: np.ndarray, other_log: np.ndarray,
-           max_age: float) -> np.ndarray:
-    """True where a sample is older than the other stream's newest stamp at its arrival by more than max_age."""
-    if other_stamp.size == 0:
-        return np.zeros(stamp.size, bool)
-    newest = np.concatenate([[-np.inf], np.maximum.accumulate(other_stamp)])
-    return stamp < newest[np.searchsorted(other_log, log, side='left')] - max_age
+def left_ranks(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(np.searchsorted(b, a, 'left'), np.searchsorted(a, b, 'left'))`` of two ascending arrays, with one binary
+    search: the number of ``b`` below each ``a`` and of ``a`` below each ``b`` (the second from the first by
+    counting, O(n); the rig's streams hold millions of samples)."""
+    unique_b = bool(b.size) and bool((np.diff(b) > 0).all())
+    if unique_b and a.size == b.size and np.array_equal(a, b):  # two streams sampled on one clock grid, no gaps
+        ranks = np.arange(a.size)
+        return ranks, ranks.copy()
+    below_a = np.searchsorted(b, a, side='left')                 # #{b < a[i]}
+    if unique_b and a.size:
+        hit = below_a < b.size
+        equal = np.zeros(a.size, np.int64)
+        equal[hit] = b[below_a[hit]] == a[hit]
+        not_above = below_a + equal                              # #{b <= a[i]} (b's values are unique)
+        # a[i] < b[k] exactly when #{b <= a[i]} <= k: count the a's per value of not_above, cumulatively.
+        below_b = np.cumsum(np.bincount(not_above, minlength=b.size + 1))[:b.size]
+    else:
+        below_b = np.searchsorted(a, b, side='left')
+    return below_a, below_b
+
+
+def _stale_both(force_stamp: np.ndarray, force_log: np.ndarray, disp_stamp: np.ndarray, disp_log: np.ndarray,
+                max_age: float) -> tuple[np.ndarray, np.ndarray]:
+    """For each stream, True where a sample is older than the other stream's newest stamp at its arrival by more
+    than max_age."""
+    f_at, d_at = left_ranks(force_log, disp_log)  # how many of the other stream had arrived before each sample
+
+    def stale(stamp: np.ndarray, other_stamp: np.ndarray, arrived: np.ndarray) -> np.ndarray:
+        if other_stamp.size == 0:
+            return np.zeros(stamp.size, bool)
+        newest = np.concatenate([[-np.inf], np.maximum.accumulate(other_stamp)])
+        return stamp < newest[arrived] - max_age
+
+    return stale(force_stamp, disp_stamp, f_at), stale(disp_stamp, force_stamp, d_at)
 
 
 def _admitted(force_stamp: np.ndarray, force_log: np.ndarray, disp_stamp: np.ndarray, disp_log: np.ndarray,
@@ -239,8 +266,9 @@ def _admitted(force_stamp: np.ndarray, force_log: np.ndarray, disp_stamp: np.nda
     admitted per stream (in order, not stale) and the out-of-order and stale counts."""
     f_ok = _in_order(force_stamp)
     d_ok = _in_order(disp_stamp)
-    f_stale = _stale(force_stamp, force_log, disp_stamp, disp_log, max_age) & f_ok
-    d_stale = _stale(disp_stamp, disp_log, force_stamp, force_log, max_age) & d_ok
+    f_stale, d_stale = _stale_both(force_stamp, force_log, disp_stamp, disp_log, max_age)
+    f_stale &= f_ok
+    d_stale &= d_ok
     counters = {'force_out_of_order': int((~f_ok).sum()), 'displacement_out_of_order': int((~d_ok).sum()),
                 'force_stale': int(f_stale.sum()), 'displacement_stale': int(d_stale.sum())}
     return np.flatnonzero(f_ok & ~f_stale), np.flatnonzero(d_ok & ~d_stale), counters

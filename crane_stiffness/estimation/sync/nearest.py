@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from crane_stiffness.estimation.errors import ParameterError
-from crane_stiffness.estimation.sync.base import (Pair, _admitted,
+from crane_stiffness.estimation.sync.base import (Pair, _admitted, left_ranks,
                                                   _Stream, _SyncBase)
 
 class ApproximateTimeSync(_SyncBase):
@@ -133,9 +133,11 @@ class ApproximateTimeSync(_SyncBase):
             own.counters.unmatched += 1
 
 
-def _nearest(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Index of the nearest element of sorted ``b`` for each of ``a``; ties go to the earlier (lower) index."""
-    j = np.searchsorted(b, a, side='left')  # b[j - 1] < a <= b[j]
+def _nearest(a: np.ndarray, b: np.ndarray, j: np.ndarray | None = None) -> np.ndarray:
+    """Index of the nearest element of sorted ``b`` for each of ``a``; ties go to the earlier (lower) index.
+    ``j``: ``np.searchsorted(b, a, 'left')`` if known."""
+    if j is None:
+        j = np.searchsorted(b, a, side='left')  # b[j - 1] < a <= b[j]
     padded = np.concatenate([[-np.inf], b, [np.inf]])  # padded[j] = b[j - 1], padded[j + 1] = b[j]
     pick = np.where(padded[j + 1] - a < a - padded[j], j, j - 1)
     if b.size > 1 and not (np.diff(b) > 0).all():
@@ -187,8 +189,13 @@ def pair_by_stamp(force_stamp: np.ndarray, force_log: np.ndarray, disp_stamp: np
         return PairResult(np.zeros(0, np.int64), np.zeros(0, np.int64), counters)
     f = force_stamp[f_idx]
     d = disp_stamp[d_idx]
-    nf = _nearest(f, d)
-    nd = _nearest(d, f)
+    if f.size == d.size and np.array_equal(f, d) and bool((np.diff(f) > 0).all()):
+        # Both sensors on one clock grid and nothing lost: every sample is its partner's nearest, at 0 s.
+        nf = nd = np.arange(f.size)
+    else:
+        j_f, j_d = left_ranks(f, d)
+        nf = _nearest(f, d, j_f)
+        nd = _nearest(d, f, j_d)
     mutual = (nd[nf] == np.arange(f.size)) & (np.abs(f - d[nf]) <= slop)
     af = np.flatnonzero(mutual)          # anchors: positions in f and d of the mutual pairs
     ad = nf[mutual]
