@@ -93,7 +93,8 @@ def hold_runs(stamp: np.ndarray, value: np.ndarray, min_hold_s: float = MIN_HOLD
 def _inputs(data: SessionData) -> tuple[Samples, Samples, dict[str, int]]:
     """The live estimator's input checks on both streams: the (force, displacement) samples kept, and the counts."""
     s = data.settings
-    f = data.force
+    f, d = data.force, data.disp
+    assert f is not None and d is not None  # the required topics: load_session decoded both
     wrench = np.column_stack([f[k] for k in AXES]) if f.size else np.zeros((0, 6))
     f_stamp = f['stamp_s']
     # The clock-skew check: live, a stamp ahead of its arrival at the estimator; here, ahead of the recorder's log
@@ -103,8 +104,7 @@ def _inputs(data: SessionData) -> tuple[Samples, Samples, dict[str, int]]:
     force, f_counts = checked_samples(f_stamp, f['log_time_ns'], s.force_component(wrench),
                                       np.isfinite(wrench).all(axis=1) & np.isfinite(f_stamp), s.max_abs_force,
                                       s.max_clock_skew_s)
-    d = data.disp
-    if 'stamp_s' in d.dtype.names:
+    if 'stamp_s' in (d.dtype.names or ()):  # (a structured array: its names are set)
         d_stamp = d['stamp_s']
         d_value = s.reading_to_displacement(d['x'].astype(float))
     else:  # std_msgs/Float64 in volts, stamped on arrival by the estimator
@@ -152,6 +152,7 @@ def _steps(data: SessionData, pairs: LivePairs, commands: CommandSeries | None, 
     matched = bool(offsets)
     if matched:
         holds = holds[offsets[0]:offsets[0] + len(runs)]
+        assert data.program is not None  # matched holds are the program's
         if len(runs) != len(data.program.holds(data.settings.force_axis)):
             problems.append(f'the commands show {len(runs)} of the program\'s '
                             f'{len(data.program.holds(data.settings.force_axis))} holds on {data.settings.force_axis} '
@@ -161,6 +162,8 @@ def _steps(data: SessionData, pairs: LivePairs, commands: CommandSeries | None, 
                         f'recorded program\'s {len(holds)}: steps are labelled from the commands alone')
     steps: list[Step] = []
     previous_level, approach = None, 'loading'
+    repeat: int | None
+    segment: int | None
     for i, (a, b) in enumerate(runs):
         level = float(value[a])
         start = stamp[a]
@@ -226,6 +229,7 @@ def _cycles(data: SessionData, pairs: LivePairs, steps: list[Step], t0: float) -
         return []
     starts: dict[int, float] = {}
     for step in steps:
+        assert step.repeat is not None  # matched to the program: every step has its repeat (checked on steps[0])
         starts.setdefault(step.repeat, step.start_s)
     order = sorted(starts)
     out = []

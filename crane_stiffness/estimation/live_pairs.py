@@ -29,9 +29,9 @@ class LivePairs:
     """The branch each pair is fitted to: True for loading."""
     fit_log: np.ndarray
     """When the live estimator fits each pair: the arrival (log) time of the later of its two samples, ns."""
-    counters: dict[str, int]
+    counters: dict[str, float]
     """The pairing's counters (:func:`~crane_stiffness.estimation.sync.pair_by_stamp` or
-    :func:`~crane_stiffness.estimation.sync.pair_by_interpolation`)."""
+    :func:`~crane_stiffness.estimation.sync.pair_by_interpolation`), and each stream's received fraction (float)."""
 
 
 def live_pairs(settings: LiveSettings, force: Samples, displacement: Samples,
@@ -41,25 +41,27 @@ def live_pairs(settings: LiveSettings, force: Samples, displacement: Samples,
     rejected command was in force are left out (counted as ``pairs_rejected_command``)."""
     s = settings
     if s.interpolated is None:
-        result = pair_by_stamp(force.stamp, force.arrival_ns, displacement.stamp, displacement.arrival_ns, s.slop_s,
-                               s.max_age_s)
-        fi, di = result.force_index, result.displacement_index
+        nearest = pair_by_stamp(force.stamp, force.arrival_ns, displacement.stamp, displacement.arrival_ns, s.slop_s,
+                                s.max_age_s)
+        pairing_counters = nearest.counters
+        fi, di = nearest.force_index, nearest.displacement_index
         stamp = pair_stamp(force.stamp[fi], displacement.stamp[di])
         fit_log = np.maximum(force.arrival_ns[fi], displacement.arrival_ns[di])
         value, disp_value = force.value[fi], displacement.value[di]
     else:
         fast = s.interpolated
-        result = pair_by_interpolation(force.stamp, force.arrival_ns, displacement.stamp, displacement.arrival_ns,
+        interp = pair_by_interpolation(force.stamp, force.arrival_ns, displacement.stamp, displacement.arrival_ns,
                                        fast, (force if fast == FORCE else displacement).value,
                                        s.max_interpolation_gap_s, s.max_age_s)
+        pairing_counters = interp.counters
         slow_samples, fast_samples = (displacement, force) if fast == FORCE else (force, displacement)
-        si = result.slow_index
-        stamp = result.stamp
+        si = interp.slow_index
+        stamp = interp.stamp
         # A pair forms once its slow sample and the fast sample closing its bracket have both arrived.
-        fit_log = np.maximum(slow_samples.arrival_ns[si], fast_samples.arrival_ns[result.fast_index])
+        fit_log = np.maximum(slow_samples.arrival_ns[si], fast_samples.arrival_ns[interp.fast_index])
         slow_value = slow_samples.value[si]
-        value, disp_value = (result.fast_value, slow_value) if fast == FORCE else (slow_value, result.fast_value)
-    counters = dict(result.counters)
+        value, disp_value = (interp.fast_value, slow_value) if fast == FORCE else (slow_value, interp.fast_value)
+    counters: dict[str, float] = dict(pairing_counters)
     if commands is not None:
         rejected = commands.rejected_at(stamp, fit_log)
         counters['pairs_rejected_command'] = int(rejected.sum())
