@@ -37,6 +37,7 @@ import numpy as np
 from geometry_msgs.msg import PoseStamped, WrenchStamped
 from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.node import Node
+from rclpy.timer import Timer
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension, String
 
@@ -118,7 +119,7 @@ class CraneModel(Node):
         self._resend_kinds: set[str] = set()
         self._readers: dict[str, int] = {}  # matched readers by kind, as last reported
         self._resend_from = 0
-        self._resend_timer = None
+        self._resend_timer: Timer | None = None
         self.pub_applied = self.create_publisher(
             WrenchStamped, topics.APPLIED_WRENCH, RELIABLE_QOS,
             event_callbacks=PublisherEventCallbacks(matched=self._on_applied_matched))
@@ -173,11 +174,11 @@ class CraneModel(Node):
             self._set_status(self._ok_status(self.equilibrium))  # e.g. back to ok after a rejected command
             return
         failed_key = (tuple(self.load.tolist()), key)
-        reason = self.failed.get(failed_key)
-        if reason is not None:  # failed before from this same load in force: the same answer, no solve
+        failed_before = self.failed.get(failed_key)
+        if failed_before is not None:  # failed before from this same load in force: the same answer, no solve
             self.failed.move_to_end(failed_key)
             self.counters.cache_hits += 1
-            self._no_equilibrium(msg, reason)
+            self._no_equilibrium(msg, failed_before)
             return
         self.counters.solves += 1
         try:
@@ -280,6 +281,7 @@ class CraneModel(Node):
                 self._publish_current_pose()
         if not self._resends:
             self._resend_kinds.clear()
+            assert self._resend_timer is not None  # the timer calling this
             self._resend_timer.cancel()
 
     # --- work ---
