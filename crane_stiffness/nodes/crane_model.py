@@ -107,7 +107,7 @@ class CraneModel(Node):
         self.counters = ModelCounters()
         self.failures = 0  # solves that found no equilibrium (also on a parameter change)
         self.status = 'starting'
-        self.geometry: CraneGeometry | None = None
+        self.geometry: CraneGeometry | None = None  # set by _apply (Params, below): the methods assert it
         self.equilibrium: Equilibrium | None = None
         self.load = np.zeros(6)  # the load in force [N, N·m], crane_base: the last accepted command (rest: zero)
         self.axis = 'fy'
@@ -168,6 +168,7 @@ class CraneModel(Node):
             # A hold repeats the command at the program's rate: the same equilibrium, pose restamped. The latched
             # stiffness topics already carry its values.
             self.counters.cache_hits += 1
+            assert self.equilibrium is not None  # set with solved
             self._accept(msg, load, stamp)
             self._publish_pose(self.equilibrium)
             self.counters.published += 1
@@ -181,6 +182,7 @@ class CraneModel(Node):
             self._no_equilibrium(msg, failed_before)
             return
         self.counters.solves += 1
+        assert self.geometry is not None
         try:
             eq = solve_equilibrium(self.geometry, load=load, initial=self.equilibrium)
         except ModelError as exc:
@@ -287,6 +289,7 @@ class CraneModel(Node):
     # --- work ---
     def _solve_and_publish(self) -> None:
         """Solve the load in force again (start, parameter change) and publish everything."""
+        assert self.geometry is not None
         try:
             eq = solve_equilibrium(self.geometry, load=self.load, initial=self.equilibrium)
         except ModelError as exc:
@@ -300,6 +303,7 @@ class CraneModel(Node):
 
     def _publish_solution(self, eq: Equilibrium) -> None:
         g = self.geometry
+        assert g is not None
         self.equilibrium = eq
         self.solved = tuple(self.load.tolist())
         self._publish_pose(eq)

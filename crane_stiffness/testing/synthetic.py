@@ -126,6 +126,7 @@ def write_synthetic_session(path: str | Path, program: LoadProgram, *, geometry:
     if stiffness is not None:
         true_disp = load / stiffness
     else:
+        assert geometry is not None  # checked above: without a stiffness, a geometry is given
         true_disp = model_displacement(geometry, axis, load)
     noise = np.array([force_noise] * 3 + [force_noise * 0.05] * 3)
     force = wrench + rng.normal(size=wrench.shape) * noise
