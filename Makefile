@@ -41,6 +41,8 @@ demo: $(STAMP)
 
 test: $(STAMP)
 	$(BIN)/ruff check crane_stiffness test benchmarks scripts launch setup.py
+	@# Type checks of the package (mypy.ini); its cache (.mypy_cache/) makes a re-run take under a second.
+	$(BIN)/mypy
 	$(BIN)/python -m pytest -q -p no:cacheprovider test
 
 bench: $(STAMP)

@@ -16,7 +16,7 @@ MCAP metadata values are strings: everything that is not a string is stored as J
 from __future__ import annotations
 
 import json
-from collections.abc import Collection, Mapping, Sequence
+from collections.abc import Collection, Container, Mapping, Sequence
 from typing import Any, Protocol, Union
 
 from crane_stiffness import __version__
@@ -64,7 +64,7 @@ def session_metadata(*, rig: Mapping[str, Any] | None = None, program: Any = Non
 def session_record(*, session: str, start_ns: int, parameters: Mapping[str, Any], geometry: _Geometry,
                    program: LoadProgram | None, param_sections: Mapping[str, Mapping[str, Any]],
                    param_files: Sequence[Mapping[str, str]], program_keys: Collection[str],
-                   own_sections: Collection[str], recorder: Mapping[str, Any], ros_distro: str,
+                   own_sections: Container[str], recorder: Mapping[str, Any], ros_distro: str,
                    host: str) -> tuple[dict[str, str], list[str]]:
     """The recorder's :data:`SESSION_METADATA` record, and warnings for the operator.
 

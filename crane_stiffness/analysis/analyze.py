@@ -93,7 +93,8 @@ def hold_runs(stamp: np.ndarray, value: np.ndarray, min_hold_s: float = MIN_HOLD
 def _inputs(data: SessionData) -> tuple[Samples, Samples, dict[str, int]]:
     """The live estimator's input checks on both streams: the (force, displacement) samples kept, and the counts."""
     s = data.settings
-    f = data.force
+    f, d = data.force, data.disp
+    assert f is not None and d is not None  # the required topics: load_session decoded both
     f_stamp = f['stamp_s']
     finite = np.isfinite(f_stamp)
     for k in AXES:  # a NaN/Inf anywhere in the wrench drops the sample, as live
@@ -108,7 +109,6 @@ def _inputs(data: SessionData) -> tuple[Samples, Samples, dict[str, int]]:
     # live estimator's matrix, vectorised; as is when the sensor is at the centre.
     force, f_counts = checked_samples(f_stamp, f['log_time_ns'], component, finite, s.max_abs_force,
                                       s.max_clock_skew_s)
-    d = data.disp
     if 'stamp_s' in d:
         d_stamp = d['stamp_s']
         d_value = s.reading_to_displacement(d['x'].astype(float))
@@ -157,6 +157,7 @@ def _steps(data: SessionData, pairs: LivePairs, commands: CommandSeries | None, 
     matched = bool(offsets)
     if matched:
         holds = holds[offsets[0]:offsets[0] + len(runs)]
+        assert data.program is not None  # matched holds are the program's
         if len(runs) != len(data.program.holds(data.settings.force_axis)):
             problems.append(f'the commands show {len(runs)} of the program\'s '
                             f'{len(data.program.holds(data.settings.force_axis))} holds on {data.settings.force_axis} '
@@ -166,6 +167,8 @@ def _steps(data: SessionData, pairs: LivePairs, commands: CommandSeries | None, 
                         f'recorded program\'s {len(holds)}: steps are labelled from the commands alone')
     steps: list[Step] = []
     previous_level, approach = None, 'loading'
+    repeat: int | None
+    segment: int | None
     for i, (a, b) in enumerate(runs):
         level = float(value[a])
         start = stamp[a]
@@ -231,6 +234,7 @@ def _cycles(data: SessionData, pairs: LivePairs, steps: list[Step], t0: float) -
         return []
     starts: dict[int, float] = {}
     for step in steps:
+        assert step.repeat is not None  # matched to the program: every step has its repeat (checked on steps[0])
         starts.setdefault(step.repeat, step.start_s)
     order = sorted(starts)
     out = []

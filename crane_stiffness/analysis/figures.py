@@ -210,9 +210,9 @@ def plot_sessions_overlay(path: str | Path, axis: str,
     ylab, xlab, s = _labels(axis)
     fig, ax = plt.subplots(figsize=(6.8, 5.0), dpi=110)
     colors = plt.rcParams['axes.prop_cycle'].by_key()['color']
-    for i, (name, (x, y, approach), curve) in enumerate(sessions):
+    for i, (name, means, curve) in enumerate(sessions):
         color = colors[i % len(colors)]
-        x, y, approach = np.asarray(x, float), np.asarray(y, float), np.asarray(approach)
+        x, y, approach = np.asarray(means[0], float), np.asarray(means[1], float), np.asarray(means[2])
         for branch, marker in (('loading', '^'), ('unloading', 'v')):
             sel = approach == branch
             if sel.any():
@@ -237,6 +237,8 @@ def write_session_figures(result: SessionAnalysis, data: SessionData, pairs: Liv
     written: list[str] = []
     scale = result.model.lvdt_scale if result.model is not None and abs(result.model.lvdt_scale) > 1e-9 else None
     step = _decimate(pairs.stamp.size)
+    cloud: dict[str, tuple[np.ndarray, np.ndarray]]  # (displacement, force) by branch, as the plot takes them
+    holds: dict[str, tuple[np.ndarray, np.ndarray]]
     cloud = {LOADING: (pairs.displacement[step][pairs.loading[step]], pairs.force[step][pairs.loading[step]]),
              UNLOADING: (pairs.displacement[step][~pairs.loading[step]], pairs.force[step][~pairs.loading[step]])}
     holds = {a: (np.array([s.displacement_mean for s in result.steps if s.approach == a]),
@@ -244,12 +246,14 @@ def write_session_figures(result: SessionAnalysis, data: SessionData, pairs: Liv
     title = f'{result.session}: {result.axis}' + (f', program {result.program["name"]}' if result.program else '')
     if result.geometry:
         title += f', W = {result.geometry["weight"]:g} N, l0 = {result.geometry["l0"]:.3f} m'
+    assert data.force is not None  # a required topic: load_session decoded it
     for fmt in formats:
         path = out / f'force_displacement.{fmt}'
         plot_session_force_displacement(
             path, result.axis, curves=result.model.curves if result.model is not None and scale else None,
             lvdt_scale=scale or 1.0, cloud=cloud, holds=holds,
-            fits={b: (f.stiffness, f.intercept) for b, f in result.branch_fits.items() if f is not None},
+            fits={b: (float(f.stiffness), float(f.intercept))  # one fit each: floats already
+                  for b, f in result.branch_fits.items() if f is not None},
             title=title)
         written.append(str(path))
         path = out / f'timeseries.{fmt}'

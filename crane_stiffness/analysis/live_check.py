@@ -48,7 +48,9 @@ def live_comparison(data: SessionData, pairs: LivePairs) -> LiveComparison | Non
     index = {f: i for i, f in enumerate(VALUE_FIELDS)}
     stamp = float(rows[0, index['sample_stamp']])
     cut = int(np.searchsorted(pairs.stamp, stamp, side='right')) if math.isfinite(stamp) else pairs.stamp.size
-    live, offline, worst = {}, {}, {}
+    live: dict[str, dict[str, float]] = {}
+    offline: dict[str, dict[str, float]] = {}
+    worst: dict[str, float] = {}
     for b, branch in enumerate(BRANCHES):
         live[branch] = {f: float(rows[b, index[f]]) for f in COMPARED_FIELDS}
         offline[branch] = _window_fit(pairs, cut, branch, s.window, s.forgetting)
@@ -62,12 +64,13 @@ def live_comparison(data: SessionData, pairs: LivePairs) -> LiveComparison | Non
     comparison = LiveComparison(sample_stamp_s=stamp, log_time_s=log * 1e-9, live=live, offline=offline,
                                 max_rel_diff=worst)
     if len(data.live_inputs) == 2:
-        (t_a, a), (t_b, b) = data.live_inputs
+        (t_a, first), (t_b, last) = data.live_inputs
         try:
-            received = int(b['force_received']) - int(a['force_received'])
-            paired = int(b['pairs']) - int(a['pairs'])
+            received = int(last['force_received']) - int(first['force_received'])
+            paired = int(last['pairs']) - int(first['pairs'])
         except (KeyError, ValueError):
             return comparison
+        assert data.force is not None  # a required topic: load_session decoded it
         in_bag = int(((data.force['log_time_ns'] > t_a) & (data.force['log_time_ns'] <= t_b)).sum())
         offline_pairs = int(((pairs.fit_log > t_a) & (pairs.fit_log <= t_b)).sum())
         comparison.inputs = {'from_s': t_a * 1e-9, 'to_s': t_b * 1e-9, 'live_force_received': received,

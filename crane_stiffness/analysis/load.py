@@ -76,7 +76,7 @@ def _dominant_axis(program: LoadProgram | None) -> str | None:
 def _last_live_values(reader: BagReader, problems: list[str]) -> tuple[int, np.ndarray] | None:
     """(log time, rows) of the last recorded estimate with a finite stiffness, reading only the end of the bag."""
     end, start = reader.end_ns, reader.start_ns
-    if end is None:
+    if end is None or start is None:  # an empty bag (both are None together)
         return None
     span = 2_000_000_000
     width = len(VALUE_FIELDS)
@@ -165,7 +165,8 @@ def load_session(path: Path, axis: str | None, problems: list[str], missing: lis
         if 'segments.kind' in nodes.get('load_program', {}):  # what the load_program node actually ran
             program_record = {**nodes['load_program'], 'source': 'load_program node parameters'}
         program = _program_from_record(program_record, problems)
-        sensors = dict(session.get('sensors')) if isinstance(session.get('sensors'), dict) else {}
+        recorded_sensors = session.get('sensors')
+        sensors = dict(recorded_sensors) if isinstance(recorded_sensors, dict) else {}
         sensors.update(nodes)
         est_params = sensors.get('stiffness_estimator') or sensors.get('/stiffness_estimator') or {}
         try:

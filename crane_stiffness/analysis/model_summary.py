@@ -75,6 +75,7 @@ def model_summary(data: SessionData, steps: list[Step], commands: CommandSeries 
             problems.append('the recorded LVDT parameters are incomplete: readings taken as displacement along '
                             f'{axis}')
     elif abs(scale) < 1e-9:
+        assert lvdt is not None  # a scale comes from recorded LVDT parameters
         problems.append(f'the LVDT (axis {lvdt.get("axis")}, contact point {lvdt.get("contact_point")}) does not see '
                         f'motion along {axis}: measured points are not comparable with the model curves')
     summary = ModelSummary(axis=axis, unit='N/m' if axis.startswith('f') else 'N·m/rad', tangent_at_rest=tangent,

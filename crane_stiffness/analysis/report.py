@@ -45,6 +45,7 @@ def session_blocks(a: SessionAnalysis, images: Sequence[str] = ()) -> list[Block
     """The report of one session as blocks."""
     unit = a.unit
     blocks: list[Block] = [('h1', f'Stiffness test session {a.session}')]
+    rows: list[list[Any]]  # table cells, str() of each (numbers for the later tables)
     rows = [['bag', a.bag], ['recorded (UTC)', a.start_time_utc or '–'], ['duration', f'{fmt(a.duration_s, 5)} s'],
             ['messages', fmt(sum(a.counts.values()))], ['software', f'recorded with {a.recorded_with or "?"}, '
                                                                     f'analysed with {a.analysed_with}'],

@@ -115,7 +115,7 @@ class SessionAnalysis:
     geometry: dict[str, Any] | None
     settings: dict[str, Any]
     counts: dict[str, int]
-    pairing: dict[str, int]
+    pairing: dict[str, float]  # counters, and each stream's received fraction
     branch_fits: dict[str, LineFit | None]
     hold_fits: dict[str, LineFit | None]
     cycle_fits: list[CycleFits]

@@ -56,8 +56,8 @@ class StiffnessRow:
     elastic: float   # eq. (28): W = 0, wires as bilateral springs
 
 
-def stiffness_vs_weight(base: CraneGeometry, axis: str, heights: Sequence[float], weights: Sequence[float],
-                        progress: Progress = _identity) -> list[StiffnessRow]:
+def stiffness_vs_weight(base: CraneGeometry, axis: str, heights: Sequence[float] | np.ndarray,
+                        weights: Sequence[float] | np.ndarray, progress: Progress = _identity) -> list[StiffnessRow]:
     """Stiffness to a small load along ``axis`` for every (height, weight) pair (the paper's Figs. 10 and 13)."""
     d = unit(axis)
     cases = [(h, w) for h in heights for w in weights]

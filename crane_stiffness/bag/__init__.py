@@ -12,6 +12,8 @@
 - ``errors.py``: the exceptions (all :class:`BagError`) and :class:`BagDamageWarning`.
 """
 
+from typing import TYPE_CHECKING
+
 from .errors import (
     BagCorruptError, BagDamageWarning, BagError, BagExistsError, BagFormatError, BagNotFoundError, BagPathError,
     BagWriteFailedError, BagWriterError,
@@ -21,6 +23,9 @@ from .mcapfile import McapFile
 from .qos import dump_qos_profiles, normalize_qos_profiles, qos_profile
 from .reader import SUPPORTED_TYPES, BagReader, RawMessage, TopicInfo
 from .writer import BagWriter
+
+if TYPE_CHECKING:  # imported when first asked for (__getattr__ below); named here for type checkers
+    from .recover import RecoveryReport, recover_bag
 
 
 def __getattr__(name: str) -> object:

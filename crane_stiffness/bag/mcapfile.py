@@ -165,14 +165,14 @@ class McapFile:
                 head.compression, head.message_start_time, head.message_end_time, length=length,
                 index_length=entry.message_index_length,
                 index=dict(entry.message_index_offsets) if entry.message_index_length else None))
-        for entry in summary.metadata_indexes:
+        for meta_entry in summary.metadata_indexes:
             try:
-                record = next(self._records_from(entry.offset))
+                record = next(self._records_from(meta_entry.offset))
                 if not isinstance(record, Metadata):
                     raise ValueError('no metadata record at the indexed offset')
                 self.metadata.append((record.name, dict(record.metadata)))
             except (StopIteration, *READ_ERRORS) as exc:
-                self._problem(f'metadata record at offset {entry.offset} is unreadable ({exc})')
+                self._problem(f'metadata record at offset {meta_entry.offset} is unreadable ({exc})')
         if stats is not None:
             self.channel_counts = dict(stats.channel_message_counts)
             if stats.message_count:

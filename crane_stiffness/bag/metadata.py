@@ -96,7 +96,8 @@ def build_bag_metadata(files: Sequence[FileStats], topics: Sequence[TopicStats],
             {
                 'path': f.path,
                 'starting_time': {'nanoseconds_since_epoch': f.start_ns or 0},
-                'duration': {'nanoseconds': (f.end_ns - f.start_ns) if f.start_ns is not None else 0},
+                'duration': {'nanoseconds': (f.end_ns - f.start_ns)
+                             if f.start_ns is not None and f.end_ns is not None else 0},  # set together
                 'message_count': f.message_count,
             }
             for f in files

@@ -158,9 +158,9 @@ def _copy_messages(source: McapFile, result: FileRecovery, stats: FileStats, cou
                 schema_ids[schema.id] = writer.register_schema(schema.name, schema.encoding, schema.data)
             channel_ids[cid] = writer.register_channel(channel.topic, channel.message_encoding,
                                                        schema_ids.get(channel.schema_id, 0), channel.metadata)
-        for name, data in source.metadata:
+        for name, record in source.metadata:
             if name != ROSBAG2_METADATA:
-                writer.add_metadata(name, data)
+                writer.add_metadata(name, record)
         lost = 0
 
         def copy(cid: int, seq: int, log: int, pub: int, payload: bytes) -> bool:

@@ -27,7 +27,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import TracebackType
-from typing import Any
+from typing import IO, Any, cast
 
 from mcap.writer import CompressionType, Writer as McapWriter
 
@@ -399,15 +399,16 @@ class BagWriter:
         try:
             self.metadata_path = write_metadata_yaml(self.path, info)
             meta = f'wrote {self.metadata_path}'
+            written: dict[str, Any] | None = info
         except OSError as exc:
-            info = None
+            written = None  # metadata.yaml not written
             meta = (f'metadata.yaml NOT written ({os_error_text(exc)}): run `crane-stiffness recover {self.path}` once '
                     'there is room')
         saved = (' (the message being written when the error came among them: its chunk went out whole)'
                  if self.failed_write_on_disk else '')
         self.salvage = (f'{on_disk} message(s) on disk in complete chunks{saved}, {lost} lost with the chunk being '
                         f'written; {meta}')
-        return info
+        return written
 
     def _recount_cut_file(self, opened: _OpenFile) -> int:
         """Set the stats of the file a write error cut to what is readable in it; returns the messages lost."""
@@ -459,8 +460,9 @@ class BagWriter:
     def _open_file(self) -> _OpenFile:
         stats = FileStats(path=f'{self.session}_{len(self._files)}.mcap')
         stream = _DirectFile(self.path / stats.path, self._fsync)
-        mcap = McapWriter(stream, chunk_size=self.chunk_size, compression=COMPRESSIONS[self.compression],
-                          enable_crcs=True)
+        # McapWriter's annotation asks for an IO; it only calls write() and tell(), which _DirectFile has.
+        mcap = McapWriter(cast(IO[bytes], stream), chunk_size=self.chunk_size,
+                          compression=COMPRESSIONS[self.compression], enable_crcs=True)
         # Chunk indexes on disk until the summary: the library's list grows ~15 MB per hour of 0.5 s chunks.
         opened = _OpenFile(stats=stats, stream=stream, mcap=mcap, index_spool=spool_chunk_indexes(mcap, str(self.path)))
         self._files.append(stats)

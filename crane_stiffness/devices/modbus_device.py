@@ -16,16 +16,20 @@ from __future__ import annotations
 import asyncio
 import logging
 import threading
-from typing import Callable
+from typing import TYPE_CHECKING, Callable, cast
 
 from crane_stiffness.drivers.errors import DriverError, ParameterError
 from crane_stiffness.drivers.modbus import Channel
+
+if TYPE_CHECKING:  # pymodbus is imported where the server starts
+    from pymodbus.constants import ExcCodes
+    from pymodbus.server import ModbusTcpServer
 
 
 class ModbusDevice:
     """Emulated Modbus TCP analog-input device (see the module docstring). A context manager."""
 
-    def __init__(self, source: Callable[[], float], *, channel: Channel = Channel(), host: str = '127.0.0.1',
+    def __init__(self, source: Callable[[], float | None], *, channel: Channel = Channel(), host: str = '127.0.0.1',
                  port: int = 0, unit_id: int = 1, registers: int = 64) -> None:
         """Args:
             source: Returns the current reading [m], or None while there is none yet (reads answer exception 6,
@@ -46,12 +50,12 @@ class ModbusDevice:
         self.fail_with = 0
         self.reads = 0
         self._loop: asyncio.AbstractEventLoop | None = None
-        self._server = None
+        self._server: ModbusTcpServer | None = None
         self._thread: threading.Thread | None = None
         logging.getLogger('pymodbus').setLevel(logging.CRITICAL)
 
     async def _action(self, function_code: int, start_address: int, address: int, count: int,
-                      registers: list[int], values) -> object:
+                      registers: list[int], values: list[int] | list[bool] | None) -> ExcCodes | None:
         from pymodbus.constants import ExcCodes
         self.reads += 1
         if self.fail_with:
@@ -87,7 +91,9 @@ class ModbusDevice:
                     return
                 self._server = server
                 self._loop = asyncio.get_running_loop()
-                self.port = server.transport.sockets[0].getsockname()[1]
+                # A listening server's transport is the asyncio.Server of create_server (pymodbus annotates it as
+                # a BaseTransport).
+                self.port = cast(asyncio.Server, server.transport).sockets[0].getsockname()[1]
                 ready.set()
                 await server.serving
             asyncio.run(main())

@@ -20,9 +20,10 @@ import socket
 import threading
 import time
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
-from typing import Callable, Sequence
+from typing import Callable
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from crane_stiffness.drivers import rdt
 from crane_stiffness.drivers.errors import ParameterError, ProtocolError
@@ -31,7 +32,7 @@ from crane_stiffness.drivers.errors import ParameterError, ProtocolError
 class RdtDevice:
     """Emulated RDT F/T sensor (see the module docstring). A context manager: ``with RdtDevice(src) as dev:``."""
 
-    def __init__(self, source: Callable[[], Sequence[float]], *, host: str = '127.0.0.1', port: int = 0,
+    def __init__(self, source: Callable[..., ArrayLike], *, host: str = '127.0.0.1', port: int = 0,
                  sample_rate_hz: float = 7000.0, calibration: rdt.Calibration = rdt.Calibration(1e6, 1e6),
                  records_per_packet: int = 1, clock_ppm: float = 0.0, start_counter: int = 0,
                  http_port: int | None = None, drop: Callable[[int], bool] | None = None, reorder_every: int = 0,
@@ -79,6 +80,9 @@ class RdtDevice:
         self._thread: threading.Thread | None = None
         self._http: ThreadingHTTPServer | None = None
         self._running = False
+        # Stream state, set by each stream request:
+        self._leftover = b''                 # buffered: records short of a full datagram
+        self._remaining: int | None = None   # records left of a counted request; None: endless
 
     # --- life cycle -------------------------------------------------------------------------------------------
 
@@ -139,6 +143,7 @@ class RdtDevice:
     # --- HTTP: /netftapi2.xml -----------------------------------------------------------------------------------
 
     def _start_http(self) -> None:
+        assert self.http_port is not None  # start() serves HTTP only when given a port
         xml = rdt.netftapi2_xml(self.calibration, self.sample_rate_hz, self.sample_rate_hz).encode()
 
         class Handler(BaseHTTPRequestHandler):
@@ -164,6 +169,7 @@ class RdtDevice:
 
     def _loop(self) -> None:
         sock = self._sock
+        assert sock is not None  # start() binds it before it starts this thread
         held: bytes | None = None      # a datagram held back to reorder
         datagrams = 0
         while self._running:

@@ -139,6 +139,7 @@ class CounterClock:
         return self._stamps(np.asarray(counter_unwrapped_offset, dtype=np.int64))
 
     def _stamps(self, x: NDArray[np.int64]) -> NDArray[np.int64]:
+        assert self._t0 is not None  # set by the first update: stamps count from its origin record
         offset = x * self.period_ns + self._a + self._b * x
         return self._t0 + np.rint(offset).astype(np.int64)
 

@@ -18,10 +18,13 @@ import socket
 import struct
 import time
 from dataclasses import dataclass
-from typing import Any, Callable, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Mapping, Sequence
 
 from crane_stiffness.drivers.errors import (DeviceAddressError, DeviceBusyError, DeviceResponseError,
                                             DeviceSilentError, ParameterError)
+
+if TYPE_CHECKING:  # pymodbus is imported where a connection opens
+    from pymodbus.client import ModbusTcpClient
 
 MODBUS_TCP_PORT = 502
 #: data type → (registers, struct format of the value's bytes, most significant word first)
@@ -174,7 +177,7 @@ class ModbusPoller:
         self.host, self.port, self.unit_id, self.channel = host, port, unit_id, channel
         self.timeout_s = float(timeout_s)
         self._clock = clock_ns
-        self._client = None
+        self._client: ModbusTcpClient | None = None
         self.connects = 0
         logging.getLogger('pymodbus').setLevel(logging.CRITICAL)  # it logs every failure itself; we raise instead
 
@@ -200,8 +203,10 @@ class ModbusPoller:
         from pymodbus.exceptions import ConnectionException, ModbusException
         if self._client is None:
             self.open()
+        client = self._client
+        assert client is not None  # open() connected it, or raised
         ch = self.channel
-        fn = self._client.read_holding_registers if ch.register_type == 'holding' else self._client.read_input_registers
+        fn = client.read_holding_registers if ch.register_type == 'holding' else client.read_input_registers
         start = self._clock()
         try:
             response = fn(ch.register, count=ch.count, device_id=self.unit_id)
@@ -213,10 +218,11 @@ class ModbusPoller:
             raise DeviceSilentError(f'no answer from {self.where} within {self.timeout_s} s: {exc}') from None
         end = self._clock()
         if response.isError():
-            code = getattr(response, 'exception_code', None)
+            code: int | None = getattr(response, 'exception_code', None)
             error = DeviceBusyError if code == DEVICE_BUSY else DeviceResponseError
+            name = 'unknown' if code is None else EXCEPTION_NAMES.get(code, 'unknown')
             raise error(
-                f'{self.where} answered Modbus exception {code} ({EXCEPTION_NAMES.get(code, "unknown")}) to a read '
+                f'{self.where} answered Modbus exception {code} ({name}) to a read '
                 f'of {ch.count} {ch.register_type} register(s) at {ch.register}')
         registers = list(response.registers)
         if len(registers) != ch.count:

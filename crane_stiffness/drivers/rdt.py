@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 import struct
 import xml.etree.ElementTree as ET
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -119,6 +119,7 @@ class Calibration:
 
     counts_per_force: float
     counts_per_torque: float
+    _divisors: NDArray[np.float64] = field(init=False, repr=False, compare=False)  # set by __post_init__
 
     def __post_init__(self) -> None:
         for name in ('counts_per_force', 'counts_per_torque'):
@@ -181,7 +182,7 @@ def parse_netftapi2(text: str | bytes) -> NetFtConfig:
 
     def number(tag: str, required: bool) -> float | None:
         raw = values.get(tag)
-        if raw in (None, ''):
+        if not raw:  # absent or empty
             if required:
                 raise DeviceResponseError(f'netftapi2.xml has no <{tag}>')
             return None
@@ -191,6 +192,7 @@ def parse_netftapi2(text: str | bytes) -> NetFtConfig:
             raise DeviceResponseError(f'netftapi2.xml <{tag}> = {raw!r} is not a number') from None
 
     cpf, cpt = number('cfgcpf', True), number('cfgcpt', True)
+    assert cpf is not None and cpt is not None  # required: number() raised otherwise
     fu, tu = values.get('scfgfu', ''), values.get('scfgtu', '')
     if not fu or not tu:
         raise DeviceResponseError('netftapi2.xml states no force/torque unit (scfgfu, scfgtu): set counts_per_force '
@@ -283,7 +285,8 @@ class SequenceTracker:
         self.in_order = False
         deliver = np.zeros(n, dtype=bool)
         unwrapped = np.empty(n, dtype=np.int64)
-        for i, s in enumerate(seq.tolist()):
+        numbers: list[int] = seq.tolist()
+        for i, s in enumerate(numbers):
             d = ((s + self._shift - self._last + (1 << 31)) % SEQUENCE_MODULUS) - (1 << 31)
             if abs(d) > self.restart_jump:  # a new stream: continue the numbering after the highest so far
                 self.restarts += 1

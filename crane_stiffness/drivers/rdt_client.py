@@ -184,6 +184,7 @@ class RdtReceiver:
         self._send(rdt.encode_request(rdt.STREAM_COMMANDS[self.command]))
 
     def _send(self, data: bytes) -> None:
+        assert self._sock is not None  # started: stop() closes it only after the receive thread ended
         try:
             self._sock.send(data)
         except ConnectionRefusedError:
@@ -201,6 +202,7 @@ class RdtReceiver:
 
     def _receive_loop(self) -> None:
         sock = self._sock
+        assert sock is not None  # start() connects it before it starts this thread
         cmsg_size = socket.CMSG_SPACE(_TIMESPEC.size)
         pending = self._pending
         while self._running:
@@ -320,7 +322,9 @@ class RdtPipeline:
     def process(self, datagrams: list[tuple[bytes, int, int]]) -> Batch:
         """Decode, account, stamp, convert, tare and (optionally) average ``datagrams`` from
         :meth:`RdtReceiver.drain`."""
-        payloads, arrivals, counts = [], [], []
+        payloads: list[bytes] = []
+        arrivals: list[int] = []
+        counts: list[int] = []
         for data, t_ns, generation in datagrams:
             if len(data) % rdt.RECORD_SIZE or not data:
                 self.malformed_datagrams += 1

@@ -20,6 +20,7 @@ It is NaN when a half has no spread in x or ``k_lower`` is 0.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import Any, Union
@@ -221,7 +222,7 @@ def fit_line(x: ArrayLike, y: ArrayLike) -> LineFit:
     return _assemble(n, xm, ym, sxx, sxy, syy, sse, nonlinearity)
 
 
-def fit_or_none(x: ArrayLike, y: ArrayLike) -> LineFit | None:
+def fit_or_none(x: np.ndarray | Sequence[float], y: ArrayLike) -> LineFit | None:
     """:func:`fit_line`, or None when there is nothing to fit (fewer than 3 points, no spread in x, NaN/Inf)."""
     if len(x) < 3:
         return None
@@ -355,7 +356,7 @@ class WindowedLeastSquares:
         if self._nonlinearity if nonlinearity is None else nonlinearity:
             x, y = self.data()
             k = sxy / sxx
-            indicator = split_half_nonlinearity(x, y, k, ym - k * xm)
+            indicator = float(split_half_nonlinearity(x, y, k, ym - k * xm))  # 1-D window: already a float
         return _assemble_scalar(n, xm, ym, sxx, sxy, syy, sse, indicator)
 
 

@@ -197,6 +197,7 @@ class CommandSeries:
         stamp, value, arrival, rej = stamp[usable], np.asarray(load, float)[usable], arrival_ns[usable], rej[usable]
         model = np.zeros(stamp.size, np.int8)  # 1: a rejection by the model
         if rejected_stamp_s is not None and rejected_stamp_s.size:
+            assert rejected_arrival_ns is not None  # the model's rejections come with both arrays
             r_ok, r_stamp = command_inputs(rejected_stamp_s, rejected_arrival_ns * 1e-9,
                                            np.zeros(rejected_stamp_s.size))
             n = int(r_ok.sum())
@@ -226,6 +227,7 @@ class CommandSeries:
         time (a rejection the live estimator had not received yet did not stop it fitting)."""
         if self.rejected is None:
             return np.zeros(np.shape(stamp_s), bool)
+        assert self.arrival_ns is not None  # known when rejected is (of)
         k = np.searchsorted(self.stamp, stamp_s, side='right') - 1
         kk = np.maximum(k, 0)
         return (k >= 0) & self.rejected[kk] & (self.arrival_ns[kk] <= arrival_ns)

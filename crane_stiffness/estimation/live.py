@@ -98,16 +98,15 @@ class LiveStiffness:
         self.prediction = math.nan
         self.lag = LagHistogram()
         self._settings = settings or LiveSettings()
-        self._sync: ApproximateTimeSync | InterpolatingSync | None = None
         self._zero_epochs: dict[str, float] = {}  # the last zero epoch seen per stream (see zero_epoch)
-        self._build()
+        self._build(None)
 
-    def _build(self) -> None:
+    def _build(self, old: ApproximateTimeSync | InterpolatingSync | None) -> None:
+        """(Re)build pairing and fitting from the settings; ``old``: the pairing being replaced (None at start)."""
         s = self._settings
         self._axis = s.axis_index
         self._force_row = s.force_row()  # None: the sensor is the platform centre's frame, take the component as is
         self._delay_correction = s.displacement_delay_s
-        old = self._sync
         self._sync = s.make_sync()
         if old is not None:  # the counters go on across restarts: every message stays accounted
             self._sync.carry_counters(old)
@@ -157,7 +156,7 @@ class LiveStiffness:
         if restart:
             self.counters.fit_restarts += 1
             self.counters.segments += 1
-            self._build()
+            self._build(self._sync)
             self._segment_reason = 'parameters changed'
         return restart
 
@@ -367,9 +366,11 @@ class LiveStiffness:
             row = [nan] * len(VALUE_FIELDS)
             row[VALUE_FIELDS.index('prediction')] = pred
             return row
-        rel = (est.stiffness - pred) / pred if math.isfinite(pred) and pred != 0.0 else nan
-        return [est.stiffness, est.intercept, est.stderr, est.ci95_low, est.ci95_high, est.r2, float(est.n),
-                est.residual_rms, nan, est.rls_stiffness, est.rls_stderr, pred, rel, 0.0, nan]
+        # One windowed fit: its LineFit fields (typed float or array) are floats; float() keeps them as they are.
+        k, c, se, lo, hi, r2, rms = map(float, (est.stiffness, est.intercept, est.stderr, est.ci95_low, est.ci95_high,
+                                                est.r2, est.residual_rms))
+        rel = (k - pred) / pred if math.isfinite(pred) and pred != 0.0 else nan
+        return [k, c, se, lo, hi, r2, float(est.n), rms, nan, est.rls_stiffness, est.rls_stderr, pred, rel, 0.0, nan]
 
     def estimate(self, branch: Branch) -> Estimate | None:
         """The cheap windowed estimate of ``branch`` (its nonlinearity is NaN; see :meth:`refresh`)."""

@@ -29,9 +29,9 @@ class LivePairs:
     """The branch each pair is fitted to: True for loading."""
     fit_log: np.ndarray
     """When the live estimator fits each pair: the arrival (log) time of the later of its two samples, ns."""
-    counters: dict[str, int]
+    counters: dict[str, float]
     """The pairing's counters (:func:`~crane_stiffness.estimation.sync.pair_by_stamp` or
-    :func:`~crane_stiffness.estimation.sync.pair_by_interpolation`)."""
+    :func:`~crane_stiffness.estimation.sync.pair_by_interpolation`), and each stream's received fraction (float)."""
     late_rejection_log: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     """When a rejected command reached the live estimator after pairs stamped under it were fitted (it WARNs until
     they leave its windows; :func:`late_rejections`), log time ns, ascending."""
@@ -44,12 +44,14 @@ def late_rejections(commands: CommandSeries | None, stamp: np.ndarray, fit_log: 
     same log time: the command first (the node takes commands before sensor messages)."""
     if commands is None or commands.rejected is None or not commands.rejected.any() or stamp.size == 0:
         return np.zeros(0, np.int64)
+    arrival = commands.arrival_ns
+    assert arrival is not None  # known whenever rejected is
     rej = np.flatnonzero(commands.rejected)
     by_log = np.argsort(fit_log, kind='stable')
     newest = np.maximum.accumulate(stamp[by_log])  # the newest stamp fitted, by the pairs' fit order
-    upto = np.searchsorted(fit_log[by_log], commands.arrival_ns[rej], side='left')  # pairs fitted before it came
+    upto = np.searchsorted(fit_log[by_log], arrival[rej], side='left')  # pairs fitted before it came
     late = (upto > 0) & (newest[np.maximum(upto - 1, 0)] >= commands.stamp[rej])
-    return np.sort(commands.arrival_ns[rej][late].astype(np.int64))
+    return np.sort(arrival[rej][late].astype(np.int64))
 
 
 def live_pairs(settings: LiveSettings, force: Samples, displacement: Samples,
@@ -59,25 +61,27 @@ def live_pairs(settings: LiveSettings, force: Samples, displacement: Samples,
     rejected command was in force are left out (counted as ``pairs_rejected_command``)."""
     s = settings
     if s.interpolated is None:
-        result = pair_by_stamp(force.stamp, force.arrival_ns, displacement.stamp, displacement.arrival_ns, s.slop_s,
-                               s.max_age_s)
-        fi, di = result.force_index, result.displacement_index
+        nearest = pair_by_stamp(force.stamp, force.arrival_ns, displacement.stamp, displacement.arrival_ns, s.slop_s,
+                                s.max_age_s)
+        pairing_counters = nearest.counters
+        fi, di = nearest.force_index, nearest.displacement_index
         stamp = pair_stamp(force.stamp[fi], displacement.stamp[di])
         fit_log = np.maximum(force.arrival_ns[fi], displacement.arrival_ns[di])
         value, disp_value = force.value[fi], displacement.value[di]
     else:
         fast = s.interpolated
-        result = pair_by_interpolation(force.stamp, force.arrival_ns, displacement.stamp, displacement.arrival_ns,
+        interp = pair_by_interpolation(force.stamp, force.arrival_ns, displacement.stamp, displacement.arrival_ns,
                                        fast, (force if fast == FORCE else displacement).value,
                                        s.max_interpolation_gap_s, s.max_age_s)
+        pairing_counters = interp.counters
         slow_samples, fast_samples = (displacement, force) if fast == FORCE else (force, displacement)
-        si = result.slow_index
-        stamp = result.stamp
+        si = interp.slow_index
+        stamp = interp.stamp
         # A pair forms once its slow sample and the fast sample closing its bracket have both arrived.
-        fit_log = np.maximum(slow_samples.arrival_ns[si], fast_samples.arrival_ns[result.fast_index])
+        fit_log = np.maximum(slow_samples.arrival_ns[si], fast_samples.arrival_ns[interp.fast_index])
         slow_value = slow_samples.value[si]
-        value, disp_value = (result.fast_value, slow_value) if fast == FORCE else (slow_value, result.fast_value)
-    counters = dict(result.counters)
+        value, disp_value = (interp.fast_value, slow_value) if fast == FORCE else (slow_value, interp.fast_value)
+    counters: dict[str, float] = dict(pairing_counters)
     if commands is not None:
         rejected = commands.rejected_at(stamp, fit_log)
         counters['pairs_rejected_command'] = int(rejected.sum())

@@ -61,12 +61,12 @@ def fit_problems(stiffness: float, ci95_low: float, ci95_high: float, scatter: f
     return problems
 
 
-def moved_axes(low: Sequence[float], high: Sequence[float]) -> list[str]:
+def moved_axes(low: Sequence[float] | np.ndarray, high: Sequence[float] | np.ndarray) -> list[str]:
     """The wrench components whose commanded value moved (``high − low`` > MOVE_TOLERANCE), in AXES order."""
     return [axis for axis, lo, hi in zip(AXES, low, high) if hi - lo > MOVE_TOLERANCE]
 
 
-def axis_problem(fitted: str, low: Sequence[float], high: Sequence[float]) -> str:
+def axis_problem(fitted: str, low: Sequence[float] | np.ndarray, high: Sequence[float] | np.ndarray) -> str:
     """'' when the commands (componentwise range ``low`` .. ``high`` over the fit segment) load the fitted axis
     alone (or load nothing yet); else the problem, naming both axes."""
     moved = moved_axes(low, high)

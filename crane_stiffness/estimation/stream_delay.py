@@ -74,7 +74,7 @@ class StreamDelay:
     def __init__(self, settings: LiveSettings) -> None:
         self.settings = settings
         self.enabled = settings.delay_window_s > 0.0
-        self._data = {FORCE: deque(), DISPLACEMENT: deque()}
+        self._data: dict[str, deque[tuple[float, float]]] = {FORCE: deque(), DISPLACEMENT: deque()}  # (stamp, value)
         self._new = 0                # samples since the last estimate
         self._new_at_update = -1     # _new at the previous update: unchanged = the streams pause
         self._last_newest = -math.inf

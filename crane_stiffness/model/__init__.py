@@ -6,6 +6,20 @@
 - :mod:`.rotation` — the paper's z–x–y angles and conversions.
 """
 import importlib
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # the names for type checkers; at run time __getattr__ (below) imports each module on first use
+    # Re-exported through the __all__ built below from _EXPORTS, which linters cannot follow: hence the F401 noqa.
+    from .equilibrium import (  # noqa: F401
+        BatchEquilibrium, Equilibrium, as_load, net_wrench, rest_pose, solve_batch, solve_equilibrium, solve_path,
+        wrench_jacobian)
+    from .errors import ConvergenceError, GeometryError, ModelError, NoEquilibriumError  # noqa: F401
+    from .geometry import WIRE_NAMES, CraneGeometry, lab_model, rest_wire_length  # noqa: F401
+    from .rotation import euler_zxy_to_matrix, matrix_to_euler_zxy  # noqa: F401
+    from .stiffness import (  # noqa: F401
+        AXES, PaperCoefficients, axis_index, axis_stiffness, compliance, directional_stiffness, elastic_stiffness,
+        loaded_height, paper_coefficients, paper_stiffness, pendulum_stiffness, single_wire_pendulum_stiffness,
+        tangent_stiffness)
 
 #: The public names and the module of each. Imported on first use: importing .geometry alone (params.geometry,
 #: so every node) must not import .equilibrium and numba (~0.5 s of CPU in each node process at start).

@@ -111,6 +111,11 @@ class BatchEquilibrium:
                            self.slack[i], self.loads[i], int(self.iterations[i]), self.residual[i])
 
 
+#: The geometry's leading kernel arguments: top, plat, l0, kw, weight, com, ploc (a fixed-length tuple, so that
+#: mypy can check the compiled kernels' calls that unpack it).
+_KernelGeometry = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float, np.ndarray, np.ndarray]
+
+
 class _Arrays:
     """The geometry as the contiguous float arrays the kernels take."""
 
@@ -131,10 +136,10 @@ class _Arrays:
         self.min_cos_turn = math.cos(MAX_STEP_ROTATION)
         self.max_shift = MAX_STEP_TRANSLATION * g.l0
 
-    def args(self):
+    def args(self) -> _KernelGeometry:
         return self.top, self.plat, self.l0, self.kw, self.weight, self.com, self.ploc
 
-    def homotopy(self, lam: float):
+    def homotopy(self, lam: float) -> _KernelGeometry:
         """Kernel arguments with the offsets (centre of mass, wire lengths) scaled by lam: lam = 0 is the symmetric
         crane, whose rest pose is a plain vertical sag, lam = 1 the real one."""
         nominal = np.full(6, self.l0_nominal)
@@ -211,7 +216,7 @@ def check_load_admissible(geometry: CraneGeometry, load: np.ndarray) -> None:
         f'not positive, so the wires (which can only pull up) would all go slack')
 
 
-def _step(arr: _Arrays, args: tuple, load: np.ndarray, u: np.ndarray, q: np.ndarray, xtol: float,
+def _step(arr: _Arrays, args: _KernelGeometry, load: np.ndarray, u: np.ndarray, q: np.ndarray, xtol: float,
           max_iter: int):
     """One continuation step in place on (u, q): Newton, accepted only near the start (else status JUMPED)."""
     lengths = np.empty(6)
@@ -355,8 +360,8 @@ def solve_batch(geometry: CraneGeometry, loads, *, xtol: float = DEFAULT_XTOL,
     """
     loads = np.ascontiguousarray(np.asarray(loads, dtype=float).reshape(-1, 6))
     if not np.all(np.isfinite(loads)):
-        bad = int(np.argwhere(~np.all(np.isfinite(loads), axis=1))[0, 0])
-        raise ValueError(f'loads[{bad}] = {loads[bad].tolist()}: every component must be finite')
+        row = int(np.argwhere(~np.all(np.isfinite(loads), axis=1))[0, 0])
+        raise ValueError(f'loads[{row}] = {loads[row].tolist()}: every component must be finite')
     down = geometry.weight + loads[:, 2]
     bad = np.flatnonzero((down < 0.0) | ((down == 0.0) & np.any(loads != 0.0, axis=1)))
     if bad.size:

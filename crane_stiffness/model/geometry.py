@@ -120,7 +120,7 @@ class CraneGeometry:
         if has_k and has_material:
             raise GeometryError('wire_stiffness', self.wire_stiffness,
                                 'give either wire_stiffness or wire_diameter with youngs_modulus, not both')
-        if has_k:
+        if self.wire_stiffness is not None:  # has_k
             set_(self, 'wire_stiffness', _check_finite('wire_stiffness', self.wire_stiffness, positive=True))
         else:
             if self.wire_diameter is None or self.youngs_modulus is None:
@@ -158,14 +158,18 @@ class CraneGeometry:
         """Axial stiffness of wires 1..6, shape (6,) [N/m]: k as given, or A·E/l0_i per wire."""
         if self.wire_stiffness is not None:
             return np.full(6, self.wire_stiffness)
-        return self.wire_area * self.youngs_modulus / self.unstretched_lengths
+        area, modulus = self.wire_area, self.youngs_modulus
+        assert area is not None and modulus is not None  # __post_init__: without k both d and E are given
+        return area * modulus / self.unstretched_lengths
 
     @property
     def k(self) -> float:
         """Nominal wire stiffness k [N/m] (A·E/l0 at the nominal length), as used by the paper's closed forms."""
         if self.wire_stiffness is not None:
             return self.wire_stiffness
-        return self.wire_area * self.youngs_modulus / self.l0
+        area, modulus = self.wire_area, self.youngs_modulus
+        assert area is not None and modulus is not None  # __post_init__: without k both d and E are given
+        return area * modulus / self.l0
 
     @property
     def top_points(self) -> np.ndarray:

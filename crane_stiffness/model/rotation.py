@@ -51,17 +51,17 @@ def matrix_to_quaternion(q: np.ndarray) -> np.ndarray:
     tr = q[0, 0] + q[1, 1] + q[2, 2]
     if tr > 0.0:
         s = math.sqrt(tr + 1.0) * 2.0
-        quat = [(q[2, 1] - q[1, 2]) / s, (q[0, 2] - q[2, 0]) / s, (q[1, 0] - q[0, 1]) / s, 0.25 * s]
+        xyzw = [(q[2, 1] - q[1, 2]) / s, (q[0, 2] - q[2, 0]) / s, (q[1, 0] - q[0, 1]) / s, 0.25 * s]
     elif q[0, 0] > q[1, 1] and q[0, 0] > q[2, 2]:
         s = math.sqrt(1.0 + q[0, 0] - q[1, 1] - q[2, 2]) * 2.0
-        quat = [0.25 * s, (q[0, 1] + q[1, 0]) / s, (q[0, 2] + q[2, 0]) / s, (q[2, 1] - q[1, 2]) / s]
+        xyzw = [0.25 * s, (q[0, 1] + q[1, 0]) / s, (q[0, 2] + q[2, 0]) / s, (q[2, 1] - q[1, 2]) / s]
     elif q[1, 1] > q[2, 2]:
         s = math.sqrt(1.0 + q[1, 1] - q[0, 0] - q[2, 2]) * 2.0
-        quat = [(q[0, 1] + q[1, 0]) / s, 0.25 * s, (q[1, 2] + q[2, 1]) / s, (q[0, 2] - q[2, 0]) / s]
+        xyzw = [(q[0, 1] + q[1, 0]) / s, 0.25 * s, (q[1, 2] + q[2, 1]) / s, (q[0, 2] - q[2, 0]) / s]
     else:
         s = math.sqrt(1.0 + q[2, 2] - q[0, 0] - q[1, 1]) * 2.0
-        quat = [(q[0, 2] + q[2, 0]) / s, (q[1, 2] + q[2, 1]) / s, 0.25 * s, (q[1, 0] - q[0, 1]) / s]
-    quat = np.array(quat)
+        xyzw = [(q[0, 2] + q[2, 0]) / s, (q[1, 2] + q[2, 1]) / s, 0.25 * s, (q[1, 0] - q[0, 1]) / s]
+    quat = np.array(xyzw)
     quat /= np.linalg.norm(quat)
     return quat if quat[3] >= 0 else -quat
 

@@ -37,6 +37,7 @@ import numpy as np
 from geometry_msgs.msg import PoseStamped, WrenchStamped
 from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.node import Node
+from rclpy.timer import Timer
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension, String
 
@@ -106,7 +107,7 @@ class CraneModel(Node):
         self.counters = ModelCounters()
         self.failures = 0  # solves that found no equilibrium (also on a parameter change)
         self.status = 'starting'
-        self.geometry: CraneGeometry | None = None
+        self.geometry: CraneGeometry | None = None  # set by _apply (Params, below): the methods assert it
         self.equilibrium: Equilibrium | None = None
         self.load = np.zeros(6)  # the load in force [N, N·m], crane_base: the last accepted command (rest: zero)
         self.axis = 'fy'
@@ -118,7 +119,7 @@ class CraneModel(Node):
         self._resend_kinds: set[str] = set()
         self._readers: dict[str, int] = {}  # matched readers by kind, as last reported
         self._resend_from = 0
-        self._resend_timer = None
+        self._resend_timer: Timer | None = None
         self.pub_applied = self.create_publisher(
             WrenchStamped, topics.APPLIED_WRENCH, RELIABLE_QOS,
             event_callbacks=PublisherEventCallbacks(matched=self._on_applied_matched))
@@ -167,19 +168,21 @@ class CraneModel(Node):
             # A hold repeats the command at the program's rate: the same equilibrium, pose restamped. The latched
             # stiffness topics already carry its values.
             self.counters.cache_hits += 1
+            assert self.equilibrium is not None  # set with solved
             self._accept(msg, load, stamp)
             self._publish_pose(self.equilibrium)
             self.counters.published += 1
             self._set_status(self._ok_status(self.equilibrium))  # e.g. back to ok after a rejected command
             return
         failed_key = (tuple(self.load.tolist()), key)
-        reason = self.failed.get(failed_key)
-        if reason is not None:  # failed before from this same load in force: the same answer, no solve
+        failed_before = self.failed.get(failed_key)
+        if failed_before is not None:  # failed before from this same load in force: the same answer, no solve
             self.failed.move_to_end(failed_key)
             self.counters.cache_hits += 1
-            self._no_equilibrium(msg, reason)
+            self._no_equilibrium(msg, failed_before)
             return
         self.counters.solves += 1
+        assert self.geometry is not None
         try:
             eq = solve_equilibrium(self.geometry, load=load, initial=self.equilibrium)
         except ModelError as exc:
@@ -280,11 +283,13 @@ class CraneModel(Node):
                 self._publish_current_pose()
         if not self._resends:
             self._resend_kinds.clear()
+            assert self._resend_timer is not None  # the timer calling this
             self._resend_timer.cancel()
 
     # --- work ---
     def _solve_and_publish(self) -> None:
         """Solve the load in force again (start, parameter change) and publish everything."""
+        assert self.geometry is not None
         try:
             eq = solve_equilibrium(self.geometry, load=self.load, initial=self.equilibrium)
         except ModelError as exc:
@@ -298,6 +303,7 @@ class CraneModel(Node):
 
     def _publish_solution(self, eq: Equilibrium) -> None:
         g = self.geometry
+        assert g is not None
         self.equilibrium = eq
         self.solved = tuple(self.load.tolist())
         self._publish_pose(eq)

@@ -21,9 +21,10 @@ Counters: received = used + dropped_non_finite
 """
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
+from numpy.typing import NDArray
 from geometry_msgs.msg import WrenchStamped
 from rclpy.node import Node
 from std_srvs.srv import Trigger
@@ -68,7 +69,7 @@ class LoadCell(Node):
         self._saturated_reported = np.zeros(6, dtype=np.int64)
         self.applied = StampedHold(6)  # no value until crane_model says which load is in force
         self.tared_at_ns = 0
-        self.model: LoadCellModel | None = None
+        self.model: LoadCellModel | None = None  # set by _apply (Params, below): _tick asserts it
         self.schedule = SampleSchedule(self, self._tick)
         self.settings: dict[str, Any] = {}
         self.t0_ns = self.get_clock().now().nanoseconds  # drift time origin; also the start reported
@@ -83,6 +84,7 @@ class LoadCell(Node):
     @property
     def clock(self) -> SampleClock:
         """The sample clock (period, skipped samples)."""
+        assert self.schedule.clock is not None  # configured by _apply (Params, in __init__)
         return self.schedule.clock
 
     @property
@@ -122,11 +124,13 @@ class LoadCell(Node):
             times, true_wrench = times[valid], true_wrench[valid]
             if times.size == 0:
                 return
+        assert self.model is not None
         readings, saturated = self.model.measure(true_wrench, (times - self.t0_ns) * 1e-9)
         if saturated.any():
             self.saturated += saturated.sum(axis=0)
+            per_axis = cast(NDArray[np.bool_], saturated.any(axis=0))  # a batch (n, 6): one flag per axis
             self.get_logger().warning(
-                f'overload: {", ".join(a for a, s in zip(AXES, saturated.any(axis=0)) if s)} saturated at '
+                f'overload: {", ".join(a for a, s in zip(AXES, per_axis) if s)} saturated at '
                 f'full scale {self.settings["full_scale"]}', throttle_duration_sec=2.0)
         frame = self.settings['frame_id']
         for t_ns, r in zip(times.tolist(), readings.tolist()):

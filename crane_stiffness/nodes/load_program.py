@@ -19,11 +19,14 @@ from __future__ import annotations
 
 import json
 import time
+from functools import partial
 from typing import Any, Callable
 
 from geometry_msgs.msg import WrenchStamped
 from rclpy.duration import Duration
 from rclpy.node import Node
+from rclpy.subscription import Subscription
+from rclpy.timer import Timer
 from std_msgs.msg import Float64, String
 from std_srvs.srv import Trigger
 
@@ -35,7 +38,7 @@ from crane_stiffness.nodes.run import run
 from crane_stiffness.nodes.parameters import Params, check
 from crane_stiffness.rig_description import NODES as RIG_NODES
 from crane_stiffness.rig_description import readiness
-from crane_stiffness.sim.program import PROGRAM_KEYS, PROGRAM_PARAMS, LoadProgram
+from crane_stiffness.sim.program import PROGRAM_KEYS, PROGRAM_PARAMS, LoadProgram, ProgramState
 from crane_stiffness.status import OK, WARN
 
 #: What the program waits for by default: the whole simulated rig with the recorder, as crane_stiffness.rig_description
@@ -96,7 +99,7 @@ class _Readiness:
         self.node = node
         self.items: list[tuple[str, Callable[[], bool]]] = []
         self._received: dict[str, bool] = {}
-        self._subscriptions = {}
+        self._subscriptions: dict[str, Subscription | None] = {}  # None: dropped once its message came
         for name in dict.fromkeys(m.strip() for m in messages if m.strip()):
             topic = node.resolve_topic_name(name)
             msg_type = topics.RIG_TOPICS.get(topic)  # a topic outside the contract: missing() finds its type
@@ -104,14 +107,14 @@ class _Readiness:
             if msg_type is not None:
                 self._subscribe(topic, message_class(msg_type))
             self.items.append((f'a message on {topic}' + (f' ({SOURCES[topic]})' if topic in SOURCES else ''),
-                               lambda t=topic: self._received[t]))
+                               partial(self._received.__getitem__, topic)))
         self._pending_types = [t for t in self._received if t not in self._subscriptions]
         command_readers = set()
         for name, reader in subscribers:
             topic = node.resolve_topic_name(name)
             if topic == topics.WRENCH_COMMAND:
                 command_readers.add(reader)
-            self.items.append((f'{reader} subscribed to {topic}', lambda t=topic, r=reader: self._subscribed(t, r)))
+            self.items.append((f'{reader} subscribed to {topic}', partial(self._subscribed, topic, reader)))
         # The graph can show a reader before our publisher has matched it: count the matches of the command too.
         need = max(min_subscribers, len(command_readers))
         if need:
@@ -166,10 +169,10 @@ class LoadProgramNode(Node):
         super().__init__('load_program', **kwargs)
         self.state = 'idle'
         self.elapsed = 0.0        # program time reached when last paused [s]
-        self.started_at = None    # node-clock time of (re)start [s]
-        self.last = None
-        self.program: LoadProgram | None = None
-        self.timer = None
+        self.started_at: float | None = None    # node-clock time of (re)start [s]
+        self.last: ProgramState | None = None
+        self.program: LoadProgram | None = None  # set by _apply (Params, below): the methods assert it
+        self.timer: Timer | None = None
         self.counters = Counters()  # published = commands published (FINAL_COUNTERS at exit)
         self.exit_status = 0
         self.pub_cmd = self.create_publisher(WrenchStamped, topics.WRENCH_COMMAND, RELIABLE_QOS)
@@ -180,9 +183,11 @@ class LoadProgramNode(Node):
         self.create_service(Trigger, '~/pause', self._srv_pause)
         self.create_service(Trigger, '~/stop', self._srv_stop)
         self.diagnostics = Diagnostics(self, self._report)
-        self._autostart = None
+        self._autostart: Timer | None = None
         self._readiness: _Readiness | None = None
+        self._wait_started = self._next_report = 0.0  # time.monotonic() [s], set with the readiness
         if self.params['autostart']:
+            assert self.program is not None
             self._readiness = _Readiness(self, self.params['wait_for_messages'],
                                          wanted_subscribers(self.params['wait_for_subscribers']),
                                          self.params['min_subscribers'], self.pub_cmd.get_subscription_count)
@@ -218,10 +223,13 @@ class LoadProgramNode(Node):
 
     def _program_time(self) -> float:
         if self.state == 'running':
+            assert self.started_at is not None  # set by _start
             return self.elapsed + self._now() - self.started_at
         return self.elapsed
 
     def _auto(self) -> None:
+        # The autostart timer's callback: __init__ set the readiness, the program and the timer.
+        assert self._readiness is not None and self.program is not None and self._autostart is not None
         now = time.monotonic()
         if self._ready_at is None:
             missing = self._readiness.missing()
@@ -257,6 +265,7 @@ class LoadProgramNode(Node):
             return 'already running'
         if self.state in ('done', 'stopped', 'idle'):
             self.elapsed = 0.0
+        assert self.program is not None
         self.started_at = self._now()
         self.state = 'running'
         self._publish_state()
@@ -265,6 +274,7 @@ class LoadProgramNode(Node):
     def _tick(self) -> None:
         if self.state not in ('running', 'paused'):
             return
+        assert self.program is not None
         st = self.program.wrench_at(self._program_time())
         self.last = st
         cmd = WrenchStamped()
@@ -298,6 +308,7 @@ class LoadProgramNode(Node):
         self.exit_requested = True  # run.run ends the spin and exits with status 0
 
     def _publish_state(self) -> None:
+        assert self.program is not None
         st = self.last
         self.pub_state.publish(String(data=json.dumps({
             'program': self.program.name, 'state': self.state, 'time_s': round(self._program_time(), 6),

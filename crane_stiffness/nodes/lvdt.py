@@ -65,7 +65,7 @@ class Lvdt(Node):
         self._out_of_range_reported = 0
         self.zero_pose: np.ndarray | None = None  # [u, Q] of the pose the sensor was zeroed at
         self.pose = StampedHold(12)
-        self.model: LvdtModel | None = None
+        self.model: LvdtModel | None = None  # set by _apply (Params, below): the methods assert it
         self.schedule = SampleSchedule(self, self._tick)
         self.settings: dict[str, Any] = {}
         self.pub = self.create_publisher(PointStamped, topics.LVDT_DISPLACEMENT, SENSOR_QOS)
@@ -80,6 +80,7 @@ class Lvdt(Node):
     @property
     def clock(self) -> SampleClock:
         """The sample clock (period, skipped samples)."""
+        assert self.schedule.clock is not None  # configured by _apply (Params, in __init__)
         return self.schedule.clock
 
     @property
@@ -96,6 +97,7 @@ class Lvdt(Node):
 
     def _zero(self, pose: np.ndarray, *, new: bool = True) -> None:
         """Zero the model at ``pose``; ``new``: a zero of its own (counted), not one carried over to a new model."""
+        assert self.model is not None
         self.model.zero(pose[:3], pose[3:].reshape(3, 3))
         self.zero_pose = pose
         if new:
@@ -114,6 +116,7 @@ class Lvdt(Node):
         self.counters.used += 1
         if first and self.settings['zero_on_first_pose']:
             self._zero(pose)
+            assert self.model is not None
             self.get_logger().info(f'zeroed at the first pose: u = {pose[:3].tolist()} m, zero offset '
                                    f'{self.model.zero_offset:.9g} m')
 
@@ -127,6 +130,7 @@ class Lvdt(Node):
             times, poses = times[valid], poses[valid]
             if times.size == 0:
                 return
+        assert self.model is not None
         readings, in_range = self.model.measure(poses[:, :3], poses[:, 3:].reshape(-1, 3, 3))
         if not in_range.all():
             self.out_of_range += int((~in_range).sum())

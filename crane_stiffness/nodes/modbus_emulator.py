@@ -66,7 +66,7 @@ class ModbusEmulator(Node):
         self.counters = SensorCounters()
         self.pose: np.ndarray | None = None  # the held pose: u (3) then Q row-major (9)
         self.zero_pose: np.ndarray | None = None
-        self.model: LvdtModel | None = None
+        self.model: LvdtModel | None = None  # set by _apply (Params, below): the methods assert it
         self.device: ModbusDevice | None = None
         self.settings: dict[str, Any] = {}
         self.params = Params(self, PARAMS, self._validate, self._apply)
@@ -103,6 +103,7 @@ class ModbusEmulator(Node):
         pose = self.pose
         if pose is None:
             return None
+        assert self.model is not None
         reading, _ = self.model.measure(pose[:3], pose[3:].reshape(3, 3))
         return reading
 
@@ -114,6 +115,7 @@ class ModbusEmulator(Node):
             self.counters.dropped_non_finite += 1
             return
         if self.zero_pose is None and self.settings['zero_on_first_pose']:
+            assert self.model is not None
             self.model.zero(pose[:3], pose[3:].reshape(3, 3))
             self.zero_pose = pose
         self.pose = pose

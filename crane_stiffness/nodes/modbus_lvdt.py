@@ -105,7 +105,7 @@ class ModbusLvdt(Node):
         self.counters = PollCounters()
         self._reported = PollCounters()
         self.settings: dict[str, Any] = {}
-        self.poller: ModbusPoller | None = None
+        self.poller: ModbusPoller | None = None  # created by the first _apply (Params, below): _tick asserts it
         self.timer = None
         self.zero_m = 0.0
         self.last_error = ''
@@ -145,6 +145,7 @@ class ModbusLvdt(Node):
         self.settings = values
 
     def _tick(self) -> None:
+        assert self.poller is not None
         now = time.monotonic()
         if now < self._retry_at:
             return

@@ -120,6 +120,7 @@ class NetFt(Node):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('netft', **kwargs)
         self.counters = FtCounters()
+        # Both built by the first _apply (Params, below): the methods assert them.
         self.receiver: RdtReceiver | None = None
         self.pipeline: RdtPipeline | None = None
         self.timer = None
@@ -162,6 +163,7 @@ class NetFt(Node):
             self.pipeline = RdtPipeline(calibration, values['sample_rate_hz'], values['publish_rate_hz'],
                                         values['tare_samples'], values['drop_status_mask'])
         else:
+            assert self.pipeline is not None
             self.pipeline.configure(values['publish_rate_hz'], values['tare_samples'], values['drop_status_mask'])
         if self.timer is None or values['flush_rate_hz'] != self.settings['flush_rate_hz']:
             if self.timer is not None:
@@ -170,6 +172,7 @@ class NetFt(Node):
         self.settings = values
 
     def _tick(self) -> None:
+        assert self.receiver is not None and self.pipeline is not None
         datagrams = self.receiver.drain()
         if not datagrams:
             return
@@ -186,6 +189,7 @@ class NetFt(Node):
         self._update_counters()
 
     def _update_counters(self) -> None:
+        assert self.receiver is not None and self.pipeline is not None
         c = self.pipeline.counters()
         self.counters.received = c['records_received']
         for name in ('records_lost', 'records_out_of_order', 'records_late_dropped', 'records_duplicate',

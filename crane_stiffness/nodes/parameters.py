@@ -259,8 +259,8 @@ def package_parameter_names() -> set[str]:
     return names
 
 
-def one_line(text: str) -> str:
-    """``text`` on one line (white space folded)."""
+def one_line(text: object) -> str:
+    """``text`` (str() of it) on one line (white space folded)."""
     return ' '.join(str(text).split())
 
 

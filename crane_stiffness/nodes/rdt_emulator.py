@@ -117,6 +117,7 @@ class RdtEmulator(Node):
     def _samples(self, n: int) -> np.ndarray:
         """The model's readings of the held wrench for the n samples of a burst (the device thread calls this, and
         then encodes the burst with the device's status word, set here for the same wrench)."""
+        assert self.device is not None and self.model is not None  # _apply sets both, then starts the device
         applied = self.applied  # one read: the executor thread may replace it meanwhile
         if applied is None:
             self.device.status = STATUS_NOT_READY

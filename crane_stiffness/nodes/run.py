@@ -7,7 +7,7 @@ import os
 import signal
 import sys
 import threading
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Sequence, TypeVar
 
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
@@ -95,8 +95,11 @@ class ShutdownRequest:
                 signal.signal(sig, signal.SIG_IGN)
 
 
-def run(node_factory: Callable[[], Node], args: Sequence[str] | None = None,
-        executor: str | Callable[[Node], str] = 'events') -> int:
+NodeT = TypeVar('NodeT', bound=Node)
+
+
+def run(node_factory: Callable[[], NodeT], args: Sequence[str] | None = None,
+        executor: str | Callable[[NodeT], str] = 'events') -> int:
     """The ``main`` of every node: init, build, spin until SIGINT (Ctrl-C), SIGTERM or ``node.exit_requested``,
     clean up; returns the exit status (``node.exit_status``, default 0).
 
@@ -113,7 +116,7 @@ def run(node_factory: Callable[[], Node], args: Sequence[str] | None = None,
     reason = next(filter(None, map(parameters.params_file_problem, params_files_from_args(argv))), None)
     if reason is None:
         try:
-            rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+            rclpy.init(args=None if args is None else argv, signal_handler_options=SignalHandlerOptions.NO)
         except Exception as exc:  # e.g. a parameter file rcl reads differently
             reason = parameters.one_line(f'{type(exc).__name__}: {exc}')
     if reason is not None:

@@ -35,6 +35,7 @@ from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.exceptions import ParameterUninitializedException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.publisher import Publisher
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from std_srvs.srv import Trigger
@@ -135,7 +136,8 @@ class _Playback(threading.Thread):
                 self.player.stats['skipped_stopped'] += 1
                 self.pending = False
 
-    def _publish_clock(self, bag_ns: int) -> None:
+    def _publish_clock(self, bag_ns: float) -> None:
+        """Publish /clock at bag time ``bag_ns`` [ns] (a float when scaled by the rate; truncated to an int)."""
         if self.clock_pub is not None:
             msg = Clock()
             msg.clock.sec, msg.clock.nanosec = divmod(int(bag_ns), 1_000_000_000)
@@ -200,7 +202,7 @@ class SessionPlayer(Node):
         super().__init__('session_player', **kwargs)
         self.playback: _Playback | None = None
         self.publishers_by_topic: dict[str, Any] = {}
-        self.clock_pub = None
+        self.clock_pub: Publisher | None = None
         self.state = 'idle'
         self.problems: list[str] = []
         self.stats: dict[str, Any] = {'read': 0, 'published': 0, 'skipped_stopped': 0, 'skipped_publish_error': 0,
@@ -304,6 +306,7 @@ class SessionPlayer(Node):
                 return 'resumed'
             return 'already playing'
         self.prepare()
+        assert self.reader is not None  # prepare() opened the bag
         p = self.params
         self._check_offset()
         self.stats.update(read=0, published=0, skipped_stopped=0, skipped_publish_error=0, max_late_ms=0.0, loops=0,
@@ -393,6 +396,7 @@ class SessionPlayer(Node):
         return self.state == 'finished'
 
     def _auto(self) -> None:
+        assert self._autostart is not None  # the timer calling this
         self.destroy_timer(self._autostart)
         self._autostart = None
         if self.state == 'idle':

@@ -38,6 +38,7 @@ import os
 import socket
 import threading
 from datetime import datetime, timezone
+from functools import partial
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -45,6 +46,8 @@ from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from rclpy.serialization import deserialize_message
+from rclpy.subscription import Subscription
+from rclpy.timer import Timer
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
@@ -132,7 +135,7 @@ class _Channel:
         self.msg_class = message_class(msg_type)
         self.qos = qos
         self.stamped = has_header(self.msg_class)
-        self.subscription = None
+        self.subscription: Subscription | None = None
         self.added = False
         self.count = 0
 
@@ -179,10 +182,10 @@ class SessionRecorder(Node):
         self.received = 0                       # every message callback (all recordings)
         self.written = 0                        # on disk, recordings closed so far
         self.dropped = {'not_recording': 0, 'write_error': 0, 'lost_with_chunk': 0, 'rejected': 0}
-        self.state_subscription = None
+        self.state_subscription: Subscription | None = None
         self.program_ran = False
         self.program_state: dict[str, Any] = {}
-        self.stop_timer = None
+        self.stop_timer: Timer | None = None
         self.exit_requested = False
         self.node_parameters: dict[str, dict[str, Any]] = {}
         self.parameter_reader: NodeParameterReader | None = None
@@ -195,7 +198,7 @@ class SessionRecorder(Node):
         self.create_service(Trigger, '~/stop', self._srv_stop)
         self.diagnostics = Diagnostics(self, self._report)
         self.discovery_timer = self.create_timer(0.2, self._discover)
-        self.flush_timer = None
+        self.flush_timer: Timer | None = None
         if self.params['autostart']:
             self.start()  # a bad output directory stops the node at start with the reason
 
@@ -222,6 +225,7 @@ class SessionRecorder(Node):
     def start(self) -> Path:
         """Open a new bag and subscribe; returns its directory. Raises BagError/OSError if it cannot be created."""
         if self.writer is not None:
+            assert self.bag_path is not None  # set with the writer
             return self.bag_path
         p = self.params
         path = self._session_dir()
@@ -349,9 +353,10 @@ class SessionRecorder(Node):
                 continue
             self._subscribe(topic, msg_type)
         if self.params['stop_on_program_done'] and topics.PROGRAM_STATE not in self.channels:
-            self.state_subscription = self.create_subscription(
-                String, topics.PROGRAM_STATE, lambda m: self._on_program_state(m.data), contract_qos(
-                    topics.PROGRAM_STATE))
+            qos = contract_qos(topics.PROGRAM_STATE)
+            assert qos is not None  # a rig topic: in the contract
+            self.state_subscription = self.create_subscription(String, topics.PROGRAM_STATE,
+                                                               self._on_program_state_msg, qos)
 
     def _subscribe(self, topic: str, msg_type: str) -> None:
         qos = contract_qos(topic)
@@ -364,7 +369,7 @@ class SessionRecorder(Node):
             self.errors += 1
             return
         channel.subscription = self.create_subscription(
-            channel.msg_class, topic, lambda data, c=channel: self._on_message(c, data), qos, raw=True,
+            channel.msg_class, topic, partial(self._on_message, channel), qos, raw=True,
             event_callbacks=_NO_EVENTS)
         self.channels[topic] = channel
 
@@ -406,6 +411,7 @@ class SessionRecorder(Node):
             if len(graph) == 1 and channel.msg_type not in graph:
                 self.get_logger().warning(f'{topic} is published as {next(iter(graph))}, not {channel.msg_type}: '
                                           'recording that type')
+                assert channel.subscription is not None  # subscribed while recording
                 self.destroy_subscription(channel.subscription)
                 del self.channels[topic]
                 self._subscribe(topic, next(iter(graph)))
@@ -443,6 +449,9 @@ class SessionRecorder(Node):
                 self._on_program_state(deserialize_message(data, String).data)
             except Exception as exc:  # a malformed state must not stop the recording
                 self.get_logger().warning(f'unreadable program state: {exc}', throttle_duration_sec=5.0)
+
+    def _on_program_state_msg(self, msg: String) -> None:
+        self._on_program_state(msg.data)
 
     def _on_program_state(self, text: str) -> None:
         try:

@@ -32,12 +32,16 @@ Service ~/reset (std_srvs/Trigger) starts afresh: fits, branch tracker, pairing 
 """
 from __future__ import annotations
 
-from typing import Any
+from functools import partial
+from typing import Any, cast
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PointStamped, WrenchStamped
+from rclpy.clock import ROSClock
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.node import Node
+from rclpy.subscription import Subscription
+from rclpy.timer import Timer
 from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension
 from std_srvs.srv import Trigger
 
@@ -97,11 +101,12 @@ class StiffnessEstimatorNode(Node):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('stiffness_estimator', **kwargs)
-        self.core: LiveStiffness | None = None  # built with the start-up settings by the first _apply
+        # Built with the start-up settings by the first _apply (Params, below): the methods assert it is set.
+        self.core: LiveStiffness | None = None
         self.settings: dict[str, Any] = {}
-        self.sub_displacement = None
+        self.sub_displacement: Subscription | None = None  # created by _apply, for the displacement_type
         self.drained: list = []  # (subscription, handler) taken from in turn: command, force, displacement
-        self.timer = None
+        self.timer: Timer | None = None
         self.last_stiffness = float('nan')
         self.changed = False  # new pairs fitted since the last /stiffness/estimate_values
         self.pub_values = self.create_publisher(Float64MultiArray, topics.STIFFNESS_VALUES, RELIABLE_QOS,
@@ -127,14 +132,19 @@ class StiffnessEstimatorNode(Node):
         self.params = Params(self, PARAMS, _validate, self._apply)  # subscribes the displacement
         self.create_subscription(Float64, topics.PREDICTED_AXIS_STIFFNESS, self._on_prediction, LATCHED_QOS)
         for stream, topic in ((DISPLACEMENT, topics.LVDT_ZERO), (FORCE, topics.LOAD_CELL_TARE)):
-            self.create_subscription(Float64, topic, lambda msg, s=stream: self._on_zero_epoch(s, msg), LATCHED_QOS)
+            self.create_subscription(Float64, topic, partial(self._on_zero_epoch, stream), LATCHED_QOS)
         self.create_service(Trigger, '~/reset', self._srv_reset)
-        self.diagnostics = Diagnostics(self, lambda: self.core.input_report('diagnostics', self._now_s()))
+        self.diagnostics = Diagnostics(self, self._diagnostics_report)
+
+    def _diagnostics_report(self) -> tuple[int, str, list[tuple[str, str]]]:
+        assert self.core is not None
+        return self.core.input_report('diagnostics', self._now_s())
 
     @property
     def counters(self) -> dict[str, int]:
         """Every message accounted (what ``run`` prints at exit): the input counters and the pairing's, per stream
         (see LiveStiffness.accounting)."""
+        assert self.core is not None
         return self.core.accounting()
 
     def _now_s(self) -> float:
@@ -142,7 +152,7 @@ class StiffnessEstimatorNode(Node):
 
     def _apply(self, settings: LiveSettings, values: dict[str, Any]) -> None:
         first = self.core is None
-        if first:  # the start: segment 1 is fitted with these settings (not a change of parameters)
+        if self.core is None:  # the start: segment 1 is fitted with these settings (not a change of parameters)
             self.core = LiveStiffness(settings)
         if first or self.core.configure(settings):
             where = 'at the platform centre' if settings.force_row() is None else 'moved to the platform centre'
@@ -169,6 +179,7 @@ class StiffnessEstimatorNode(Node):
     # --- inputs: a message (sensors: serialized) and, when taken by _drain, its message info ---
     def _decode(self, data: bytes, count: int, stream: str) -> tuple[float, tuple[float, ...]] | None:
         """(stamp in s, the floats) of a stamped message, or None: counted as malformed."""
+        assert self.core is not None
         try:
             sec, nanosec, values = decode_stamped(data, count)
         except CdrError:
@@ -183,18 +194,21 @@ class StiffnessEstimatorNode(Node):
         return seq if 0 < seq < 2**63 else None  # 0 or all ones: not supported by the middleware
 
     def _on_force(self, data: bytes, info: dict | None = None) -> None:
+        assert self.core is not None
         sample = self._decode(data, 6, FORCE)
         if sample is not None and self.core.add_force(sample[0], sample[1], self._sensor_arrival_s(info),
                                                       self._sequence(info)):
             self.changed = True
 
     def _on_point(self, data: bytes, info: dict | None = None) -> None:
+        assert self.core is not None
         sample = self._decode(data, 3, DISPLACEMENT)
         if sample is not None and self.core.add_displacement(sample[0], sample[1][0], self._sensor_arrival_s(info),
                                                              self._sequence(info)):
             self.changed = True
 
     def _on_volts(self, data: bytes, info: dict | None = None) -> None:
+        assert self.core is not None
         try:
             volts = decode_float64(data)
         except CdrError:
@@ -204,11 +218,13 @@ class StiffnessEstimatorNode(Node):
             self.changed = True
 
     def _on_command(self, msg: WrenchStamped, info: dict | None = None) -> None:
+        assert self.core is not None
         f, m = msg.wrench.force, msg.wrench.torque
         self.core.add_command(stamp_to_s(msg.header.stamp), (f.x, f.y, f.z, m.x, m.y, m.z),
                               self._arrival_s(info))
 
     def _on_rejected(self, msg: WrenchStamped, info: dict | None = None) -> None:
+        assert self.core is not None
         f, m = msg.wrench.force, msg.wrench.torque
         self.core.add_rejected(stamp_to_s(msg.header.stamp), (f.x, f.y, f.z, m.x, m.y, m.z), self._arrival_s(info))
 
@@ -221,7 +237,7 @@ class StiffnessEstimatorNode(Node):
     def _arrival_s(self, info: dict | None) -> float:
         """When a message arrived, s: the middleware's reception stamp (system clock = the node clock) if known, else
         the node clock's now (always under simulated time)."""
-        clock = self.get_clock()
+        clock = cast(ROSClock, self.get_clock())  # a node's clock is a ROSClock (rclpy annotates a Clock)
         received = (info or {}).get('received_timestamp') or 0
         if received > 0 and not clock.ros_time_is_active:
             return received * 1e-9
@@ -268,15 +284,18 @@ class StiffnessEstimatorNode(Node):
     def _on_zero_epoch(self, stream: str, msg: Float64) -> None:
         # The readings queued were published before the sensor's zero changed: they belong to the old segment.
         self._catch_up()
+        assert self.core is not None
         if self.core.zero_epoch(stream, msg.data):
             self.get_logger().warn(f'new fit segment: {self.core.segment_reason} (zero epoch {msg.data:g})')
             self._publish_values()
 
     def _on_prediction(self, msg: Float64) -> None:
+        assert self.core is not None
         self.core.set_prediction(msg.data)
 
     # --- outputs ---
     def _publish_values(self) -> None:
+        assert self.core is not None
         self.changed = False
         self.values_msg.data = self.core.values()
         self.pub_values.publish(self.values_msg)
@@ -289,6 +308,7 @@ class StiffnessEstimatorNode(Node):
     def _check_publishers(self) -> None:
         """A new publisher on a sensor topic while one was already matched (a sensor restarted before its old
         publisher was found gone) starts a new fit segment."""
+        assert self.core is not None and self.sub_displacement is not None  # both set by the first _apply
         for stream, sub in ((FORCE, self.sub_force), (DISPLACEMENT, self.sub_displacement)):
             count = sub.get_publisher_count()
             before = self.publisher_counts.get(stream)
@@ -301,6 +321,7 @@ class StiffnessEstimatorNode(Node):
         # Judge the inputs on everything already delivered: take what is queued first.
         self._catch_up()
         self._check_publishers()
+        assert self.core is not None
         stiffness = self.core.loading_stiffness()
         if stiffness == stiffness:  # not NaN; also at this slow rate, for a late subscriber during a hold
             self.pub_stiffness.publish(Float64(data=stiffness))

@@ -119,7 +119,7 @@ class Decoder:
         """The decoded ``columns`` (with ``log_time_ns``) as :class:`Columns`, ``log_time_ns`` first and ``stamp_s``
         computed here, in the order of :meth:`dtype`; no copy of the columns."""
         out = Columns(log_time_ns=columns['log_time_ns'])
-        for name in self.dtype(columns).names[1:]:
+        for name in (self.dtype(columns).names or ())[1:]:
             if name == 'stamp_s':
                 out[name] = stamp_seconds(columns['stamp_sec'], columns['stamp_nanosec'])
             else:
@@ -129,7 +129,7 @@ class Decoder:
     def empty_columns(self) -> Columns:
         """The columns of no messages."""
         empty = self.empty()
-        return Columns({name: empty[name] for name in empty.dtype.names})
+        return Columns({name: empty[name] for name in empty.dtype.names or ()})
 
     def to_array(self, columns: Mapping[str, np.ndarray]) -> np.ndarray:
         """One structured array of decoded ``columns`` (with ``log_time_ns``); ``stamp_s`` is computed here."""
@@ -173,7 +173,7 @@ class _StampedDoubles(Decoder):
         if buf[first] != 0 or buf[first + 1] != 1:
             return None
         slen = int(buf[first + 12:first + 16].view('<u4')[0])
-        start = 4 + int(_align(np.int64(12 + slen), 8))
+        start = 4 + (12 + slen + 7) // 8 * 8  # the float64 fields, aligned to 8 after the header (see module doc)
         n = len(self.names)
         if slen < 1 or start + 8 * n > int(dlen[0]):
             return None

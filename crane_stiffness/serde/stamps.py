@@ -5,7 +5,15 @@ turn stamps into seconds here, so that live and offline results agree bit for bi
 """
 from __future__ import annotations
 
+from typing import overload
+
 import numpy as np
+
+
+@overload
+def stamp_seconds(sec: int, nanosec: int) -> float: ...
+@overload
+def stamp_seconds(sec: int | np.ndarray, nanosec: int | np.ndarray) -> float | np.ndarray: ...
 
 
 def stamp_seconds(sec: int | np.ndarray, nanosec: int | np.ndarray) -> float | np.ndarray:

@@ -10,7 +10,7 @@ from __future__ import annotations
 import json
 import time
 from pathlib import Path
-from typing import Any, Mapping
+from typing import TYPE_CHECKING, Any, Mapping
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
@@ -30,9 +30,14 @@ from crane_stiffness.rig_description import config_files as rig_config_files
 from crane_stiffness.sim.program import LoadProgram, load_program_file
 from crane_stiffness.testing.rosrun import Processes, RosRunError
 
+if TYPE_CHECKING:
+    from rclpy.executors import SingleThreadedExecutor
+
 
 class Observer(Node):
     """Watches the rig: program progress and state, the estimator's numbers, the model's prediction."""
+
+    _executor: SingleThreadedExecutor | None  # created by the first spin_once
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('rig_observer', **kwargs)
@@ -78,11 +83,12 @@ class Observer(Node):
 
     def spin_once(self, timeout_sec: float = 0.05) -> None:
         """One spin in the node's own context (the default one or a test's)."""
-        if getattr(self, '_executor', None) is None:
+        executor = getattr(self, '_executor', None)
+        if executor is None:
             from rclpy.executors import SingleThreadedExecutor
-            self._executor = SingleThreadedExecutor(context=self.context)
-            self._executor.add_node(self)
-        self._executor.spin_once(timeout_sec=timeout_sec)
+            executor = self._executor = SingleThreadedExecutor(context=self.context)
+            executor.add_node(self)
+        executor.spin_once(timeout_sec=timeout_sec)
 
     def spin_until(self, predicate, timeout_s: float, what: str, procs: Processes | None = None) -> None:
         deadline = time.monotonic() + timeout_s
@@ -94,9 +100,10 @@ class Observer(Node):
             self.spin_once(0.05)
 
     def destroy_node(self) -> None:
-        if getattr(self, '_executor', None) is not None:
-            self._executor.remove_node(self)
-            self._executor.shutdown()
+        executor = getattr(self, '_executor', None)
+        if executor is not None:
+            executor.remove_node(self)
+            executor.shutdown()
             self._executor = None
         super().destroy_node()
 
@@ -135,7 +142,7 @@ def start_rig(procs: Processes, share: Path, program: str, session: str, bags: P
     if record:
         bags.mkdir(parents=True, exist_ok=True)
     for node in nodes:
-        extra = {'output_dir': bags} if node.name == 'session_recorder' else {}
+        extra: dict[str, Any] = {'output_dir': bags} if node.name == 'session_recorder' else {}
         if node.runs_program:
             extra = {'exit_on_done': True, 'ready_timeout_s': ready_timeout_s}
         start_node(procs, node, {**extra, **(overrides or {}).get(node.name, {})})
@@ -216,6 +223,7 @@ def run_rig(share: Path, env: Mapping[str, str], out: Path, program: str, sessio
             prog = start_rig(procs, share, program, session, out / 'bags', record=record,
                              ready_timeout_s=ready_timeout_s, overrides=overrides)
             wait_for_program_start(observer, procs, ready_timeout_s + 30)
+            assert observer.running_at is not None  # set when the program started
             started_after = observer.running_at - launched
             deadline = time.monotonic() + prog.duration_s + 60
             while procs.procs['load_program'].poll() is None and time.monotonic() < deadline:

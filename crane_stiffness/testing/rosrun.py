@@ -17,7 +17,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
-from typing import Mapping, Sequence
+from typing import Any, Mapping, Sequence
 
 from crane_stiffness import PACKAGE
 from crane_stiffness.errors import CraneStiffnessError
@@ -137,7 +137,8 @@ class Processes:
     def _popen(self, name: str, argv: Sequence[str], env: Mapping[str, str]) -> subprocess.Popen:
         """Start ``argv`` as node ``name`` (log ``<log_dir>/<name>.log``, own session or the shared group)."""
         log = open(self.log_dir / f'{name}.log', 'w')
-        group = {'start_new_session': True} if self.leader is None else {'process_group': self.leader.pid}
+        group: dict[str, Any] = ({'start_new_session': True} if self.leader is None  # Popen keywords
+                                 else {'process_group': self.leader.pid})
         proc = subprocess.Popen(argv, env=env, stdout=log, stderr=subprocess.STDOUT,
                                 stdin=subprocess.DEVNULL, **group)
         log.close()

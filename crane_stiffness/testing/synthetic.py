@@ -106,7 +106,8 @@ def write_synthetic_session(path: str | Path, program: LoadProgram, *, geometry:
     """
     if geometry is None and stiffness is None:
         raise ValueError('give a geometry (nonlinear model) or a stiffness (linear truth)')
-    axis = axis or next((s.axis for s in program.segments if s.target != 0.0), program.segments[0].axis)
+    if not axis:  # (not `axis or next(...)`: mypy would type that as str | None)
+        axis = next((s.axis for s in program.segments if s.target != 0.0), program.segments[0].axis)
     i_axis = AXES.index(axis)
     rng = np.random.default_rng(seed)
     period = int(round(1e9 / sample_rate_hz))
@@ -125,6 +126,7 @@ def write_synthetic_session(path: str | Path, program: LoadProgram, *, geometry:
     if stiffness is not None:
         true_disp = load / stiffness
     else:
+        assert geometry is not None  # checked above: without a stiffness, a geometry is given
         true_disp = model_displacement(geometry, axis, load)
     noise = np.array([force_noise] * 3 + [force_noise * 0.05] * 3)
     force = wrench + rng.normal(size=wrench.shape) * noise
@@ -162,6 +164,7 @@ def write_synthetic_session(path: str | Path, program: LoadProgram, *, geometry:
     if geometry is not None:
         from crane_stiffness.model import axis_stiffness, rest_pose, tangent_stiffness
         prediction = axis_stiffness(tangent_stiffness(geometry, rest_pose(geometry)), axis)
+    assert prediction is not None  # checked above: a geometry or a stiffness is given
     others.append((int(start_ns), topics.PREDICTED_AXIS_STIFFNESS, encode_float64(prediction)))
     last_values = None
     if live:
