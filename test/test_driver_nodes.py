@@ -26,7 +26,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from conftest import call_trigger, spin_until
+from helpers import call_trigger, spin_until
 from crane_stiffness import topics
 from crane_stiffness.devices.modbus_device import ModbusDevice
 from crane_stiffness.devices.rdt_device import RdtDevice

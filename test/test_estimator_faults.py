@@ -14,8 +14,8 @@ import pytest
 from geometry_msgs.msg import PointStamped, WrenchStamped
 from rclpy.parameter import Parameter
 
-from conftest import call_trigger as call
-from conftest import spin_until
+from helpers import call_trigger as call
+from helpers import spin_until
 from crane_stiffness import topics
 from crane_stiffness.estimation.live import VALUE_FIELDS, LiveStiffness
 from crane_stiffness.estimation.settings import LiveSettings

@@ -25,8 +25,8 @@ from rclpy.parameter import Parameter  # noqa: E402
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 from std_msgs.msg import Float64, Float64MultiArray  # noqa: E402
 
-from conftest import call_trigger as call  # noqa: E402
-from conftest import spin_until  # noqa: E402
+from helpers import call_trigger as call  # noqa: E402
+from helpers import spin_until  # noqa: E402
 from crane_stiffness import topics  # noqa: E402
 from crane_stiffness.params.files import load_params  # noqa: E402
 from crane_stiffness.nodes import stiffness_estimator  # noqa: E402

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from rclpy.parameter import Parameter
 
-from conftest import spin_until
+from helpers import spin_until
 from crane_stiffness.analysis.analyze import analyze_session
 from crane_stiffness.estimation.settings import LiveSettings
 from crane_stiffness.nodes.stiffness_estimator import StiffnessEstimatorNode

@@ -20,7 +20,7 @@ from pathlib import Path
 import pytest
 from rclpy.executors import SingleThreadedExecutor
 
-from conftest import spin_until
+from helpers import spin_until
 from crane_stiffness.params.files import ParamFile
 from crane_stiffness.rig_description import rig_nodes
 from crane_stiffness.testing.rig import Observer, decode_values

@@ -14,7 +14,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
-from conftest import REPO, spin_until
+from helpers import REPO, spin_until
 from crane_stiffness import topics
 from crane_stiffness.rig_description import rig_nodes
 from crane_stiffness.testing import rosrun

@@ -23,8 +23,8 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from std_msgs.msg import String
 
-from conftest import publish_wrench_now, call_trigger as call
-from conftest import spin_until
+from helpers import publish_wrench_now, call_trigger as call
+from helpers import spin_until
 from crane_stiffness import topics
 from crane_stiffness.drivers import rdt
 from crane_stiffness.nodes.qos import LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS

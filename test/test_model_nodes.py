@@ -14,7 +14,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, String
 from std_srvs.srv import Trigger
 
-from conftest import spin_until
+from helpers import spin_until
 from crane_stiffness import topics
 from crane_stiffness.model import lab_model, paper_coefficients, solve_equilibrium
 from crane_stiffness.nodes.qos import LATCHED_QOS, RELIABLE_QOS

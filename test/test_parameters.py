@@ -19,7 +19,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from std_srvs.srv import Trigger
 
-from conftest import spin_until
+from helpers import spin_until
 from crane_stiffness.bag import BagWriter, dump_qos_profiles, qos_profile
 from crane_stiffness.nodes.crane_model import CraneModel
 from crane_stiffness.nodes.session_player import SessionPlayer

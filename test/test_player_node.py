@@ -21,7 +21,7 @@ from rclpy.serialization import serialize_message
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64, String
 
-from conftest import spin_until
+from helpers import spin_until
 from crane_stiffness import topics
 from crane_stiffness.analysis.analyze import analyze_session
 from crane_stiffness.bag import BagReader, BagWriter, dump_qos_profiles, qos_profile

@@ -26,7 +26,7 @@ from geometry_msgs.msg import WrenchStamped
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 
-from conftest import call_trigger, spin_until
+from helpers import call_trigger, spin_until
 from crane_stiffness import topics
 from crane_stiffness.bag import BagDamageWarning, BagReader
 from crane_stiffness.cli import main as cli_main

@@ -25,7 +25,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import Trigger
 
-from conftest import REPO, spin_until
+from helpers import REPO, spin_until
 from crane_stiffness import topics
 from crane_stiffness.testing import rosrun
 from crane_stiffness.bag import BagDamageWarning, BagReader

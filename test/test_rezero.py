@@ -10,7 +10,7 @@ import pytest
 from rclpy.parameter import Parameter
 from std_msgs.msg import Float64
 
-from conftest import spin_until
+from helpers import spin_until
 from crane_stiffness import topics
 from crane_stiffness.estimation.live import LiveStiffness
 from crane_stiffness.estimation.sync import DISPLACEMENT, FORCE

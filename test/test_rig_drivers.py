@@ -15,7 +15,7 @@ from crane_stiffness.testing import rosrun
 from crane_stiffness.testing.lab import emulated_ports, start_rig_with
 from crane_stiffness.testing.rig import Observer, summarize, wait_for_program_start
 
-from conftest import REPO
+from helpers import REPO
 
 CONFIG = REPO / 'config'
 

@@ -21,8 +21,8 @@ from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.node import Node  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 
-from conftest import publish_wrench_now, call_trigger as call  # noqa: E402
-from conftest import spin_until  # noqa: E402
+from helpers import publish_wrench_now, call_trigger as call  # noqa: E402
+from helpers import spin_until  # noqa: E402
 from crane_stiffness import topics  # noqa: E402
 from crane_stiffness.params.files import load_params  # noqa: E402
 from crane_stiffness.model.rotation import euler_zxy_to_matrix, matrix_to_quaternion  # noqa: E402

@@ -20,7 +20,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.serialization import serialize_message
 from std_msgs.msg import Float64, String
 
-from conftest import spin_until
+from helpers import spin_until
 from crane_stiffness.bag import BagWriter, dump_qos_profiles, qos_profile
 from crane_stiffness.rig_description import PACKAGE, rig_nodes
 from crane_stiffness.testing import rosrun

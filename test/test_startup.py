@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from conftest import REPO as _REPO
+from helpers import REPO as _REPO
 
 from crane_stiffness import topics
 from crane_stiffness.rig_description import RigError, rig_nodes
