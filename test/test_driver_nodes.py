@@ -8,15 +8,10 @@ Every test remaps the rig's topics under its own prefix and gets its own DDS dom
 from __future__ import annotations
 
 import itertools
-import json
 import math
 import os
-import signal
 import socket
-import subprocess
-import sys
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -26,7 +21,8 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from helpers import call_trigger, spin_until
+from helpers import call_trigger, isolated, spin_until, stamp_ns
+from helpers.processes import final_counters, start_node_process, stop_node_process
 from crane_stiffness import topics
 from crane_stiffness.devices.modbus_device import ModbusDevice
 from crane_stiffness.devices.rdt_device import RdtDevice
@@ -34,22 +30,11 @@ from crane_stiffness.drivers import rdt
 from crane_stiffness.drivers.modbus import Channel
 from crane_stiffness.nodes import modbus_emulator, modbus_lvdt, netft, rdt_emulator
 from crane_stiffness.nodes.qos import LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS
+from crane_stiffness.testing.lab import free_port
 from std_msgs.msg import Float64
-from test_sensor_nodes import isolated  # noqa: E402 (one way to isolate a node's topics in every test)
 
-NS = 1_000_000_000
 _ids = itertools.count()
 BIAS = np.array([0.05, -0.03, 0.08, 0.001, -0.001, 0.0005])
-
-
-def free_port(kind: int) -> int:
-    with socket.socket(socket.AF_INET, kind) as s:
-        s.bind(('127.0.0.1', 0))
-        return s.getsockname()[1]
-
-
-def stamp_ns(stamp) -> int:
-    return stamp.sec * NS + stamp.nanosec
 
 
 class Probe:
@@ -109,33 +94,6 @@ class Probe:
         return None
 
 
-def start_node(executable: str, args: list[str], log: Path) -> subprocess.Popen:
-    """The installed console script (what `ros2 run crane_stiffness <executable>` runs), in its own process."""
-    exe = Path(sys.prefix) / 'bin' / executable
-    assert exe.exists(), f'{exe} missing: run `make install` first'
-    with open(log, 'w') as out:
-        return subprocess.Popen([str(exe), *args], stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-                                start_new_session=True)
-
-
-def stop_node(proc: subprocess.Popen, log: Path) -> tuple[int, str]:
-    if proc.poll() is None:
-        os.killpg(proc.pid, signal.SIGINT)
-        try:
-            proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait()
-    return proc.returncode, log.read_text(errors='replace')
-
-
-def final_counters(log: str, node: str) -> dict:
-    for line in reversed(log.splitlines()):
-        if line.startswith(f'FINAL_COUNTERS {node} '):
-            return json.loads(line.split(' ', 2)[2])
-    raise AssertionError(f'no FINAL_COUNTERS {node} in:\n{log[-2000:]}')
-
-
 def test_netft_reads_the_rdt_emulator_across_processes(rclpy_context, tmp_path):
     """applied wrench → rdt_emulator (load-cell physics, RDT on 127.0.0.1) → netft → /load_cell/wrench: the
     commanded wrench plus the sensor's bias, 7 kHz averaged to 1 kHz, stamped on the host clock; ~/tare; counters."""
@@ -143,7 +101,7 @@ def test_netft_reads_the_rdt_emulator_across_processes(rclpy_context, tmp_path):
     emu_name, prefix, emu_args = isolated('rdt_emulator')
     ft_name = f'netft_{os.getpid()}_{next(_ids)}'
     ft_args = [a if not a.startswith('__node:=') else f'__node:={ft_name}' for a in emu_args]
-    emu = start_node('rdt_emulator', emu_args + [
+    emu = start_node_process('rdt_emulator', emu_args + [
         '-p', f'port:={port}', '-p', 'noise_std:=[0.0, 0.0, 0.0, 0.0, 0.0, 0.0]', '-p',
         f'bias:={BIAS.tolist()}', '-p', 'resolution:=[0.0, 0.0, 0.0, 0.0, 0.0, 0.0]', '-p', 'seed:=1'],
         tmp_path / 'emu.log')
@@ -159,7 +117,7 @@ def test_netft_reads_the_rdt_emulator_across_processes(rclpy_context, tmp_path):
         # rightly marked not ready, and the status checked below must be that of a device that never was.
         assert spin_until(ex, lambda: (probe.status(emu_name) or (None, {}))[1].get('used') == '1', 20.0), \
             (tmp_path / 'emu.log').read_text()
-        ft = start_node('netft', ft_args + [
+        ft = start_node_process('netft', ft_args + [
             '-p', 'host:=127.0.0.1', '-p', f'port:={port}', '-p', 'counts_per_force:=1000000.0', '-p',
             'counts_per_torque:=1000000.0', '-p', 'publish_rate_hz:=1000.0', '-p', 'frame_id:=ft_test',
             '-p', 'tare_samples:=200'], tmp_path / 'netft.log')
@@ -193,8 +151,8 @@ def test_netft_reads_the_rdt_emulator_across_processes(rclpy_context, tmp_path):
         assert int(values['received']) > 1000 and values['streaming'] == 'true'
         assert values['last_status'] == '0x00000000'
     finally:
-        ft_code, ft_log = stop_node(ft, tmp_path / 'netft.log') if ft is not None else (None, '')
-        emu_code, emu_log = stop_node(emu, tmp_path / 'emu.log')
+        ft_code, ft_log = stop_node_process(ft, tmp_path / 'netft.log') if ft is not None else (None, '')
+        emu_code, emu_log = stop_node_process(emu, tmp_path / 'emu.log')
     assert ft_code == 0, ft_log[-3000:]
     assert emu_code == 0, emu_log[-3000:]
     counters = final_counters(ft_log, ft_name)
@@ -214,7 +172,7 @@ def test_modbus_lvdt_reads_the_modbus_emulator_across_processes(rclpy_context, t
     lv_args = [a if not a.startswith('__node:=') else f'__node:={lv_name}' for a in emu_args]
     channel = ['-p', 'register:=4', '-p', 'data_type:=float32', '-p', 'word_order:=little', '-p', 'gain:=0.002',
                '-p', 'offset:=-0.001', '-p', 'unit_id:=2']
-    emu = start_node('modbus_emulator', emu_args + channel + [
+    emu = start_node_process('modbus_emulator', emu_args + channel + [
         '-p', f'port:={port}', '-p', 'noise_std:=0.0', '-p', 'resolution:=0.0'], tmp_path / 'emu.log')
     probe = Probe(rclpy_context, prefix)
     ex = SingleThreadedExecutor(context=rclpy_context)
@@ -223,7 +181,7 @@ def test_modbus_lvdt_reads_the_modbus_emulator_across_processes(rclpy_context, t
     try:
         assert spin_until(ex, lambda: probe.pose.get_subscription_count() >= 1, 20.0), \
             (tmp_path / 'emu.log').read_text()
-        lv = start_node('modbus_lvdt', lv_args + channel + [
+        lv = start_node_process('modbus_lvdt', lv_args + channel + [
             '-p', 'host:=127.0.0.1', '-p', f'port:={port}', '-p', 'poll_rate_hz:=200.0', '-p', 'frame_id:=lvdt_mb'],
             tmp_path / 'lvdt.log')
         # No pose yet: the emulator answers "server device busy" and the driver publishes nothing (a reading of a
@@ -254,8 +212,8 @@ def test_modbus_lvdt_reads_the_modbus_emulator_across_processes(rclpy_context, t
         assert status.level == b'\x00' and values['failures'] == '0'
         assert math.isfinite(float(values['poll_jitter_p99_us']))
     finally:
-        lv_code, lv_log = stop_node(lv, tmp_path / 'lvdt.log') if lv is not None else (None, '')
-        emu_code, emu_log = stop_node(emu, tmp_path / 'emu.log')
+        lv_code, lv_log = stop_node_process(lv, tmp_path / 'lvdt.log') if lv is not None else (None, '')
+        emu_code, emu_log = stop_node_process(emu, tmp_path / 'emu.log')
     assert lv_code == 0, lv_log[-3000:]
     assert emu_code == 0, emu_log[-3000:]
     counters = final_counters(lv_log, lv_name)

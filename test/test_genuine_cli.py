@@ -20,12 +20,12 @@ from pathlib import Path
 import pytest
 from rclpy.executors import SingleThreadedExecutor
 
-from helpers import spin_until
 from crane_stiffness.params.files import ParamFile
 from crane_stiffness.rig_description import rig_nodes
 from crane_stiffness.testing.rig import Observer, decode_values
 from crane_stiffness.testing.rosrun import command, installed_config
-from test_shutdown import UNCLEAN, assert_bag_complete
+from helpers import spin_until
+from helpers.processes import UNCLEAN, assert_bag_complete
 
 pytestmark = pytest.mark.genuine_cli
 

@@ -24,7 +24,8 @@ from rclpy.parameter import Parameter
 from std_msgs.msg import String
 
 from helpers import publish_wrench_now, call_trigger as call
-from helpers import spin_until
+from helpers import collect_for, isolated, spin_until, stamp_ns
+from helpers.processes import final_counters, start_node_process, stop_node_process
 from crane_stiffness import topics
 from crane_stiffness.drivers import rdt
 from crane_stiffness.nodes.qos import LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS
@@ -33,8 +34,6 @@ from crane_stiffness.nodes.load_cell import LoadCell
 from crane_stiffness.nodes.lvdt import Lvdt
 from crane_stiffness.nodes.rdt_emulator import STATUS_NOT_READY, RdtEmulator
 from crane_stiffness.status import OK, WARN
-from test_driver_nodes import final_counters, start_node, stop_node
-from test_sensor_nodes import collect_for, isolated, stamp_ns
 
 HELD = np.array([0.0, 1.0, 0.0, 0.0, 0.0, 0.0])      # the 1 N hold of the issue
 ABSURD = np.array([0.0, 1e30, 0.0, 0.0, 0.0, 0.0])   # dropped as absurd by the model
@@ -170,8 +169,8 @@ def test_a_repeated_failing_command_is_answered_from_the_cache(rclpy_context, tm
     model_name, prefix, model_args = isolated('crane_model')
     lc_name = model_name.replace('crane_model', 'load_cell')
     lc_args = [a if not a.startswith('__node:=') else f'__node:={lc_name}' for a in model_args]
-    model = start_node('crane_model', model_args + ['-p', 'geometry.height:=0.5'], tmp_path / 'model.log')
-    cell = start_node('load_cell', lc_args, tmp_path / 'cell.log')
+    model = start_node_process('crane_model', model_args + ['-p', 'geometry.height:=0.5'], tmp_path / 'model.log')
+    cell = start_node_process('load_cell', lc_args, tmp_path / 'cell.log')
     probe = Probe(rclpy_context, prefix)
     ex = SingleThreadedExecutor(context=rclpy_context)
     ex.add_node(probe.node)
@@ -200,8 +199,8 @@ def test_a_repeated_failing_command_is_answered_from_the_cache(rclpy_context, tm
         collect_for(ex, 0.3)
         assert np.all(probe.readings_after(t_hold)[:, 5] < 0.1)  # mz = 50 N·m never reached the load cell
     finally:
-        model_code, model_log = stop_node(model, tmp_path / 'model.log')
-        cell_code, cell_log = stop_node(cell, tmp_path / 'cell.log')
+        model_code, model_log = stop_node_process(model, tmp_path / 'model.log')
+        cell_code, cell_log = stop_node_process(cell, tmp_path / 'cell.log')
         ex.shutdown()
     assert model_code == 0 and cell_code == 0, model_log[-2000:] + cell_log[-2000:]
     mc, lc = final_counters(model_log, model_name), final_counters(cell_log, lc_name)

@@ -22,7 +22,7 @@ from rclpy.node import Node  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 
 from helpers import publish_wrench_now, call_trigger as call  # noqa: E402
-from helpers import spin_until  # noqa: E402
+from helpers import collect_for, isolated, spin_until, stamp_ns  # noqa: E402
 from crane_stiffness import topics  # noqa: E402
 from crane_stiffness.params.files import load_params  # noqa: E402
 from crane_stiffness.model.rotation import euler_zxy_to_matrix, matrix_to_quaternion  # noqa: E402
@@ -34,30 +34,8 @@ _ids = itertools.count()
 MS = 1_000_000  # ns
 
 
-def stamp_ns(stamp) -> int:
-    return stamp.sec * 1_000_000_000 + stamp.nanosec
-
-
-def isolated(base: str) -> tuple[str, str, list[str]]:
-    """A unique node name, a topic prefix and the cli_args remapping the rig's topics under that prefix."""
-    name = f'{base}_{os.getpid()}_{next(_ids)}'
-    prefix = f'/{name}_t'
-    args = ['--ros-args', '-r', f'__node:={name}']
-    for topic in (topics.WRENCH_COMMAND, topics.APPLIED_WRENCH, topics.REJECTED_COMMAND, topics.PLATFORM_POSE,
-                  topics.LOAD_CELL_WRENCH, topics.LVDT_DISPLACEMENT, topics.LVDT_ZERO, topics.LOAD_CELL_TARE,
-                  topics.MODEL_STATUS, topics.DIAGNOSTICS):
-        args += ['-r', f'{topic}:={prefix}{topic}']
-    return name, prefix, args
-
-
 def wait_connected(ex, pub, sub_count: int = 1) -> None:
     assert spin_until(ex, lambda: pub.get_subscription_count() >= sub_count, 5.0)
-
-
-def collect_for(ex, seconds: float) -> None:
-    end = time.monotonic() + seconds
-    while time.monotonic() < end:
-        ex.spin_once(timeout_sec=0.01)
 
 
 class LoadCellProbe:

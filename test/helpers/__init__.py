@@ -3,16 +3,43 @@
 conftest.py holds only what pytest itself uses (the environment, fixtures, markers). This module imports no rclpy at
 import time (pure tests import it too); the submodules for ROS tests do:
 
-- ``helpers``: paths, spinning an executor, calling a service, publishing a wrench.
+- ``helpers``: paths, stamps, topic names of one test's own, spinning an executor, calling a service, publishing a
+  wrench;
+- ``helpers.processes``: node processes started as ``ros2 run`` does, their logs and the bags they leave;
+- ``helpers.estimator``: the synthetic rig and the probe of the estimator tests.
 """
 from __future__ import annotations
 
+import itertools
+import os
 import time
 from pathlib import Path
 from typing import Callable
 
+from crane_stiffness import topics
+
 #: The repository (the work tree the tests run from).
 REPO = Path(__file__).resolve().parents[2]
+NS = 1_000_000_000
+_ids = itertools.count()
+
+
+def stamp_ns(stamp) -> int:
+    """A builtin_interfaces/Time (a header's stamp) in ns."""
+    return stamp.sec * NS + stamp.nanosec
+
+
+def isolated(base: str) -> tuple[str, str, list[str]]:
+    """A unique node name, a topic prefix and the cli_args remapping the rig's topics under that prefix (the topics
+    of the model, the sensors, the drivers and the emulators; the estimator's: helpers.estimator.isolated_estimator)."""
+    name = f'{base}_{os.getpid()}_{next(_ids)}'
+    prefix = f'/{name}_t'
+    args = ['--ros-args', '-r', f'__node:={name}']
+    for topic in (topics.WRENCH_COMMAND, topics.APPLIED_WRENCH, topics.REJECTED_COMMAND, topics.PLATFORM_POSE,
+                  topics.LOAD_CELL_WRENCH, topics.LVDT_DISPLACEMENT, topics.LVDT_ZERO, topics.LOAD_CELL_TARE,
+                  topics.MODEL_STATUS, topics.DIAGNOSTICS):
+        args += ['-r', f'{topic}:={prefix}{topic}']
+    return name, prefix, args
 
 
 def spin_until(executor, predicate: Callable[[], bool], timeout_s: float) -> bool:
@@ -23,6 +50,13 @@ def spin_until(executor, predicate: Callable[[], bool], timeout_s: float) -> boo
             return True
         executor.spin_once(timeout_sec=0.01)
     return predicate()
+
+
+def collect_for(executor, seconds: float) -> None:
+    """Spin ``executor`` for ``seconds``, whatever arrives."""
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        executor.spin_once(timeout_sec=0.01)
 
 
 def call_trigger(executor, node, service: str, timeout_s: float = 5.0):
