@@ -41,11 +41,16 @@ def stop_node_process(proc: subprocess.Popen, log: Path) -> tuple[int, str]:
     return proc.returncode, log.read_text(errors='replace')
 
 
-def final_counters(log: str, node: str) -> dict:
-    """The counters ``node`` printed on its FINAL_COUNTERS line in ``log`` (the newest such line)."""
+def final_counters(log: str, node: str | None = None) -> dict:
+    """The counters on the newest ``FINAL_COUNTERS <node> {json}`` line in ``log`` (a node prints it once, at exit):
+    ``node``'s (AssertionError with the log's end if there is none), or any node's if ``node`` is None ({} if there is
+    none)."""
+    start = 'FINAL_COUNTERS ' if node is None else f'FINAL_COUNTERS {node} '
     for line in reversed(log.splitlines()):
-        if line.startswith(f'FINAL_COUNTERS {node} '):
+        if line.startswith(start):
             return json.loads(line.split(' ', 2)[2])
+    if node is None:
+        return {}
     raise AssertionError(f'no FINAL_COUNTERS {node} in:\n{log[-2000:]}')
 
 
