@@ -15,13 +15,12 @@ import time
 
 import numpy as np
 import pytest
-from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PointStamped, PoseStamped, WrenchStamped
 from rclpy.executors import SingleThreadedExecutor
-from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from helpers import call_trigger, isolated, spin_until, stamp_ns
+from helpers import call_trigger, isolated, publish_wrench_now, spin_until, stamp_ns, wrench_vector
+from helpers.probe import ProbeNode
 from helpers.processes import final_counters, start_node_process, stop_node_process
 from crane_stiffness import topics
 from crane_stiffness.devices.modbus_device import ModbusDevice
@@ -37,40 +36,26 @@ _ids = itertools.count()
 BIAS = np.array([0.05, -0.03, 0.08, 0.001, -0.001, 0.0005])
 
 
-class Probe:
+class Probe(ProbeNode):
     """Publishes the rig's inputs and records the sensor topics and /diagnostics under a prefix."""
 
     def __init__(self, ctx, prefix: str):
-        self.node = Node(f'probe_{next(_ids)}_{os.getpid()}', context=ctx)
-        self.wrenches: list[tuple[int, str, np.ndarray]] = []
-        self.points: list[tuple[int, str, float]] = []
-        self.diagnostics: list = []
+        super().__init__(ctx, prefix, name=f'probe_{next(_ids)}_{os.getpid()}', diagnostics_depth=100)
         # What crane_model publishes after each command: the load in force, which the simulated sensors apply.
-        self.cmd = self.node.create_publisher(WrenchStamped, prefix + topics.APPLIED_WRENCH, RELIABLE_QOS)
-        self.pose = self.node.create_publisher(PoseStamped, prefix + topics.PLATFORM_POSE, RELIABLE_QOS)
-        self.node.create_subscription(WrenchStamped, prefix + topics.LOAD_CELL_WRENCH, self._on_wrench, SENSOR_QOS)
-        self.node.create_subscription(
-            PointStamped, prefix + topics.LVDT_DISPLACEMENT,
-            lambda m: self.points.append((stamp_ns(m.header.stamp), m.header.frame_id, m.point.x)), SENSOR_QOS)
-        self.node.create_subscription(DiagnosticArray, prefix + topics.DIAGNOSTICS,
-                                      lambda m: self.diagnostics.extend(m.status), 100)
-        self.epochs: dict[str, list[float]] = {topics.LVDT_ZERO: [], topics.LOAD_CELL_TARE: []}  # zero epochs
-        for topic, received in self.epochs.items():
-            self.node.create_subscription(Float64, prefix + topic, lambda m, r=received: r.append(m.data),
-                                          LATCHED_QOS)
-
-    def _on_wrench(self, msg: WrenchStamped) -> None:
-        f, m = msg.wrench.force, msg.wrench.torque
-        self.wrenches.append((stamp_ns(msg.header.stamp), msg.header.frame_id,
-                              np.array([f.x, f.y, f.z, m.x, m.y, m.z])))
+        self.cmd = self.publisher(topics.APPLIED_WRENCH, WrenchStamped, RELIABLE_QOS)
+        self.pose = self.publisher(topics.PLATFORM_POSE, PoseStamped, RELIABLE_QOS)
+        self.wrenches: list[tuple[int, str, np.ndarray]] = self.record(
+            topics.LOAD_CELL_WRENCH, WrenchStamped, SENSOR_QOS,
+            lambda m: (stamp_ns(m.header.stamp), m.header.frame_id, wrench_vector(m)))
+        self.points: list[tuple[int, str, float]] = self.record(
+            topics.LVDT_DISPLACEMENT, PointStamped, SENSOR_QOS,
+            lambda m: (stamp_ns(m.header.stamp), m.header.frame_id, m.point.x))
+        self.epochs: dict[str, list[float]] = {  # zero epochs
+            topic: self.record(topic, Float64, LATCHED_QOS, lambda m: m.data)
+            for topic in (topics.LVDT_ZERO, topics.LOAD_CELL_TARE)}
 
     def command(self, wrench) -> None:
-        msg = WrenchStamped()
-        msg.header.stamp = self.node.get_clock().now().to_msg()
-        msg.header.frame_id = topics.FRAME_BASE
-        f, m = msg.wrench.force, msg.wrench.torque
-        f.x, f.y, f.z, m.x, m.y, m.z = (float(v) for v in wrench)
-        self.cmd.publish(msg)
+        publish_wrench_now(self.node, self.cmd, wrench, topics.FRAME_BASE)
 
     def publish_pose(self, u) -> None:
         msg = PoseStamped()
@@ -85,13 +70,6 @@ class Probe:
 
     def points_after(self, t_ns: int) -> np.ndarray:
         return np.array([x for s, _, x in self.points if s > t_ns])
-
-    def status(self, hardware_id: str, level: bytes | None = None):
-        """The newest diagnostic status of a node (at ``level`` if given), as (status, {key: value}) or None."""
-        for s in reversed(self.diagnostics):
-            if s.hardware_id == hardware_id and (level is None or s.level == level):
-                return s, {kv.key: kv.value for kv in s.values}
-        return None
 
 
 def test_netft_reads_the_rdt_emulator_across_processes(rclpy_context, tmp_path):

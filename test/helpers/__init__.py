@@ -1,10 +1,11 @@
 """What the tests share, in one place: a test imports helpers from here, never from conftest.py or another test.
 
-conftest.py holds only what pytest itself uses (the environment, fixtures, markers). This module imports no rclpy at
-import time (pure tests import it too); the submodules for ROS tests do:
+conftest.py holds only what pytest itself uses (the environment, fixtures, markers). This module and
+helpers.processes import no rclpy (pure tests import them too); helpers.probe and helpers.estimator do:
 
 - ``helpers``: paths, stamps, topic names of one test's own, spinning an executor, calling a service, publishing a
   wrench;
+- ``helpers.probe``: ProbeNode, the test node the probes of the node tests build on;
 - ``helpers.processes``: node processes started as ``ros2 run`` does, their logs and the bags they leave;
 - ``helpers.estimator``: the synthetic rig and the probe of the estimator tests.
 """
@@ -15,6 +16,8 @@ import os
 import time
 from pathlib import Path
 from typing import Callable
+
+import numpy as np
 
 from crane_stiffness import topics
 
@@ -27,6 +30,12 @@ _ids = itertools.count()
 def stamp_ns(stamp) -> int:
     """A builtin_interfaces/Time (a header's stamp) in ns."""
     return stamp.sec * NS + stamp.nanosec
+
+
+def wrench_vector(msg) -> np.ndarray:
+    """A WrenchStamped's wrench as [fx fy fz mx my mz]."""
+    f, m = msg.wrench.force, msg.wrench.torque
+    return np.array([f.x, f.y, f.z, m.x, m.y, m.z])
 
 
 def isolated(base: str) -> tuple[str, str, list[str]]:

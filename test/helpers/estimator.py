@@ -25,6 +25,7 @@ from crane_stiffness.nodes.qos import LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS
 from crane_stiffness.nodes.stiffness_estimator import VALUE_FIELDS, StiffnessEstimatorNode
 from crane_stiffness.sim.sampling import SampleClock
 from helpers import NS, spin_until
+from helpers.probe import ProbeNode
 
 K = 1875.0   # N/m, true stiffness of the synthetic spring
 C = 0.15     # N, load at zero displacement (an untared load cell)
@@ -173,21 +174,16 @@ class SyntheticRig:
             self.burst_newest.append(newest)
 
 
-class EstimatorProbe:
+class EstimatorProbe(ProbeNode):
     """Records the estimator's outputs; publishes the latched model prediction."""
 
     def __init__(self, ctx, prefix: str):
-        self.node = Node(f'probe{prefix.replace("/", "_")}', context=ctx)
+        super().__init__(ctx, prefix)
         self.values: list[tuple[int, list[float]]] = []  # (publication time at the estimator ns, data)
-        self.stiffness: list[float] = []
-        self.estimates: list[DiagnosticArray] = []
-        n = self.node
-        n.create_subscription(Float64MultiArray, prefix + topics.STIFFNESS_VALUES, self._on_values, SENSOR_QOS)
-        n.create_subscription(Float64, prefix + topics.STIFFNESS, lambda m: self.stiffness.append(m.data),
-                              RELIABLE_QOS)
-        n.create_subscription(DiagnosticArray, prefix + topics.STIFFNESS_ESTIMATE, self.estimates.append,
-                              RELIABLE_QOS)
-        self.pub_prediction = n.create_publisher(Float64, prefix + topics.PREDICTED_AXIS_STIFFNESS, LATCHED_QOS)
+        self.node.create_subscription(Float64MultiArray, prefix + topics.STIFFNESS_VALUES, self._on_values, SENSOR_QOS)
+        self.stiffness: list[float] = self.record(topics.STIFFNESS, Float64, RELIABLE_QOS, lambda m: m.data)
+        self.estimates: list[DiagnosticArray] = self.record(topics.STIFFNESS_ESTIMATE, DiagnosticArray, RELIABLE_QOS)
+        self.pub_prediction = self.publisher(topics.PREDICTED_AXIS_STIFFNESS, Float64, LATCHED_QOS)
 
     def _on_values(self, msg: Float64MultiArray, info: dict) -> None:
         self.values.append((info['source_timestamp'], list(msg.data)))
