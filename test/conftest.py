@@ -73,7 +73,13 @@ def colcon_install(tmp_path_factory):
     return ws / 'install'
 
 
-# --- The genuine ros2 command line -----------------------------------------------------------------------------
+# --- Markers ---------------------------------------------------------------------------------------------------
+# ``ros``: the test starts ROS (an rclpy context and nodes in this process, node processes, the genuine ros2 command
+# line): DDS traffic, seconds to minutes each. `pytest -m "not ros" test` runs the pure tests alone. Every test using
+# one of ROS_FIXTURES is marked here; modules of ROS tests only say so themselves (``pytestmark``), and the few
+# others that start ROS without these fixtures (a node's main() in-process) carry the mark on the test.
+ROS_FIXTURES = {'rclpy_context', 'install_tree', 'colcon_install'}
+
 # Tests marked ``genuine_cli`` drive the real `ros2` (ros2cli, launch, launch_ros) the way a ROS user has it: on
 # PATH from a sourced setup file. Without it they cannot run; they are left out and the run says so in one line.
 GENUINE_CLI = __import__('shutil').which('ros2')
@@ -81,9 +87,16 @@ _NOT_RUN: list[str] = []
 
 
 def pytest_configure(config):
+    config.addinivalue_line('markers', 'ros: starts ROS (rclpy nodes, node processes, DDS); deselect with -m "not ros"')
     config.addinivalue_line('markers', 'genuine_cli: drives the genuine ros2 CLI (needs `ros2` on PATH)')
 
 
+def pytest_itemcollected(item):
+    if ROS_FIXTURES & set(item.fixturenames) or item.get_closest_marker('genuine_cli') is not None:
+        item.add_marker(pytest.mark.ros)
+
+
+@pytest.hookimpl(trylast=True)  # after -m and -k: what they left out is not reported as not run for want of ros2
 def pytest_collection_modifyitems(config, items):
     if GENUINE_CLI:
         return

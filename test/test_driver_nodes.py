@@ -32,6 +32,8 @@ from crane_stiffness.nodes.qos import LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS
 from crane_stiffness.testing.lab import free_port
 from std_msgs.msg import Float64
 
+pytestmark = pytest.mark.ros  # every test here starts ROS (conftest)
+
 _ids = itertools.count()
 BIAS = np.array([0.05, -0.03, 0.08, 0.001, -0.001, 0.0005])
 

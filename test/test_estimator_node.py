@@ -28,6 +28,8 @@ from crane_stiffness.params.files import load_params  # noqa: E402
 from crane_stiffness.nodes import stiffness_estimator  # noqa: E402
 from crane_stiffness.nodes.stiffness_estimator import StiffnessEstimatorNode  # noqa: E402
 
+pytestmark = pytest.mark.ros  # every test here starts ROS (conftest)
+
 _ids = itertools.count()
 
 

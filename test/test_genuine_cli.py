@@ -27,7 +27,7 @@ from crane_stiffness.testing.rosrun import command, installed_config
 from helpers import spin_until
 from helpers.processes import UNCLEAN, assert_bag_complete
 
-pytestmark = pytest.mark.genuine_cli
+pytestmark = [pytest.mark.genuine_cli, pytest.mark.ros]
 
 #: launch's own lines about each process it ran: '[INFO] [crane_model-1]: process has finished cleanly [pid 12]'.
 FINISHED = re.compile(r'\[(?P<name>[a-z_]+)-\d+\]: process has finished cleanly')

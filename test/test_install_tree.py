@@ -21,6 +21,8 @@ from crane_stiffness.testing import rosrun
 from crane_stiffness.testing.rig import start_node
 from crane_stiffness.nodes.qos import RELIABLE_QOS
 
+pytestmark = pytest.mark.ros  # every test here starts ROS (conftest)
+
 # The node executables setup.py declares (read, not imported: importing it would run setup()).
 NODES = next(ast.literal_eval(n.value) for n in ast.parse((REPO / 'setup.py').read_text()).body
              if isinstance(n, ast.Assign) and getattr(n.targets[0], 'id', '') == 'NODES')

@@ -25,6 +25,8 @@ from crane_stiffness.model import axis_stiffness, rest_pose, tangent_stiffness
 from crane_stiffness.rig_description import rig_nodes
 from helpers.processes import final_counters
 
+pytestmark = pytest.mark.ros  # every test here starts ROS (conftest)
+
 
 def _read_bag(bag: Path) -> dict[str, list[tuple[int, bytes]]]:
     """Every message of the session's MCAP files by topic, (log time ns, CDR bytes), with the ``mcap`` package."""

@@ -35,6 +35,8 @@ from crane_stiffness.nodes.lvdt import Lvdt
 from crane_stiffness.nodes.rdt_emulator import STATUS_NOT_READY, RdtEmulator
 from crane_stiffness.status import OK, WARN
 
+pytestmark = pytest.mark.ros  # every test here starts ROS (conftest)
+
 HELD = np.array([0.0, 1.0, 0.0, 0.0, 0.0, 0.0])      # the 1 N hold of the issue
 ABSURD = np.array([0.0, 1e30, 0.0, 0.0, 0.0, 0.0])   # dropped as absurd by the model
 NO_EQUILIBRIUM = np.array([0.0, 2.0, 0.0, 0.0, 0.0, 50.0])  # the platform twists over: a limit point

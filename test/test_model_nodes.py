@@ -22,6 +22,8 @@ from crane_stiffness.nodes import crane_model
 from crane_stiffness.nodes.crane_model import MODEL_STATUS, CraneModel
 from crane_stiffness.nodes.load_program import LoadProgramNode
 
+pytestmark = pytest.mark.ros  # every test here starts ROS (conftest)
+
 
 class Probe(ProbeNode):
     """A test node that records what the rig publishes and can send wrench commands."""

@@ -37,6 +37,8 @@ from crane_stiffness.nodes.stiffness_estimator import StiffnessEstimatorNode
 from crane_stiffness.serde import decode_float64_multiarray
 from crane_stiffness.session_record import NODE_PARAMETERS_METADATA
 
+pytestmark = pytest.mark.ros  # every test here starts ROS (conftest)
+
 NS = 1_000_000_000
 T0 = 1_700_000_000 * NS
 

@@ -34,6 +34,8 @@ from crane_stiffness.nodes.qos import LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS
 from crane_stiffness.nodes.session_recorder import SESSION_END_METADATA, SessionRecorder
 from crane_stiffness.session_record import read_session
 
+pytestmark = pytest.mark.ros  # every test here starts ROS (conftest)
+
 NS = 1_000_000_000
 
 

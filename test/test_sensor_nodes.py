@@ -30,6 +30,8 @@ from crane_stiffness.nodes import load_cell, lvdt  # noqa: E402
 from crane_stiffness.nodes.qos import LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS  # noqa: E402
 from std_msgs.msg import Float64  # noqa: E402
 
+pytestmark = pytest.mark.ros  # every test here starts ROS (conftest)
+
 _ids = itertools.count()
 MS = 1_000_000  # ns
 

@@ -26,6 +26,8 @@ from crane_stiffness.rig_description import PACKAGE, rig_nodes
 from crane_stiffness.testing import rosrun
 from crane_stiffness.testing.rig import Observer, start_node
 
+pytestmark = pytest.mark.ros  # every test here starts ROS (conftest)
+
 SESSION = 'shutdown'
 #: How long the rig runs (program playing, recording on) before the signal [s].
 RUN_S = 3.0
