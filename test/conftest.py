@@ -1,7 +1,8 @@
 """Test set-up shared by every test: DDS stays on loopback, each session gets its own domain id.
 
 These variables are set before anything imports rclpy, so every in-process node and every subprocess the tests
-start inherits them.
+start inherits them. This file holds what pytest itself uses (the environment, fixtures, hooks); what the tests
+import is in helpers/.
 """
 from __future__ import annotations
 
@@ -10,9 +11,10 @@ import random
 import signal
 import sys
 import time
-from typing import Callable
 
 import pytest
+
+from helpers import REPO
 
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'  # never multicast off this machine
 os.environ.setdefault('ROS_DOMAIN_ID', str(random.Random(os.getpid() ^ time.time_ns()).randint(1, 100)))
@@ -49,29 +51,6 @@ def rclpy_context(ros_domain):
     rclpy.shutdown(context=ctx)
 
 
-def spin_until(executor, predicate: Callable[[], bool], timeout_s: float) -> bool:
-    """Spin ``executor`` until ``predicate()`` holds or the timeout passes; returns the predicate's last value."""
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if predicate():
-            return True
-        executor.spin_once(timeout_sec=0.01)
-    return predicate()
-
-
-def call_trigger(executor, node, service: str, timeout_s: float = 5.0):
-    """Call the std_srvs/Trigger ``service`` from ``node``, spinning ``executor``; returns the response."""
-    from std_srvs.srv import Trigger
-    client = node.create_client(Trigger, service)
-    assert client.wait_for_service(timeout_sec=timeout_s), service
-    future = client.call_async(Trigger.Request())
-    assert spin_until(executor, future.done, timeout_s)
-    return future.result()
-
-
-REPO = __import__('pathlib').Path(__file__).resolve().parent.parent
-
-
 @pytest.fixture
 def install_tree(colcon_install, ros_domain):
     """(install_base, env) of the session's colcon build; env is what sourcing the install's local_setup gives, in
@@ -94,21 +73,13 @@ def colcon_install(tmp_path_factory):
     return ws / 'install'
 
 
-def publish_wrench_now(node, publisher, wrench, frame_id: str = 'crane_base') -> int:
-    """Publish ``wrench`` [fx fy fz mx my mz] (N, N·m) as a WrenchStamped stamped with ``node``'s clock now; returns
-    the stamp [ns]."""
-    from geometry_msgs.msg import WrenchStamped
-    msg = WrenchStamped()
-    now = node.get_clock().now()
-    msg.header.stamp = now.to_msg()
-    msg.header.frame_id = frame_id
-    f, m = msg.wrench.force, msg.wrench.torque
-    f.x, f.y, f.z, m.x, m.y, m.z = (float(v) for v in wrench)
-    publisher.publish(msg)
-    return now.nanoseconds
+# --- Markers ---------------------------------------------------------------------------------------------------
+# ``ros``: the test starts ROS (an rclpy context and nodes in this process, node processes, the genuine ros2 command
+# line): DDS traffic, seconds to minutes each. `pytest -m "not ros" test` runs the pure tests alone. Every test using
+# one of ROS_FIXTURES is marked here; modules of ROS tests only say so themselves (``pytestmark``), and the few
+# others that start ROS without these fixtures (a node's main() in-process) carry the mark on the test.
+ROS_FIXTURES = {'rclpy_context', 'install_tree', 'colcon_install'}
 
-
-# --- The genuine ros2 command line -----------------------------------------------------------------------------
 # Tests marked ``genuine_cli`` drive the real `ros2` (ros2cli, launch, launch_ros) the way a ROS user has it: on
 # PATH from a sourced setup file. Without it they cannot run; they are left out and the run says so in one line.
 GENUINE_CLI = __import__('shutil').which('ros2')
@@ -116,9 +87,16 @@ _NOT_RUN: list[str] = []
 
 
 def pytest_configure(config):
+    config.addinivalue_line('markers', 'ros: starts ROS (rclpy nodes, node processes, DDS); deselect with -m "not ros"')
     config.addinivalue_line('markers', 'genuine_cli: drives the genuine ros2 CLI (needs `ros2` on PATH)')
 
 
+def pytest_itemcollected(item):
+    if ROS_FIXTURES & set(item.fixturenames) or item.get_closest_marker('genuine_cli') is not None:
+        item.add_marker(pytest.mark.ros)
+
+
+@pytest.hookimpl(trylast=True)  # after -m and -k: what they left out is not reported as not run for want of ros2
 def pytest_collection_modifyitems(config, items):
     if GENUINE_CLI:
         return

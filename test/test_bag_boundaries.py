@@ -26,7 +26,7 @@ from rclpy.parameter import Parameter
 from rclpy.serialization import serialize_message
 from std_msgs.msg import String
 
-from conftest import call_trigger, spin_until
+from helpers import call_trigger, spin_until
 from crane_stiffness.bag import BagPathError, BagReader, BagWriter, UnsupportedTypeError
 from crane_stiffness.bag.msgdef import interface_prefix
 from crane_stiffness.cli import main as cli_main

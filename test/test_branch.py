@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from conftest import REPO
+from helpers import REPO
 from crane_stiffness.estimation.branch import BranchTracker, branch_labels
 from crane_stiffness.estimation.errors import ParameterError
 from crane_stiffness.sim.program import load_program_file

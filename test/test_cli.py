@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import REPO
+from helpers import REPO
 from crane_stiffness.cli import main
 from crane_stiffness.model import lab_model, paper_stiffness, solve_equilibrium, tangent_stiffness
 

@@ -8,25 +8,20 @@ Every test remaps the rig's topics under its own prefix and gets its own DDS dom
 from __future__ import annotations
 
 import itertools
-import json
 import math
 import os
-import signal
 import socket
-import subprocess
-import sys
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
-from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PointStamped, PoseStamped, WrenchStamped
 from rclpy.executors import SingleThreadedExecutor
-from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from conftest import call_trigger, spin_until
+from helpers import call_trigger, isolated, publish_wrench_now, spin_until, stamp_ns, wrench_vector
+from helpers.probe import ProbeNode
+from helpers.processes import final_counters, start_node_process, stop_node_process
 from crane_stiffness import topics
 from crane_stiffness.devices.modbus_device import ModbusDevice
 from crane_stiffness.devices.rdt_device import RdtDevice
@@ -34,58 +29,35 @@ from crane_stiffness.drivers import rdt
 from crane_stiffness.drivers.modbus import Channel
 from crane_stiffness.nodes import modbus_emulator, modbus_lvdt, netft, rdt_emulator
 from crane_stiffness.nodes.qos import LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS
+from crane_stiffness.testing.lab import free_port
 from std_msgs.msg import Float64
-from test_sensor_nodes import isolated  # noqa: E402 (one way to isolate a node's topics in every test)
 
-NS = 1_000_000_000
+pytestmark = pytest.mark.ros  # every test here starts ROS (conftest)
+
 _ids = itertools.count()
 BIAS = np.array([0.05, -0.03, 0.08, 0.001, -0.001, 0.0005])
 
 
-def free_port(kind: int) -> int:
-    with socket.socket(socket.AF_INET, kind) as s:
-        s.bind(('127.0.0.1', 0))
-        return s.getsockname()[1]
-
-
-def stamp_ns(stamp) -> int:
-    return stamp.sec * NS + stamp.nanosec
-
-
-class Probe:
+class Probe(ProbeNode):
     """Publishes the rig's inputs and records the sensor topics and /diagnostics under a prefix."""
 
     def __init__(self, ctx, prefix: str):
-        self.node = Node(f'probe_{next(_ids)}_{os.getpid()}', context=ctx)
-        self.wrenches: list[tuple[int, str, np.ndarray]] = []
-        self.points: list[tuple[int, str, float]] = []
-        self.diagnostics: list = []
+        super().__init__(ctx, prefix, name=f'probe_{next(_ids)}_{os.getpid()}', diagnostics_depth=100)
         # What crane_model publishes after each command: the load in force, which the simulated sensors apply.
-        self.cmd = self.node.create_publisher(WrenchStamped, prefix + topics.APPLIED_WRENCH, RELIABLE_QOS)
-        self.pose = self.node.create_publisher(PoseStamped, prefix + topics.PLATFORM_POSE, RELIABLE_QOS)
-        self.node.create_subscription(WrenchStamped, prefix + topics.LOAD_CELL_WRENCH, self._on_wrench, SENSOR_QOS)
-        self.node.create_subscription(
-            PointStamped, prefix + topics.LVDT_DISPLACEMENT,
-            lambda m: self.points.append((stamp_ns(m.header.stamp), m.header.frame_id, m.point.x)), SENSOR_QOS)
-        self.node.create_subscription(DiagnosticArray, prefix + topics.DIAGNOSTICS,
-                                      lambda m: self.diagnostics.extend(m.status), 100)
-        self.epochs: dict[str, list[float]] = {topics.LVDT_ZERO: [], topics.LOAD_CELL_TARE: []}  # zero epochs
-        for topic, received in self.epochs.items():
-            self.node.create_subscription(Float64, prefix + topic, lambda m, r=received: r.append(m.data),
-                                          LATCHED_QOS)
-
-    def _on_wrench(self, msg: WrenchStamped) -> None:
-        f, m = msg.wrench.force, msg.wrench.torque
-        self.wrenches.append((stamp_ns(msg.header.stamp), msg.header.frame_id,
-                              np.array([f.x, f.y, f.z, m.x, m.y, m.z])))
+        self.cmd = self.publisher(topics.APPLIED_WRENCH, WrenchStamped, RELIABLE_QOS)
+        self.pose = self.publisher(topics.PLATFORM_POSE, PoseStamped, RELIABLE_QOS)
+        self.wrenches: list[tuple[int, str, np.ndarray]] = self.record(
+            topics.LOAD_CELL_WRENCH, WrenchStamped, SENSOR_QOS,
+            lambda m: (stamp_ns(m.header.stamp), m.header.frame_id, wrench_vector(m)))
+        self.points: list[tuple[int, str, float]] = self.record(
+            topics.LVDT_DISPLACEMENT, PointStamped, SENSOR_QOS,
+            lambda m: (stamp_ns(m.header.stamp), m.header.frame_id, m.point.x))
+        self.epochs: dict[str, list[float]] = {  # zero epochs
+            topic: self.record(topic, Float64, LATCHED_QOS, lambda m: m.data)
+            for topic in (topics.LVDT_ZERO, topics.LOAD_CELL_TARE)}
 
     def command(self, wrench) -> None:
-        msg = WrenchStamped()
-        msg.header.stamp = self.node.get_clock().now().to_msg()
-        msg.header.frame_id = topics.FRAME_BASE
-        f, m = msg.wrench.force, msg.wrench.torque
-        f.x, f.y, f.z, m.x, m.y, m.z = (float(v) for v in wrench)
-        self.cmd.publish(msg)
+        publish_wrench_now(self.node, self.cmd, wrench, topics.FRAME_BASE)
 
     def publish_pose(self, u) -> None:
         msg = PoseStamped()
@@ -101,40 +73,6 @@ class Probe:
     def points_after(self, t_ns: int) -> np.ndarray:
         return np.array([x for s, _, x in self.points if s > t_ns])
 
-    def status(self, hardware_id: str, level: bytes | None = None):
-        """The newest diagnostic status of a node (at ``level`` if given), as (status, {key: value}) or None."""
-        for s in reversed(self.diagnostics):
-            if s.hardware_id == hardware_id and (level is None or s.level == level):
-                return s, {kv.key: kv.value for kv in s.values}
-        return None
-
-
-def start_node(executable: str, args: list[str], log: Path) -> subprocess.Popen:
-    """The installed console script (what `ros2 run crane_stiffness <executable>` runs), in its own process."""
-    exe = Path(sys.prefix) / 'bin' / executable
-    assert exe.exists(), f'{exe} missing: run `make install` first'
-    with open(log, 'w') as out:
-        return subprocess.Popen([str(exe), *args], stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-                                start_new_session=True)
-
-
-def stop_node(proc: subprocess.Popen, log: Path) -> tuple[int, str]:
-    if proc.poll() is None:
-        os.killpg(proc.pid, signal.SIGINT)
-        try:
-            proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait()
-    return proc.returncode, log.read_text(errors='replace')
-
-
-def final_counters(log: str, node: str) -> dict:
-    for line in reversed(log.splitlines()):
-        if line.startswith(f'FINAL_COUNTERS {node} '):
-            return json.loads(line.split(' ', 2)[2])
-    raise AssertionError(f'no FINAL_COUNTERS {node} in:\n{log[-2000:]}')
-
 
 def test_netft_reads_the_rdt_emulator_across_processes(rclpy_context, tmp_path):
     """applied wrench → rdt_emulator (load-cell physics, RDT on 127.0.0.1) → netft → /load_cell/wrench: the
@@ -143,7 +81,7 @@ def test_netft_reads_the_rdt_emulator_across_processes(rclpy_context, tmp_path):
     emu_name, prefix, emu_args = isolated('rdt_emulator')
     ft_name = f'netft_{os.getpid()}_{next(_ids)}'
     ft_args = [a if not a.startswith('__node:=') else f'__node:={ft_name}' for a in emu_args]
-    emu = start_node('rdt_emulator', emu_args + [
+    emu = start_node_process('rdt_emulator', emu_args + [
         '-p', f'port:={port}', '-p', 'noise_std:=[0.0, 0.0, 0.0, 0.0, 0.0, 0.0]', '-p',
         f'bias:={BIAS.tolist()}', '-p', 'resolution:=[0.0, 0.0, 0.0, 0.0, 0.0, 0.0]', '-p', 'seed:=1'],
         tmp_path / 'emu.log')
@@ -159,7 +97,7 @@ def test_netft_reads_the_rdt_emulator_across_processes(rclpy_context, tmp_path):
         # rightly marked not ready, and the status checked below must be that of a device that never was.
         assert spin_until(ex, lambda: (probe.status(emu_name) or (None, {}))[1].get('used') == '1', 20.0), \
             (tmp_path / 'emu.log').read_text()
-        ft = start_node('netft', ft_args + [
+        ft = start_node_process('netft', ft_args + [
             '-p', 'host:=127.0.0.1', '-p', f'port:={port}', '-p', 'counts_per_force:=1000000.0', '-p',
             'counts_per_torque:=1000000.0', '-p', 'publish_rate_hz:=1000.0', '-p', 'frame_id:=ft_test',
             '-p', 'tare_samples:=200'], tmp_path / 'netft.log')
@@ -193,8 +131,8 @@ def test_netft_reads_the_rdt_emulator_across_processes(rclpy_context, tmp_path):
         assert int(values['received']) > 1000 and values['streaming'] == 'true'
         assert values['last_status'] == '0x00000000'
     finally:
-        ft_code, ft_log = stop_node(ft, tmp_path / 'netft.log') if ft is not None else (None, '')
-        emu_code, emu_log = stop_node(emu, tmp_path / 'emu.log')
+        ft_code, ft_log = stop_node_process(ft, tmp_path / 'netft.log') if ft is not None else (None, '')
+        emu_code, emu_log = stop_node_process(emu, tmp_path / 'emu.log')
     assert ft_code == 0, ft_log[-3000:]
     assert emu_code == 0, emu_log[-3000:]
     counters = final_counters(ft_log, ft_name)
@@ -214,7 +152,7 @@ def test_modbus_lvdt_reads_the_modbus_emulator_across_processes(rclpy_context, t
     lv_args = [a if not a.startswith('__node:=') else f'__node:={lv_name}' for a in emu_args]
     channel = ['-p', 'register:=4', '-p', 'data_type:=float32', '-p', 'word_order:=little', '-p', 'gain:=0.002',
                '-p', 'offset:=-0.001', '-p', 'unit_id:=2']
-    emu = start_node('modbus_emulator', emu_args + channel + [
+    emu = start_node_process('modbus_emulator', emu_args + channel + [
         '-p', f'port:={port}', '-p', 'noise_std:=0.0', '-p', 'resolution:=0.0'], tmp_path / 'emu.log')
     probe = Probe(rclpy_context, prefix)
     ex = SingleThreadedExecutor(context=rclpy_context)
@@ -223,7 +161,7 @@ def test_modbus_lvdt_reads_the_modbus_emulator_across_processes(rclpy_context, t
     try:
         assert spin_until(ex, lambda: probe.pose.get_subscription_count() >= 1, 20.0), \
             (tmp_path / 'emu.log').read_text()
-        lv = start_node('modbus_lvdt', lv_args + channel + [
+        lv = start_node_process('modbus_lvdt', lv_args + channel + [
             '-p', 'host:=127.0.0.1', '-p', f'port:={port}', '-p', 'poll_rate_hz:=200.0', '-p', 'frame_id:=lvdt_mb'],
             tmp_path / 'lvdt.log')
         # No pose yet: the emulator answers "server device busy" and the driver publishes nothing (a reading of a
@@ -254,8 +192,8 @@ def test_modbus_lvdt_reads_the_modbus_emulator_across_processes(rclpy_context, t
         assert status.level == b'\x00' and values['failures'] == '0'
         assert math.isfinite(float(values['poll_jitter_p99_us']))
     finally:
-        lv_code, lv_log = stop_node(lv, tmp_path / 'lvdt.log') if lv is not None else (None, '')
-        emu_code, emu_log = stop_node(emu, tmp_path / 'emu.log')
+        lv_code, lv_log = stop_node_process(lv, tmp_path / 'lvdt.log') if lv is not None else (None, '')
+        emu_code, emu_log = stop_node_process(emu, tmp_path / 'emu.log')
     assert lv_code == 0, lv_log[-3000:]
     assert emu_code == 0, emu_log[-3000:]
     counters = final_counters(lv_log, lv_name)

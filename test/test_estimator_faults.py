@@ -1,8 +1,7 @@
 """The estimator's part of "never silently wrong": the estimate is never silently wrong. Each fault is injected into a
-running
-stiffness_estimator over real DDS (the SyntheticRig/Probe of test_estimator_node), and the rule asserted, including
-that no estimate is published with status OK while its inputs are invalid. The symptom of case 1 is reproduced on the
-pure core, and a bag holding these faults is analysed offline and agrees with the live core.
+running stiffness_estimator over real DDS (the SyntheticRig/EstimatorProbe of helpers.estimator), and the rule asserted,
+including that no estimate is published with status OK while its inputs are invalid. The symptom of case 1 is
+reproduced on the pure core, and a bag holding these faults is analysed offline and agrees with the live core.
 """
 from __future__ import annotations
 
@@ -14,8 +13,8 @@ import pytest
 from geometry_msgs.msg import PointStamped, WrenchStamped
 from rclpy.parameter import Parameter
 
-from conftest import call_trigger as call
-from conftest import spin_until
+from helpers import call_trigger as call
+from helpers import NS, spin_until
 from crane_stiffness import topics
 from crane_stiffness.estimation.live import VALUE_FIELDS, LiveStiffness
 from crane_stiffness.estimation.settings import LiveSettings
@@ -23,30 +22,14 @@ from crane_stiffness.estimation.sync import DISPLACEMENT, FORCE
 from crane_stiffness.nodes.qos import RELIABLE_QOS, SENSOR_QOS
 from crane_stiffness.nodes.stiffness_estimator import StiffnessEstimatorNode
 from crane_stiffness.status import ERROR, OK, STALE, WARN
-from test_estimator_node import (C, K, NS, Probe, SyntheticRig, isolated, row, run_in_own_process, run_program,
-                                 setup)
+from helpers.estimator import (C, K, EstimatorProbe, SyntheticRig, executor_with, identity, isolated_estimator, row,
+                               run_in_own_process, run_program, statuses)
 
 LEVEL = {OK: b'\x00', WARN: b'\x01', ERROR: b'\x02', STALE: b'\x03'}
 
 
-def statuses(array) -> tuple[list, object]:
-    """(the branch statuses, the input status) of one /stiffness/estimate DiagnosticArray."""
-    return list(array.status[:2]), array.status[2]
-
-
 def kv(status) -> dict[str, str]:
     return {k.key: k.value for k in status.values}
-
-
-def identity(c: dict[str, int]) -> None:
-    """Every message the estimator received is accounted for in its final counters."""
-    for s in (FORCE, DISPLACEMENT):
-        used_or_dropped = (c[f'{s}_dropped'] + c[f'{s}_paired'] + c[f'{s}_out_of_order'] + c[f'{s}_non_finite']
-                           + c[f'{s}_stale'] + c[f'{s}_unmatched'] + c[f'{s}_discarded'] + c[f'{s}_pending'])
-        assert c[f'{s}_received'] == used_or_dropped, (s, c)
-        assert c[f'{s}_received'] == c[f'{s}_dropped'] + c[f'{s}_passed_checks'], (s, c)
-    assert c['pairs'] == c['pairs_fitted'] + c['pairs_rejected_command'] + c['pairs_non_finite'], c
-    assert c['command_received'] == c['command_used'] + c['command_rejected'] + c['command_dropped'], c
 
 
 # ------------------------------------------------------------------------------------------------ case 2 --
@@ -62,12 +45,12 @@ def test_stamp_an_hour_ahead_is_dropped_pairing_goes_on_and_reset_restarts_every
             rig.pub_force.publish(rig.wrench_msg(t_ns + NS // 2, 1.0))
             skewed['n'] += 1
 
-    name, prefix, args = isolated()
-    probe = Probe(rclpy_context, prefix)
+    name, prefix, args = isolated_estimator()
+    probe = EstimatorProbe(rclpy_context, prefix)
     estimator = StiffnessEstimatorNode(context=rclpy_context, cli_args=args, parameter_overrides=[
         Parameter('window', value=600), Parameter('diagnostics_rate_hz', value=20.0)])
     rig = SyntheticRig(rclpy_context, prefix, rate_hz=500.0, inject=inject, seed=21)
-    ex = setup(rclpy_context, estimator, probe.node, rig.node)
+    ex = executor_with(rclpy_context, estimator, probe.node, rig.node)
     run_program(ex, rig, estimator)
     c = estimator.core.counters
     sc = estimator.core.sync_counters
@@ -118,15 +101,15 @@ def test_dead_lvdt_makes_estimates_stale_and_its_restart_starts_a_new_segment(rc
     """The LVDT dies for 1 s during loading and comes back as a new process that zeroed itself again (its reading is
     0 where it restarted): the estimate is STALE while it is silent, and after the restart the fit starts a new
     segment, so the two zero points never share a window (in the issue they did: 25,514 N/m for 53,794)."""
-    name, prefix, args = isolated()
-    probe = Probe(rclpy_context, prefix)
+    name, prefix, args = isolated_estimator()
+    probe = EstimatorProbe(rclpy_context, prefix)
     estimator = StiffnessEstimatorNode(context=rclpy_context, cli_args=args, parameter_overrides=[
         Parameter('window', value=600), Parameter('diagnostics_rate_hz', value=20.0),
         Parameter('expected_period_s', value=0.002)])
     rig = SyntheticRig(rclpy_context, prefix, rate_hz=500.0, ramp_s=2.5, seed=22)
     dead = {'on': False}
     rig.disp_ok = lambda i: not dead['on']
-    ex = setup(rclpy_context, estimator, probe.node, rig.node)
+    ex = executor_with(rclpy_context, estimator, probe.node, rig.node)
     assert spin_until(ex, lambda: rig.pub_force.get_subscription_count() >= 1
                       and rig.pub_point.get_subscription_count() >= 1 and rig.pub_cmd.get_subscription_count() >= 1, 5)
     rig.start()
@@ -178,14 +161,14 @@ def test_dead_lvdt_makes_estimates_stale_and_its_restart_starts_a_new_segment(rc
 def test_lost_samples_are_reported_per_stream_and_warned_above_max_loss_fraction(rclpy_context):
     lose = np.random.default_rng(5).random(100_000) < 0.05  # 5 % of the force samples never sent
     stamps: list[int] = []
-    name, prefix, args = isolated()
-    probe = Probe(rclpy_context, prefix)
+    name, prefix, args = isolated_estimator()
+    probe = EstimatorProbe(rclpy_context, prefix)
     estimator = StiffnessEstimatorNode(context=rclpy_context, cli_args=args, parameter_overrides=[
         Parameter('window', value=600), Parameter('diagnostics_rate_hz', value=20.0),
         Parameter('max_loss_fraction', value=0.02)])
     rig = SyntheticRig(rclpy_context, prefix, rate_hz=500.0, seed=23, inject=lambda rig, i, t: stamps.append(t))
     rig.force_ok = lambda i: not lose[i]
-    ex = setup(rclpy_context, estimator, probe.node, rig.node)
+    ex = executor_with(rclpy_context, estimator, probe.node, rig.node)
     run_program(ex, rig, estimator)
     core = estimator.core
     sent_force = int((~lose[:rig.sent]).sum())
@@ -285,15 +268,15 @@ def test_rejected_and_absurd_commands_excluded_over_dds(rclpy_context):
         state['phase'] = phase
         rig.command_on = phase is None
 
-    name, prefix, args = isolated()
-    probe = Probe(rclpy_context, prefix)
+    name, prefix, args = isolated_estimator()
+    probe = EstimatorProbe(rclpy_context, prefix)
     estimator = StiffnessEstimatorNode(context=rclpy_context, cli_args=args, parameter_overrides=[
         Parameter('window', value=600), Parameter('diagnostics_rate_hz', value=20.0)])
     rig = SyntheticRig(rclpy_context, prefix, rate_hz=500.0, inject=inject, seed=24)
     rig.pub_rejected = rig.node.create_publisher(WrenchStamped, prefix + topics.REJECTED_COMMAND, RELIABLE_QOS)
     rig.pub_cmd = Recorded(rig.pub_cmd)
     rig.force_map = lambda i, f: {'absurd': 40.0, 'model': 2.0}.get(state['phase'], f)
-    ex = setup(rclpy_context, estimator, probe.node, rig.node)
+    ex = executor_with(rclpy_context, estimator, probe.node, rig.node)
     assert spin_until(ex, lambda: rig.pub_rejected.get_subscription_count() >= 1, 5.0)
     run_program(ex, rig, estimator)
     c = estimator.core.counters
@@ -344,7 +327,7 @@ def test_final_counters_account_for_every_message(rclpy_context):
             rig.pub_cmd.publish(rig.wrench_msg(t_ns, 1e30))                      # absurd command
             rig.pub_cmd.publish(rig.wrench_msg(0, math.nan))                     # unusable command
 
-    name, prefix, args = isolated()
+    name, prefix, args = isolated_estimator()
     rig = SyntheticRig(rclpy_context, prefix, rate_hz=500.0, inject=inject, seed=25)
     done = run_in_own_process(rclpy_context, rig, args, run_timeout_s=15.0, settle_s=1.0, stop_timeout_s=20.0)
     assert done.returncode == 0, done.stderr.decode()[-2000:]

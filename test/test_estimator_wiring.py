@@ -6,7 +6,7 @@
 * clocks: a displacement stream stamped 3 ms late is found 3 ms late (within 0.5 ms) by the estimator, WARNed, and
   with ``displacement_delay_s = 0.003`` the loading/unloading difference the delay causes disappears.
 
-The rig (test_estimator_node.SyntheticRig) publishes the wrench as the mounted sensor would measure it; the sensor's
+The rig (helpers.estimator.SyntheticRig) publishes the wrench as the mounted sensor would measure it; the sensor's
 reading is modelled here independently of crane_stiffness.estimation.frames (explicit rotation matrix).
 """
 from __future__ import annotations
@@ -17,13 +17,14 @@ import numpy as np
 import pytest
 from rclpy.parameter import Parameter
 
-from conftest import spin_until
+from helpers import spin_until
 from crane_stiffness.analysis.analyze import analyze_session
 from crane_stiffness.estimation.settings import LiveSettings
 from crane_stiffness.nodes.stiffness_estimator import StiffnessEstimatorNode
 from crane_stiffness.sim.program import LoadProgram, Segment
 from crane_stiffness.testing.synthetic import write_synthetic_session
-from test_estimator_node import K, Probe, SyntheticRig, assert_refused, isolated, run_program, setup
+from helpers.estimator import (K, EstimatorProbe, SyntheticRig, assert_refused, executor_with, isolated_estimator,
+                               run_program)
 
 ANGLE = math.pi / 2                                # sensor rotated 90° about z
 R = np.array([[math.cos(ANGLE), -math.sin(ANGLE), 0.0], [math.sin(ANGLE), math.cos(ANGLE), 0.0], [0.0, 0.0, 1.0]])
@@ -45,8 +46,8 @@ def sensor_reading(w_c) -> np.ndarray:
 def run_rig(ctx, params: dict, *, platform=None, sensor=None, rate_hz=500.0, late_ns=0, load=None,
             force_noise=0.02, seed=11):
     """One estimator and rig over DDS; returns (loading row, unloading row, estimator, probe, rig)."""
-    name, prefix, args = isolated()
-    probe = Probe(ctx, prefix)
+    name, prefix, args = isolated_estimator()
+    probe = EstimatorProbe(ctx, prefix)
     estimator = StiffnessEstimatorNode(context=ctx, cli_args=args, parameter_overrides=[
         Parameter(k, value=v) for k, v in params.items()])
     rig = SyntheticRig(ctx, prefix, rate_hz=rate_hz, seed=seed, force_noise=force_noise)
@@ -56,7 +57,7 @@ def run_rig(ctx, params: dict, *, platform=None, sensor=None, rate_hz=500.0, lat
     rig.disp_late_ns = late_ns
     if load is not None:
         rig.load = load
-    ex = setup(ctx, estimator, probe.node, rig.node)
+    ex = executor_with(ctx, estimator, probe.node, rig.node)
     # Matched both ways before the rig starts: runs compared with each other must not lose their first (best
     # effort) samples to discovery, one more than the other.
     assert spin_until(ex, lambda: estimator.sub_force.get_publisher_count() >= 1
@@ -109,7 +110,7 @@ def delayed_load(t_s: float) -> float | None:
     return None if t_s > knots_t[-1] else float(np.interp(t_s, knots_t, knots_f))
 
 
-def input_statuses(probe: Probe) -> list[tuple[int, str, dict[str, str]]]:
+def input_statuses(probe: EstimatorProbe) -> list[tuple[int, str, dict[str, str]]]:
     out = []
     for array in probe.estimates:
         for s in array.status:
@@ -285,7 +286,7 @@ def test_stream_delay_of_a_long_recording_looks_where_the_load_moves():
 
 
 def test_mount_and_delay_parameters_validated_on_start_and_on_change(rclpy_context):
-    _, _, args = isolated()
+    _, _, args = isolated_estimator()
     node = StiffnessEstimatorNode(context=rclpy_context, cli_args=args)
     for param, value, words in [('sensor_rotation', [0.0, 0.0, 0.0, 0.0], 'sensor_rotation = [0.0, 0.0, 0.0, 0.0]'),
                                 ('sensor_rotation', [1.0, 2.0], 'sensor_rotation'),
@@ -300,6 +301,6 @@ def test_mount_and_delay_parameters_validated_on_start_and_on_change(rclpy_conte
     assert node.set_parameters([Parameter('displacement_delay_s', value=0.003)])[0].successful
     assert node.core.settings.displacement_delay_s == 0.003 and node.core.counters.fit_restarts == restarts + 2
     with pytest.raises(ValueError, match='sensor_position'):
-        StiffnessEstimatorNode(context=rclpy_context, cli_args=isolated()[2],
+        StiffnessEstimatorNode(context=rclpy_context, cli_args=isolated_estimator()[2],
                                parameter_overrides=[Parameter('sensor_position', value=[0.0, float('nan'), 0.0])])
     node.destroy_node()

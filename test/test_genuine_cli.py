@@ -20,14 +20,14 @@ from pathlib import Path
 import pytest
 from rclpy.executors import SingleThreadedExecutor
 
-from conftest import spin_until
 from crane_stiffness.params.files import ParamFile
 from crane_stiffness.rig_description import rig_nodes
 from crane_stiffness.testing.rig import Observer, decode_values
 from crane_stiffness.testing.rosrun import command, installed_config
-from test_shutdown import UNCLEAN, assert_bag_complete
+from helpers import spin_until
+from helpers.processes import UNCLEAN, assert_bag_complete
 
-pytestmark = pytest.mark.genuine_cli
+pytestmark = [pytest.mark.genuine_cli, pytest.mark.ros]
 
 #: launch's own lines about each process it ran: '[INFO] [crane_model-1]: process has finished cleanly [pid 12]'.
 FINISHED = re.compile(r'\[(?P<name>[a-z_]+)-\d+\]: process has finished cleanly')

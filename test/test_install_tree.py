@@ -14,12 +14,14 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
-from conftest import REPO, spin_until
+from helpers import REPO, spin_until
 from crane_stiffness import topics
 from crane_stiffness.rig_description import rig_nodes
 from crane_stiffness.testing import rosrun
 from crane_stiffness.testing.rig import start_node
 from crane_stiffness.nodes.qos import RELIABLE_QOS
+
+pytestmark = pytest.mark.ros  # every test here starts ROS (conftest)
 
 # The node executables setup.py declares (read, not imported: importing it would run setup()).
 NODES = next(ast.literal_eval(n.value) for n in ast.parse((REPO / 'setup.py').read_text()).body

@@ -9,7 +9,6 @@ Where namespaces cannot be made (not root, no iproute2), the test FAILS with the
 """
 from __future__ import annotations
 
-import json
 import time
 from pathlib import Path
 
@@ -24,13 +23,9 @@ from crane_stiffness.params.geometry import geometry_from_params
 from crane_stiffness.params.files import load_params
 from crane_stiffness.model import axis_stiffness, rest_pose, tangent_stiffness
 from crane_stiffness.rig_description import rig_nodes
+from helpers.processes import final_counters
 
-
-def _final_counters(log: str) -> dict:
-    for line in reversed(log.splitlines()):
-        if line.startswith('FINAL_COUNTERS '):
-            return json.loads(line.split(' ', 2)[2])
-    return {}
+pytestmark = pytest.mark.ros  # every test here starts ROS (conftest)
 
 
 def _read_bag(bag: Path) -> dict[str, list[tuple[int, bytes]]]:
@@ -117,9 +112,9 @@ def test_drivers_on_one_pc_estimator_and_recorder_on_another(install_tree, tmp_p
     meta = yaml.safe_load((bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
     messages = _read_bag(bag)
     assert sum(len(v) for v in messages.values()) == meta['message_count']
-    sent = _final_counters(logs['load_program'])['published']
+    sent = final_counters(logs['load_program'])['published']
     assert len(messages['/crane/wrench_command']) == sent > 1000
-    ft = _final_counters(logs['netft'])
+    ft = final_counters(logs['netft'])
     stamps = []
     for _, data in messages['/load_cell/wrench']:
         h = deserialize_message(data, WrenchStamped).header.stamp

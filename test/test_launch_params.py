@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from conftest import REPO
+from helpers import REPO
 from crane_stiffness.params.files import ParamFile, load_yaml
 from crane_stiffness.rig_description import ARGUMENTS, RigError, rig_nodes
 

@@ -16,15 +16,16 @@ import time
 import numpy as np
 import pytest
 import rclpy.duration
-from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, WrenchStamped
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from std_msgs.msg import String
 
-from conftest import publish_wrench_now, call_trigger as call
-from conftest import spin_until
+from helpers import publish_wrench_now, call_trigger as call
+from helpers import collect_for, isolated, spin_until, stamp_ns, wrench_vector
+from helpers.probe import ProbeNode
+from helpers.processes import final_counters, start_node_process, stop_node_process
 from crane_stiffness import topics
 from crane_stiffness.drivers import rdt
 from crane_stiffness.nodes.qos import LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS
@@ -33,8 +34,8 @@ from crane_stiffness.nodes.load_cell import LoadCell
 from crane_stiffness.nodes.lvdt import Lvdt
 from crane_stiffness.nodes.rdt_emulator import STATUS_NOT_READY, RdtEmulator
 from crane_stiffness.status import OK, WARN
-from test_driver_nodes import final_counters, start_node, stop_node
-from test_sensor_nodes import collect_for, isolated, stamp_ns
+
+pytestmark = pytest.mark.ros  # every test here starts ROS (conftest)
 
 HELD = np.array([0.0, 1.0, 0.0, 0.0, 0.0, 0.0])      # the 1 N hold of the issue
 ABSURD = np.array([0.0, 1e30, 0.0, 0.0, 0.0, 0.0])   # dropped as absurd by the model
@@ -48,30 +49,17 @@ def accounted(counters: dict) -> bool:
     return counters['received'] == counters['used'] + sum(v for k, v in counters.items() if k.startswith('dropped_'))
 
 
-def vector(msg: WrenchStamped) -> np.ndarray:
-    f, m = msg.wrench.force, msg.wrench.torque
-    return np.array([f.x, f.y, f.z, m.x, m.y, m.z])
-
-
-class Probe:
+class Probe(ProbeNode):
     """Sends commands to an isolated rig and records what the model and the load cell publish."""
 
     def __init__(self, ctx, prefix: str):
-        self.node = Node(f'probe{prefix.replace("/", "_")}', context=ctx)
-        n = self.node
-        self.applied: list[WrenchStamped] = []
-        self.rejected: list[WrenchStamped] = []
-        self.status: list[str] = []
-        self.samples: list[tuple[int, np.ndarray]] = []
-        self.diagnostics: list = []
-        self.cmd = n.create_publisher(WrenchStamped, prefix + topics.WRENCH_COMMAND, RELIABLE_QOS)
-        n.create_subscription(WrenchStamped, prefix + topics.APPLIED_WRENCH, self.applied.append, RELIABLE_QOS)
-        n.create_subscription(WrenchStamped, prefix + topics.REJECTED_COMMAND, self.rejected.append, RELIABLE_QOS)
-        n.create_subscription(String, prefix + topics.MODEL_STATUS, lambda m: self.status.append(m.data), LATCHED_QOS)
-        n.create_subscription(WrenchStamped, prefix + topics.LOAD_CELL_WRENCH,
-                              lambda m: self.samples.append((stamp_ns(m.header.stamp), vector(m))), SENSOR_QOS)
-        n.create_subscription(DiagnosticArray, prefix + topics.DIAGNOSTICS,
-                              lambda m: self.diagnostics.extend(m.status), 100)
+        super().__init__(ctx, prefix, diagnostics_depth=100)
+        self.cmd = self.publisher(topics.WRENCH_COMMAND, WrenchStamped, RELIABLE_QOS)
+        self.applied: list[WrenchStamped] = self.record(topics.APPLIED_WRENCH, WrenchStamped, RELIABLE_QOS)
+        self.rejected: list[WrenchStamped] = self.record(topics.REJECTED_COMMAND, WrenchStamped, RELIABLE_QOS)
+        self.model_status: list[str] = self.record(topics.MODEL_STATUS, String, LATCHED_QOS, lambda m: m.data)
+        self.samples: list[tuple[int, np.ndarray]] = self.record(
+            topics.LOAD_CELL_WRENCH, WrenchStamped, SENSOR_QOS, lambda m: (stamp_ns(m.header.stamp), wrench_vector(m)))
 
     def command(self, wrench) -> int:
         return publish_wrench_now(self.node, self.cmd, wrench, topics.FRAME_BASE)
@@ -95,12 +83,6 @@ class Probe:
         assert spin_until(ex, lambda: self.diag(hardware_id) is not None and pred(self.diag(hardware_id)),
                           timeout_s), self.diag(hardware_id)
         return self.diag(hardware_id)
-
-    def diag(self, hardware_id: str) -> dict | None:
-        for s in reversed(self.diagnostics):
-            if s.hardware_id == hardware_id:
-                return {'message': s.message, **{kv.key: kv.value for kv in s.values}}
-        return None
 
 
 def test_commands_the_model_rejects_reach_no_sensor(rclpy_context):
@@ -130,21 +112,21 @@ def test_commands_the_model_rejects_reach_no_sensor(rclpy_context):
     t_hold = probe.command(HELD)
     assert spin_until(ex, lambda: probe.applied_at(t_hold) is not None and len(probe.held_from(t_hold, HELD)) > 50,
                       5.0)
-    assert vector(probe.applied_at(t_hold)).tolist() == HELD.tolist()
+    assert wrench_vector(probe.applied_at(t_hold)).tolist() == HELD.tolist()
     assert np.all(probe.held_from(t_hold, HELD) == HELD)
     # An absurd command: rejected (republished unchanged, same stamp); the load in force stays the 1 N hold.
     t_absurd = probe.command(ABSURD)
     assert spin_until(ex, lambda: probe.applied_at(t_absurd) is not None and probe.rejected, 5.0)
-    assert vector(probe.applied_at(t_absurd)).tolist() == HELD.tolist()
-    assert vector(probe.rejected[-1]).tolist() == ABSURD.tolist()
+    assert wrench_vector(probe.applied_at(t_absurd)).tolist() == HELD.tolist()
+    assert wrench_vector(probe.rejected[-1]).tolist() == ABSURD.tolist()
     assert stamp_ns(probe.rejected[-1].header.stamp) == t_absurd
     # A command without an equilibrium: the same, and the status says why.
     t_none = probe.command(NO_EQUILIBRIUM)
     assert spin_until(ex, lambda: probe.applied_at(t_none) is not None and len(probe.rejected) == 2, 10.0)
-    assert vector(probe.applied_at(t_none)).tolist() == HELD.tolist()
-    assert vector(probe.rejected[-1]).tolist() == NO_EQUILIBRIUM.tolist()
+    assert wrench_vector(probe.applied_at(t_none)).tolist() == HELD.tolist()
+    assert wrench_vector(probe.rejected[-1]).tolist() == NO_EQUILIBRIUM.tolist()
     assert stamp_ns(probe.rejected[-1].header.stamp) == t_none
-    assert spin_until(ex, lambda: probe.status and probe.status[-1].startswith('no_equilibrium'), 5.0)
+    assert spin_until(ex, lambda: probe.model_status and probe.model_status[-1].startswith('no_equilibrium'), 5.0)
     assert spin_until(ex, lambda: len(probe.held_from(t_hold, HELD)) > 400, 10.0)
     # The load cell never measured either: every reading since the hold is exactly the held load, nothing
     # saturated (fy full scale 40 N, mz 2 N·m), and its tare at the current load zeroes the held load.
@@ -170,8 +152,8 @@ def test_a_repeated_failing_command_is_answered_from_the_cache(rclpy_context, tm
     model_name, prefix, model_args = isolated('crane_model')
     lc_name = model_name.replace('crane_model', 'load_cell')
     lc_args = [a if not a.startswith('__node:=') else f'__node:={lc_name}' for a in model_args]
-    model = start_node('crane_model', model_args + ['-p', 'geometry.height:=0.5'], tmp_path / 'model.log')
-    cell = start_node('load_cell', lc_args, tmp_path / 'cell.log')
+    model = start_node_process('crane_model', model_args + ['-p', 'geometry.height:=0.5'], tmp_path / 'model.log')
+    cell = start_node_process('load_cell', lc_args, tmp_path / 'cell.log')
     probe = Probe(rclpy_context, prefix)
     ex = SingleThreadedExecutor(context=rclpy_context)
     ex.add_node(probe.node)
@@ -193,15 +175,15 @@ def test_a_repeated_failing_command_is_answered_from_the_cache(rclpy_context, tm
         t_after = probe.command(HELD)
         # Every command is answered (applied wrench with its stamp), the failing ones with the held load.
         assert spin_until(ex, lambda: probe.applied_at(t_after) is not None, 20.0)
-        answers = {stamp_ns(m.header.stamp): vector(m) for m in probe.applied}
+        answers = {stamp_ns(m.header.stamp): wrench_vector(m) for m in probe.applied}
         assert all(answers[t].tolist() == HELD.tolist() for t in sent)
         # The rejections come from another writer, not ordered with the applied wrenches: wait for all of them.
         assert spin_until(ex, lambda: len(probe.rejected) == n, 10.0), (len(probe.rejected), n)
         collect_for(ex, 0.3)
         assert np.all(probe.readings_after(t_hold)[:, 5] < 0.1)  # mz = 50 N·m never reached the load cell
     finally:
-        model_code, model_log = stop_node(model, tmp_path / 'model.log')
-        cell_code, cell_log = stop_node(cell, tmp_path / 'cell.log')
+        model_code, model_log = stop_node_process(model, tmp_path / 'model.log')
+        cell_code, cell_log = stop_node_process(cell, tmp_path / 'cell.log')
         ex.shutdown()
     assert model_code == 0 and cell_code == 0, model_log[-2000:] + cell_log[-2000:]
     mc, lc = final_counters(model_log, model_name), final_counters(cell_log, lc_name)

@@ -8,13 +8,13 @@ import numpy as np
 import pytest
 from geometry_msgs.msg import PoseStamped, WrenchStamped
 from rclpy.executors import SingleThreadedExecutor
-from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, String
 from std_srvs.srv import Trigger
 
-from conftest import spin_until
+from helpers import spin_until, stamp_ns
+from helpers.probe import ProbeNode
 from crane_stiffness import topics
 from crane_stiffness.model import lab_model, paper_coefficients, solve_equilibrium
 from crane_stiffness.nodes.qos import LATCHED_QOS, RELIABLE_QOS
@@ -22,28 +22,21 @@ from crane_stiffness.nodes import crane_model
 from crane_stiffness.nodes.crane_model import MODEL_STATUS, CraneModel
 from crane_stiffness.nodes.load_program import LoadProgramNode
 
+pytestmark = pytest.mark.ros  # every test here starts ROS (conftest)
 
-class Probe:
+
+class Probe(ProbeNode):
     """A test node that records what the rig publishes and can send wrench commands."""
 
     def __init__(self, ctx):
-        self.node = Node('probe', context=ctx)
-        self.poses: list[PoseStamped] = []
-        self.wires: list[JointState] = []
-        self.axis: list[float] = []
-        self.status: list[str] = []
-        self.commands: list[WrenchStamped] = []
-        self.state: list[dict] = []
-        n = self.node
-        n.create_subscription(PoseStamped, topics.PLATFORM_POSE, self.poses.append, RELIABLE_QOS)
-        n.create_subscription(JointState, topics.WIRE_STATES, self.wires.append, RELIABLE_QOS)
-        n.create_subscription(Float64, topics.PREDICTED_AXIS_STIFFNESS, lambda m: self.axis.append(m.data),
-                              LATCHED_QOS)
-        n.create_subscription(String, MODEL_STATUS, lambda m: self.status.append(m.data), LATCHED_QOS)
-        n.create_subscription(WrenchStamped, topics.WRENCH_COMMAND, self.commands.append, RELIABLE_QOS)
-        n.create_subscription(String, topics.PROGRAM_STATE, lambda m: self.state.append(json.loads(m.data)),
-                              LATCHED_QOS)
-        self.pub = n.create_publisher(WrenchStamped, topics.WRENCH_COMMAND, RELIABLE_QOS)
+        super().__init__(ctx)  # named 'probe', the rig's own topic names
+        self.poses: list[PoseStamped] = self.record(topics.PLATFORM_POSE, PoseStamped, RELIABLE_QOS)
+        self.wires: list[JointState] = self.record(topics.WIRE_STATES, JointState, RELIABLE_QOS)
+        self.axis: list[float] = self.record(topics.PREDICTED_AXIS_STIFFNESS, Float64, LATCHED_QOS, lambda m: m.data)
+        self.model_status: list[str] = self.record(MODEL_STATUS, String, LATCHED_QOS, lambda m: m.data)
+        self.commands: list[WrenchStamped] = self.record(topics.WRENCH_COMMAND, WrenchStamped, RELIABLE_QOS)
+        self.state: list[dict] = self.record(topics.PROGRAM_STATE, String, LATCHED_QOS, lambda m: json.loads(m.data))
+        self.pub = self.publisher(topics.WRENCH_COMMAND, WrenchStamped, RELIABLE_QOS)
 
     def command(self, fx=0.0, fy=0.0, fz=0.0, mz=0.0):
         m = WrenchStamped()
@@ -57,10 +50,6 @@ def lab_overrides(height=0.5, weight=50.0):
     return [Parameter('geometry.height', value=height), Parameter('geometry.weight', value=weight)]
 
 
-def stamp_ns(header) -> int:
-    return header.stamp.sec * 1_000_000_000 + header.stamp.nanosec
-
-
 def test_crane_model_solves_commands_and_reports_no_equilibrium(rclpy_context, monkeypatch):
     ex = SingleThreadedExecutor(context=rclpy_context)
     model = CraneModel(context=rclpy_context, parameter_overrides=lab_overrides())
@@ -69,7 +58,7 @@ def test_crane_model_solves_commands_and_reports_no_equilibrium(rclpy_context, m
     ex.add_node(probe.node)
     g = lab_model(0.5, 50.0)
     # The rest pose is published at start (latched status, predicted stiffness = eq. 19 for fy).
-    assert spin_until(ex, lambda: probe.axis and probe.status, 10)
+    assert spin_until(ex, lambda: probe.axis and probe.model_status, 10)
     assert probe.axis[-1] == pytest.approx(paper_coefficients(g).side, rel=1e-9)
     assert spin_until(ex, lambda: probe.node.count_publishers(topics.WRENCH_COMMAND) >= 1
                       and model.count_publishers(topics.WRENCH_COMMAND) >= 1, 5)
@@ -87,11 +76,11 @@ def test_crane_model_solves_commands_and_reports_no_equilibrium(rclpy_context, m
     # An upward force larger than the weight: explicit status, node alive, last pose kept.
     n1 = len(probe.poses)
     probe.command(fz=-80.0)
-    assert spin_until(ex, lambda: any(s.startswith('no_equilibrium') for s in probe.status), 10)
+    assert spin_until(ex, lambda: any(s.startswith('no_equilibrium') for s in probe.model_status), 10)
     # (the pose may be sent again for a reader that joined: the same pose, restamped)
     assert all(p.pose == probe.poses[n1 - 1].pose for p in probe.poses[n1:])
     probe.command(fy=1.0)
-    assert spin_until(ex, lambda: len(probe.poses) > n1 and probe.status[-1].startswith('ok'), 10)
+    assert spin_until(ex, lambda: len(probe.poses) > n1 and probe.model_status[-1].startswith('ok'), 10)
     # A repeated command (a hold at the program's rate) restamps the same pose without solving again and does not
     # repeat the latched prediction; after a failed command the load still in force is answered from the cache too
     # (the pose was kept), and the status returns to ok.
@@ -103,13 +92,13 @@ def test_crane_model_solves_commands_and_reports_no_equilibrium(rclpy_context, m
     assert spin_until(ex, lambda: probe.poses[-1] is not before and probe.wires[-1].header == probe.poses[-1].header,
                       10)
     after = probe.poses[-1]
-    assert after.pose == before.pose and stamp_ns(after.header) > stamp_ns(before.header)
+    assert after.pose == before.pose and stamp_ns(after.header.stamp) > stamp_ns(before.header.stamp)
     spin_until(ex, lambda: False, 0.3)
     assert solves == [] and len(probe.axis) == n_axis
     probe.command(fz=-80.0)
-    assert spin_until(ex, lambda: probe.status[-1].startswith('no_equilibrium'), 10)
+    assert spin_until(ex, lambda: probe.model_status[-1].startswith('no_equilibrium'), 10)
     probe.command(fy=1.0)
-    assert spin_until(ex, lambda: probe.status[-1].startswith('ok'), 10)
+    assert spin_until(ex, lambda: probe.model_status[-1].startswith('ok'), 10)
     assert len(solves) == 1
     # NaN and absurd commands are dropped and counted.
     probe.command(fy=float('nan'))

@@ -19,7 +19,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from std_srvs.srv import Trigger
 
-from conftest import spin_until
+from helpers import spin_until
 from crane_stiffness.bag import BagWriter, dump_qos_profiles, qos_profile
 from crane_stiffness.nodes.crane_model import CraneModel
 from crane_stiffness.nodes.session_player import SessionPlayer
@@ -258,6 +258,7 @@ def test_the_shared_config_files_hold_only_keys_some_node_knows():
         check_params_files(files, f'/{module}', own)
 
 
+@pytest.mark.ros  # lvdt.main() starts rclpy and a node (DDS) in this process
 def test_main_exits_2_for_a_missing_params_file_without_traceback(tmp_path, capsys):
     from crane_stiffness.nodes import lvdt
     missing = tmp_path / 'nope.yaml'

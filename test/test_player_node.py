@@ -21,7 +21,7 @@ from rclpy.serialization import serialize_message
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64, String
 
-from conftest import spin_until
+from helpers import spin_until
 from crane_stiffness import topics
 from crane_stiffness.analysis.analyze import analyze_session
 from crane_stiffness.bag import BagReader, BagWriter, dump_qos_profiles, qos_profile
@@ -36,6 +36,8 @@ from crane_stiffness.nodes.session_recorder import SessionRecorder
 from crane_stiffness.nodes.stiffness_estimator import StiffnessEstimatorNode
 from crane_stiffness.serde import decode_float64_multiarray
 from crane_stiffness.session_record import NODE_PARAMETERS_METADATA
+
+pytestmark = pytest.mark.ros  # every test here starts ROS (conftest)
 
 NS = 1_000_000_000
 T0 = 1_700_000_000 * NS

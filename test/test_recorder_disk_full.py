@@ -9,7 +9,6 @@ message received.
 """
 from __future__ import annotations
 
-import json
 import os
 import shutil
 import subprocess
@@ -26,7 +25,8 @@ from geometry_msgs.msg import WrenchStamped
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 
-from conftest import call_trigger, spin_until
+from helpers import call_trigger, spin_until
+from helpers.processes import final_counters
 from crane_stiffness import topics
 from crane_stiffness.bag import BagDamageWarning, BagReader
 from crane_stiffness.cli import main as cli_main
@@ -35,13 +35,6 @@ from crane_stiffness.testing import rosrun
 
 NS = 1_000_000_000
 ERROR = 2
-
-
-def _final_counters(log: str, node: str) -> dict:
-    for line in log.splitlines():
-        if line.startswith(f'FINAL_COUNTERS {node} '):
-            return json.loads(line.split(' ', 2)[2])
-    raise AssertionError(f'no FINAL_COUNTERS {node} in:\n{log[-2000:]}')
 
 
 def _mcap_messages(path: Path) -> tuple[int, int]:
@@ -189,7 +182,7 @@ def _run_on_small_disk(disk: Path, env: dict, ctx, tmp_path: Path) -> None:
         codes = procs.stop()
         log = procs.log('rec')
     assert codes['rec'] == 0 and 'Traceback' not in log, log[-3000:]
-    counters = _final_counters(log, 'session_recorder')
+    counters = final_counters(log, 'session_recorder')
     dropped = {k[len('dropped_'):]: v for k, v in counters.items() if k.startswith('dropped_')}
     assert set(dropped) == {'not_recording', 'write_error', 'lost_with_chunk', 'rejected'}, counters
     assert counters['received'] == counters['written'] + sum(dropped.values()), counters

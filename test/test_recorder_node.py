@@ -25,7 +25,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import Trigger
 
-from conftest import REPO, spin_until
+from helpers import REPO, spin_until
 from crane_stiffness import topics
 from crane_stiffness.testing import rosrun
 from crane_stiffness.bag import BagDamageWarning, BagReader
@@ -33,6 +33,8 @@ from crane_stiffness.cli import main as cli_main
 from crane_stiffness.nodes.qos import LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS
 from crane_stiffness.nodes.session_recorder import SESSION_END_METADATA, SessionRecorder
 from crane_stiffness.session_record import read_session
+
+pytestmark = pytest.mark.ros  # every test here starts ROS (conftest)
 
 NS = 1_000_000_000
 

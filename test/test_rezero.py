@@ -10,14 +10,13 @@ import pytest
 from rclpy.parameter import Parameter
 from std_msgs.msg import Float64
 
-from conftest import spin_until
+from helpers import spin_until
 from crane_stiffness import topics
 from crane_stiffness.estimation.live import LiveStiffness
 from crane_stiffness.estimation.sync import DISPLACEMENT, FORCE
 from crane_stiffness.nodes.qos import LATCHED_QOS
 from crane_stiffness.nodes.stiffness_estimator import StiffnessEstimatorNode
-from test_estimator_faults import identity, statuses
-from test_estimator_node import C, K, Probe, SyntheticRig, isolated, setup
+from helpers.estimator import C, K, EstimatorProbe, SyntheticRig, executor_with, identity, isolated_estimator, statuses
 
 RATE_HZ = 500.0
 WINDOW = 600
@@ -27,15 +26,15 @@ def test_lvdt_rezero_without_restart_starts_a_new_segment(rclpy_context):
     """During the loading ramp the LVDT re-zeroes (its readings step by the displacement there) and publishes zero
     epoch 1: the estimator starts segment 'lvdt re-zeroed' and the loading estimate is K within 1 %; the window
     it would have fitted without the new segment, mixing both zeros, is far off (a negative slope here)."""
-    name, prefix, args = isolated()
-    probe = Probe(rclpy_context, prefix)
+    name, prefix, args = isolated_estimator()
+    probe = EstimatorProbe(rclpy_context, prefix)
     estimator = StiffnessEstimatorNode(context=rclpy_context, cli_args=args, parameter_overrides=[
         Parameter('window', value=WINDOW), Parameter('diagnostics_rate_hz', value=20.0),
         Parameter('expected_period_s', value=1.0 / RATE_HZ)])
     rig = SyntheticRig(rclpy_context, prefix, rate_hz=RATE_HZ, ramp_s=2.5, seed=31)
     zero = rig.node.create_publisher(Float64, prefix + topics.LVDT_ZERO, LATCHED_QOS)
     zero.publish(Float64(data=0.0))  # the LVDT's epoch at start, latched
-    ex = setup(rclpy_context, estimator, probe.node, rig.node)
+    ex = executor_with(rclpy_context, estimator, probe.node, rig.node)
     assert spin_until(ex, lambda: rig.pub_force.get_subscription_count() >= 1 and zero.get_subscription_count() >= 1
                       and rig.pub_point.get_subscription_count() >= 1 and rig.pub_cmd.get_subscription_count() >= 1, 5)
     rig.start()

@@ -5,7 +5,6 @@ the way ``ros2 run`` starts it from the colcon install tree, all at the same ins
 of the model's prediction; the rig description's choices for the arguments are pinned here too."""
 from __future__ import annotations
 
-import json
 import time
 
 import pytest
@@ -15,16 +14,10 @@ from crane_stiffness.testing import rosrun
 from crane_stiffness.testing.lab import emulated_ports, start_rig_with
 from crane_stiffness.testing.rig import Observer, summarize, wait_for_program_start
 
-from conftest import REPO
+from helpers import REPO
+from helpers.processes import final_counters
 
 CONFIG = REPO / 'config'
-
-
-def _final_counters(log: str) -> dict:
-    for line in reversed(log.splitlines()):
-        if line.startswith('FINAL_COUNTERS '):
-            return json.loads(line.split(' ', 2)[2])
-    return {}
 
 
 def test_transport_argument_chooses_the_nodes():
@@ -133,8 +126,8 @@ def test_side_force_through_the_drivers_gives_the_prediction(install_tree, tmp_p
         rclpy.shutdown(context=ctx)
     assert 'load_cell' not in codes and 'lvdt' not in codes
     assert all(code == 0 for code in codes.values()), {n: logs[n][-1500:] for n, c in codes.items() if c}
-    ft, daq = _final_counters(logs['netft']), _final_counters(logs['modbus_lvdt'])
-    rdt, modbus = _final_counters(logs['rdt_emulator']), _final_counters(logs['modbus_emulator'])
+    ft, daq = final_counters(logs['netft']), final_counters(logs['modbus_lvdt'])
+    rdt, modbus = final_counters(logs['rdt_emulator']), final_counters(logs['modbus_emulator'])
     duration = prog.duration_s
     # 7 kHz records in, their 1 ms means out; a poll every 10 ms (a starved timer skips some: generous margins).
     assert ft['received'] > 7000 * duration * 0.9 and ft['published'] > 1000 * duration * 0.9, ft
@@ -145,7 +138,7 @@ def test_side_force_through_the_drivers_gives_the_prediction(install_tree, tmp_p
     # Interpolated pairing (drivers_emulated.yaml): one pair per LVDT reading, the force interpolated at its stamp,
     # not one per force sample. (LVDT readings before netft's first sample pair with nothing: modbus_lvdt may start
     # publishing seconds earlier, so the share paired is bounded loosely.)
-    est_counters = _final_counters(logs['stiffness_estimator'])
+    est_counters = final_counters(logs['stiffness_estimator'])
     assert 'pairing interpolate_force' in logs['stiffness_estimator'], logs['stiffness_estimator'][-2000:]
     assert est_counters['pairs'] > 0.6 * est_counters['displacement_passed_checks'], est_counters
     assert est_counters['pairs'] < 0.2 * est_counters['force_passed_checks'], est_counters

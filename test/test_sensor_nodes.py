@@ -15,14 +15,14 @@ os.environ.setdefault('ROS_DOMAIN_ID', str(os.getpid() % 100 + 1))
 
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
-from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from geometry_msgs.msg import PointStamped, PoseStamped, WrenchStamped  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.node import Node  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 
-from conftest import publish_wrench_now, call_trigger as call  # noqa: E402
-from conftest import spin_until  # noqa: E402
+from helpers import publish_wrench_now, call_trigger as call  # noqa: E402
+from helpers import collect_for, isolated, spin_until, stamp_ns, wrench_vector  # noqa: E402
+from helpers.probe import ProbeNode  # noqa: E402
 from crane_stiffness import topics  # noqa: E402
 from crane_stiffness.params.files import load_params  # noqa: E402
 from crane_stiffness.model.rotation import euler_zxy_to_matrix, matrix_to_quaternion  # noqa: E402
@@ -30,58 +30,32 @@ from crane_stiffness.nodes import load_cell, lvdt  # noqa: E402
 from crane_stiffness.nodes.qos import LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS  # noqa: E402
 from std_msgs.msg import Float64  # noqa: E402
 
+pytestmark = pytest.mark.ros  # every test here starts ROS (conftest)
+
 _ids = itertools.count()
 MS = 1_000_000  # ns
-
-
-def stamp_ns(stamp) -> int:
-    return stamp.sec * 1_000_000_000 + stamp.nanosec
-
-
-def isolated(base: str) -> tuple[str, str, list[str]]:
-    """A unique node name, a topic prefix and the cli_args remapping the rig's topics under that prefix."""
-    name = f'{base}_{os.getpid()}_{next(_ids)}'
-    prefix = f'/{name}_t'
-    args = ['--ros-args', '-r', f'__node:={name}']
-    for topic in (topics.WRENCH_COMMAND, topics.APPLIED_WRENCH, topics.REJECTED_COMMAND, topics.PLATFORM_POSE,
-                  topics.LOAD_CELL_WRENCH, topics.LVDT_DISPLACEMENT, topics.LVDT_ZERO, topics.LOAD_CELL_TARE,
-                  topics.MODEL_STATUS, topics.DIAGNOSTICS):
-        args += ['-r', f'{topic}:={prefix}{topic}']
-    return name, prefix, args
 
 
 def wait_connected(ex, pub, sub_count: int = 1) -> None:
     assert spin_until(ex, lambda: pub.get_subscription_count() >= sub_count, 5.0)
 
 
-def collect_for(ex, seconds: float) -> None:
-    end = time.monotonic() + seconds
-    while time.monotonic() < end:
-        ex.spin_once(timeout_sec=0.01)
-
-
-class LoadCellProbe:
+class LoadCellProbe(ProbeNode):
     """Applies a wrench (publishes what crane_model publishes on /crane/applied_wrench) and records the load cell's
     samples and diagnostics."""
 
     def __init__(self, ctx, prefix: str):
-        self.node = Node(f'probe{prefix.replace("/", "_")}', context=ctx)
+        super().__init__(ctx, prefix, diagnostics_depth=10)
         self.samples: list[tuple[float, str, np.ndarray]] = []  # (stamp, frame, wrench)
         self.arrivals: list[float] = []
-        self.diagnostics: list = []
-        self.cmd = self.node.create_publisher(WrenchStamped, prefix + topics.APPLIED_WRENCH, RELIABLE_QOS)
+        self.cmd = self.publisher(topics.APPLIED_WRENCH, WrenchStamped, RELIABLE_QOS)
         self.node.create_subscription(WrenchStamped, prefix + topics.LOAD_CELL_WRENCH, self._on_sample, SENSOR_QOS)
-        self.node.create_subscription(DiagnosticArray, prefix + topics.DIAGNOSTICS,
-                                      lambda m: self.diagnostics.extend(m.status), 10)
-        self.epochs: list[float] = []  # the zero epochs received on /load_cell/tare
-        self.node.create_subscription(Float64, prefix + topics.LOAD_CELL_TARE, lambda m: self.epochs.append(m.data),
-                                      LATCHED_QOS)
+        # the zero epochs received on /load_cell/tare
+        self.epochs: list[float] = self.record(topics.LOAD_CELL_TARE, Float64, LATCHED_QOS, lambda m: m.data)
 
     def _on_sample(self, msg: WrenchStamped) -> None:
-        f, m = msg.wrench.force, msg.wrench.torque
         self.arrivals.append(time.monotonic())
-        self.samples.append((stamp_ns(msg.header.stamp), msg.header.frame_id,
-                             np.array([f.x, f.y, f.z, m.x, m.y, m.z])))
+        self.samples.append((stamp_ns(msg.header.stamp), msg.header.frame_id, wrench_vector(msg)))
 
     def command(self, wrench) -> int:
         return publish_wrench_now(self.node, self.cmd, wrench, topics.FRAME_BASE)
@@ -217,20 +191,15 @@ def test_node_mains_exit_2_on_bad_parameters(capsys):
     assert 'tare_samples = 0' in err and 'range_m' in err
 
 
-class LvdtProbe:
+class LvdtProbe(ProbeNode):
     def __init__(self, ctx, prefix: str):
-        self.node = Node(f'probe{prefix.replace("/", "_")}', context=ctx)
-        self.samples: list[tuple[float, str, float]] = []
-        self.diagnostics: list = []
-        self.pose = self.node.create_publisher(PoseStamped, prefix + topics.PLATFORM_POSE, RELIABLE_QOS)
-        self.node.create_subscription(
-            PointStamped, prefix + topics.LVDT_DISPLACEMENT,
-            lambda m: self.samples.append((stamp_ns(m.header.stamp), m.header.frame_id, m.point.x)), SENSOR_QOS)
-        self.node.create_subscription(DiagnosticArray, prefix + topics.DIAGNOSTICS,
-                                      lambda m: self.diagnostics.extend(m.status), 10)
-        self.epochs: list[float] = []  # the zero epochs received on /lvdt/zero
-        self.node.create_subscription(Float64, prefix + topics.LVDT_ZERO, lambda m: self.epochs.append(m.data),
-                                      LATCHED_QOS)
+        super().__init__(ctx, prefix, diagnostics_depth=10)
+        self.pose = self.publisher(topics.PLATFORM_POSE, PoseStamped, RELIABLE_QOS)
+        self.samples: list[tuple[float, str, float]] = self.record(
+            topics.LVDT_DISPLACEMENT, PointStamped, SENSOR_QOS,
+            lambda m: (stamp_ns(m.header.stamp), m.header.frame_id, m.point.x))
+        # the zero epochs received on /lvdt/zero
+        self.epochs: list[float] = self.record(topics.LVDT_ZERO, Float64, LATCHED_QOS, lambda m: m.data)
 
     def publish(self, u, q: np.ndarray) -> int:
         msg = PoseStamped()

@@ -8,6 +8,8 @@ from crane_stiffness.analysis.analyze import analyze_session
 from crane_stiffness.testing import rosrun
 from crane_stiffness.testing.rig import run_rig
 
+pytestmark = pytest.mark.ros  # every test here starts ROS (conftest)
+
 #: program -> (fitted axis, stiffness unit); the prediction is the model's along that axis in that unit.
 SERIES = {'side_force': ('fy', 'N/m'), 'force_z': ('fz', 'N/m'), 'moment_z': ('mz', 'N·m/rad')}
 

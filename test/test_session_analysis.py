@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import REPO
+from helpers import REPO
 from crane_stiffness import topics
 from crane_stiffness.analysis.analyze import analyze_session
 from crane_stiffness.analysis.compare import compare_sessions

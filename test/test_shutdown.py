@@ -15,20 +15,20 @@ import time
 from pathlib import Path
 
 import pytest
-import yaml
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.serialization import serialize_message
 from std_msgs.msg import Float64, String
 
-from conftest import spin_until
+from helpers import spin_until
+from helpers.processes import UNCLEAN, assert_bag_complete
 from crane_stiffness.bag import BagWriter, dump_qos_profiles, qos_profile
 from crane_stiffness.rig_description import PACKAGE, rig_nodes
 from crane_stiffness.testing import rosrun
 from crane_stiffness.testing.rig import Observer, start_node
 
+pytestmark = pytest.mark.ros  # every test here starts ROS (conftest)
+
 SESSION = 'shutdown'
-#: Signs of an unclean end in a node's output (rclpy's FATAL callback report, pybind11's abort, faulthandler).
-UNCLEAN = ('Traceback', 'FATAL', 'terminate called', 'Fatal Python error', 'KeyboardInterrupt')
 #: How long the rig runs (program playing, recording on) before the signal [s].
 RUN_S = 3.0
 #: How long a node may take to end after the signal [s].
@@ -43,40 +43,6 @@ def assert_clean_exit(name: str, code: int | None, log: str) -> dict:
     match = re.search(rf'^FINAL_COUNTERS {re.escape(name)} (\{{.*\}})$', log, re.M)
     assert match, f'{name} printed no FINAL_COUNTERS line:\n{log[-3000:]}'
     return json.loads(match.group(1))
-
-
-def assert_bag_complete(bag: Path) -> int:
-    """The bag as independent readers see it: metadata.yaml written and counting what the MCAP files hold, every
-    file finished (summary section present). Returns the message count."""
-    from mcap.reader import make_reader
-    from rosbags.rosbag2 import Reader
-
-    meta_file = bag / 'metadata.yaml'
-    assert meta_file.is_file(), f'no metadata.yaml in {bag}: {sorted(p.name for p in bag.iterdir())}'
-    info = yaml.safe_load(meta_file.read_text())['rosbag2_bagfile_information']
-    total = info['message_count']
-    assert total > 0, info
-    per_topic = {t['topic_metadata']['name']: t['message_count'] for t in info['topics_with_message_count']}
-    assert sum(per_topic.values()) == total
-    # rosbags: reads metadata.yaml and the MCAP storage
-    with Reader(bag) as reader:
-        assert reader.message_count == total
-        counted: dict[str, int] = {}
-        for connection, _, _ in reader.messages():
-            counted[connection.topic] = counted.get(connection.topic, 0) + 1
-    assert counted == {t: n for t, n in per_topic.items() if n}
-    # mcap: every file closed (summary and footer written), its messages those metadata.yaml counts
-    in_files = 0
-    for name in info['relative_file_paths']:
-        with open(bag / name, 'rb') as f:
-            reader = make_reader(f)
-            summary = reader.get_summary()
-            assert summary is not None and summary.statistics is not None, f'{name} has no summary: not closed'
-            n = sum(1 for _ in reader.iter_messages())
-            assert n == summary.statistics.message_count
-            in_files += n
-    assert in_files == total
-    return total
 
 
 def start_rig_at_once(procs: rosrun.Processes, share: Path, bags: Path) -> None:

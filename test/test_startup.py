@@ -11,7 +11,8 @@ from pathlib import Path
 
 import pytest
 
-from conftest import REPO as _REPO
+from helpers import REPO as _REPO
+from helpers.processes import final_counters
 
 from crane_stiffness import topics
 from crane_stiffness.rig_description import RigError, rig_nodes
@@ -28,13 +29,6 @@ def _site(install: Path) -> Path:
 
 def _share(install: Path) -> Path:
     return rosrun.installed_config(install)
-
-
-def _final_counters(log: str) -> dict:
-    for line in reversed(log.splitlines()):
-        if line.startswith('FINAL_COUNTERS '):
-            return json.loads(line.split(' ', 2)[2])
-    return {}
 
 
 def _cache_files(install: Path) -> list[Path]:
@@ -86,8 +80,8 @@ def _check_run(summary: dict, observer: Observer, logs: dict) -> None:
     assert observer.predicted_at is not None and observer.running_at is not None
     assert 'rig ready after' in logs['load_program'], logs['load_program'][-3000:]
     # ... crane_model received every command ...
-    sent = _final_counters(logs['load_program'])['published']
-    received = _final_counters(logs['crane_model'])['received']
+    sent = final_counters(logs['load_program'])['published']
+    received = final_counters(logs['crane_model'])['received']
     # (The program's 100 Hz timer skips ticks when the machine is starved of CPU: ~1,650-2,100 commands in 21 s.)
     assert sent > 1000 and received == sent, (sent, received)
     # ... and the estimate is the model's.
@@ -141,8 +135,8 @@ def test_ros2_run_in_any_order_model_last(install_tree, tmp_path):
     assert codes['load_program'] == 0, logs['load_program'][-3000:]
     assert 'waiting (' in logs['load_program'] and 'crane_model subscribed to /crane/wrench_command' in \
         logs['load_program']
-    sent = _final_counters(logs['load_program'])['published']
-    received = _final_counters(logs['crane_model'])['received']
+    sent = final_counters(logs['load_program'])['published']
+    received = final_counters(logs['crane_model'])['received']
     # 3 s at 100 Hz is 300 ticks, but the timer skips missed periods under CPU starvation (up to ~21 %, see
     # _check_run): half of them proves the program ran; the real check is that the model got every one sent.
     assert sent > 150 and received == sent, (sent, received)

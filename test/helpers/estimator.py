@@ -1,0 +1,271 @@
+"""The estimator tests' rig and probe: a test node playing load cell, LVDT and load program for a spring of known
+stiffness (:class:`SyntheticRig`), a probe recording what stiffness_estimator publishes (:class:`EstimatorProbe`), and
+running the two against an estimator in-process or in its own process. Used by test_estimator_node,
+test_estimator_faults, test_estimator_wiring and test_rezero.
+"""
+from __future__ import annotations
+
+import itertools
+import os
+import signal
+import subprocess
+import sys
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PointStamped, WrenchStamped
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from std_msgs.msg import Float64, Float64MultiArray
+
+from crane_stiffness import topics
+from crane_stiffness.estimation.sync import DISPLACEMENT, FORCE
+from crane_stiffness.nodes.qos import LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS
+from crane_stiffness.nodes.stiffness_estimator import VALUE_FIELDS, StiffnessEstimatorNode
+from crane_stiffness.sim.sampling import SampleClock
+from helpers import NS, spin_until
+from helpers.probe import ProbeNode
+
+K = 1875.0   # N/m, true stiffness of the synthetic spring
+C = 0.15     # N, load at zero displacement (an untared load cell)
+NF = len(VALUE_FIELDS)
+_ids = itertools.count()
+
+
+def isolated_estimator(extra_remaps: dict[str, str] | None = None) -> tuple[str, str, list[str]]:
+    """A unique node name, a topic prefix and cli_args remapping the estimator's topics under that prefix."""
+    name = f'estimator_{os.getpid()}_{next(_ids)}'
+    prefix = f'/{name}_t'
+    args = ['--ros-args', '-r', f'__node:={name}']
+    for topic in (topics.WRENCH_COMMAND, topics.REJECTED_COMMAND, topics.LOAD_CELL_WRENCH, topics.LVDT_DISPLACEMENT,
+                  topics.LVDT_ZERO, topics.LOAD_CELL_TARE, topics.PREDICTED_AXIS_STIFFNESS, topics.STIFFNESS_ESTIMATE,
+                  topics.STIFFNESS_VALUES,
+                  topics.STIFFNESS, topics.DIAGNOSTICS):
+        target = (extra_remaps or {}).get(topic, prefix + topic)
+        args += ['-r', f'{topic}:={target}']
+    return name, prefix, args
+
+
+def row(data, branch: int) -> dict[str, float]:
+    """One branch's fields (0 loading, 1 unloading) of a /stiffness/estimate_values message's data."""
+    return dict(zip(VALUE_FIELDS, list(data)[branch * NF:(branch + 1) * NF]))
+
+
+class SyntheticRig:
+    """A test node playing load cell, LVDT and load program for a linear spring ``F = K·x + C``.
+
+    The load is a triangle 0 → ``peak`` → 0 (``ramp_s`` each way) after ``lead_s`` at zero. Samples are taken on
+    the grid 1/rate of the clock and published in bursts by a 100 Hz timer, like the simulated sensors; the
+    command (optional) is published once per burst with the burst's first stamp. ``inject(i, t_ns)`` is called
+    before sample i and may publish extra messages.
+    """
+
+    def __init__(self, ctx, prefix: str, *, rate_hz: float = 500.0, peak: float = 4.0, ramp_s: float = 1.0,
+                 lead_s: float = 0.1, force_noise: float = 0.02, x_noise: float = 2e-7, seed: int = 1,
+                 force_topic: str | None = None, force_qos=SENSOR_QOS, volts_topic: str | None = None,
+                 volts_gain: float = 1.0, volts_offset: float = 0.0, command: bool = True, inject=None,
+                 burst_hz: float = 100.0, stamp_on_publish: bool = False):
+        self.node = Node(f'rig{prefix.replace("/", "_")}', context=ctx)
+        self.rng = np.random.default_rng(seed)
+        self.peak, self.ramp_s, self.lead_s = peak, ramp_s, lead_s
+        self.force_noise, self.x_noise = force_noise, x_noise
+        self.gain, self.offset = volts_gain, volts_offset
+        self.inject = inject
+        self.stamp_on_publish = stamp_on_publish
+        self.pub_force = self.node.create_publisher(WrenchStamped, force_topic or prefix + topics.LOAD_CELL_WRENCH,
+                                                    force_qos)
+        if volts_topic:
+            self.pub_volts = self.node.create_publisher(Float64, volts_topic, RELIABLE_QOS)
+            self.pub_point = None
+        else:
+            self.pub_point = self.node.create_publisher(PointStamped, prefix + topics.LVDT_DISPLACEMENT,
+                                                        SENSOR_QOS)
+        self.pub_cmd = self.node.create_publisher(WrenchStamped, prefix + topics.WRENCH_COMMAND, RELIABLE_QOS) \
+            if command else None
+        self.clock = SampleClock(rate_hz)
+        # Fault hooks (test_estimator_faults): which samples are published, the LVDT's zero, commands on or off.
+        self.force_ok = lambda i: True
+        self.force_map = lambda i, f: f
+        # Sensor hooks (test_estimator_wiring): the platform wrench at the centre (crane_base) for a load F, what the
+        # F/T sensor reports of it in its own frame, and how late the LVDT's stamps are [ns].
+        self.platform = lambda f: (0.0, f, 0.0, 0.0, 0.0, 0.0)
+        self.sensor = None
+        self.disp_late_ns = 0
+        self.disp_ok = lambda i: True
+        self.x_offset = 0.0
+        self.command_on = True
+        self.start_ns: int | None = None
+        self.sent = 0
+        self.burst_newest: list[int] = []  # stamp of the newest sample of every burst, ns
+        self.done = False
+        self.running = False
+        self.node.create_timer(1.0 / burst_hz, self._tick)
+
+    def start(self) -> None:
+        self.running = True
+
+    def load(self, t_s: float) -> float | None:
+        t = t_s - self.lead_s
+        if t < 0.0:
+            return 0.0
+        if t <= self.ramp_s:
+            return self.peak * t / self.ramp_s
+        if t <= 2 * self.ramp_s:
+            return self.peak * (2 * self.ramp_s - t) / self.ramp_s
+        return None
+
+    def wrench_msg(self, t_ns: int, fy: float, wrench=None) -> WrenchStamped:
+        """A WrenchStamped with force.y = fy, or with all six components of ``wrench``."""
+        msg = WrenchStamped()
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(int(t_ns), NS)
+        msg.header.frame_id = 'load_cell'
+        if wrench is None:
+            msg.wrench.force.y = float(fy)
+        else:
+            w = [float(v) for v in wrench]
+            f, m = msg.wrench.force, msg.wrench.torque
+            f.x, f.y, f.z, m.x, m.y, m.z = w
+        return msg
+
+    def point_msg(self, t_ns: int, x: float) -> PointStamped:
+        msg = PointStamped()
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(int(t_ns), NS)
+        msg.header.frame_id = 'lvdt'
+        msg.point.x = float(x)
+        return msg
+
+    def _tick(self) -> None:
+        now_ns = self.node.get_clock().now().nanoseconds
+        times = self.clock.due(now_ns)
+        if not self.running or self.done or times.size == 0:
+            return
+        if self.stamp_on_publish:  # one sample per tick, stamped now (a driver stamping on receipt)
+            times = np.array([now_ns])
+        if self.start_ns is None:
+            self.start_ns = int(times[0])
+        if self.pub_cmd is not None and self.command_on:
+            first = self.load((int(times[0]) - self.start_ns) / NS)
+            if first is not None:
+                self.pub_cmd.publish(self.wrench_msg(int(times[0]), first, self.platform(first)))
+        newest: int | None = None
+        for t_ns in times.tolist():
+            f = self.load((t_ns - self.start_ns) / NS)
+            if f is None:
+                # The program ended inside this burst: its newest sample is the last one sent, not times[-1].
+                self.done = True
+                break
+            if self.inject is not None:
+                self.inject(self, self.sent, t_ns)
+            x = (f - C) / K + self.rng.normal(0.0, self.x_noise) - self.x_offset
+            measured = self.force_map(self.sent, f + self.rng.normal(0.0, self.force_noise))
+            wrench = self.platform(measured)
+            force_msg = self.wrench_msg(t_ns, measured, wrench if self.sensor is None else self.sensor(wrench))
+            if self.force_ok(self.sent):
+                self.pub_force.publish(force_msg)
+            if self.pub_point is not None:
+                if self.disp_ok(self.sent):
+                    self.pub_point.publish(self.point_msg(t_ns + self.disp_late_ns, x))
+            else:
+                self.pub_volts.publish(Float64(data=(x - self.offset) / self.gain))
+            self.sent += 1
+            newest = int(t_ns)
+        if newest is not None:
+            self.burst_newest.append(newest)
+
+
+class EstimatorProbe(ProbeNode):
+    """Records the estimator's outputs; publishes the latched model prediction."""
+
+    def __init__(self, ctx, prefix: str):
+        super().__init__(ctx, prefix)
+        self.values: list[tuple[int, list[float]]] = []  # (publication time at the estimator ns, data)
+        self.node.create_subscription(Float64MultiArray, prefix + topics.STIFFNESS_VALUES, self._on_values, SENSOR_QOS)
+        self.stiffness: list[float] = self.record(topics.STIFFNESS, Float64, RELIABLE_QOS, lambda m: m.data)
+        self.estimates: list[DiagnosticArray] = self.record(topics.STIFFNESS_ESTIMATE, DiagnosticArray, RELIABLE_QOS)
+        self.pub_prediction = self.publisher(topics.PREDICTED_AXIS_STIFFNESS, Float64, LATCHED_QOS)
+
+    def _on_values(self, msg: Float64MultiArray, info: dict) -> None:
+        self.values.append((info['source_timestamp'], list(msg.data)))
+
+    def last(self, branch: int) -> dict[str, float]:
+        return row(self.values[-1][1], branch)
+
+
+def executor_with(ctx, *nodes) -> SingleThreadedExecutor:
+    """A single-threaded executor in ``ctx`` spinning ``nodes``."""
+    ex = SingleThreadedExecutor(context=ctx)
+    for n in nodes:
+        ex.add_node(n)
+    return ex
+
+
+def run_program(ex, rig: SyntheticRig, estimator: StiffnessEstimatorNode, timeout_s: float = 8.0) -> None:
+    """Wait for the connections, play the program, then let the estimator drain its queue."""
+    assert spin_until(ex, lambda: rig.pub_force.get_subscription_count() >= 1
+                      and (rig.pub_point or rig.pub_volts).get_subscription_count() >= 1
+                      and (rig.pub_cmd is None or rig.pub_cmd.get_subscription_count() >= 1), 5.0)
+    rig.start()
+    assert spin_until(ex, lambda: rig.done, timeout_s)
+    sent = rig.sent
+    spin_until(ex, lambda: estimator.core.sync_counters.force.received >= sent
+               and estimator.core.sync_counters.displacement.received >= sent, 2.0)
+    spin_until(ex, lambda: False, 0.3)
+
+
+def assert_refused(node, param: str, value, words: str) -> None:
+    """Setting ``param`` to ``value`` is refused with a reason containing ``words``; the old value stays."""
+    old = node.get_parameter(param).value
+    result = node.set_parameters([Parameter(param, value=value)])[0]
+    assert not result.successful, param
+    assert words in result.reason, result.reason
+    now = node.get_parameter(param).value
+    if isinstance(old, (list, tuple)) or hasattr(old, 'tolist'):
+        assert list(now) == list(old)
+    else:
+        assert now == old
+
+
+def run_in_own_process(ctx, rig: SyntheticRig, args: list[str], nodes=(), ready=lambda: True,
+                       run_timeout_s: float = 8.0, settle_s: float = 0.5,
+                       stop_timeout_s: float = 10.0) -> subprocess.CompletedProcess:
+    """The estimator as deployed, in its own process (``python -m``), fed by ``rig`` (and watched by ``nodes``):
+    wait for the rig's connections and ``ready``, play the program, settle, then SIGINT. Returns the process's exit
+    status, stdout and stderr (bytes)."""
+    proc = subprocess.Popen([sys.executable, '-m', 'crane_stiffness.nodes.stiffness_estimator'] + args,
+                            env=dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path)),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    ex = executor_with(ctx, *nodes, rig.node)
+    try:
+        assert spin_until(ex, lambda: rig.pub_force.get_subscription_count() >= 1
+                          and rig.pub_point.get_subscription_count() >= 1 and rig.pub_cmd.get_subscription_count() >= 1
+                          and ready(), 60.0)
+        rig.start()
+        assert spin_until(ex, lambda: rig.done, run_timeout_s)
+        spin_until(ex, lambda: False, settle_s)
+    finally:
+        proc.send_signal(signal.SIGINT)
+        try:
+            out, err = proc.communicate(timeout=stop_timeout_s)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            out, err = proc.communicate()
+        ex.shutdown()
+    return subprocess.CompletedProcess(proc.args, proc.returncode, out, err)
+
+
+def statuses(array) -> tuple[list, object]:
+    """(the branch statuses, the input status) of one /stiffness/estimate DiagnosticArray."""
+    return list(array.status[:2]), array.status[2]
+
+
+def identity(c: dict[str, int]) -> None:
+    """Every message the estimator received is accounted for in its final counters."""
+    for s in (FORCE, DISPLACEMENT):
+        used_or_dropped = (c[f'{s}_dropped'] + c[f'{s}_paired'] + c[f'{s}_out_of_order'] + c[f'{s}_non_finite']
+                           + c[f'{s}_stale'] + c[f'{s}_unmatched'] + c[f'{s}_discarded'] + c[f'{s}_pending'])
+        assert c[f'{s}_received'] == used_or_dropped, (s, c)
+        assert c[f'{s}_received'] == c[f'{s}_dropped'] + c[f'{s}_passed_checks'], (s, c)
+    assert c['pairs'] == c['pairs_fitted'] + c['pairs_rejected_command'] + c['pairs_non_finite'], c
+    assert c['command_received'] == c['command_used'] + c['command_rejected'] + c['command_dropped'], c
+
