@@ -26,12 +26,9 @@ PACKAGE = 'crane_stiffness'
 # The node executables: plain scripts in nodes_bin/ (installed to lib/crane_stiffness, see setup.cfg), each three
 # lines into crane_stiffness.entry, which holds SIGINT/SIGTERM while the node's module imports. Not console_scripts:
 # the script setuptools generates for those spends 0.1 s (seconds on a loaded machine) in importlib.metadata before
-# any code of ours runs, and Ctrl-C in that time ended the node with a KeyboardInterrupt traceback.
-NODES = (
-    'load_program', 'crane_model', 'load_cell', 'lvdt', 'stiffness_estimator', 'session_recorder', 'session_player',
-    # Real-hardware drivers and the device emulators that serve the simulated physics through the same protocols.
-    'netft', 'modbus_lvdt', 'rdt_emulator', 'modbus_emulator',
-)
+# any code of ours runs, and Ctrl-C in that time ended the node with a KeyboardInterrupt traceback. The directory is
+# the one list of the package's nodes: a node is crane_stiffness/nodes/<name>.py and nodes_bin/<name>.
+NODES = tuple(sorted(os.listdir(os.path.join(os.path.dirname(os.path.abspath(__file__)), 'nodes_bin'))))
 
 
 # A signal in the first milliseconds of a Python process, while the interpreter itself starts (before any line of

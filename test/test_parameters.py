@@ -19,7 +19,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from std_srvs.srv import Trigger
 
-from helpers import spin_until
+from helpers import REPO, spin_until
 from crane_stiffness.bag import BagWriter, dump_qos_profiles, qos_profile
 from crane_stiffness.nodes.crane_model import CraneModel
 from crane_stiffness.nodes.session_player import SessionPlayer
@@ -249,10 +249,10 @@ def test_the_shared_config_files_hold_only_keys_some_node_knows():
     import importlib
 
     from crane_stiffness.params.files import share_dir
-    from crane_stiffness.nodes.parameters import NODE_MODULES, RCLPY_PARAMS, check_params_files
+    from crane_stiffness.nodes.parameters import RCLPY_PARAMS, check_params_files, node_modules
     files = sorted(str(p) for p in (share_dir() / 'config').glob('*.yaml'))
     assert files
-    for module in NODE_MODULES:
+    for module in node_modules():
         mod = importlib.import_module(f'crane_stiffness.nodes.{module}')
         own = {s.name for s in mod.PARAMS} | set(getattr(mod, 'LIST_PARAMS', {})) | set(RCLPY_PARAMS)
         check_params_files(files, f'/{module}', own)
@@ -269,3 +269,13 @@ def test_main_exits_2_for_a_missing_params_file_without_traceback(tmp_path, caps
     assert lvdt.main(['--ros-args', '--params-file', str(bad)]) == 2
     err = capsys.readouterr().err
     assert str(bad) in err and "'nois_std'" in err and "did you mean 'noise_std'" in err
+
+
+def test_every_node_module_has_its_executable_and_every_executable_its_node():
+    """nodes_bin/ (what setup.py installs for `ros2 run`) and the node modules found at run time are one list."""
+    from crane_stiffness.nodes.parameters import node_modules
+    executables = sorted(p.name for p in (REPO / 'nodes_bin').iterdir())
+    assert executables == sorted(node_modules())
+    assert len(executables) == 11
+    for name in executables:
+        assert f'from crane_stiffness.entry import {name}' in (REPO / 'nodes_bin' / name).read_text()

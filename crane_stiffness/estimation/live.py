@@ -50,7 +50,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 
 
 from crane_stiffness.estimation.branch import BRANCHES, LOADING, Branch
@@ -60,6 +60,7 @@ from crane_stiffness.estimation.quality import CommandRange, fit_problems
 from crane_stiffness.estimation.settings import LiveSettings
 from crane_stiffness.estimation.stream_delay import StreamDelay
 from crane_stiffness.command_limits import command_fault
+from crane_stiffness.estimation import live_status
 from crane_stiffness.estimation.lag import LagHistogram
 from crane_stiffness.estimation.inputs import (CommandHold, InputCounters, StreamHealth,
                                                command_inputs, input_faults)
@@ -506,53 +507,9 @@ class LiveStiffness:
         return out
 
     def accounting(self) -> dict[str, int]:
-        """Every message accounted (the node's final counters): per stream received = dropped (input checks) +
-        passed_checks, and passed_checks = out_of_order + non_finite + stale + unmatched + discarded + pending +
-        paired; pairs = fitted + rejected_command + non_finite; commands received = used + rejected + dropped."""
-        out = {f.name: getattr(self.counters, f.name) for f in fields(self.counters)}
-        sc = self._sync.counters
-        out['pairs'] = sc.pairs
-        for stream, counters in ((FORCE, sc.force), (DISPLACEMENT, sc.displacement)):
-            for f in fields(counters):
-                # the pairing's 'received' are the samples that passed the input checks (not the messages received)
-                key = f'{stream}_passed_checks' if f.name == 'received' else f'{stream}_{f.name}'
-                out[key] = getattr(counters, f.name)
-            out[f'{stream}_pending'] = self._sync.pending(stream)
-        return out
+        """Every message accounted (the node's final counters; :func:`~.live_status.accounting`)."""
+        return live_status.accounting(self)
 
     def input_report(self, consumer: str = '', now_s: float = math.nan) -> tuple[int, str, list[tuple[str, str]]]:
-        """Input health: (level, message, key/values); ERROR if a stream is silent (``now_s``: node clock, s), WARN
-        if a rejected command is in force, a stream lost too many samples, or samples were dropped, out of order,
-        stale or lost in a dropout since this ``consumer``'s previous call."""
-        c = self.counters
-        sc = self._sync.counters
-        problems = {
-            'dropped': c.dropped,
-            'out_of_order': sc.total('out_of_order'),
-            'stale': sc.total('stale'),
-            'dropouts': sc.total('dropouts'),
-        }
-        snapshot = tuple(problems.values())
-        previous = self._last_report.get(consumer, (0,) * len(snapshot))
-        self._last_report[consumer] = snapshot
-        new = {k: now - before for (k, now), before in zip(problems.items(), previous) if now > before}
-        pairs = [(f.name, str(getattr(c, f.name))) for f in fields(c)]
-        pairs += [('pairs', str(sc.pairs))]
-        for stream, counters in ((FORCE, sc.force), (DISPLACEMENT, sc.displacement)):
-            pairs += [(f'{stream}.{f.name}', str(getattr(counters, f.name))) for f in fields(counters)]
-        for stream, health in self.health.items():
-            pairs += [(f'{stream}.received_fraction', status_value(health.received_fraction())),
-                      (f'{stream}.silent_s', status_value(health.silent_for(now_s)))]
-        pairs += [('segment', str(c.segments)), ('segment_reason', self._segment_reason)]
-        pairs += [('newest_pair_stamp', status_value(self._newest_stamp))]
-        pairs += [(f'lag_{name}_ms', status_value(value * 1e3)) for name, value in (
-            ('p50', self.lag.percentile(50)), ('p99', self.lag.percentile(99)), ('max', self.lag.max_s))]
-        pairs += [('lag_n', str(self.lag.n))]
-        pairs += self._delay.values()
-        level, reasons = self.input_problems(now_s)
-        if new:
-            level = max(level, WARN)
-            reasons.append('since last report: ' + ', '.join(f'{v} {k}' for k, v in new.items()))
-        if reasons:
-            return level, '; '.join(reasons), pairs
-        return OK, f'{sc.pairs} pairs, {c.pairs_fitted} fitted', pairs
+        """Input health: (level, message, key/values) (:func:`~.live_status.input_report`)."""
+        return live_status.input_report(self, consumer, now_s)

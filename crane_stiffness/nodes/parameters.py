@@ -25,10 +25,6 @@ from crane_stiffness.params.spec import ParamSpec, check_spec
 from crane_stiffness.params.files import ParamFile, applicable_sections, param_names_from_args, params_files_from_args
 
 
-#: Modules of the package's nodes (crane_stiffness.nodes.<module>.PARAMS): the parameter names a ``/**`` section of a
-#: parameter file may hold.
-NODE_MODULES = ('load_program', 'crane_model', 'load_cell', 'lvdt', 'stiffness_estimator', 'session_recorder',
-                'session_player', 'netft', 'modbus_lvdt', 'rdt_emulator', 'modbus_emulator')
 #: Parameters the package's files share across nodes under ``/**`` (the geometry): known to be some node's without
 #: importing every node module (package_parameter_names costs ~1.4 s at each start).
 SHARED_PARAMS = frozenset(spec.name for spec in GEOMETRY_PARAMS)
@@ -248,11 +244,27 @@ def started_with(argv: Sequence[str]) -> Iterator[None]:
         _start_args = None
 
 
+def node_modules() -> tuple[str, ...]:
+    """The package's nodes: the modules of crane_stiffness.nodes with ``PARAMS`` and a ``main`` (each has its
+    executable nodes_bin/<name>, which setup.py installs; test_parameters pins the two together). Imports them all
+    (~1.4 s): only for a key a ``/**`` section names that is not the geometry's."""
+    import importlib
+    import pkgutil
+
+    import crane_stiffness.nodes as package
+    names = []
+    for info in pkgutil.iter_modules(package.__path__):
+        module = importlib.import_module(f'{package.__name__}.{info.name}')
+        if hasattr(module, 'PARAMS') and hasattr(module, 'main'):
+            names.append(info.name)
+    return tuple(names)
+
+
 def package_parameter_names() -> set[str]:
     """Every parameter some node of the package declares (what a ``/**`` section may hold)."""
     import importlib
     names = set(RCLPY_PARAMS)
-    for module in NODE_MODULES:
+    for module in node_modules():
         mod = importlib.import_module(f'crane_stiffness.nodes.{module}')
         names.update(s.name for s in getattr(mod, 'PARAMS', ()))
         names.update(getattr(mod, 'LIST_PARAMS', {}))

@@ -37,7 +37,6 @@ import json
 import os
 import socket
 import threading
-from datetime import datetime, timezone
 from functools import partial
 from pathlib import Path
 from typing import Any, Sequence
@@ -54,74 +53,25 @@ from std_srvs.srv import Trigger
 from crane_stiffness import __version__, topics
 from crane_stiffness.bag import BagWriter, dump_qos_profiles
 from crane_stiffness.bag.errors import BagError, BagWriteFailedError
-from crane_stiffness.bag.writer import COMPRESSIONS
-from crane_stiffness.params.geometry import GEOMETRY_PARAMS, geometry_from_params
-from crane_stiffness.params.spec import ParamSpec
 from crane_stiffness.nodes.diagnostics import Diagnostics
 from crane_stiffness.nodes.run import run
 from crane_stiffness.nodes.parameter_reader import NodeParameterReader, plain
-from crane_stiffness.nodes.parameters import Params, check, valid_topic_name
+from crane_stiffness.nodes.parameters import Params
+from crane_stiffness.nodes.session_recorder_params import (OWN_SECTIONS, PARAMS, RECORDING_KEYS, utc_session_name,
+                                                          validate)
 from crane_stiffness.nodes.session_qos import (adapted_qos, contract_qos, has_header, message_class,
                                                offered_profiles, publisher_types)
-from crane_stiffness.params.files import NodeSections, params_files_from_args, read_params_files
+from crane_stiffness.params.files import params_files_from_args, read_params_files
 from crane_stiffness.serde import header_stamp_ns
 from crane_stiffness.session_record import (NODE_PARAMETERS_METADATA, SESSION_END_METADATA, SESSION_METADATA,
                                             session_record)
-from crane_stiffness.sim.program import PROGRAM_KEYS, PROGRAM_PARAMS, LoadProgram
+from crane_stiffness.sim.program import PROGRAM_KEYS
 from crane_stiffness.status import ERROR, OK
 
-
-PROGRAM_DEFAULTS = {p.name: p.default for p in PROGRAM_PARAMS}
-#: Sections of a parameter file that hold this node's own parameters (not recorded as another node's): ROS's rule.
-OWN_SECTIONS = NodeSections('session_recorder')
-
-#: Longest flush interval, split duration and stop delay [s]: finite (a timer period and a duration in ns must be
-#: integers) and longer than any session.
-MAX_INTERVAL_S = 86400.0
-
-PARAMS = GEOMETRY_PARAMS + PROGRAM_PARAMS + (
-    ParamSpec('topics', list(topics.RIG_TOPICS), 'topics to record; rig topics use their contract type and QoS, '
-              'others are subscribed once a publisher appears [-]'),
-    ParamSpec('session', '', "bag name: the bag is <output_dir>/<session>/; '' = session_<UTC time> [-]"),
-    ParamSpec('output_dir', 'bags', 'directory the session bags are written to [-]'),
-    ParamSpec('compression', 'zstd', 'MCAP chunk compression: zstd, lz4 or none [-]'),
-    ParamSpec('chunk_size', 262144, 'uncompressed MCAP chunk size; a chunk is on disk once full [bytes]', low=1),
-    ParamSpec('flush_interval_s', 0.5, 'also write the current chunk once it is this old, so a crash (SIGKILL) loses '
-              'at most this much; 0 = by size only [s]', low=0.0, high=MAX_INTERVAL_S),
-    ParamSpec('split_max_bytes', 0, 'start a new .mcap file at this size, 0 = never [bytes]', low=0,
-              rule='0 (never) or >= 1024'),
-    ParamSpec('split_max_duration_s', 0.0, 'start a new .mcap file after this much time, 0 = never [s]', low=0.0,
-              high=MAX_INTERVAL_S),
-    ParamSpec('fsync', False, 'fsync every write (survives power loss too; slower) [-]'),
-    ParamSpec('autostart', True, 'start recording when the node starts (else call ~/start) [-]'),
-    ParamSpec('stop_on_program_done', True, "stop and close the bag when /load_program/state reports 'done' after "
-              'the program ran [-]'),
-    ParamSpec('stop_delay_s', 1.0, "keep recording this long after 'done' so the last samples and estimates "
-              'arrive [s]', low=0.0, high=MAX_INTERVAL_S),
-    ParamSpec('exit_on_program_done', False, 'shut the node down once the bag closed at the program end is '
-              'written [-]'),
-    ParamSpec('executor', 'events', "executor of the recorder process: 'events' (rclpy's EventsExecutor, in C++: "
-              "about a quarter of the CPU per message) or 'single' (SingleThreadedExecutor); read at start [-]"),
-    ParamSpec('notes', '', 'free text stored with the session (operator, specimen, remarks) [-]'),
-    ParamSpec('record_node_parameters', ['/crane_model', '/load_program', '/load_cell', '/lvdt',
-                                         '/stiffness_estimator'],
-              'nodes whose parameters are read over ROS (get_parameters) once they appear and stored with the '
-              "session; [''] = none [-]"),
-)
-
-#: Settings read when a recording starts; their change applies to the next recording.
-RECORDING_KEYS = ('topics', 'session', 'output_dir', 'compression', 'chunk_size', 'flush_interval_s',
-                  'split_max_bytes', 'split_max_duration_s', 'fsync')
 
 # rclpy puts a QoS-event handler into every wait of the executor for each subscription with the default event
 # callbacks (~15 µs each per wait): with a dozen recorded topics at a few kHz that is a large share of a core.
 _NO_EVENTS = SubscriptionEventCallbacks(use_default_callbacks=False)
-
-
-def utc_session_name(now_ns: int) -> str:
-    return 'session_' + datetime.fromtimestamp(now_ns / 1e9, tz=timezone.utc).strftime('%Y%m%dT%H%M%SZ')
-
-
 
 
 class _Channel:
@@ -138,29 +88,6 @@ class _Channel:
         self.subscription: Subscription | None = None
         self.added = False
         self.count = 0
-
-
-def _validate(values: dict[str, Any]) -> dict[str, Any]:
-    check(values['compression'] in COMPRESSIONS, 'compression', values['compression'],
-          f'must be one of {", ".join(sorted(COMPRESSIONS))}')
-    check(values['split_max_bytes'] == 0 or values['split_max_bytes'] >= 1024, 'split_max_bytes',
-          values['split_max_bytes'], 'must be 0 (no split) or >= 1024 bytes')
-    session = values['session']
-    check(session == '' or (session not in ('.', '..') and '/' not in session), 'session', session,
-          "must be '' or a directory name without '/'")
-    check(values['output_dir'] != '', 'output_dir', values['output_dir'], 'must not be empty')
-    check(values['executor'] in ('events', 'single'), 'executor', values['executor'], "must be 'events' or 'single'")
-    names = list(values['topics'])
-    check(bool(names) and all(isinstance(t, str) and t for t in names), 'topics', names,
-          'must be a non-empty list of topic names')
-    for t in names:
-        check(valid_topic_name(t), 'topics', names, f'{t!r} is not a valid topic name')
-    geometry = geometry_from_params(values)  # GeometryError (a ValueError) names the field
-    program_values = {k: plain(values[k]) for k in PROGRAM_KEYS}
-    program = None
-    if program_values != PROGRAM_DEFAULTS:
-        program = LoadProgram.from_params(program_values)  # ParameterError (a ValueError) names the field
-    return {'geometry': geometry, 'program': program}
 
 
 class SessionRecorder(Node):
@@ -193,7 +120,7 @@ class SessionRecorder(Node):
         self._lock = threading.Lock()
         self.params_files = list(params_files)
         self.built: dict[str, Any] = {}
-        self.params = Params(self, PARAMS, _validate, self._apply)
+        self.params = Params(self, PARAMS, validate, self._apply)
         self.create_service(Trigger, '~/start', self._srv_start)
         self.create_service(Trigger, '~/stop', self._srv_stop)
         self.diagnostics = Diagnostics(self, self._report)
