@@ -21,9 +21,7 @@ import argparse
 import json
 import os
 import random
-import signal
 import socket
-import subprocess
 import sys
 import time
 from array import array
@@ -35,6 +33,7 @@ os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ.setdefault('ROS_DOMAIN_ID', str(random.randint(1, 100)))
 os.environ.setdefault('AMENT_PREFIX_PATH', sys.prefix)
 
+from crane_stiffness.testing import rosrun  # noqa: E402
 import numpy as np  # noqa: E402
 
 TICKS = os.sysconf('SC_CLK_TCK')
@@ -51,22 +50,6 @@ def final_counters(log: str, prefix: str = 'FINAL_COUNTERS ') -> dict:
         if line.startswith(prefix):
             return json.loads(line.split(' ', 2)[2])
     return {}
-
-
-def start(executable: str, args: list[str], log: Path) -> subprocess.Popen:
-    with open(log, 'w') as out:
-        return subprocess.Popen([str(Path(sys.prefix) / 'bin' / executable), *args], stdout=out,
-                                stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, start_new_session=True)
-
-
-def stop(proc: subprocess.Popen) -> None:
-    if proc.poll() is None:
-        os.killpg(proc.pid, signal.SIGINT)
-        try:
-            proc.wait(timeout=15)
-        except subprocess.TimeoutExpired:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait()
 
 
 def run(rate: float, publish_rate: float, seconds: float, log_dir: Path, command: str = 'realtime',
@@ -93,13 +76,13 @@ def run(rate: float, publish_rate: float, seconds: float, log_dir: Path, command
         sec, nanosec, _ = decode_stamped(data, 6)
         seen.extend((sec * 1_000_000_000 + nanosec, time.time_ns()))
     node.create_subscription(WrenchStamped, topics.LOAD_CELL_WRENCH, on_wrench, SENSOR_QOS, raw=True)
-    emu = start('rdt_emulator', ['--ros-args', '-p', f'port:={port}', '-p', f'sample_rate_hz:={rate}'],
-                log_dir / 'rdt_emulator.log')
+    emu = rosrun.start_installed('rdt_emulator', ['--ros-args', '-p', f'port:={port}', '-p',
+                                                  f'sample_rate_hz:={rate}'], log_dir / 'rdt_emulator.log')
     time.sleep(1.0)
-    ft = start('netft', ['--ros-args', '-p', 'host:=127.0.0.1', '-p', f'port:={port}', '-p',
-                         'counts_per_force:=1000000.0', '-p', 'counts_per_torque:=1000000.0', '-p',
-                         f'sample_rate_hz:={rate}', '-p', f'publish_rate_hz:={publish_rate}', '-p',
-                         f'command:={command}'], log_dir / 'netft.log')
+    ft = rosrun.start_installed('netft', ['--ros-args', '-p', 'host:=127.0.0.1', '-p', f'port:={port}', '-p',
+                                          'counts_per_force:=1000000.0', '-p', 'counts_per_torque:=1000000.0', '-p',
+                                          f'sample_rate_hz:={rate}', '-p', f'publish_rate_hz:={publish_rate}', '-p',
+                                          f'command:={command}'], log_dir / 'netft.log')
     try:
         deadline = time.monotonic() + 60
         while node.count_publishers(topics.LOAD_CELL_WRENCH) < 1 or len(seen) < 2000:
@@ -119,8 +102,8 @@ def run(rate: float, publish_rate: float, seconds: float, log_dir: Path, command
         cpu = {p.pid: (cpu_seconds(p.pid) - cpu0[p.pid]) / wall for p in (ft, emu)}
         last_index = len(seen) // 2
     finally:
-        stop(ft)
-        stop(emu)
+        rosrun.interrupt(ft, 15.0)
+        rosrun.interrupt(emu, 15.0)
         t_drain = time.monotonic() + 1.0
         while time.monotonic() < t_drain:
             executor.spin_once(timeout_sec=0.01)

@@ -114,3 +114,18 @@ def pytest_terminal_summary(terminalreporter):
             + ', '.join(n.split('::')[-1] for n in _NOT_RUN))
     elif GENUINE_CLI:
         terminalreporter.write_line(f'genuine ros2 CLI: {GENUINE_CLI}')
+
+
+# --- the bag of the bag I/O tests (test_bag_io, test_bag_damage): one per module ---
+@pytest.fixture(scope='module')
+def messages():
+    """Rig messages serialized by rclpy (helpers.bags.make_messages)."""
+    from helpers.bags import make_messages
+    return make_messages()
+
+
+@pytest.fixture(scope='module')
+def bag(tmp_path_factory, messages):
+    """A bag of ``messages`` written by our writer, small chunks."""
+    from helpers.bags import write_bag
+    return write_bag(tmp_path_factory.mktemp('bags') / 'session', messages, chunk_size=16 * 1024)

@@ -3,7 +3,6 @@ chunk, a file that is not MCAP, damaged metadata, misuse, and the reader without
 from __future__ import annotations
 
 import os
-import random
 import shutil
 import signal
 import subprocess
@@ -17,36 +16,19 @@ import numpy as np
 import pytest
 import yaml
 
-REPO = Path(__file__).resolve().parents[1]
-os.environ.setdefault('AMENT_PREFIX_PATH', sys.prefix)
-os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-os.environ.setdefault('ROS_DOMAIN_ID', str(random.randint(1, 100)))
-
-from crane_stiffness.bag import (  # noqa: E402
+from crane_stiffness.bag import (
     BagCorruptError, BagDamageWarning, BagExistsError, BagFormatError, BagReader, BagWriter, BagWriterError,
     McapFile, TopicNotFoundError, UnsupportedTypeError, recover_bag,
 )
-from crane_stiffness.bag.msgdef import SEPARATOR, message_definition  # noqa: E402
-from crane_stiffness.session_record import read_session  # noqa: E402
+from crane_stiffness.bag.msgdef import SEPARATOR, message_definition
+from crane_stiffness.session_record import read_session
 
-rclpy_serialization = pytest.importorskip('rclpy.serialization')
-from sensor_msgs.msg import JointState  # noqa: E402
-from std_msgs.msg import String  # noqa: E402
+from sensor_msgs.msg import JointState
+from std_msgs.msg import String
 
-serialize = rclpy_serialization.serialize_message
-
-from helpers.bags import (JOINTS, RIG, T0, decoded, expected_by_topic, make_messages,  # noqa: E402
-                          read_with_mcap_ros2, read_with_rosbags, write_bag)
-
-
-@pytest.fixture(scope='module')
-def messages():
-    return make_messages()
-
-
-@pytest.fixture(scope='module')
-def bag(tmp_path_factory, messages) -> Path:
-    return write_bag(tmp_path_factory.mktemp('bags') / 'session', messages, chunk_size=16 * 1024)
+from helpers import REPO
+from helpers.bags import (JOINTS, RIG, T0, decoded, expected_by_topic, read_with_mcap_ros2, read_with_rosbags,
+                          serialize)
 
 
 # ------------------------------------------------------------------------------------------ crash safety --

@@ -6,42 +6,22 @@ ros2msg schema text we wrote). Crash safety and damage: test_bag_damage.py.
 from __future__ import annotations
 
 import os
-import random
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 import yaml
 
-REPO = Path(__file__).resolve().parents[1]
-os.environ.setdefault('AMENT_PREFIX_PATH', sys.prefix)
-os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-os.environ.setdefault('ROS_DOMAIN_ID', str(random.randint(1, 100)))
-
-from crane_stiffness.bag import (  # noqa: E402
+from crane_stiffness.bag import (
     BagDamageWarning, BagReader, BagWriter, McapFile,
 )
-from crane_stiffness.bag.msgdef import SEPARATOR, type_description_hash  # noqa: E402
-from crane_stiffness.session_record import SESSION_METADATA, read_session  # noqa: E402
+from crane_stiffness.bag.msgdef import SEPARATOR, type_description_hash
+from crane_stiffness.session_record import SESSION_METADATA, read_session
 
-rclpy_serialization = pytest.importorskip('rclpy.serialization')
-from std_msgs.msg import Float64  # noqa: E402
+from std_msgs.msg import Float64
 
-serialize = rclpy_serialization.serialize_message
-
-from helpers.bags import (RIG, T0, TOPICS, decoded, expected_by_topic, make_messages,  # noqa: E402
+from helpers.bags import (RIG, T0, TOPICS, decoded, expected_by_topic, make_messages, serialize,
                           read_with_mcap_ros2, read_with_rosbags, write_bag)
-
-
-@pytest.fixture(scope='module')
-def messages():
-    return make_messages()
-
-
-@pytest.fixture(scope='module')
-def bag(tmp_path_factory, messages) -> Path:
-    return write_bag(tmp_path_factory.mktemp('bags') / 'session', messages, chunk_size=16 * 1024)
 
 
 # ------------------------------------------------------------------------------------------- round trips --

@@ -176,6 +176,30 @@ class Processes:
         self.stop()
 
 
+def start_installed(executable: str, args: Sequence[str], log: str | os.PathLike) -> subprocess.Popen:
+    """The executable installed beside this interpreter (``.venv/bin``: a node, ``crane-stiffness``) in a session of
+    its own, its output to ``log``."""
+    exe = Path(sys.prefix) / 'bin' / executable
+    if not exe.exists():
+        raise RosRunError(f'{exe} missing: run `make install` first')
+    with open(log, 'w') as out:
+        return subprocess.Popen([str(exe), *args], stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+                                start_new_session=True)
+
+
+def interrupt(proc: subprocess.Popen, timeout_s: float = 10.0) -> int:
+    """Ctrl-C for a process started in a session of its own: SIGINT to its group, SIGKILL after ``timeout_s``; its
+    exit status."""
+    if proc.poll() is None:
+        os.killpg(proc.pid, signal.SIGINT)
+        try:
+            proc.wait(timeout=timeout_s)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    return proc.returncode
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if len(argv) < 2:

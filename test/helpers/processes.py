@@ -8,13 +8,12 @@ crane_stiffness.testing.rig/rosrun's.)
 from __future__ import annotations
 
 import json
-import os
-import signal
 import subprocess
-import sys
 from pathlib import Path
 
 import yaml
+
+from crane_stiffness.testing import rosrun
 
 #: Signs of an unclean end in a node's output (rclpy's FATAL callback report, pybind11's abort, faulthandler).
 UNCLEAN = ('Traceback', 'FATAL', 'terminate called', 'Fatal Python error', 'KeyboardInterrupt')
@@ -22,23 +21,12 @@ UNCLEAN = ('Traceback', 'FATAL', 'terminate called', 'Fatal Python error', 'Keyb
 
 def start_node_process(executable: str, args: list[str], log: Path) -> subprocess.Popen:
     """The installed console script (what `ros2 run crane_stiffness <executable>` runs), in its own process."""
-    exe = Path(sys.prefix) / 'bin' / executable
-    assert exe.exists(), f'{exe} missing: run `make install` first'
-    with open(log, 'w') as out:
-        return subprocess.Popen([str(exe), *args], stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-                                start_new_session=True)
+    return rosrun.start_installed(executable, args, log)
 
 
 def stop_node_process(proc: subprocess.Popen, log: Path) -> tuple[int, str]:
     """SIGINT to the process's group (SIGKILL after 10 s); its exit status and output."""
-    if proc.poll() is None:
-        os.killpg(proc.pid, signal.SIGINT)
-        try:
-            proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait()
-    return proc.returncode, log.read_text(errors='replace')
+    return rosrun.interrupt(proc, 10.0), log.read_text(errors='replace')
 
 
 def final_counters(log: str, node: str | None = None) -> dict:
