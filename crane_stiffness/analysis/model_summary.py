@@ -78,7 +78,7 @@ def model_summary(data: SessionData, steps: list[Step], commands: CommandSeries 
         assert lvdt is not None  # a scale comes from recorded LVDT parameters
         problems.append(f'the LVDT (axis {lvdt.get("axis")}, contact point {lvdt.get("contact_point")}) does not see '
                         f'motion along {axis}: measured points are not comparable with the model curves')
-    summary = ModelSummary(axis=axis, unit='N/m' if axis.startswith('f') else 'N·m/rad', tangent_at_rest=tangent,
+    summary = ModelSummary(axis=axis, unit=data.settings.stiffness_unit, tangent_at_rest=tangent,
                            eq18=eq18, elastic_w0=elastic, single_wire_w6=pendulum, recorded_prediction=recorded,
                            lvdt_scale=scale)
     if peak != 0.0:

@@ -20,8 +20,7 @@ from rclpy.parameter import Parameter
 from rclpy.validate_topic_name import validate_topic_name
 
 from crane_stiffness.params.geometry import GEOMETRY_PARAMS
-from crane_stiffness.errors import ParameterError
-from crane_stiffness.params.spec import ParamSpec, check_spec
+from crane_stiffness.params.spec import ParamSpec, check_spec, is_number as _is_number
 from crane_stiffness.params.files import ParamFile, applicable_sections, param_names_from_args, params_files_from_args
 
 
@@ -49,10 +48,6 @@ def _kind(default: Any) -> str:
         plural = next((p for t, _, p in _KINDS if default and isinstance(default[0], t)), None)
         return f'a list of {plural}' if plural else 'a list'
     return next((one for t, one, _ in _KINDS if isinstance(default, t)), 'a value')
-
-
-def _is_number(v: Any) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool)
 
 
 def coerce(spec: ParamSpec, value: Any) -> Any:
@@ -101,14 +96,11 @@ def descriptor(spec: ParamSpec) -> ParameterDescriptor:
 
 
 def check_range(spec: ParamSpec, value: Any) -> None:
-    """The declared rule of ``spec`` (choices, ``above``, the inclusive range low/high; rclpy enforces the range at
-    runtime too), in our words: ValueError('name = value: must be ...')."""
-    if isinstance(value, (list, tuple, array)):
-        return
-    try:
+    """The declared rule of ``spec`` (choices, ``above``, ``at_least``/``at_most``, the inclusive range low/high;
+    rclpy enforces the range at runtime too), in our words: ParameterError, a ValueError ('name = value: must be
+    ...'). Lists are the owner's to check."""
+    if not isinstance(value, (list, tuple, array)):
         check_spec(spec, value)
-    except ParameterError as exc:
-        raise ValueError(f'{spec.name} = {show(value)}: {exc.rule}') from None
 
 
 class Params:
@@ -244,30 +236,28 @@ def started_with(argv: Sequence[str]) -> Iterator[None]:
         _start_args = None
 
 
-def node_modules() -> tuple[str, ...]:
-    """The package's nodes: the modules of crane_stiffness.nodes with ``PARAMS`` and a ``main`` (each has its
-    executable nodes_bin/<name>, which setup.py installs; test_parameters pins the two together). Imports them all
-    (~1.4 s): only for a key a ``/**`` section names that is not the geometry's."""
+def node_modules() -> dict[str, Any]:
+    """The package's nodes: {name: module} of the modules of crane_stiffness.nodes with ``PARAMS`` and a ``main``
+    (each has its executable nodes_bin/<name>, which setup.py installs; test_parameters pins the two together).
+    Imports them all (~1.4 s): only for a key a ``/**`` section names that is not the geometry's."""
     import importlib
     import pkgutil
 
     import crane_stiffness.nodes as package
-    names = []
+    found = {}
     for info in pkgutil.iter_modules(package.__path__):
         module = importlib.import_module(f'{package.__name__}.{info.name}')
         if hasattr(module, 'PARAMS') and hasattr(module, 'main'):
-            names.append(info.name)
-    return tuple(names)
+            found[info.name] = module
+    return found
 
 
 def package_parameter_names() -> set[str]:
     """Every parameter some node of the package declares (what a ``/**`` section may hold)."""
-    import importlib
     names = set(RCLPY_PARAMS)
-    for module in node_modules():
-        mod = importlib.import_module(f'crane_stiffness.nodes.{module}')
-        names.update(s.name for s in getattr(mod, 'PARAMS', ()))
-        names.update(getattr(mod, 'LIST_PARAMS', {}))
+    for module in node_modules().values():
+        names.update(s.name for s in module.PARAMS)
+        names.update(getattr(module, 'LIST_PARAMS', {}))
     return names
 
 

@@ -27,7 +27,8 @@ PARAMS = GEOMETRY_PARAMS + PROGRAM_PARAMS + (
               'others are subscribed once a publisher appears [-]'),
     ParamSpec('session', '', "bag name: the bag is <output_dir>/<session>/; '' = session_<UTC time> [-]"),
     ParamSpec('output_dir', 'bags', 'directory the session bags are written to [-]'),
-    ParamSpec('compression', 'zstd', 'MCAP chunk compression: zstd, lz4 or none [-]'),
+    ParamSpec('compression', 'zstd', 'MCAP chunk compression: zstd, lz4 or none [-]',
+              choices=tuple(sorted(COMPRESSIONS))),
     ParamSpec('chunk_size', 262144, 'uncompressed MCAP chunk size; a chunk is on disk once full [bytes]', low=1),
     ParamSpec('flush_interval_s', 0.5, 'also write the current chunk once it is this old, so a crash (SIGKILL) loses '
               'at most this much; 0 = by size only [s]', low=0.0, high=MAX_INTERVAL_S),
@@ -44,7 +45,8 @@ PARAMS = GEOMETRY_PARAMS + PROGRAM_PARAMS + (
     ParamSpec('exit_on_program_done', False, 'shut the node down once the bag closed at the program end is '
               'written [-]'),
     ParamSpec('executor', 'events', "executor of the recorder process: 'events' (rclpy's EventsExecutor, in C++: "
-              "about a quarter of the CPU per message) or 'single' (SingleThreadedExecutor); read at start [-]"),
+              "about a quarter of the CPU per message) or 'single' (SingleThreadedExecutor); read at start [-]",
+              choices=('events', 'single')),
     ParamSpec('notes', '', 'free text stored with the session (operator, specimen, remarks) [-]'),
     ParamSpec('record_node_parameters', ['/crane_model', '/load_program', '/load_cell', '/lvdt',
                                          '/stiffness_estimator'],
@@ -58,15 +60,12 @@ RECORDING_KEYS = ('topics', 'session', 'output_dir', 'compression', 'chunk_size'
 
 
 def validate(values: dict[str, Any]) -> dict[str, Any]:
-    check(values['compression'] in COMPRESSIONS, 'compression', values['compression'],
-          f'must be one of {", ".join(sorted(COMPRESSIONS))}')
     check(values['split_max_bytes'] == 0 or values['split_max_bytes'] >= 1024, 'split_max_bytes',
           values['split_max_bytes'], 'must be 0 (no split) or >= 1024 bytes')
     session = values['session']
     check(session == '' or (session not in ('.', '..') and '/' not in session), 'session', session,
           "must be '' or a directory name without '/'")
     check(values['output_dir'] != '', 'output_dir', values['output_dir'], 'must not be empty')
-    check(values['executor'] in ('events', 'single'), 'executor', values['executor'], "must be 'events' or 'single'")
     names = list(values['topics'])
     check(bool(names) and all(isinstance(t, str) and t for t in names), 'topics', names,
           'must be a non-empty list of topic names')

@@ -12,7 +12,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
-from typing import Any, Sequence
+from typing import Any
 
 from crane_stiffness.errors import ParameterError
 
@@ -75,7 +75,8 @@ def range_text(spec: ParamSpec) -> str:
     return f'>= {spec.low}' if spec.low is not None else f'<= {spec.high}'
 
 
-def _is_number(value: Any) -> bool:
+def is_number(value: Any) -> bool:
+    """A Python int or float, not a bool."""
     return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
@@ -90,7 +91,7 @@ def check_spec(spec: ParamSpec, value: Any) -> None:
     bounds = (spec.above, spec.at_least, spec.at_most, spec.low, spec.high)
     if all(b is None for b in bounds):
         return
-    if not _is_number(value) or not math.isfinite(value):
+    if not is_number(value) or not math.isfinite(value):
         raise ParameterError(spec.name, value, 'must be a finite number')
     if spec.above is not None and value <= spec.above:
         raise ParameterError(spec.name, value, f'must be > {spec.above:g}')
@@ -125,12 +126,4 @@ def specs_of(settings: Any, prefix: str = '') -> tuple[ParamSpec, ...]:
     return tuple(out)
 
 
-def spec_named(specs: Sequence[ParamSpec], name: str) -> ParamSpec:
-    """The spec called ``name`` (KeyError naming it otherwise)."""
-    for spec in specs:
-        if spec.name == name:
-            return spec
-    raise KeyError(name)
-
-
-__all__ = ['ParamSpec', 'check_spec', 'declared', 'range_text', 'spec_named', 'specs_of']
+__all__ = ['ParamSpec', 'check_spec', 'declared', 'is_number', 'range_text', 'specs_of']

@@ -43,7 +43,8 @@ def gather(buf: np.ndarray, offsets: np.ndarray, dtype: Any) -> np.ndarray:
     return rows.view(dt).reshape(np.shape(offsets))
 
 
-def _align(value: np.ndarray, alignment: int) -> np.ndarray:
+def _align(value: Any, alignment: int) -> Any:
+    """``value`` (an int or an int array) rounded up to a multiple of ``alignment`` (a power of two)."""
     return (value + (alignment - 1)) & ~(alignment - 1)
 
 
@@ -173,7 +174,7 @@ class _StampedDoubles(Decoder):
         if buf[first] != 0 or buf[first + 1] != 1:
             return None
         slen = int(buf[first + 12:first + 16].view('<u4')[0])
-        start = 4 + (12 + slen + 7) // 8 * 8  # the float64 fields, aligned to 8 after the header (see module doc)
+        start = 4 + int(_align(12 + slen, 8))
         n = len(self.names)
         if slen < 1 or start + 8 * n > int(dlen[0]):
             return None

@@ -189,7 +189,7 @@ def pair_by_stamp(force_stamp: np.ndarray, force_log: np.ndarray, disp_stamp: np
         return PairResult(np.zeros(0, np.int64), np.zeros(0, np.int64), counters)
     f = force_stamp[f_idx]
     d = disp_stamp[d_idx]
-    if f.size == d.size and np.array_equal(f, d) and bool((np.diff(f) > 0).all()):
+    if f.size == d.size and np.array_equal(f, d) and (f.size < 2 or bool((np.diff(f) > 0).all())):
         # Both sensors on one clock grid and nothing lost: every sample is its partner's nearest, at 0 s.
         nf = nd = np.arange(f.size)
     else:
