@@ -28,8 +28,16 @@ if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
     signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
-_DOMAINS = __import__('itertools').cycle(list(range(int(os.environ['ROS_DOMAIN_ID']), 101))
-                                         + list(range(1, int(os.environ['ROS_DOMAIN_ID']))))
+def _domain_band() -> list[int]:
+    """The DDS domain ids this run's tests cycle through, starting at ROS_DOMAIN_ID: 1..100, or the band
+    CRANE_STIFFNESS_TEST_DOMAINS="LO-HI" names (two test runs on one machine, each in its own band, never meet)."""
+    lo, hi = (int(v) for v in os.environ.get('CRANE_STIFFNESS_TEST_DOMAINS', '1-100').split('-'))
+    start = int(os.environ['ROS_DOMAIN_ID'])
+    start = start if lo <= start <= hi else lo
+    return list(range(start, hi + 1)) + list(range(lo, start))
+
+
+_DOMAINS = __import__('itertools').cycle(_domain_band())
 
 
 @pytest.fixture(autouse=True)
