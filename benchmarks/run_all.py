@@ -14,6 +14,7 @@ OUT = HERE.parent / 'out' / 'bench'
 BENCHMARKS = [
     ('bench_solver.py', [], 'bench_solver.json'),
     ('bench_bag_decode.py', [], None),
+    ('bench_sync.py', [], 'bench_sync.json'),
     ('bench_analyze.py', [], None),
     ('bench_replay.py', [], 'bench_replay.json'),
     ('bench_rig.py', [], 'bench_rig.json'),

@@ -11,6 +11,7 @@ from crane_stiffness.estimation.errors import ParameterError
 from crane_stiffness.estimation.fit import fit_line
 from crane_stiffness.estimation.live import VALUE_FIELDS, LiveStiffness
 from crane_stiffness.estimation.lag import LagHistogram
+from crane_stiffness.estimation.quality import noise_std
 from crane_stiffness.estimation.settings import LiveSettings
 from crane_stiffness.status import OK, STALE, WARN
 
@@ -84,7 +85,14 @@ def test_branches_match_batch_fits_of_the_same_pairs() -> None:
     nl = live.refresh()
     assert abs(nl['loading']) < 0.05
     assert _row(live.values(), 0)['nonlinearity'] == nl['loading']
-    assert live.loading_stiffness() == loading['stiffness']
+    # refresh() estimated each window's displacement noise (displacement_noise -1): the fits now count it, as
+    # fit_line does with the same noise (errors in both variables), and say which noise they counted.
+    refreshed = _row(live.values(), 0)
+    sigma = noise_std(x[up])
+    assert refreshed['x_noise'] == pytest.approx(sigma, rel=1e-12) and 0.5e-7 < sigma < 2e-7
+    assert refreshed['stiffness'] == pytest.approx(fit_line(x[up], force[up], x_noise=sigma).stiffness, rel=1e-9)
+    assert refreshed['stiffness'] > loading['stiffness']  # least squares alone is attenuated
+    assert live.loading_stiffness() == refreshed['stiffness']
     reports = live.report()
     assert [r.level for r in reports] == [OK, OK]
     assert 'N/m' in reports[0].message

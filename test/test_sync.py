@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import math
-import time
 
 import numpy as np
 import pytest
@@ -157,15 +156,14 @@ def test_parameter_and_stream_errors() -> None:
         ApproximateTimeSync(slop=0.1).push('torque', 0.0, 1.0)
 
 
-def test_throughput_two_5khz_streams() -> None:
+def test_two_5khz_streams_every_sample_with_its_partner() -> None:
+    """2 s of two 5 kHz streams (its speed: benchmarks/bench_sync.py)."""
     rng = np.random.default_rng(3)
-    events = _interleaved(10_000, jitter=0.05 * PERIOD, offset=0.0, rng=rng)  # 2 s of data
+    events = _interleaved(10_000, jitter=0.05 * PERIOD, offset=0.0, rng=rng)
     sync = ApproximateTimeSync(slop=0.4 * PERIOD, expected_period=PERIOD)
-    start = time.perf_counter()
     pairs = _run(sync, events)
-    elapsed = time.perf_counter() - start
     assert len(pairs) == 10_000
-    assert elapsed < 1.0  # real time is 2 s; typically ~0.1 s
+    assert all(p.force == p.displacement for p in pairs)
 
 
 # ------------------------------------------------------------------------------------------- vectorized --

@@ -194,10 +194,16 @@ def _steps(data: SessionData, pairs: LivePairs, commands: CommandSeries | None, 
     return steps
 
 
-def _branch_fits(pairs: LivePairs, lo: int, hi: int) -> dict[str, LineFit | None]:
+def _branch_fits(settings: LiveSettings, pairs: LivePairs, lo: int, hi: int) -> dict[str, LineFit | None]:
+    """Each branch's fit over the pairs ``lo:hi``, counting the displacement noise as the live estimator does
+    (``displacement_noise``: declared, or estimated from the branch's displacements)."""
     sel = slice(lo, hi)
     x, y, loading = pairs.displacement[sel], pairs.force[sel], pairs.loading[sel]
-    return {LOADING: fit_or_none(x[loading], y[loading]), UNLOADING: fit_or_none(x[~loading], y[~loading])}
+    out: dict[str, LineFit | None] = {}
+    for branch, chosen in ((LOADING, loading), (UNLOADING, ~loading)):
+        xb = x[chosen]
+        out[branch] = fit_or_none(xb, y[chosen], settings.displacement_noise_of(xb))
+    return out
 
 
 def _fit_quality(data: SessionData, pairs: LivePairs, lo: int, hi: int, fits: dict[str, LineFit | None],
@@ -242,7 +248,7 @@ def _cycles(data: SessionData, pairs: LivePairs, steps: list[Step], t0: float) -
         start = starts[r] if i else 0.0
         end = starts[order[i + 1]] if i + 1 < len(order) else steps[-1].end_s
         lo, hi = np.searchsorted(pairs.stamp, [t0 + start, t0 + end], side='left')
-        fits = _branch_fits(pairs, int(lo), int(hi))
+        fits = _branch_fits(data.settings, pairs, int(lo), int(hi))
         out.append(CycleFits(repeat=r, start_s=start, end_s=end, loading=fits[LOADING], unloading=fits[UNLOADING]))
     return out
 
@@ -365,7 +371,7 @@ def _fits(data: SessionData, pairs: LivePairs, commands: CommandSeries | None, s
         hi = int(np.searchsorted(pairs.stamp, commands.stamp[-1], side='right'))
     else:
         lo, hi = 0, int(pairs.stamp.size)
-    branch_fits = _branch_fits(pairs, lo, hi)
+    branch_fits = _branch_fits(data.settings, pairs, lo, hi)
     _fit_quality(data, pairs, lo, hi, branch_fits, problems)
     hold_fits = {}
     for approach in BRANCHES:

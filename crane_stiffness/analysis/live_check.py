@@ -10,7 +10,8 @@ import numpy as np
 from crane_stiffness.analysis.load import SessionData
 from crane_stiffness.analysis.results import COMPARED_FIELDS, WINDOW_FIT_FIELDS, LiveComparison
 from crane_stiffness.estimation.branch import BRANCHES, LOADING
-from crane_stiffness.estimation.fit import RecursiveLeastSquares, fit_or_none
+from crane_stiffness.estimation.fit import fit_or_none
+from crane_stiffness.estimation.rls import RecursiveLeastSquares
 from crane_stiffness.estimation.live import VALUE_FIELDS
 from crane_stiffness.estimation.live_pairs import LivePairs
 
@@ -18,15 +19,17 @@ from crane_stiffness.estimation.live_pairs import LivePairs
 RLS_REPLAY_PAIRS = 20_000
 
 
-def _window_fit(pairs: LivePairs, cut: int, branch: str, window: int, forgetting: float) -> dict[str, float]:
-    """The live estimator's window and RLS fits of ``branch`` over the pairs before ``cut``."""
+def _window_fit(pairs: LivePairs, cut: int, branch: str, window: int, forgetting: float,
+                x_noise: float) -> dict[str, float]:
+    """The live estimator's window and RLS fits of ``branch`` over the pairs before ``cut``, the window's counting
+    the displacement noise ``x_noise`` the live estimate says it counted."""
     sel = np.flatnonzero(pairs.loading[:cut] == (branch == LOADING))
     nan = math.nan
     out = {k: nan for k in COMPARED_FIELDS}
     if sel.size < 3:
         return out
     last = sel[-window:]
-    fit = fit_or_none(pairs.displacement[last], pairs.force[last])
+    fit = fit_or_none(pairs.displacement[last], pairs.force[last], x_noise)
     if fit is not None:
         out.update({k: float(getattr(fit, k)) for k in WINDOW_FIT_FIELDS})
     rls = RecursiveLeastSquares(forgetting)
@@ -53,7 +56,9 @@ def live_comparison(data: SessionData, pairs: LivePairs) -> LiveComparison | Non
     worst: dict[str, float] = {}
     for b, branch in enumerate(BRANCHES):
         live[branch] = {f: float(rows[b, index[f]]) for f in COMPARED_FIELDS}
-        offline[branch] = _window_fit(pairs, cut, branch, s.window, s.forgetting)
+        x_noise = live[branch]['x_noise']
+        offline[branch] = _window_fit(pairs, cut, branch, s.window, s.forgetting,
+                                      x_noise if math.isfinite(x_noise) and x_noise >= 0.0 else 0.0)
         diffs = []
         for f in WINDOW_FIT_FIELDS:
             a, o = live[branch][f], offline[branch][f]

@@ -13,7 +13,7 @@ from typing import Any, Sequence
 
 from crane_stiffness.analysis.results import SessionAnalysis, SessionComparison
 from crane_stiffness.estimation.fit import LineFit
-from crane_stiffness.estimation.settings import pairing_text
+from crane_stiffness.estimation.settings import noise_text, pairing_text
 
 Block = tuple
 
@@ -65,9 +65,10 @@ def session_blocks(a: SessionAnalysis, images: Sequence[str] = ()) -> list[Block
                                  f'W = {fmt(g["weight"])} N, l0 = {fmt(g["l0"])} m, k = {fmt(g["k"])} N/m'])
     s = a.settings
     pairing = pairing_text(s.get('pairing', 'nearest'), s['slop_s'], s.get('max_interpolation_gap_s', math.nan))
+    noise = noise_text(s.get('displacement_noise', 0.0), 'm' if a.axis.startswith('f') else 'rad')
     rows.append(['estimator settings', f'pairing: {pairing}, max age {fmt(s["max_age_s"])} s, window '
                                        f'{s["window"]} pairs, hysteresis {fmt(s["hysteresis"])}, branch from '
-                                       f'{s["branch_source"]}'])
+                                       f'{s["branch_source"]}; fits: {noise}'])
     blocks.append(('table', ['', ''], rows))
     blocks.append(('h2', 'Stiffness'))
     headers = ['fit', 'branch', f'k [{unit}]', '95 % CI', 'R²', 'n', 'nonlinearity']

@@ -49,9 +49,10 @@ def _guarded(run: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Nam
 
 def _fit_line(name: str, fit: Any, unit: str) -> str:
     if fit is None:
-        return f'  {name:<10} no fit (too few pairs or no spread in displacement)'
+        return f'  {name:<10} no fit (too few pairs or no spread in displacement beyond its noise)'
+    noise = f', displacement noise {fit.x_noise:.3g} counted' if fit.x_noise > 0.0 else ''
     return (f'  {name:<10} k = {fit.stiffness:.6g} {unit} (95 % CI {fit.ci95_low:.6g} … {fit.ci95_high:.6g}), '
-            f'R² {fit.r2:.6f}, n = {fit.n}, nonlinearity {fit.nonlinearity:+.3g}')
+            f'R² {fit.r2:.6f}, n = {fit.n}, nonlinearity {fit.nonlinearity:+.3g}{noise}')
 
 
 def _print_summary(a: Any) -> None:

@@ -1,7 +1,8 @@
 """Stiffness estimation from synchronised load and displacement samples: pure Python/numpy, no ROS.
 
-- :mod:`.fit` — batch line fit with confidence interval and nonlinearity indicator (:class:`LineFit`, the one fit
-  record), sliding-window and recursive least squares.
+- :mod:`.fit` — the line fit of load on displacement with errors in both variables, its confidence interval and
+  nonlinearity indicator (:class:`LineFit`, the one fit record): batch and sliding window side by side.
+- :mod:`.rls` — recursive least squares with forgetting.
 - :mod:`.branch` — loading/unloading branch tracking, live and vectorized.
 - :mod:`.estimator` — :class:`StiffnessEstimator`: tracker and fits per branch composed, its :class:`Estimate`.
 - :mod:`.sync` — approximate pairing of the force and displacement streams by header stamp, live and vectorized.
@@ -13,8 +14,9 @@
 from crane_stiffness.estimation.branch import BRANCHES, LOADING, UNLOADING, Branch, BranchTracker, branch_labels
 from crane_stiffness.estimation.errors import DataError, EstimationError, ParameterError, SyncError
 from crane_stiffness.estimation.estimator import Estimate, StiffnessEstimator
-from crane_stiffness.estimation.fit import (LineFit, RecursiveLeastSquares, RlsResult, WindowedLeastSquares, fit_line,
-                                            split_half_nonlinearity, t_quantile)
+from crane_stiffness.estimation.fit import (LineFit, WindowedLeastSquares, fit_line, split_half_nonlinearity,
+                                            t_quantile)
+from crane_stiffness.estimation.rls import RecursiveLeastSquares, RlsResult
 from crane_stiffness.estimation.sync import (DISPLACEMENT, FORCE, STREAMS, ApproximateTimeSync, Pair,
                                              StreamCounters, SyncCounters)
 

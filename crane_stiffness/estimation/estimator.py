@@ -8,9 +8,12 @@ from collections.abc import Mapping
 from dataclasses import dataclass, fields
 from typing import Any
 
+import numpy as np
+
 from crane_stiffness.estimation.branch import BRANCHES, Branch, BranchTracker
 from crane_stiffness.estimation.errors import ParameterError
-from crane_stiffness.estimation.fit import LineFit, RecursiveLeastSquares, WindowedLeastSquares
+from crane_stiffness.estimation.fit import LineFit, WindowedLeastSquares
+from crane_stiffness.estimation.rls import RecursiveLeastSquares
 from crane_stiffness.estimation.quality import scatter_ratio
 
 _LINE_FIT_FIELDS = tuple(f.name for f in fields(LineFit))
@@ -51,13 +54,21 @@ class StiffnessEstimator:
     PARAM_NAMES = ('hysteresis', 'window', 'forgetting', 'initial_covariance')
 
     def __init__(self, hysteresis: float, window: int = 500, forgetting: float = 0.999, *,
-                 initial_covariance: float = 1e12, nonlinearity: bool = True) -> None:
+                 initial_covariance: float = 1e12, nonlinearity: bool = True, x_noise: float = 0.0) -> None:
         """Args: hysteresis: branch dead band in load units (see BranchTracker). window: pairs per windowed fit.
-        forgetting: RLS λ. initial_covariance: RLS prior variance. nonlinearity: compute the indicator."""
+        forgetting: RLS λ. initial_covariance: RLS prior variance. nonlinearity: compute the indicator. x_noise:
+        the displacement noise counted in the windowed fits until :meth:`set_displacement_noise` (m or rad; 0:
+        ordinary least squares), and again after :meth:`reset`."""
         self._tracker = BranchTracker(hysteresis)
         self._windows = {b: WindowedLeastSquares(window, nonlinearity=nonlinearity) for b in BRANCHES}
         self._rls = {b: RecursiveLeastSquares(forgetting, initial_covariance=initial_covariance) for b in BRANCHES}
         self._stamps: dict[Branch, float] = {b: math.nan for b in BRANCHES}
+        # σx counted in each branch's windowed fit (fit.py: errors in both variables); 0 = ordinary least squares
+        self._x_noise_default = 0.0
+        self._x_noise: dict[Branch, float] = {}
+        for b in BRANCHES:
+            self.set_displacement_noise(b, x_noise)
+        self._x_noise_default = x_noise
         self._rejected = 0
 
     @classmethod
@@ -88,6 +99,7 @@ class StiffnessEstimator:
             self._windows[branch].reset()
             self._rls[branch].reset()
             self._stamps[branch] = math.nan
+            self._x_noise[branch] = self._x_noise_default
         self._rejected = 0
 
     def add(self, stamp_s: float, force: float, displacement: float, load: float | None = None) -> Branch | None:
@@ -104,17 +116,29 @@ class StiffnessEstimator:
         self._stamps[branch] = float(stamp_s)
         return branch
 
+    def set_displacement_noise(self, branch: Branch, x_noise: float) -> None:
+        """Count a displacement noise of standard deviation ``x_noise`` (m or rad, ≥ 0; 0: ordinary least squares)
+        in ``branch``'s windowed fit from now on (:mod:`~crane_stiffness.estimation.fit`)."""
+        x_noise = float(x_noise)
+        if not (x_noise >= 0.0 and math.isfinite(x_noise)):
+            raise ParameterError('x_noise', x_noise, 'must be finite and >= 0 (m or rad)')
+        self._x_noise[branch] = x_noise
+
+    def window_displacements(self, branch: Branch) -> np.ndarray:
+        """Copy of the displacements in ``branch``'s window, in arrival order, m or rad."""
+        return self._windows[branch].data()[0]
+
     def nonlinearity(self, branch: Branch) -> float:
-        """The nonlinearity indicator of ``branch``'s window (sorts the window, whatever the constructor's
+        """The nonlinearity indicator of ``branch``'s window (partitions the window, whatever the constructor's
         ``nonlinearity``); NaN while the window cannot be fitted."""
-        fit = self._windows[branch].result(nonlinearity=True)
+        fit = self._windows[branch].result(nonlinearity=True, x_noise=self._x_noise[branch])
         return math.nan if fit is None else float(fit.nonlinearity)
 
     def scatter_ratio(self, branch: Branch) -> float:
         """``branch``'s residual rms over what the noise of both series explains (:func:`~crane_stiffness.
         estimation.quality.scatter_ratio`, pairs in arrival order); NaN while the window cannot be fitted."""
         window = self._windows[branch]
-        fit = window.result(nonlinearity=False)
+        fit = window.result(nonlinearity=False, x_noise=self._x_noise[branch])
         if fit is None:
             return math.nan
         x, y = window.data()
@@ -125,7 +149,7 @@ class StiffnessEstimator:
         branch = self._tracker.branch if branch is None else branch
         if branch not in BRANCHES:
             raise ParameterError('branch', branch, f'must be one of {", ".join(BRANCHES)}')
-        fit = self._windows[branch].result()
+        fit = self._windows[branch].result(x_noise=self._x_noise[branch])
         if fit is None:
             return None
         rls = self._rls[branch].result()

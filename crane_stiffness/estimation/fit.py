@@ -1,4 +1,5 @@
-"""Straight-line fits of load against displacement: batch, sliding window and recursive.
+"""Straight-line fits of load against displacement with errors in both variables: batch and sliding window, side by
+side (:class:`WindowedLeastSquares` gives :func:`fit_line`'s result on its window; the tests pin them together).
 
 The model fitted everywhere is ``y = k·x + c`` with
 
@@ -16,6 +17,24 @@ line, positive when the curve softens at larger loads (the slack-wire bend of th
 give growing displacement steps), negative when it stiffens. The split uses the fitted load, a function of x,
 rather than the measured y, because selecting points on the noisy response would bias both half slopes low.
 It is NaN when a half has no spread in x or ``k_lower`` is 0.
+
+Errors in both variables: both sensors are noisy. Ordinary least squares of y on x attenuates the slope by the
+reliability ratio ``Sxx_true / Sxx``, i.e. by about ``(σx / sd x)²`` (a 1 µm-noise LVDT over a stroke of 10 µm
+standard deviation: 1 % low). Given the displacement's white-noise standard deviation ``x_noise`` = σx (from the
+sensor's specification, or estimated from the data with :func:`crane_stiffness.estimation.quality.noise_std`), the
+fits use the method-of-moments estimator with known measurement-error variance (Fuller, *Measurement Error Models*,
+1987, §1.2)::
+
+    k = Sxy / (Sxx − (n − 1)·σx²)
+
+with centred sums ``Sxx, Sxy`` of the observed pairs, and its variance (Fuller's theorem 1.2.1), which counts both
+noises: the force's through the residuals and the displacement's through them and the correction terms::
+
+    Var k = s_vv / SXX + (n − 1)·(σx²·s_vv + k²·σx⁴) / SXX²,   SXX = Sxx − (n − 1)·σx²,
+    s_vv = Σ (y − ȳ − k·(x − x̄))² / (n − 2).
+
+With ``x_noise`` = 0 both are the ordinary least-squares formulas, to the bit. The fit is undefined (no spread of
+x beyond its noise) when ``SXX`` ≤ 0. The intercept's standard error is the first-order ``sqrt(s_vv/n + x̄²·Var k)``.
 """
 from __future__ import annotations
 
@@ -83,6 +102,8 @@ class LineFit:
         n: Number of points.
         residual_rms: ``sqrt(SSE / n)``, in the units of y.
         nonlinearity: ``1 − k_upper / k_lower`` (see the module docstring); > 0 means softening.
+        x_noise: Standard deviation of the displacement's white noise counted in the fit, units of x (0: ordinary
+            least squares; see the module docstring).
     """
 
     stiffness: FloatOrArray
@@ -95,21 +116,31 @@ class LineFit:
     n: int
     residual_rms: FloatOrArray
     nonlinearity: FloatOrArray
+    x_noise: FloatOrArray
 
 
 def _scalar_or_array(value: NDArray[np.float64]) -> FloatOrArray:
     return float(value) if value.ndim == 0 else value
 
 
-def _assemble(n: int, xm: Any, ym: Any, sxx: Any, sxy: Any, syy: Any, sse: Any, nonlinearity: Any) -> LineFit:
-    """Build a LineFit from centred sums; works element-wise on floats or arrays."""
-    xm, ym, sxx, sxy, syy, sse = (np.asarray(v, dtype=float) for v in (xm, ym, sxx, sxy, syy, sse))
-    k = sxy / sxx
+def _assemble(n: int, xm: Any, ym: Any, sxx: Any, sxy: Any, syy: Any, sse: Any, nonlinearity: Any,
+              x_noise: Any) -> LineFit:
+    """Build a LineFit from centred sums of the observed pairs and the ordinary least-squares ``sse``, counting the
+    displacement noise ``x_noise`` (module docstring; needs ``Sxx − (n − 1)·x_noise² > 0``); works element-wise on
+    floats or arrays."""
+    xm, ym, sxx, sxy, syy, sse, x_noise = (np.asarray(v, dtype=float) for v in (xm, ym, sxx, sxy, syy, sse,
+                                                                                 x_noise))
+    x_var = x_noise * x_noise
+    sxx_true = sxx - (n - 1) * x_var
+    k = sxy / sxx_true
     c = ym - k * xm
     dof = n - 2
+    # residuals about the corrected line: the least-squares SSE plus what moving the slope off its minimum adds
+    sse = sse + sxx * (k - sxy / sxx) ** 2
     s2 = sse / dof
-    stderr = np.sqrt(s2 / sxx)
-    intercept_stderr = np.sqrt(s2 * (1.0 / n + xm * xm / sxx))
+    var_k = s2 / sxx_true + (n - 1) * (x_var * s2 + k * k * x_var * x_var) / (sxx_true * sxx_true)
+    stderr = np.sqrt(var_k)
+    intercept_stderr = np.sqrt(s2 / n + xm * xm * var_k)
     half_width = t_quantile(dof) * stderr
     with np.errstate(invalid='ignore', divide='ignore'):
         # r = Sxy / sqrt(Sxx·Syy) is better conditioned than 1 − SSE/Syy for a nearly perfect fit.
@@ -126,44 +157,54 @@ def _assemble(n: int, xm: Any, ym: Any, sxx: Any, sxy: Any, syy: Any, sse: Any, 
         n=n,
         residual_rms=_scalar_or_array(np.sqrt(sse / n)),
         nonlinearity=_scalar_or_array(np.asarray(nonlinearity, dtype=float)),
+        x_noise=_scalar_or_array(x_noise),
     )
 
 
 def _assemble_scalar(n: int, xm: float, ym: float, sxx: float, sxy: float, syy: float, sse: float,
-                     nonlinearity: float) -> LineFit:
-    """:func:`_assemble` for Python floats (sxx > 0, n ≥ 3): the same operations in the same order, so the same
-    bits, at a tenth of the cost (the live estimator calls it for every published estimate)."""
+                     nonlinearity: float, x_noise: float) -> LineFit:
+    """:func:`_assemble` for Python floats (``Sxx − (n − 1)·x_noise²`` > 0, n ≥ 3): the same operations in the same
+    order, so the same bits, at a tenth of the cost (the live estimator calls it for every published estimate)."""
     xm, ym, sxx, sxy, syy, sse = float(xm), float(ym), float(sxx), float(sxy), float(syy), float(sse)
-    k = sxy / sxx
+    x_noise = float(x_noise)
+    x_var = x_noise * x_noise
+    sxx_true = sxx - (n - 1) * x_var
+    k = sxy / sxx_true
     c = ym - k * xm
     dof = n - 2
+    sse = sse + sxx * (k - sxy / sxx) ** 2
     s2 = sse / dof
-    stderr = math.sqrt(s2 / sxx)
-    intercept_stderr = math.sqrt(s2 * (1.0 / n + xm * xm / sxx))
+    var_k = s2 / sxx_true + (n - 1) * (x_var * s2 + k * k * x_var * x_var) / (sxx_true * sxx_true)
+    stderr = math.sqrt(var_k)
+    intercept_stderr = math.sqrt(s2 / n + xm * xm * var_k)
     half_width = t_quantile(dof) * stderr
     r2 = min(sxy * sxy / (sxx * syy) if syy > 0.0 else 0.0, 1.0)
     return LineFit(stiffness=k, intercept=c, stderr=stderr, intercept_stderr=intercept_stderr,
                    ci95_low=k - half_width, ci95_high=k + half_width, r2=r2, n=n,
-                   residual_rms=math.sqrt(sse / n), nonlinearity=float(nonlinearity))
+                   residual_rms=math.sqrt(sse / n), nonlinearity=float(nonlinearity), x_noise=x_noise)
 
 
-def _slopes(x: NDArray[np.float64], y: NDArray[np.float64]) -> NDArray[np.float64]:
-    """OLS slopes along the last axis; NaN where x has no spread."""
+def _slopes(x: NDArray[np.float64], y: NDArray[np.float64], x_noise: Any = 0.0) -> NDArray[np.float64]:
+    """Slopes along the last axis counting the displacement noise ``x_noise`` (module docstring); NaN where x has no
+    spread beyond it."""
     dx = x - x.mean(axis=-1, keepdims=True)
     sxx = np.einsum('...i,...i->...', dx, dx)
     sxy = np.einsum('...i,...i->...', dx, y - y.mean(axis=-1, keepdims=True))
     scale = np.abs(x).max(axis=-1)
     flat = sxx <= x.shape[-1] * (_ZERO_SPREAD_REL * scale) ** 2
+    sxx = sxx - (x.shape[-1] - 1) * np.asarray(x_noise, dtype=float) ** 2
+    flat = flat | ~(sxx > 0.0)
     with np.errstate(invalid='ignore', divide='ignore'):
         return np.where(flat, np.nan, sxy / np.where(flat, 1.0, sxx))
 
 
-def split_half_nonlinearity(x: ArrayLike, y: ArrayLike, stiffness: ArrayLike,
-                            intercept: ArrayLike) -> FloatOrArray:
+def split_half_nonlinearity(x: ArrayLike, y: ArrayLike, stiffness: ArrayLike, intercept: ArrayLike,
+                            x_noise: ArrayLike = 0.0) -> FloatOrArray:
     """Nonlinearity indicator ``1 − k_upper / k_lower`` of points (x, y) along the last axis.
 
     The halves are split at the median of ``|stiffness·x + intercept|`` (the full fit's load magnitude); see the
-    module docstring. Needs at least 3 points; returns NaN where a half has no spread or ``k_lower`` is 0.
+    module docstring; each half's slope counts the displacement noise ``x_noise`` as the full fit does. Needs at
+    least 3 points; returns NaN where a half has no spread or ``k_lower`` is 0.
     """
     x = np.asarray(x, dtype=float)
     y = np.asarray(y, dtype=float)
@@ -174,26 +215,42 @@ def split_half_nonlinearity(x: ArrayLike, y: ArrayLike, stiffness: ArrayLike,
     # pairs (millions) was most of the offline fits' time.
     lower = np.argpartition(fitted, m - 1, axis=-1)[..., :m]
     upper = np.argpartition(fitted, n - m, axis=-1)[..., n - m:]
-    k_lower = _slopes(np.take_along_axis(x, lower, axis=-1), np.take_along_axis(y, lower, axis=-1))
-    k_upper = _slopes(np.take_along_axis(x, upper, axis=-1), np.take_along_axis(y, upper, axis=-1))
+    noise = np.asarray(x_noise, dtype=float)
+    k_lower = _slopes(np.take_along_axis(x, lower, axis=-1), np.take_along_axis(y, lower, axis=-1), noise)
+    k_upper = _slopes(np.take_along_axis(x, upper, axis=-1), np.take_along_axis(y, upper, axis=-1), noise)
     with np.errstate(invalid='ignore', divide='ignore'):
         ratio = 1.0 - k_upper / k_lower
     return _scalar_or_array(np.where(np.isfinite(ratio), ratio, np.nan))
 
 
-def fit_line(x: ArrayLike, y: ArrayLike) -> LineFit:
-    """Ordinary least-squares fit of ``y = k·x + c`` with standard errors and a 95 % interval for k.
+def _x_noise(x_noise: ArrayLike, batch_shape: tuple[int, ...]) -> NDArray[np.float64]:
+    """``x_noise`` checked (finite, ≥ 0) and broadcast to the batch's shape."""
+    noise = np.asarray(x_noise, dtype=float)
+    if not (np.isfinite(noise).all() and (noise >= 0.0).all()):
+        raise ParameterError('x_noise', x_noise, 'must be finite and >= 0 (standard deviation, units of x)')
+    try:
+        return np.broadcast_to(noise, batch_shape)
+    except ValueError:
+        raise ParameterError('x_noise', f'shape {noise.shape}', f'must broadcast to the batch shape {batch_shape}') \
+            from None
+
+
+def fit_line(x: ArrayLike, y: ArrayLike, *, x_noise: ArrayLike = 0.0) -> LineFit:
+    """Fit of ``y = k·x + c`` with errors in both variables, standard errors and a 95 % interval for k.
 
     Args:
         x: Displacements, m (or rad); shape (n,) or (..., n) for a batch of independent fits along the last axis.
         y: Loads, N (or N·m); broadcast against x.
+        x_noise: Standard deviation of the displacement's white noise, units of x; a float, or an array of the
+            batch's shape ``x.shape[:-1]``. 0 (the default): ordinary least squares. See the module docstring.
 
     Returns:
         A :class:`LineFit`; its fields are floats for 1-D input, arrays of shape ``x.shape[:-1]`` for a batch.
 
     Raises:
         DataError: Fewer than 3 points (the error estimate needs n − 2 ≥ 1), NaN/Inf values, or no spread in x
-            (in any fit of a batch).
+            (beyond its noise; in any fit of a batch).
+        ParameterError: ``x_noise`` negative, not finite, or not of the batch's shape.
     """
     x, y = np.broadcast_arrays(np.asarray(x, dtype=float), np.asarray(y, dtype=float))
     if x.ndim == 0:
@@ -203,6 +260,7 @@ def fit_line(x: ArrayLike, y: ArrayLike) -> LineFit:
         raise DataError(f'a line fit with an error estimate needs at least 3 points, got {n}')
     if not (np.isfinite(x).all() and np.isfinite(y).all()):
         raise DataError('x and y must be finite; got NaN or Inf')
+    noise = _x_noise(x_noise, x.shape[:-1])
     xm = x.mean(axis=-1)
     ym = y.mean(axis=-1)
     # Centre before forming sums of squares so an offset in x or y (e.g. an un-zeroed LVDT) costs no precision.
@@ -215,19 +273,25 @@ def fit_line(x: ArrayLike, y: ArrayLike) -> LineFit:
     if np.any(flat):
         where = '' if flat.ndim == 0 else f' in fit(s) {np.argwhere(flat).tolist()[:5]}'
         raise DataError(f'x has zero spread{where}: all displacements equal, the slope is undefined')
-    k = sxy / sxx
-    residual = dy - k[..., None] * dx
+    hidden = sxx - (n - 1) * noise * noise <= 0.0
+    if np.any(hidden):
+        where = '' if hidden.ndim == 0 else f' in fit(s) {np.argwhere(hidden).tolist()[:5]}'
+        raise DataError(f'x has no spread beyond its noise{where} (Sxx <= (n - 1)·x_noise²): the slope is undefined')
+    k_ols = sxy / sxx
+    residual = dy - k_ols[..., None] * dx
     sse = np.einsum('...i,...i->...', residual, residual)
-    nonlinearity = split_half_nonlinearity(x, y, k, ym - k * xm)
-    return _assemble(n, xm, ym, sxx, sxy, syy, sse, nonlinearity)
+    k = sxy / (sxx - (n - 1) * noise * noise)
+    nonlinearity = split_half_nonlinearity(x, y, k, ym - k * xm, noise)
+    return _assemble(n, xm, ym, sxx, sxy, syy, sse, nonlinearity, noise)
 
 
-def fit_or_none(x: np.ndarray | Sequence[float], y: ArrayLike) -> LineFit | None:
-    """:func:`fit_line`, or None when there is nothing to fit (fewer than 3 points, no spread in x, NaN/Inf)."""
+def fit_or_none(x: np.ndarray | Sequence[float], y: ArrayLike, x_noise: float = 0.0) -> LineFit | None:
+    """:func:`fit_line`, or None when there is nothing to fit (fewer than 3 points, no spread in x beyond its noise,
+    NaN/Inf)."""
     if len(x) < 3:
         return None
     try:
-        return fit_line(x, y)
+        return fit_line(x, y, x_noise=x_noise)
     except DataError:
         return None
 
@@ -239,8 +303,9 @@ class WindowedLeastSquares:
     every ``recompute_every`` updates (default: ``window``) with the reference moved to the buffer mean, so the
     rounding error of adding and removing samples cannot build up. The amortised cost stays O(1).
 
-    :meth:`result` equals :func:`fit_line` on the same window to rounding error. Its nonlinearity indicator
-    needs a sort of the window, O(window·log window) per call; pass ``nonlinearity=False`` to skip it (NaN).
+    :meth:`result` equals :func:`fit_line` on the same window (and the same ``x_noise``) to rounding error. Its
+    nonlinearity indicator needs a partition of the window, O(window) per call; pass ``nonlinearity=False`` to skip
+    it (NaN).
     """
 
     def __init__(self, window: int, *, recompute_every: int | None = None, nonlinearity: bool = True) -> None:
@@ -336,10 +401,12 @@ class WindowedLeastSquares:
         order = np.r_[self._head:self._window, 0:self._head]
         return self._xbuf[order], self._ybuf[order]
 
-    def result(self, nonlinearity: bool | None = None) -> LineFit | None:
-        """Fit of the current window, or None with fewer than 3 pairs or no spread in x.
+    def result(self, nonlinearity: bool | None = None, x_noise: float = 0.0) -> LineFit | None:
+        """Fit of the current window, or None with fewer than 3 pairs or no spread in x (beyond its noise).
 
-        ``nonlinearity``: compute the indicator (sorts the window) — None: as chosen at construction.
+        ``nonlinearity``: compute the indicator (partitions the window) — None: as chosen at construction.
+        ``x_noise``: standard deviation of the displacement's white noise counted in the fit, units of x, ≥ 0
+        (:func:`fit_line`).
         """
         n = self._n
         if n < 3:
@@ -347,6 +414,11 @@ class WindowedLeastSquares:
         sxx = self._sxx - self._sx * self._sx / n
         if sxx <= _ZERO_SPREAD_REL * self._sxx or sxx <= 0.0:
             return None
+        x_noise = float(x_noise)
+        if not (x_noise >= 0.0 and math.isfinite(x_noise)):
+            raise ParameterError('x_noise', x_noise, 'must be finite and >= 0 (standard deviation, units of x)')
+        if sxx - (n - 1) * x_noise * x_noise <= 0.0:
+            return None  # no spread beyond the noise
         sxy = self._sxy - self._sx * self._sy / n
         syy = max(self._syy - self._sy * self._sy / n, 0.0)
         sse = max(syy - sxy * sxy / sxx, 0.0)  # clipped: rounding can make a perfect fit slightly negative
@@ -355,121 +427,7 @@ class WindowedLeastSquares:
         indicator = math.nan
         if self._nonlinearity if nonlinearity is None else nonlinearity:
             x, y = self.data()
-            k = sxy / sxx
-            indicator = float(split_half_nonlinearity(x, y, k, ym - k * xm))  # 1-D window: already a float
-        return _assemble_scalar(n, xm, ym, sxx, sxy, syy, sse, indicator)
-
-
-@dataclass(frozen=True, slots=True)
-class RlsResult:
-    """State of a :class:`RecursiveLeastSquares` estimator.
-
-    Attributes:
-        stiffness: Estimated slope k, N/m (N·m/rad).
-        intercept: Estimated intercept c, N (N·m).
-        stderr: Approximate standard error of k (see :class:`RecursiveLeastSquares`).
-        n: Samples seen since the last reset.
-        effective_n: Sum of the forgetting weights, about ``1 / (1 − forgetting)`` in steady state.
-    """
-
-    stiffness: float
-    intercept: float
-    stderr: float
-    n: int
-    effective_n: float
-
-
-class RecursiveLeastSquares:
-    """Recursive least squares for ``y = k·x + c`` with exponential forgetting.
-
-    Minimises ``Σ λ^(n−i) (y_i − k·x_i − c)²`` plus a weak prior (``initial`` with covariance
-    ``initial_covariance·I``); λ = ``forgetting``, giving a memory of about ``1 / (1 − λ)`` samples. The update is
-    written out for the 2×2 case in plain floats (a few µs per sample), with the covariance kept symmetric by
-    construction.
-
-    Covariance wind-up: during a hold x does not change, so forgetting would inflate the covariance without bound
-    and the next sample would throw the estimate about. Forgetting is therefore suspended while the trace of the
-    covariance would exceed its initial value (the estimator never becomes less certain than its prior).
-
-    Standard error: ``stderr = sqrt(σ̂² · P₀₀ · W₂ / W)`` with ``W = Σλ^(n−i)``, ``W₂ = Σλ^(2(n−i))``
-    and ``σ̂² = J / (W − 2·W₂/W)`` from the weighted residual cost J. This is the weighted-least-squares sandwich
-    covariance under the assumption that the spread of x is about stationary over the memory; it is approximate
-    while the load program sweeps a range.
-    """
-
-    def __init__(self, forgetting: float = 0.999, *, initial_covariance: float = 1e12,
-                 initial: tuple[float, float] = (0.0, 0.0)) -> None:
-        """Create the estimator.
-
-        Args:
-            forgetting: λ in (0, 1]; 1 means no forgetting (ordinary least squares).
-            initial_covariance: Prior variance of k and c, > 0; large means an uninformative prior. The default
-                suits x in metres (k up to ~1e6 N/m).
-            initial: Prior (k, c).
-        """
-        forgetting = float(forgetting)
-        if not 0.0 < forgetting <= 1.0:
-            raise ParameterError('forgetting', forgetting, 'must be in (0, 1]')
-        initial_covariance = float(initial_covariance)
-        if not (math.isfinite(initial_covariance) and initial_covariance > 0.0):
-            raise ParameterError('initial_covariance', initial_covariance, 'must be finite and > 0')
-        if len(initial) != 2 or not all(math.isfinite(float(v)) for v in initial):
-            raise ParameterError('initial', initial, 'must be two finite numbers (k, c)')
-        self._lambda = forgetting
-        self._p_init = initial_covariance
-        self._initial = (float(initial[0]), float(initial[1]))
-        self.reset()
-
-    def reset(self) -> None:
-        """Return to the prior."""
-        self._k, self._c = self._initial
-        self._p00 = self._p11 = self._p_init
-        self._p01 = 0.0
-        self._cost = 0.0
-        self._w = 0.0
-        self._w2 = 0.0
-        self._n = 0
-
-    @property
-    def forgetting(self) -> float:
-        """λ."""
-        return self._lambda
-
-    def add(self, x: float, y: float) -> None:
-        """Update with one pair (x in m or rad, y in N or N·m). Raises DataError on NaN/Inf."""
-        x = float(x)
-        y = float(y)
-        if not (math.isfinite(x) and math.isfinite(y)):
-            raise DataError(f'x and y must be finite, got x={x!r}, y={y!r}')
-        lam = self._lambda
-        p00, p01, p11 = self._p00, self._p01, self._p11
-        if (p00 + p11) / lam > 2.0 * self._p_init:
-            lam = 1.0  # anti-wind-up, see the class docstring
-        p00 /= lam
-        p01 /= lam
-        p11 /= lam
-        # Measurement update with regressor φ = (x, 1): g = Pφ, gain g/den.
-        g0 = p00 * x + p01
-        g1 = p01 * x + p11
-        den = 1.0 + x * g0 + g1
-        error = y - (self._k * x + self._c)
-        self._k += g0 * error / den
-        self._c += g1 * error / den
-        self._p00 = p00 - g0 * g0 / den
-        self._p01 = p01 - g0 * g1 / den
-        self._p11 = p11 - g1 * g1 / den
-        self._cost = lam * self._cost + error * error / den
-        self._w = lam * self._w + 1.0
-        self._w2 = lam * lam * self._w2 + 1.0
-        self._n += 1
-
-    def result(self) -> RlsResult | None:
-        """Current estimate, or None before 3 samples. stderr is NaN while the effective dof is < 1."""
-        if self._n < 3:
-            return None
-        ratio = self._w2 / self._w
-        dof = self._w - 2.0 * ratio
-        stderr = math.nan
-        if dof >= 1.0 and self._p00 > 0.0:
-            stderr = math.sqrt(self._cost / dof * self._p00 * ratio)
-        return RlsResult(stiffness=self._k, intercept=self._c, stderr=stderr, n=self._n, effective_n=self._w)
+            k = sxy / (sxx - (n - 1) * x_noise * x_noise)
+            # 1-D window: already a float
+            indicator = float(split_half_nonlinearity(x, y, k, ym - k * xm, x_noise))
+        return _assemble_scalar(n, xm, ym, sxx, sxy, syy, sse, indicator, x_noise)

@@ -27,8 +27,10 @@ publishing one:
    stamp with :class:`~crane_stiffness.estimation.sync.InterpolatingSync` (``max_interpolation_gap_s``); both with
    ``max_age_s``, ``expected_period_s``, ``dropout_factor``: out-of-order and stale samples are counted there and
    never fitted; dropouts are counted.
-3. Fitting each pair with :class:`~crane_stiffness.estimation.fit.StiffnessEstimator` (windowed least squares and
-   RLS with forgetting, loading and unloading branches apart). The branch follows the commanded load (the
+3. Fitting each pair with :class:`~crane_stiffness.estimation.estimator.StiffnessEstimator` (windowed fit with
+   errors in both variables and RLS with forgetting, loading and unloading branches apart; the displacement noise
+   counted, ``displacement_noise``, is the sensor's specification or estimated from each branch's window at every
+   :meth:`LiveStiffness.refresh`). The branch follows the commanded load (the
    ``force_axis`` component of the wrench command in effect at the pair's stamp) once a command has been seen and
    ``branch_source`` is ``'auto'``, else the measured force. A pair stamped while a rejected command is in force
    (absurd by :mod:`crane_stiffness.command_limits`, the crane model's own rule, or republished by the model on
@@ -70,10 +72,11 @@ from crane_stiffness.estimation.sync import (DISPLACEMENT, FORCE, ApproximateTim
 
 #: Columns of one row of :meth:`LiveStiffness.values` (one row per branch, in the order of ``BRANCHES``).
 #: Units: stiffness, ci95_*, stderr, rls_* and prediction in N/m (N·m/rad for a moment axis); intercept and
-#: residual_rms in N (N·m); r2, nonlinearity, relative_error without unit; n in pairs; current is 1.0 for the branch
-#: of the newest pair, else 0.0; sample_stamp is the newest paired sample's stamp, s (the same in both rows).
+#: residual_rms in N (N·m); r2, nonlinearity, relative_error without unit; n in pairs; x_noise (the displacement
+#: noise counted in the fit, 0: ordinary least squares) in m (rad); current is 1.0 for the branch of the newest pair,
+#: else 0.0; sample_stamp is the newest paired sample's stamp, s (the same in both rows).
 VALUE_FIELDS = ('stiffness', 'intercept', 'stderr', 'ci95_low', 'ci95_high', 'r2', 'n', 'residual_rms',
-                'nonlinearity', 'rls_stiffness', 'rls_stderr', 'prediction', 'relative_error', 'current',
+                'nonlinearity', 'rls_stiffness', 'rls_stderr', 'x_noise', 'prediction', 'relative_error', 'current',
                 'sample_stamp')
 
 # Student-t quantiles computed ahead when a fit starts (t_quantile's cache holds 1024).
@@ -371,7 +374,8 @@ class LiveStiffness:
         k, c, se, lo, hi, r2, rms = map(float, (est.stiffness, est.intercept, est.stderr, est.ci95_low, est.ci95_high,
                                                 est.r2, est.residual_rms))
         rel = (k - pred) / pred if math.isfinite(pred) and pred != 0.0 else nan
-        return [k, c, se, lo, hi, r2, float(est.n), rms, nan, est.rls_stiffness, est.rls_stderr, pred, rel, 0.0, nan]
+        return [k, c, se, lo, hi, r2, float(est.n), rms, nan, est.rls_stiffness, est.rls_stderr, float(est.x_noise),
+                pred, rel, 0.0, nan]
 
     def estimate(self, branch: Branch) -> Estimate | None:
         """The cheap windowed estimate of ``branch`` (its nonlinearity is NaN; see :meth:`refresh`)."""
@@ -410,8 +414,12 @@ class LiveStiffness:
         return self._rows[LOADING][0]
 
     def refresh(self) -> dict[Branch, float]:
-        """Recompute the nonlinearity indicator of each branch's window (sorts the window: call it slowly)."""
+        """Estimate the displacement noise of each branch's window (``displacement_noise`` -1), recompute its
+        nonlinearity indicator and scatter (each a pass over the window: call it slowly)."""
         for branch in BRANCHES:
+            x_noise = self._settings.displacement_noise_of(self._estimator.window_displacements(branch))
+            self._estimator.set_displacement_noise(branch, x_noise)
+            self._dirty.add(branch)
             self._nonlinearity[branch] = self._estimator.nonlinearity(branch)
             self._scatter[branch] = self._estimator.scatter_ratio(branch)
         self._delay.update()
@@ -465,7 +473,7 @@ class LiveStiffness:
         unit = s.stiffness_unit
         problem_level, problems = self.input_problems(now_s)
         names = ('stiffness', 'intercept', 'stderr', 'ci95_low', 'ci95_high', 'r2', 'n', 'nonlinearity',
-                 'rls_stiffness', 'prediction', 'relative_error')
+                 'rls_stiffness', 'x_noise', 'prediction', 'relative_error')
         segment = f'segment {self.counters.segments} (started by {self._segment_reason})'
         out = []
         for branch in BRANCHES:
@@ -474,7 +482,7 @@ class LiveStiffness:
             pairs = [(k, status_value(row[k])) for k in names]
             pairs.append(('scatter_ratio', status_value(self._scatter[branch])))
             if math.isnan(row['stiffness']):
-                level, message = STALE, 'no estimate yet (needs 3 pairs with spread in displacement)'
+                level, message = STALE, 'no estimate yet (needs 3 pairs with spread in displacement beyond its noise)'
                 pairs = [(k, 'nan') for k in names] + [('scatter_ratio', 'nan')]
                 pairs[names.index('prediction')] = ('prediction', status_value(self.prediction))
             else:

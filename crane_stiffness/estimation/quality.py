@@ -7,9 +7,10 @@ A measurement tool never calls a meaningless number OK. Two checks, each worded 
 - :func:`axis_problem`: the fitted axis must be the axis the commands load. Fitting fy while the program moves mz
   fits noise against noise; a program that moves another component beside the fitted one is combined loading.
 
-:func:`noise_std` estimates a sensor's white noise from the data themselves (successive differences, median based,
-so steps and ramps between samples barely count): the live estimator applies it to its branch windows at its slow
-refresh, ``analyze`` to each branch's pairs; both call the same functions.
+:func:`noise_std` estimates a sensor's white noise from the data themselves (second differences, median based, so
+a ramp does not count at all and a step between samples barely does): the live estimator applies it to its branch
+windows at its slow refresh, ``analyze`` to each branch's pairs; both call the same functions (the scatter check
+here, and the displacement noise the fits count: ``LiveSettings.displacement_noise_of``).
 """
 from __future__ import annotations
 
@@ -23,17 +24,23 @@ from crane_stiffness.axes import AXES
 
 #: |Δ| of a command component below this counts as "does not move" [N or N·m] (commands are exact program values).
 MOVE_TOLERANCE = 1e-9
-#: median(|d|) of a normal variable d with unit standard deviation (d: a difference of two samples: σ·√2).
+#: median(|d|) of a normal variable d with unit standard deviation.
 _MEDIAN_ABS_NORMAL = 0.6744897501960817
 
 
 def noise_std(values: ArrayLike) -> float:
-    """White-noise standard deviation of a slowly varying series sampled in order, from successive differences:
-    ``median(|Δ|) / (0.6745·√2)``; NaN with fewer than 3 values. Units of ``values``."""
+    """White-noise standard deviation of a series sampled in order, from its second differences
+    ``d = v[i+1] − 2·v[i] + v[i−1]`` (σ·√6 for white noise, exactly 0 for a ramp): ``median(|d|) / (0.6745·√6)``;
+    NaN with fewer than 3 values. Units of ``values``.
+
+    Second, not first, differences: a load program's ramps move the displacement by a few noise levels per sample at
+    1 kHz, and a first difference would count that motion as noise (and the errors-in-variables fit would then
+    over-correct); the median keeps the steps between holds out."""
     v = np.asarray(values, dtype=float)
     if v.size < 3:
         return math.nan
-    return float(np.median(np.abs(np.diff(v)))) / (_MEDIAN_ABS_NORMAL * math.sqrt(2.0))
+    d2 = v[2:] - 2.0 * v[1:-1] + v[:-2]
+    return float(np.median(np.abs(d2))) / (_MEDIAN_ABS_NORMAL * math.sqrt(6.0))
 
 
 def scatter_ratio(displacement: ArrayLike, force: ArrayLike, stiffness: float, residual_rms: float) -> float:

@@ -16,6 +16,7 @@ from crane_stiffness.axes import AXES
 from crane_stiffness.errors import ParameterError
 from crane_stiffness.estimation.estimator import StiffnessEstimator
 from crane_stiffness.estimation.frames import SensorMount
+from crane_stiffness.estimation.quality import noise_std
 from crane_stiffness.estimation.stream_delay import DELAY_MAX_LAG_S
 from crane_stiffness.estimation.sync import DISPLACEMENT, FORCE, ApproximateTimeSync, InterpolatingSync
 from crane_stiffness.params.spec import ParamSpec, check_spec, declared, specs_of
@@ -55,6 +56,11 @@ class LiveSettings:
     window: int = declared(500, 'pairs per windowed least-squares fit; span several load levels [pairs]', at_least=3)
     forgetting: float = declared(0.999, 'RLS forgetting factor in (0, 1], memory ~ 1/(1 - forgetting) [-]',
                                  above=0.0, at_most=1.0)
+    displacement_noise: float = declared(
+        -1.0, "white-noise standard deviation of the displacement reading, counted in the fits (errors in both "
+        "variables: least squares alone is low by about (noise / spread of the displacement)²): -1 = estimated from "
+        "the data (successive differences of each branch's displacements), 0 = not counted (ordinary least squares), "
+        "> 0 = the sensor's specification [m or rad]", at_least=-1.0, rule='-1, 0 or > 0')
     hysteresis: float = declared(0.2, 'dead band of the loading/unloading switch; above the force noise when the '
                                  'branch follows the measured force [N or N·m]', at_least=0.0)
     branch_source: str = declared('auto', "'auto': branch from /crane/wrench_command once a command is seen, else "
@@ -123,6 +129,9 @@ class LiveSettings:
         if 0.0 < v['dropout_factor'] <= 1.0:
             raise ParameterError('dropout_factor', v['dropout_factor'], 'must be > 1, or 0 to disable dropout '
                                  'detection')
+        if -1.0 < v['displacement_noise'] < 0.0:
+            raise ParameterError('displacement_noise', v['displacement_noise'], 'must be -1 (estimated from the '
+                                 "data), 0 (not counted) or > 0 (the sensor's noise, m or rad)")
         if v['displacement_gain'] == 0.0:
             raise ParameterError('displacement_gain', v['displacement_gain'], 'must be non-zero (m/V)')
         if v['max_clock_skew_s'] > v['max_age_s']:
@@ -143,6 +152,20 @@ class LiveSettings:
         v['sensor_position'] = tuple(float(x) for x in mount.position)
         v['sensor_reaction'] = mount.reaction
         return cls(**v)
+
+    def displacement_noise_of(self, displacement: Any) -> float:
+        """The displacement noise a fit of these displacements counts (m or rad; in stamp order, one branch): the
+        declared ``displacement_noise``, or with -1 the white noise estimated from them (:func:`~crane_stiffness.
+        estimation.quality.noise_std`; 0 with fewer than 3). The live estimator (each branch's window) and
+        ``analyze`` (each branch's pairs) both take it from here."""
+        if self.displacement_noise >= 0.0:
+            return self.displacement_noise
+        sigma = noise_std(displacement)
+        return sigma if math.isfinite(sigma) else 0.0
+
+    def noise_text(self) -> str:
+        """How the fits count the displacement noise, for people (:func:`noise_text`)."""
+        return noise_text(self.displacement_noise, self.displacement_unit)
 
     def pairing_text(self) -> str:
         """The pairing rule for people (:func:`pairing_text`)."""
@@ -208,7 +231,8 @@ class LiveSettings:
                                    dropout_factor=dropout)
 
     def make_estimator(self) -> StiffnessEstimator:
-        return StiffnessEstimator(self.hysteresis, self.window, self.forgetting, nonlinearity=False)
+        return StiffnessEstimator(self.hysteresis, self.window, self.forgetting, nonlinearity=False,
+                                  x_noise=max(self.displacement_noise, 0.0))
 
     def fit_key(self) -> tuple:
         """The settings whose change restarts pairing and fitting (the others are thresholds)."""
@@ -216,13 +240,23 @@ class LiveSettings:
                 self.expected_period_s, self.dropout_factor,
                 self.window, self.forgetting, self.hysteresis, self.branch_source, self.displacement_gain,
                 self.displacement_offset, self.sensor_rotation, self.sensor_position, self.sensor_reaction,
-                self.displacement_delay_s, self.lever_arm_m)
+                self.displacement_delay_s, self.lever_arm_m, self.displacement_noise)
 
 
 
 
 #: The live estimator's parameters, as the stiffness_estimator node declares them.
 ESTIMATOR_PARAMS: tuple[ParamSpec, ...] = specs_of(LiveSettings)
+
+
+def noise_text(displacement_noise: float, unit: str) -> str:
+    """How the fits count the displacement noise (``displacement_noise``, ``unit`` m or rad), for people: the
+    node's log, the analysis and its report say it the same way."""
+    if displacement_noise < 0.0:
+        return "errors in both variables, displacement noise estimated from each branch's data"
+    if displacement_noise == 0.0:
+        return 'ordinary least squares, displacement noise not counted'
+    return f'errors in both variables, displacement noise {displacement_noise:g} {unit}'
 
 
 def pairing_text(pairing: str, slop_s: float, max_interpolation_gap_s: float) -> str:
@@ -232,4 +266,4 @@ def pairing_text(pairing: str, slop_s: float, max_interpolation_gap_s: float) ->
     return f'{pairing} across gaps up to max_interpolation_gap_s = {max_interpolation_gap_s:g} s'
 
 
-__all__ = ['BRANCH_SOURCES', 'ESTIMATOR_PARAMS', 'PAIRINGS', 'LiveSettings', 'pairing_text']
+__all__ = ['BRANCH_SOURCES', 'ESTIMATOR_PARAMS', 'PAIRINGS', 'LiveSettings', 'noise_text', 'pairing_text']

@@ -158,7 +158,8 @@ class StiffnessEstimatorNode(Node):
             where = 'at the platform centre' if settings.force_row() is None else 'moved to the platform centre'
             self.get_logger().info(f'fitting {settings.force_axis}: window {settings.window} pairs, pairing '
                                    f'{settings.pairing_text()}, branch from {settings.branch_source}, wrench {where}, '
-                                   f'displacement stamps - {settings.displacement_delay_s:g} s')
+                                   f'displacement stamps - {settings.displacement_delay_s:g} s, '
+                                   f'{settings.noise_text()}')
         if values['displacement_type'] != self.settings.get('displacement_type'):
             if self.sub_displacement is not None:
                 self.destroy_subscription(self.sub_displacement)
