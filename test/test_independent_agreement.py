@@ -2,8 +2,10 @@
 
 The reference was written from the paper and its corrections (docs/physics.md) without reading, importing or
 copying anything from the ``crane_stiffness`` package. test_independent_reference.py checks the reference on its own
-(finite differences, an energy formulation, the closed form of eq. 18); the ``test_cli_*`` tests here run the CLI as
-a subprocess and compare its JSON with the reference.
+(finite differences, an energy formulation, the closed form of eq. 18); the ``test_cli_*`` tests here run the CLI and
+compare its JSON with the reference: every case through the CLI's ``main`` in this process (argv in, exit code,
+stdout and stderr out: seconds for all of them, so the pure tests run alone quickly), and a few through the installed
+console script in a subprocess, whose output must be the same to the byte.
 
 Done-when (from the issue): pose within 1e-9 m and 1e-9 rad, tensions within 1e-6 relative, stiffness within
 1e-6 relative to the largest entry, on random geometries and loads with slack and rotated cases included.
@@ -25,19 +27,21 @@ Assumptions about the CLI contract (documented here because the contract leaves 
   about that much.
 * Numbers are passed in positional notation (``numpy.format_float_positional``, exact round trip), because
   Python 3.11's argparse takes an argument such as ``-1.5e-05`` for an option flag.
-* The CLI is the console script in ``sysconfig.get_path('scripts')`` of the interpreter running the tests; the
-  tests FAIL (not skip) when it is missing, so they cannot pass vacuously.
+* The CLI is ``crane_stiffness.cli.main`` and the console script in ``sysconfig.get_path('scripts')`` of the
+  interpreter running the tests, which calls it; the tests FAIL (not skip) when it is missing, so they cannot pass
+  vacuously.
 """
 
 from __future__ import annotations
 
+import io
 import json
 import os
 import shutil
 import subprocess
 import sys
 import sysconfig
-from concurrent.futures import ThreadPoolExecutor
+from contextlib import redirect_stderr, redirect_stdout
 
 import numpy as np
 import pytest
@@ -65,20 +69,48 @@ def cli_path() -> str:
 
 
 def run_cli(args: list[str]) -> subprocess.CompletedProcess:
+    """The installed console script in a subprocess."""
     return subprocess.run([cli_path(), *args], capture_output=True, text=True, timeout=120,
                           env=dict(os.environ))
 
 
-@pytest.fixture(scope="module")
-def cli_outputs():
-    """Every CLI call at once, two at a time (one case per call)."""
-    cli_path()
+def run_cli_main(args: list[str]) -> subprocess.CompletedProcess:
+    """``crane_stiffness.cli.main`` in this process, as the console script calls it: exit code, stdout, stderr."""
+    from crane_stiffness import cli
+    out, err = io.StringIO(), io.StringIO()
+    with redirect_stdout(out), redirect_stderr(err):
+        try:
+            code = cli.main(args)
+        except SystemExit as exc:  # argparse's usage errors
+            code = exc.code if isinstance(exc.code, int) else 2
+    return subprocess.CompletedProcess(["crane-stiffness", *args], code, out.getvalue(), err.getvalue())
+
+
+def _jobs() -> dict[tuple[str, str], list[str]]:
     jobs = {(name, cmd): CASES[name].cli_args(cmd) for name in CASE_NAMES for cmd in ("solve", "stiffness")}
     jobs[("upward_force", "solve")] = NO_EQUILIBRIUM.cli_args("solve")
     jobs[("upward_force", "stiffness")] = NO_EQUILIBRIUM.cli_args("stiffness")
-    with ThreadPoolExecutor(max_workers=max(2, min(4, os.cpu_count() or 2))) as pool:
-        futures = {key: pool.submit(run_cli, args) for key, args in jobs.items()}
-        return {key: f.result() for key, f in futures.items()}
+    return jobs
+
+
+#: The calls also run through the console script: one case of each command, and the failing load.
+SUBPROCESS_JOBS = [(CASE_NAMES[0], "solve"), (CASE_NAMES[-1], "stiffness"), ("upward_force", "solve")]
+
+
+@pytest.fixture(scope="module")
+def cli_outputs():
+    """Every CLI call, through ``main`` in this process (one case per call)."""
+    cli_path()
+    return {key: run_cli_main(args) for key, args in _jobs().items()}
+
+
+@pytest.mark.parametrize("key", SUBPROCESS_JOBS, ids=["/".join(k) for k in SUBPROCESS_JOBS])
+def test_the_console_script_prints_what_main_prints(cli_outputs, key):
+    """The installed executable gives exactly what ``main`` gave in this process: the in-process runs stand for it."""
+    args = _jobs()[key]
+    proc = run_cli(args)
+    assert (proc.returncode, proc.stdout) == (cli_outputs[key].returncode, cli_outputs[key].stdout)
+    assert proc.stderr.strip() == cli_outputs[key].stderr.strip()
 
 
 def _json(proc: subprocess.CompletedProcess, args) -> dict:
