@@ -52,46 +52,28 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
 
 
 from crane_stiffness.estimation.branch import BRANCHES, LOADING, Branch
 from crane_stiffness.estimation.estimator import Estimate
 from crane_stiffness.estimation.fit import t_quantile
-from crane_stiffness.estimation.quality import CommandRange, fit_problems
+from crane_stiffness.estimation.quality import CommandRange
 from crane_stiffness.estimation.settings import LiveSettings
 from crane_stiffness.estimation.stream_delay import StreamDelay
 from crane_stiffness.command_limits import command_fault
 from crane_stiffness.estimation import live_status
+from crane_stiffness.estimation.live_status import VALUE_FIELDS, BranchReport
 from crane_stiffness.estimation.lag import LagHistogram
 from crane_stiffness.estimation.inputs import (CommandHold, InputCounters, StreamHealth,
                                                command_inputs, input_faults)
-from crane_stiffness.status import ERROR, OK, STALE, WARN, status_value
+from crane_stiffness.status import ERROR, OK, WARN
 from crane_stiffness.estimation.sync import (DISPLACEMENT, FORCE, ApproximateTimeSync, InterpolatingSync, Pair,
                                              SyncCounters)
 
-#: Columns of one row of :meth:`LiveStiffness.values` (one row per branch, in the order of ``BRANCHES``).
-#: Units: stiffness, ci95_*, stderr, rls_* and prediction in N/m (N·m/rad for a moment axis); intercept and
-#: residual_rms in N (N·m); r2, nonlinearity, relative_error without unit; n in pairs; x_noise (the displacement
-#: noise counted in the fit, 0: ordinary least squares) in m (rad); current is 1.0 for the branch of the newest pair,
-#: else 0.0; sample_stamp is the newest paired sample's stamp, s (the same in both rows).
-VALUE_FIELDS = ('stiffness', 'intercept', 'stderr', 'ci95_low', 'ci95_high', 'r2', 'n', 'residual_rms',
-                'nonlinearity', 'rls_stiffness', 'rls_stderr', 'x_noise', 'prediction', 'relative_error', 'current',
-                'sample_stamp')
 
 # Student-t quantiles computed ahead when a fit starts (t_quantile's cache holds 1024).
 _T_CACHE = 1000
 
-
-
-@dataclass(frozen=True)
-class BranchReport:
-    """One branch's status for people: level (OK/WARN/STALE), a one-line message and key/value strings."""
-
-    branch: Branch
-    level: int
-    message: str
-    values: list[tuple[str, str]] = field(default_factory=list)
 
 
 class LiveStiffness:
@@ -466,53 +448,10 @@ class LiveStiffness:
         return level, reasons
 
     def report(self, now_s: float = math.nan) -> list[BranchReport]:
-        """Per-branch status for people; call after :meth:`refresh` and :meth:`values`. With ``now_s`` (the node
-        clock, s) a dead input stream makes every branch STALE: never OK while its inputs are invalid."""
+        """Per-branch status for people (:func:`~.live_status.branch_reports`); call after :meth:`refresh` and
+        :meth:`values`. With ``now_s`` (the node clock, s) a dead input stream makes every branch STALE."""
         self._update_rows()
-        s = self._settings
-        unit = s.stiffness_unit
-        problem_level, problems = self.input_problems(now_s)
-        names = ('stiffness', 'intercept', 'stderr', 'ci95_low', 'ci95_high', 'r2', 'n', 'nonlinearity',
-                 'rls_stiffness', 'x_noise', 'prediction', 'relative_error')
-        segment = f'segment {self.counters.segments} (started by {self._segment_reason})'
-        out = []
-        for branch in BRANCHES:
-            row = dict(zip(VALUE_FIELDS, self._rows[branch]))
-            row['nonlinearity'] = nl = self._nonlinearity[branch]
-            pairs = [(k, status_value(row[k])) for k in names]
-            pairs.append(('scatter_ratio', status_value(self._scatter[branch])))
-            if math.isnan(row['stiffness']):
-                level, message = STALE, 'no estimate yet (needs 3 pairs with spread in displacement beyond its noise)'
-                pairs = [(k, 'nan') for k in names] + [('scatter_ratio', 'nan')]
-                pairs[names.index('prediction')] = ('prediction', status_value(self.prediction))
-            else:
-                message = (f'k = {row["stiffness"]:.6g} {unit} (95 %: {row["ci95_low"]:.6g} .. '
-                           f'{row["ci95_high"]:.6g}), n = {int(row["n"])}')
-                level = OK
-                if nl > s.nonlinearity_warn:
-                    level = WARN
-                    message = f'nonlinear (slack wire?): nonlinearity {nl:.3g} > {s.nonlinearity_warn:g}; ' + message
-                meaningless = fit_problems(row['stiffness'], row['ci95_low'], row['ci95_high'],
-                                           self._scatter[branch], s.max_scatter_ratio)
-                if meaningless:
-                    level = WARN
-                    message = 'fit not trusted: ' + '; '.join(meaningless) + '; ' + message
-                if self._suspect[branch]:
-                    level = WARN
-                    message = (f'the window holds pairs fitted under a rejected command: {self._suspect_reason} '
-                               f'({self._suspect[branch]} more pairs until they leave it); ' + message)
-            if problem_level == ERROR:
-                level = STALE
-                message = 'inputs invalid, estimate frozen: ' + '; '.join(problems) + '; last ' + message
-            elif problem_level == WARN:
-                level = max(level, WARN) if level != STALE else STALE
-                message = '; '.join(problems) + '; ' + message
-            if self.counters.segments > 1:
-                message += f'; new fit {segment}'
-            pairs += [('unit', unit), ('axis', s.force_axis), ('current', str(branch == self._current).lower()),
-                      ('segment', str(self.counters.segments)), ('segment_reason', self._segment_reason)]
-            out.append(BranchReport(branch, level, message, pairs))
-        return out
+        return live_status.branch_reports(self, now_s)
 
     def accounting(self) -> dict[str, int]:
         """Every message accounted (the node's final counters; :func:`~.live_status.accounting`)."""

@@ -1,17 +1,41 @@
-"""What the live estimator says about its inputs: every message accounted (the node's final counters) and the input
-status of /stiffness/estimate. Functions of a :class:`~crane_stiffness.estimation.live.LiveStiffness` (its private
-state: they are its own reports, kept apart for the module's size). Pure Python, no ROS."""
+"""What the live estimator puts out: the columns of its numeric estimate, each branch's status for people, every
+message accounted (the node's final counters) and the input status of /stiffness/estimate. Functions of a
+:class:`~crane_stiffness.estimation.live.LiveStiffness` (its private state: they are its own reports, kept apart for
+the module's size). Pure Python, no ROS."""
 from __future__ import annotations
 
 import math
-from dataclasses import fields
+from dataclasses import dataclass, field, fields
 from typing import TYPE_CHECKING
 
 from crane_stiffness.estimation.sync import DISPLACEMENT, FORCE
-from crane_stiffness.status import OK, WARN, status_value
+from crane_stiffness.estimation.branch import BRANCHES, Branch
+from crane_stiffness.estimation.quality import fit_problems
+from crane_stiffness.status import ERROR, OK, STALE, WARN, status_value
 
 if TYPE_CHECKING:
     from crane_stiffness.estimation.live import LiveStiffness
+
+
+#: Columns of one row of :meth:`~crane_stiffness.estimation.live.LiveStiffness.values` (one row per branch, in the
+#: order of ``BRANCHES``).
+#: Units: stiffness, ci95_*, stderr, rls_* and prediction in N/m (N·m/rad for a moment axis); intercept and
+#: residual_rms in N (N·m); r2, nonlinearity, relative_error without unit; n in pairs; x_noise (the displacement
+#: noise counted in the fit, 0: ordinary least squares) in m (rad); current is 1.0 for the branch of the newest pair,
+#: else 0.0; sample_stamp is the newest paired sample's stamp, s (the same in both rows).
+VALUE_FIELDS = ('stiffness', 'intercept', 'stderr', 'ci95_low', 'ci95_high', 'r2', 'n', 'residual_rms',
+                'nonlinearity', 'rls_stiffness', 'rls_stderr', 'x_noise', 'prediction', 'relative_error', 'current',
+                'sample_stamp')
+
+
+@dataclass(frozen=True)
+class BranchReport:
+    """One branch's status for people: level (OK/WARN/STALE), a one-line message and key/value strings."""
+
+    branch: Branch
+    level: int
+    message: str
+    values: list[tuple[str, str]] = field(default_factory=list)
 
 
 def accounting(live: LiveStiffness) -> dict[str, int]:
@@ -69,4 +93,54 @@ def input_report(live: LiveStiffness, consumer: str = '', now_s: float = math.na
     return OK, f'{sc.pairs} pairs, {c.pairs_fitted} fitted', pairs
 
 
-__all__ = ['accounting', 'input_report']
+def branch_reports(live: LiveStiffness, now_s: float = math.nan) -> list[BranchReport]:
+    """Per-branch status for people (:meth:`LiveStiffness.report <crane_stiffness.estimation.live.LiveStiffness.
+    report>`, its rows up to date). With ``now_s`` (the node clock, s) a dead input stream makes every branch STALE:
+    never OK while its inputs are invalid."""
+    s = live._settings
+    unit = s.stiffness_unit
+    problem_level, problems = live.input_problems(now_s)
+    names = ('stiffness', 'intercept', 'stderr', 'ci95_low', 'ci95_high', 'r2', 'n', 'nonlinearity',
+             'rls_stiffness', 'x_noise', 'prediction', 'relative_error')
+    segment = f'segment {live.counters.segments} (started by {live._segment_reason})'
+    out = []
+    for branch in BRANCHES:
+        row = dict(zip(VALUE_FIELDS, live._rows[branch]))
+        row['nonlinearity'] = nl = live._nonlinearity[branch]
+        pairs = [(k, status_value(row[k])) for k in names]
+        pairs.append(('scatter_ratio', status_value(live._scatter[branch])))
+        if math.isnan(row['stiffness']):
+            level, message = STALE, 'no estimate yet (needs 3 pairs with spread in displacement beyond its noise)'
+            pairs = [(k, 'nan') for k in names] + [('scatter_ratio', 'nan')]
+            pairs[names.index('prediction')] = ('prediction', status_value(live.prediction))
+        else:
+            message = (f'k = {row["stiffness"]:.6g} {unit} (95 %: {row["ci95_low"]:.6g} .. '
+                       f'{row["ci95_high"]:.6g}), n = {int(row["n"])}')
+            level = OK
+            if nl > s.nonlinearity_warn:
+                level = WARN
+                message = f'nonlinear (slack wire?): nonlinearity {nl:.3g} > {s.nonlinearity_warn:g}; ' + message
+            meaningless = fit_problems(row['stiffness'], row['ci95_low'], row['ci95_high'],
+                                       live._scatter[branch], s.max_scatter_ratio)
+            if meaningless:
+                level = WARN
+                message = 'fit not trusted: ' + '; '.join(meaningless) + '; ' + message
+            if live._suspect[branch]:
+                level = WARN
+                message = (f'the window holds pairs fitted under a rejected command: {live._suspect_reason} '
+                           f'({live._suspect[branch]} more pairs until they leave it); ' + message)
+        if problem_level == ERROR:
+            level = STALE
+            message = 'inputs invalid, estimate frozen: ' + '; '.join(problems) + '; last ' + message
+        elif problem_level == WARN:
+            level = max(level, WARN) if level != STALE else STALE
+            message = '; '.join(problems) + '; ' + message
+        if live.counters.segments > 1:
+            message += f'; new fit {segment}'
+        pairs += [('unit', unit), ('axis', s.force_axis), ('current', str(branch == live._current).lower()),
+                  ('segment', str(live.counters.segments)), ('segment_reason', live._segment_reason)]
+        out.append(BranchReport(branch, level, message, pairs))
+    return out
+
+
+__all__ = ['VALUE_FIELDS', 'BranchReport', 'accounting', 'branch_reports', 'input_report']
