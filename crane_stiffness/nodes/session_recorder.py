@@ -23,6 +23,9 @@ close the bag cleanly, also when repeated (they only end the spin loop; see cran
 SIGKILL every chunk written so far is readable (chunks go to the OS as they are finished, at most
 ``flush_interval_s`` apart) and ``crane-stiffness recover BAG`` rewrites the files and metadata.yaml.
 
+It runs all day: every ``TRIM_INTERVAL_S`` it hands the pages its allocator freed back to the system
+(crane_stiffness.nodes.heap), so its resident memory stays flat.
+
 A write the operating system refuses (disk full, I/O error) stops the recording, not the node: ERROR in the log and
 on /diagnostics with the error, the file cut after its last complete chunk, metadata.yaml written from what is on
 disk or its absence reported; ~/start opens a new bag once there is room. Every message received is accounted for
@@ -54,6 +57,7 @@ from crane_stiffness import __version__, topics
 from crane_stiffness.bag import BagWriter, dump_qos_profiles
 from crane_stiffness.bag.errors import BagError, BagWriteFailedError
 from crane_stiffness.nodes.diagnostics import Diagnostics
+from crane_stiffness.nodes.heap import TRIM_INTERVAL_S, release_free_memory, trim_available
 from crane_stiffness.nodes.run import run
 from crane_stiffness.nodes.parameter_reader import NodeParameterReader, plain
 from crane_stiffness.nodes.parameters import Params
@@ -126,6 +130,10 @@ class SessionRecorder(Node):
         self.diagnostics = Diagnostics(self, self._report)
         self.discovery_timer = self.create_timer(0.2, self._discover)
         self.flush_timer: Timer | None = None
+        # A recorder runs all day: the pages its allocator freed go back to the system now and then (nodes/heap.py).
+        self.trim_timer = self.create_timer(TRIM_INTERVAL_S, release_free_memory)
+        if not trim_available():
+            self.get_logger().info('this C library has no malloc_trim: freed memory stays with the process')
         if self.params['autostart']:
             self.start()  # a bad output directory stops the node at start with the reason
 
