@@ -2,8 +2,9 @@
 
 Written from the paper (Dagalakis et al., "Stiffness study of a parallel link robot crane for shipbuilding
 applications") and its corrections (docs/physics.md) only.  It deliberately shares no code with the
-``crane_stiffness`` package: it imports numpy, scipy and the standard library and nothing else, so that the
-agreement test in ``test_independent_agreement.py`` compares two implementations written apart.
+``crane_stiffness`` package: it imports numpy, scipy, the standard library and its own rotations
+(independent_rotation.py) and nothing else, so that the agreement test in ``test_independent_agreement.py``
+compares two implementations written apart.
 
 Conventions (paper frame of Fig. 3, z pointing DOWN, SI units)
 -------------------------------------------------------------
@@ -42,6 +43,10 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.optimize import brentq, root
+
+# test/ is on sys.path wherever this module is imported from (the tests, helpers/independent_cases.py)
+from independent_rotation import (cross, euler_rate_map, euler_zxy, rodrigues, rot_x, rot_y, rot_z,  # noqa: F401
+                                  rot_zxy, skew)
 
 SQRT3 = math.sqrt(3.0)
 
@@ -136,76 +141,6 @@ def make_crane(a, b, h, weight, *, k=None, wire_diameter=None, youngs_modulus=No
 def lab_crane(h, weight, **kw) -> Crane:
     return make_crane(LAB_A, LAB_B, h, weight, wire_diameter=LAB_WIRE_DIAMETER,
                       youngs_modulus=LAB_YOUNGS_MODULUS, **kw)
-
-
-# ----------------------------------------------------------------------------------------------------------
-# Rotations
-# ----------------------------------------------------------------------------------------------------------
-
-def rot_x(t):
-    c, s = math.cos(t), math.sin(t)
-    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
-
-
-def rot_y(t):
-    c, s = math.cos(t), math.sin(t)
-    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
-
-
-def rot_z(t):
-    c, s = math.cos(t), math.sin(t)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-
-
-def rot_zxy(phi, theta, psi) -> np.ndarray:
-    """Q = Rz(phi) Rx(theta) Ry(psi), body -> fixed."""
-    return rot_z(phi) @ rot_x(theta) @ rot_y(psi)
-
-
-def euler_zxy(Q) -> np.ndarray:
-    """(phi, theta, psi) with Q = Rz(phi) Rx(theta) Ry(psi), theta in [-pi/2, pi/2].
-
-    Third row of Q is (-cos(th) sin(psi), sin(th), cos(th) cos(psi)); second column is
-    (-sin(phi) cos(th), cos(phi) cos(th), sin(th)).
-    """
-    Q = np.asarray(Q, dtype=float)
-    theta = math.asin(max(-1.0, min(1.0, Q[2, 1])))
-    psi = math.atan2(-Q[2, 0], Q[2, 2])
-    phi = math.atan2(-Q[0, 1], Q[1, 1])
-    return np.array([phi, theta, psi])
-
-
-def cross(a, b) -> np.ndarray:
-    """a x b for (..., 3) arrays (np.cross is slow for tiny arrays)."""
-    a = np.asarray(a, dtype=float)
-    b = np.asarray(b, dtype=float)
-    return np.stack([a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1],
-                     a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
-                     a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]], axis=-1)
-
-
-def skew(v) -> np.ndarray:
-    x, y, z = v
-    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
-
-
-def rodrigues(w) -> np.ndarray:
-    """exp([w]x)."""
-    w = np.asarray(w, dtype=float)
-    th = float(np.linalg.norm(w))
-    S = skew(w)
-    if th < 1e-8:
-        return np.eye(3) + S + 0.5 * S @ S
-    return np.eye(3) + math.sin(th) / th * S + (1.0 - math.cos(th)) / th ** 2 * S @ S
-
-
-def euler_rate_map(phi, theta) -> np.ndarray:
-    """Columns: fixed-frame angular velocity per unit rate of phi, theta, psi.
-
-    dQ Q^T = [w]x with w = e_z dphi + Rz(phi) e_x dtheta + Rz(phi) Rx(theta) e_y dpsi.
-    """
-    Rz = rot_z(phi)
-    return np.column_stack([np.array([0.0, 0.0, 1.0]), Rz[:, 0], (Rz @ rot_x(theta))[:, 1]])
 
 
 # ----------------------------------------------------------------------------------------------------------
