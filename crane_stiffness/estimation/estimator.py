@@ -134,6 +134,10 @@ class StiffnessEstimator:
                         rls_stiffness=math.nan if rls is None else rls.stiffness,
                         rls_stderr=math.nan if rls is None else rls.stderr)
 
+    def window_data(self, branch: Branch) -> tuple[Any, Any]:
+        """Copies of ``branch``'s window: (displacements, forces), oldest first, shape (n,) each."""
+        return self._windows[branch].data()
+
     def estimates(self) -> dict[Branch, Estimate | None]:
         """Estimates of both branches."""
         return {branch: self.estimate(branch) for branch in BRANCHES}
