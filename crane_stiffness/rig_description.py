@@ -7,7 +7,8 @@ and the benchmarks.
 
 Arguments (:data:`ARGUMENTS`): program (side_force | side_force_slack | moment_z | force_z, or a path to a program
 YAML), crane (a geometry YAML; default the lab model), sensors (sensor YAML), sim_sensors and record (true/false),
-session (bag name), transport and drivers (below).
+session (bag name), transport and drivers (below), live_view (true/false) and its view_host, view_port,
+view_http_port.
 
 ``transport`` says how the sensor readings reach the estimator:
 
@@ -74,7 +75,11 @@ ARGUMENTS: tuple[Argument, ...] = (
     Argument('drivers', 'drivers_emulated.yaml', 'driver (and device emulator) parameters, read with '
              'transport:=drivers (a bare file name is one of config/)', config_file=True),
     Argument('machine', 'all', "start the nodes of one lab machine only: 'daq' (model, program, sensors, drivers), "
-             "'analysis' (estimator, recorder), or 'all'"),
+             "'analysis' (estimator, recorder, live view), or 'all'"),
+    Argument('live_view', 'false', 'start live_view: the page and a Foxglove WebSocket server (docs/live_view.md)'),
+    Argument('view_host', '127.0.0.1', "address the live view listens on (0.0.0.0: the lab network)"),
+    Argument('view_port', '8765', "the live view's Foxglove WebSocket port"),
+    Argument('view_http_port', '8080', "the live view's page port"),
 )
 #: The values of the ``transport`` argument.
 TRANSPORTS = ('sim', 'drivers')
@@ -136,6 +141,9 @@ NODES: tuple[RigNode, ...] = (
             condition='record', reads=(topics.WRENCH_COMMAND, topics.APPLIED_WRENCH, topics.REJECTED_COMMAND,
                                         topics.PLATFORM_POSE, *_STREAMS), machine='analysis'),
     RigNode('load_program', ('program',), runs_program=True),
+    # For people watching: reads the rig's topics, waits for nothing, and the program does not wait for it.
+    RigNode('live_view', ('crane',), arguments={'host': 'view_host', 'port': 'view_port', 'http_port': 'view_http_port'},
+            condition='live_view', machine='analysis'),
 )
 #: Topics a message must have arrived on before the program starts: the model's prediction (latched) and both
 #: sensor streams (from the simulated sensors, or from real drivers remapped onto them).
