@@ -58,7 +58,7 @@ class Browser:
              'about:blank'], stdout=self._log_file, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
             start_new_session=True)
         url = self._devtools_url(60.0)
-        self.ws = connect(url, max_size=None, open_timeout=30)
+        self.ws = connect(url, max_size=None, open_timeout=30, legacy=True)
         self._ids = itertools.count(1)
         target = self.send('Target.createTarget', url='about:blank')['targetId']
         self.session = self.send('Target.attachToTarget', targetId=target, flatten=True)['sessionId']

@@ -20,7 +20,7 @@ class FoxgloveClient:
 
     def __init__(self, port: int, host: str = '127.0.0.1', timeout_s: float = 10.0) -> None:
         self.ws: ClientConnection = connect(f'ws://{host}:{port}', subprotocols=[SUBPROTOCOL],
-                                            open_timeout=timeout_s, max_size=None)
+                                            open_timeout=timeout_s, max_size=None, legacy=True)
         self.server_info: dict[str, Any] = {}
         self.channels: dict[str, dict[str, Any]] = {}  # topic -> advertised channel
         self.services: dict[str, dict[str, Any]] = {}  # name -> advertised service
