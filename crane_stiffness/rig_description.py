@@ -142,8 +142,8 @@ NODES: tuple[RigNode, ...] = (
                                         topics.PLATFORM_POSE, *_STREAMS), machine='analysis'),
     RigNode('load_program', ('program',), runs_program=True),
     # For people watching: reads the rig's topics, waits for nothing, and the program does not wait for it.
-    RigNode('live_view', ('crane',), arguments={'host': 'view_host', 'port': 'view_port', 'http_port': 'view_http_port'},
-            condition='live_view', machine='analysis'),
+    RigNode('live_view', ('crane',), condition='live_view', machine='analysis',
+            arguments={'host': 'view_host', 'port': 'view_port', 'http_port': 'view_http_port'}),
 )
 #: Topics a message must have arrived on before the program starts: the model's prediction (latched) and both
 #: sensor streams (from the simulated sensors, or from real drivers remapped onto them).

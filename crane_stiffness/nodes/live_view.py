@@ -56,6 +56,8 @@ DEFAULT_SERVICES = ['/load_cell/tare', '/stiffness_estimator/reset', '/session_r
 _TYPES = {**topics.RIG_TOPICS, **topics.VIEW_TOPICS, topics.MODEL_STATUS: 'std_msgs/msg/String',
           topics.DIAGNOSTICS: 'diagnostic_msgs/msg/DiagnosticArray'}
 _NO_EVENTS = SubscriptionEventCallbacks(use_default_callbacks=False)
+#: Every derived channel is sent at least this often (ns), changed or not.
+RESEND_NS = 1_000_000_000
 
 PARAMS = (
     ParamSpec('host', '127.0.0.1', "address both servers listen on: 127.0.0.1 = this machine only; 0.0.0.0 = every "
@@ -107,6 +109,7 @@ class LiveViewNode(Node):
         self.prediction = float('nan')
         self.statuses: list[tuple[str, int, str]] = []
         self.dirty: set[str] = set()
+        self.resent_ns = 0  # when every derived channel was last sent (a client that joined since gets them all)
         self.trigger_clients = {name: self.create_client(Trigger, name) for name in DEFAULT_SERVICES}
         self.params = Params(self, PARAMS, _validate, self._apply)
         self.create_subscription(Float64MultiArray, topics.FITTED_PAIRS, self._on_pairs, RELIABLE_QOS)
@@ -228,9 +231,12 @@ class LiveViewNode(Node):
     def _tick(self) -> None:
         self._update_subscriptions()
         fox = self.foxglove
+        now = self.get_clock().now().nanoseconds
+        if now - self.resent_ns >= RESEND_NS:  # the slow channels too, for clients that joined since
+            self.resent_ns = now
+            self.dirty.update(('status', 'fit_lines', 'scene', *self.latest))
         if fox is None or not self.dirty:
             return
-        now = self.get_clock().now().nanoseconds
         dirty, self.dirty = self.dirty, set()
         sent = 0
         try:

@@ -71,7 +71,11 @@ class _LogForward(logging.Handler):
 
     def emit(self, record: logging.LogRecord) -> None:
         text = f'foxglove: {record.getMessage()}'
-        (self.warn if record.levelno >= logging.WARNING else self.info)(text)
+        # Two call sites: rclpy refuses a change of severity between calls from one line (raises ValueError).
+        if record.levelno >= logging.WARNING:
+            self.warn(text)
+        else:
+            self.info(text)
 
 
 def _trigger_response(encoding: str, success: bool, message: str) -> bytes:

@@ -33,6 +33,7 @@ class RigWatcher(Node):
         self.pairs: dict[float, tuple[float, float, int, int]] = {}  # stamp -> (x, force, branch, segment)
         self.tensions: set[tuple[float, ...]] = set()
         self.values: dict[float, float] = {}  # sample_stamp -> loading stiffness
+        self.loading: dict[str, float] = {}  # the newest loading row (VALUE_FIELDS)
         self.tare_epochs: list[float] = []
         self.statuses: dict[str, tuple[int, str]] = {}
         self.status_history: list[dict[str, tuple[int, str]]] = []
@@ -64,6 +65,7 @@ class RigWatcher(Node):
     def _on_values(self, msg: Float64MultiArray) -> None:
         row = dict(zip(VALUE_FIELDS, msg.data[:len(VALUE_FIELDS)]))  # the loading row
         self.values[row['sample_stamp']] = row['stiffness']
+        self.loading = row
 
     def _on_tare(self, msg: Float64) -> None:
         self.tare_epochs.append(msg.data)
