@@ -109,6 +109,8 @@ class RigNode:
     runs_program: bool = False
     reads: tuple[str, ...] = ()
     machine: str = 'daq'
+    #: Parameters of ``arguments`` given as integers (launch hands a plain string to the node as a string).
+    integers: tuple[str, ...] = ()
 
     @property
     def name(self) -> str:
@@ -143,7 +145,8 @@ NODES: tuple[RigNode, ...] = (
     RigNode('load_program', ('program',), runs_program=True),
     # For people watching: reads the rig's topics, waits for nothing, and the program does not wait for it.
     RigNode('live_view', ('crane',), condition='live_view', machine='analysis',
-            arguments={'host': 'view_host', 'port': 'view_port', 'http_port': 'view_http_port'}),
+            arguments={'host': 'view_host', 'port': 'view_port', 'http_port': 'view_http_port'},
+            integers=('port', 'http_port')),
 )
 #: Topics a message must have arrived on before the program starts: the model's prediction (latched) and both
 #: sensor streams (from the simulated sensors, or from real drivers remapped onto them).
@@ -244,6 +247,16 @@ def readiness(started: list[RigNode]) -> dict[str, list[str]]:
             'wait_for_subscribers': [f'{topic}: {" ".join(names)}' for topic, names in readers.items()] or ['']}
 
 
+def _argument(node: RigNode, param: str, arg: str, value: Any) -> str | int:
+    """The value of parameter ``param`` from argument ``arg``: a string, or an integer for ``node.integers``."""
+    if param not in node.integers:
+        return str(value)
+    try:
+        return int(str(value))
+    except ValueError:
+        raise RigError(f'{arg}:={value}: expected an integer') from None
+
+
 def rig_nodes(config_dir: str | os.PathLike, given: Mapping[str, str | bool] | None = None) -> list[NodeStart]:
     """The nodes the rig starts for the arguments ``given`` (the rest at their defaults), in start order."""
     values = argument_values(config_dir, given)
@@ -257,7 +270,7 @@ def rig_nodes(config_dir: str | os.PathLike, given: Mapping[str, str | bool] | N
     # load_program waits for the whole rig, the other machine's nodes too.
     return [NodeStart(node.name, node.executable,
                       tuple(files[f] for f in node.files if f != 'drivers' or values['transport'] == 'drivers'),
-                      {**{param: str(values[arg]) for param, arg in node.arguments.items()},
+                      {**{param: _argument(node, param, arg, values[arg]) for param, arg in node.arguments.items()},
                        **(readiness(started) if node.runs_program else {})}, node.remappings, node.runs_program,
                       node.machine)
             for node in started if values['machine'] in ('all', node.machine)]
