@@ -1,8 +1,8 @@
 """Live view benchmark: the cost of watching. The rig at 1 kHz (bench_rig's run) without the view, then with
 live_view and two clients subscribed to every channel the page shows, in one run, alternating ``--pairs`` times.
 
-Reports, per case, the estimator's lag at publication (its own record: p50, p99) and the losses (samples the
-sensors sent that the estimator did not receive; samples missing on the 1 ms grid at an independent observer), and
+Reports, per case, the estimator's lag at publication (its own record: p50, p99) and the losses (samples missing
+on the 1 ms grid at an independent observer; the sensors' sent minus the estimator's received is shown too), and
 the view's own CPU (user + system time of its process over the steady state, as a fraction of one core), with the
 rates its clients received. Targets: with the view, the estimator's lag p99 and the loss counts within 10 % of the
 run without it (a loss count of 0 stays 0; the lag compared as the median over the pairs of runs), and the view's CPU
@@ -30,11 +30,10 @@ CPU_LIMIT = 0.15
 
 
 def losses(res: dict) -> int:
-    """Every sample lost: sent but not received by the estimator, and missing at the observer, both topics."""
-    total = 0
-    for c in res['topics'].values():
-        total += max(c['sent_minus_estimator_received'] or 0, 0) + (c['observer_grid']['lost'] or 0)
-    return total
+    """Samples lost on the way, both topics: missing on the 1 ms grid at the independent observer (exact; the
+    sensors' sent minus the estimator's received also counts samples sent before the estimator matched them, so it
+    is reported, not compared)."""
+    return sum(c['observer_grid']['lost'] or 0 for c in res['topics'].values())
 
 
 def main(argv=None) -> int:
@@ -67,7 +66,7 @@ def main(argv=None) -> int:
     print(f"--- the view's own CPU: {100 * cpu:.1f} % of one core (worst run); its {args.clients} clients received "
           f'{rates} messages/s')
     ratio = summary['with']['lag_p99_ms'] / summary['without']['lag_p99_ms']
-    lost_ok = summary['with']['lost'] <= summary['without']['lost'] * LAG_RATIO
+    lost_ok = summary['with']['lost'] <= summary['without']['lost'] * LAG_RATIO  # 0 stays 0
     print(f"=== lag p99 with / without: {ratio:.2f} (target <= {LAG_RATIO}); samples lost {summary['with']['lost']} vs "
           f"{summary['without']['lost']} (target within 10 %); view CPU {100 * cpu:.1f} % (target <= "
           f'{100 * CPU_LIMIT:.0f} %)')
