@@ -211,7 +211,11 @@ class LiveViewNode(Node):
 
     def _on_pairs(self, msg: Float64MultiArray) -> None:
         assert self.points is not None
-        self.points.add(msg.data)
+        try:
+            self.points.add(msg.data)
+        except ValueError as exc:  # not rows of PAIR_FIELDS (a foreign publisher): said, not fatal
+            self.get_logger().warn(f'live view: {topics.FITTED_PAIRS} ignored: {exc}', throttle_duration_sec=5.0)
+            return
         self.dirty.add('xy')
 
     def _on_fit_lines(self, msg: Float64MultiArray) -> None:
