@@ -87,11 +87,14 @@ setup(
     cmdclass={'install': InstallAndCompileKernels, 'build_scripts': BuildNodeScripts},
     version='0.1.0',
     packages=find_packages(exclude=['test', 'test.*', 'benchmarks']),
+    # the live view's page (plain HTML/JS/CSS, served by the live_view node)
+    package_data={PACKAGE + '.view': ['web/*']},
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE]),
         ('share/' + PACKAGE, ['package.xml']),
         ('share/' + PACKAGE + '/config', sorted(glob('config/*.yaml'))),
         ('share/' + PACKAGE + '/launch', sorted(glob('launch/*.launch.py'))),
+        ('share/' + PACKAGE + '/foxglove', sorted(glob('foxglove/*.json'))),
     ],
     install_requires=['setuptools'],
     zip_safe=False,

@@ -50,8 +50,37 @@ def final_counters(log: str) -> dict:
     return {}
 
 
+def view_client(port: int, stop, counts: list) -> None:
+    """A client of the live view (a thread): subscribes to what the page shows (every /live_view/ channel) and
+    reads until ``stop`` is set; counts[0] = messages received. The page's own drawing is not the view's cost."""
+    from websockets.sync.client import connect
+    ws = connect(f'ws://127.0.0.1:{port}', subprotocols=['foxglove.sdk.v1'], max_size=None, legacy=True)
+    subscribed = False
+    while not stop.is_set():
+        try:
+            frame = ws.recv(timeout=0.2)
+        except TimeoutError:
+            continue
+        if isinstance(frame, str) and not subscribed and json.loads(frame).get('op') == 'advertise':
+            channels = [c for c in json.loads(frame)['channels'] if c['topic'].startswith('/live_view/')]
+            ws.send(json.dumps({'op': 'subscribe', 'subscriptions': [{'id': i + 1, 'channelId': c['id']}
+                                                                       for i, c in enumerate(channels)]}))
+            subscribed = True
+        elif isinstance(frame, bytes):
+            counts[0] += 1
+    ws.close()
+
+
+def cpu_seconds(pid: int) -> float:
+    """User + system CPU time of a process so far, s (/proc/<pid>/stat)."""
+    fields = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
+
+
 def run_rate(rate: float, seconds: float, env: dict, share: Path, log_dir: Path, publish_rate: float = 0.0,
-             warmup_s: float = 2.0, transport: str = 'sim') -> dict:
+             warmup_s: float = 2.0, transport: str = 'sim', view_clients: int | None = None) -> dict:
+    """One run; ``view_clients``: start live_view too, with that many clients connected (None: no view)."""
+    import threading
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
     from geometry_msgs.msg import PointStamped, WrenchStamped
@@ -104,7 +133,8 @@ def run_rate(rate: float, seconds: float, env: dict, share: Path, log_dir: Path,
     node.create_subscription(Float64MultiArray, topics.STIFFNESS_VALUES, on_values, RELIABLE_QOS)
     node.create_subscription(DiagnosticArray, topics.STIFFNESS_ESTIMATE, on_estimate, RELIABLE_QOS)
     # The rig of rig.launch.py without the recorder, the sensors at the benchmark's rates.
-    nodes = rig_nodes(share, {'program': 'side_force', 'record': False, 'transport': transport})
+    nodes = rig_nodes(share, {'program': 'side_force', 'record': False, 'transport': transport,
+                              'live_view': view_clients is not None})
     if transport == 'sim':
         sensor_nodes = {t: n for t, n in zip(sensors, ('load_cell', 'lvdt'))}
         rates = {'sample_rate_hz': rate, **({'publish_rate_hz': publish_rate} if publish_rate else {})}
@@ -114,8 +144,15 @@ def run_rate(rate: float, seconds: float, env: dict, share: Path, log_dir: Path,
         overrides = emulated_ports()
         overrides['netft'] |= {'publish_rate_hz': rate, **({'flush_rate_hz': publish_rate} if publish_rate else {})}
         overrides['modbus_lvdt'] |= {'poll_rate_hz': rate}
+    if view_clients is not None:
+        from crane_stiffness.testing.ports import free_port
+        overrides['live_view'] = {'port': free_port(), 'http_port': free_port()}
+    stop_clients = threading.Event()
+    client_counts: list[list[int]] = []
+    view_cpu: list[float] = []
     repeats = int(np.ceil(seconds / 21.0))
-    with rosrun.Processes(env, log_dir / f'{transport}_{int(rate)}hz') as procs:
+    suffix = '' if view_clients is None else f'_view{view_clients}'
+    with rosrun.Processes(env, log_dir / f'{transport}_{int(rate)}hz{suffix}') as procs:
         for n in nodes:
             if not n.runs_program:
                 start_node(procs, n, overrides.get(n.name))
@@ -127,14 +164,34 @@ def run_rate(rate: float, seconds: float, env: dict, share: Path, log_dir: Path,
             if time.monotonic() > deadline:
                 raise RuntimeError('rig did not connect')
             executor.spin_once(timeout_sec=0.05)
+        clients = []
+        if view_clients is not None:
+            while 'live view: page' not in procs.log('live_view'):
+                procs.check_alive()
+                if time.monotonic() > deadline:
+                    raise RuntimeError('the live view did not start')
+                executor.spin_once(timeout_sec=0.05)
+            for _ in range(view_clients):
+                client_counts.append([0])
+                clients.append(threading.Thread(target=view_client, daemon=True, args=(
+                    overrides['live_view']['port'], stop_clients, client_counts[-1])))
+                clients[-1].start()
         for n in nodes:
             if n.runs_program:
                 start_node(procs, n, {'repeats': repeats, 'start_delay_s': 0.5})
         program_start = time.time()
         window = (program_start + warmup_s, program_start + seconds)  # steady state, wall clock s
         t_end = time.monotonic() + seconds
+        t_cpu = time.monotonic() + warmup_s
         while time.monotonic() < t_end:
             executor.spin_once(timeout_sec=0.01)
+            if view_clients is not None and not view_cpu and time.monotonic() >= t_cpu:
+                view_cpu += [time.monotonic(), cpu_seconds(procs.procs['live_view'].pid)]
+        if view_cpu:
+            view_cpu = [(cpu_seconds(procs.procs['live_view'].pid) - view_cpu[1]) / (time.monotonic() - view_cpu[0])]
+        stop_clients.set()
+        for c in clients:
+            c.join(5)
         procs.check_alive()
         # Stop the program and the sensors; everything they sent must still arrive.
         procs.stop(names=('load_program', *sensor_nodes.values()))
@@ -204,6 +261,9 @@ def run_rate(rate: float, seconds: float, env: dict, share: Path, log_dir: Path,
         'estimate_lag_ms': stats(est_in[:, 1] - est_in[:, 0]),
         'sample_to_estimate_ms': stats(per_sample),
         'baseline_sensor_transport_lag_ms': stats(raw_lag),
+        'live_view': None if view_clients is None else {
+            'clients': view_clients, 'messages_per_client': [c[0] for c in client_counts],
+            'cpu_fraction_of_a_core': round(view_cpu[0], 4) if view_cpu else None},
     }
 
 

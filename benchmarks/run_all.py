@@ -20,6 +20,8 @@ BENCHMARKS = [
     ('bench_rig.py', [], 'bench_rig.json'),
     # The rig through the drivers (rig.launch.py transport:=drivers) against the direct topics, back to back.
     ('bench_rig.py', ['--rates', '1000', '--transports', 'sim', 'drivers'], 'bench_rig_drivers.json'),
+    # The rig at 1 kHz without and with the live view and two clients: the cost of watching.
+    ('bench_live_view.py', [], 'bench_live_view.json'),
     ('bench_netft.py', [], 'bench_netft.json'),
     ('bench_startup.py', [], 'bench_startup.json'),
     ('bench_soak.py', [], 'bench_soak.json'),   # 10 minutes of the whole rig: every node's memory growth

@@ -7,7 +7,8 @@ and the benchmarks.
 
 Arguments (:data:`ARGUMENTS`): program (side_force | side_force_slack | moment_z | force_z, or a path to a program
 YAML), crane (a geometry YAML; default the lab model), sensors (sensor YAML), sim_sensors and record (true/false),
-session (bag name), transport and drivers (below).
+session (bag name), transport and drivers (below), live_view (true/false) and its view_host, view_port,
+view_http_port.
 
 ``transport`` says how the sensor readings reach the estimator:
 
@@ -74,7 +75,11 @@ ARGUMENTS: tuple[Argument, ...] = (
     Argument('drivers', 'drivers_emulated.yaml', 'driver (and device emulator) parameters, read with '
              'transport:=drivers (a bare file name is one of config/)', config_file=True),
     Argument('machine', 'all', "start the nodes of one lab machine only: 'daq' (model, program, sensors, drivers), "
-             "'analysis' (estimator, recorder), or 'all'"),
+             "'analysis' (estimator, recorder, live view), or 'all'"),
+    Argument('live_view', 'false', 'start live_view: the page and a Foxglove WebSocket server (docs/live_view.md)'),
+    Argument('view_host', '127.0.0.1', "address the live view listens on (0.0.0.0: the lab network)"),
+    Argument('view_port', '8765', "the live view's Foxglove WebSocket port"),
+    Argument('view_http_port', '8080', "the live view's page port"),
 )
 #: The values of the ``transport`` argument.
 TRANSPORTS = ('sim', 'drivers')
@@ -104,6 +109,8 @@ class RigNode:
     runs_program: bool = False
     reads: tuple[str, ...] = ()
     machine: str = 'daq'
+    #: Parameters of ``arguments`` given as integers (launch hands a plain string to the node as a string).
+    integers: tuple[str, ...] = ()
 
     @property
     def name(self) -> str:
@@ -136,6 +143,10 @@ NODES: tuple[RigNode, ...] = (
             condition='record', reads=(topics.WRENCH_COMMAND, topics.APPLIED_WRENCH, topics.REJECTED_COMMAND,
                                         topics.PLATFORM_POSE, *_STREAMS), machine='analysis'),
     RigNode('load_program', ('program',), runs_program=True),
+    # For people watching: reads the rig's topics, waits for nothing, and the program does not wait for it.
+    RigNode('live_view', ('crane',), condition='live_view', machine='analysis',
+            arguments={'host': 'view_host', 'port': 'view_port', 'http_port': 'view_http_port'},
+            integers=('port', 'http_port')),
 )
 #: Topics a message must have arrived on before the program starts: the model's prediction (latched) and both
 #: sensor streams (from the simulated sensors, or from real drivers remapped onto them).
@@ -236,6 +247,16 @@ def readiness(started: list[RigNode]) -> dict[str, list[str]]:
             'wait_for_subscribers': [f'{topic}: {" ".join(names)}' for topic, names in readers.items()] or ['']}
 
 
+def _argument(node: RigNode, param: str, arg: str, value: Any) -> str | int:
+    """The value of parameter ``param`` from argument ``arg``: a string, or an integer for ``node.integers``."""
+    if param not in node.integers:
+        return str(value)
+    try:
+        return int(str(value))
+    except ValueError:
+        raise RigError(f'{arg}:={value}: expected an integer') from None
+
+
 def rig_nodes(config_dir: str | os.PathLike, given: Mapping[str, str | bool] | None = None) -> list[NodeStart]:
     """The nodes the rig starts for the arguments ``given`` (the rest at their defaults), in start order."""
     values = argument_values(config_dir, given)
@@ -249,7 +270,7 @@ def rig_nodes(config_dir: str | os.PathLike, given: Mapping[str, str | bool] | N
     # load_program waits for the whole rig, the other machine's nodes too.
     return [NodeStart(node.name, node.executable,
                       tuple(files[f] for f in node.files if f != 'drivers' or values['transport'] == 'drivers'),
-                      {**{param: str(values[arg]) for param, arg in node.arguments.items()},
+                      {**{param: _argument(node, param, arg, values[arg]) for param, arg in node.arguments.items()},
                        **(readiness(started) if node.runs_program else {})}, node.remappings, node.runs_program,
                       node.machine)
             for node in started if values['machine'] in ('all', node.machine)]

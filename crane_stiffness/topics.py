@@ -53,6 +53,13 @@ STIFFNESS_ESTIMATE = '/stiffness/estimate'
 STIFFNESS_VALUES = '/stiffness/estimate_values'
 STIFFNESS = '/stiffness/stiffness'
 DIAGNOSTICS = '/diagnostics'
+# For looking, not recorded (the estimate topics above hold the numbers): std_msgs/Float64MultiArray, reliable.
+# FITTED_PAIRS: the pairs the estimator fitted since its previous message, rows × PAIR_FIELDS of
+# crane_stiffness.estimation.live (stamp s, displacement m or rad, force N or N·m, branch 0 loading / 1 unloading,
+# segment); about 20 messages a second. FIT_LINES: each branch's window as a line with its 95 % band, rows loading,
+# unloading × FIT_LINE_FIELDS, at the estimator's diagnostics rate.
+FITTED_PAIRS = '/stiffness/fitted_pairs'
+FIT_LINES = '/stiffness/fit_lines'
 
 FRAME_BASE = 'crane_base'
 FRAME_PLATFORM = 'platform'
@@ -121,6 +128,14 @@ TOPIC_QOS: dict[str, QoS] = {
     STIFFNESS_ESTIMATE: RELIABLE,
     STIFFNESS_VALUES: RELIABLE,
     STIFFNESS: RELIABLE,
+    FITTED_PAIRS: RELIABLE,
+    FIT_LINES: RELIABLE,
+}
+
+#: Topics published for the live view only (not in RIG_TOPICS: the recorder does not record them by default).
+VIEW_TOPICS: dict[str, str] = {
+    FITTED_PAIRS: 'std_msgs/msg/Float64MultiArray',
+    FIT_LINES: 'std_msgs/msg/Float64MultiArray',
 }
 
 #: The recorder's subscriptions and the player's publishers are at least this deep: a latched topic's publishers

@@ -5,6 +5,7 @@ other two series, each with its own measuring arrangement from its program file)
 2. starts every node as its own process the way `ros2 run crane_stiffness <node>` starts it, from that install
    tree, all at the same instant as `ros2 launch` does: crane_model, load_cell, lvdt, stiffness_estimator,
    session_recorder and load_program, which starts the program once the rig is ready;
+   and live_view (unless --no-live-view), printing the page's and the Foxglove WebSocket's addresses;
 3. follows the program with a progress bar, then prints the estimated side stiffness beside the model's
    prediction and writes out/demo/summary.json; the session is recorded to bags/<session>/.
 
@@ -53,12 +54,15 @@ def main(argv=None) -> int:
     ap.add_argument('--out', default=str(REPO / 'out' / 'demo'), help='summary and logs directory')
     ap.add_argument('--bags', default=str(REPO / 'bags'), help='where the session is recorded')
     ap.add_argument('--tolerance', type=float, default=0.02, help='allowed relative error of the estimate')
+    ap.add_argument('--no-live-view', dest='live_view', action='store_false',
+                    help='do not start live_view (the page and the Foxglove WebSocket server)')
     args = ap.parse_args(argv)
 
     import rclpy
     from tqdm import tqdm
 
     from crane_stiffness.testing import rosrun
+    from crane_stiffness.testing.ports import free_port
     from crane_stiffness.testing.rig import Observer, start_rig, summarize, wait_for_program_start
 
     out = Path(args.out)
@@ -75,8 +79,14 @@ def main(argv=None) -> int:
     observer = Observer()
     with rosrun.Processes(env, out / 'logs') as procs:
         launched = time.monotonic()
-        program = start_rig(procs, share, args.program, session, Path(args.bags))
+        view = {'port': free_port(8765), 'http_port': free_port(8080)}  # the defaults unless taken
+        program = start_rig(procs, share, args.program, session, Path(args.bags), live_view=args.live_view,
+                            overrides={'live_view': view})
         print(f'  started {len(procs.procs)} nodes at once; load_program waits for the rig ...', flush=True)
+        if args.live_view:
+            print(f"  live view: open http://127.0.0.1:{view['http_port']}/ in a browser; Foxglove or Lichtblick: "
+                  f"ws://127.0.0.1:{view['port']} (layouts in install/crane_stiffness/share/crane_stiffness/"
+                  'foxglove/)', flush=True)
         wait_for_program_start(observer, procs, 90)
         print(f'  program started {observer.running_at - launched:.1f} s after launch', flush=True)
         bar = tqdm(total=100, desc=f'program {program.name}', unit='%', mininterval=0.5,

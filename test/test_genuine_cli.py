@@ -208,3 +208,36 @@ def test_ros2_run_a_node_and_ctrl_c(install_tree, tmp_path):
     assert 'FINAL_COUNTERS crane_model' in text, text[-3000:]
     for sign in UNCLEAN:
         assert sign not in text, text[-3000:]
+
+
+def test_launch_with_live_view_serves_the_page_and_ends_cleanly(install_tree, tmp_path):
+    """`ros2 launch crane_stiffness rig.launch.py live_view:=true view_port:=P view_http_port:=H`: the view starts
+    with the ports given (integers through launch_ros), serves the page and names the WebSocket port in it, and
+    one Ctrl-C ends every node cleanly."""
+    import json
+    import urllib.request
+
+    from crane_stiffness.testing.ports import free_port
+    install, env = install_tree
+    port, http_port = free_port(), free_port()
+    nodes = {n.name for n in rig_nodes(installed_config(install), {'live_view': 'true', 'record': 'false'})}
+    assert 'live_view' in nodes
+    launch = Launch(env, tmp_path, 'live_view:=true', 'record:=false', f'view_port:={port}',
+                    f'view_http_port:={http_port}')
+    try:
+        deadline = time.monotonic() + 90
+        while f'Foxglove ws://127.0.0.1:{port}' not in launch.output:
+            assert launch.proc.poll() is None and time.monotonic() < deadline, launch.output[-6000:]
+            time.sleep(0.2)
+        with urllib.request.urlopen(f'http://127.0.0.1:{http_port}/', timeout=10) as page:
+            assert b'<canvas id="xy"' in page.read()
+        with urllib.request.urlopen(f'http://127.0.0.1:{http_port}/config.json', timeout=10) as config:
+            assert json.loads(config.read())['ws_port'] == port
+        while set(STARTED.findall(launch.output)) != nodes:
+            assert time.monotonic() < deadline, launch.output[-6000:]
+            time.sleep(0.2)
+        code = launch.ctrl_c()
+    finally:
+        launch.kill()
+    assert code == 0, launch.output[-6000:]
+    assert_every_node_ended_cleanly(launch.output, nodes)

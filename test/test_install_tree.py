@@ -41,6 +41,11 @@ def test_install_tree_has_index_marker_executables_config_and_launch(install_tre
                  'program_side_force_slack.yaml', 'sensors.yaml'):
         assert (prefix / 'share/crane_stiffness/config' / name).is_file(), name
     assert (prefix / 'share/crane_stiffness/launch/rig.launch.py').is_file()
+    for name in ('stiffness_test.json', 'sensors.json'):  # the Foxglove layouts, read back as JSON
+        layout = json.loads((prefix / 'share/crane_stiffness/foxglove' / name).read_text())
+        assert layout['configById'] and layout['layout']
+    site = next(prefix.glob('lib/python3*/site-packages/crane_stiffness/view/web'))
+    assert {p.name for p in site.iterdir()} >= {'index.html', 'app.js', 'style.css'}  # the live view's page
     with pytest.raises(rosrun.RosRunError, match='No executable'):
         rosrun.executable_path('crane_stiffness', 'no_such_node', env['AMENT_PREFIX_PATH'])
     with pytest.raises(rosrun.RosRunError, match='not found'):

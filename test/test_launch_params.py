@@ -100,3 +100,17 @@ def test_rig_arguments_choose_the_nodes_and_their_files():
         rig_nodes(CONFIG, {'crane': './nowhere.yaml'})
     with pytest.raises(RigError, match="unknown program 'nothing'.*force_z, moment_z, side_force"):
         rig_nodes(CONFIG, {'program': 'nothing'})
+
+
+def test_live_view_argument_starts_it_with_integer_ports():
+    """live_view:=true adds the view (on the analysis machine) with its ports as integers: launch_ros would hand a
+    string to the node, which declares integers."""
+    names = [n.name for n in rig_nodes(CONFIG, {})]
+    assert 'live_view' not in names
+    view = {n.name: n for n in rig_nodes(CONFIG, {'live_view': 'true', 'view_port': '9000',
+                                                  'view_http_port': '9001'})}['live_view']
+    assert view.parameters == {'host': '127.0.0.1', 'port': 9000, 'http_port': 9001}
+    assert view.machine == 'analysis' and view.parameter_files == (str(CONFIG / 'crane_lab.yaml'),)
+    assert 'live_view' not in [n.name for n in rig_nodes(CONFIG, {'live_view': 'true', 'machine': 'daq'})]
+    with pytest.raises(RigError, match='view_port:=80a: expected an integer'):
+        rig_nodes(CONFIG, {'live_view': 'true', 'view_port': '80a'})

@@ -8,8 +8,6 @@ from collections.abc import Mapping
 from dataclasses import dataclass, fields
 from typing import Any
 
-import numpy as np
-
 from crane_stiffness.estimation.branch import BRANCHES, Branch, BranchTracker
 from crane_stiffness.estimation.errors import ParameterError
 from crane_stiffness.estimation.fit import LineFit, WindowedLeastSquares
@@ -124,10 +122,6 @@ class StiffnessEstimator:
             raise ParameterError('x_noise', x_noise, 'must be finite and >= 0 (m or rad)')
         self._x_noise[branch] = x_noise
 
-    def window_displacements(self, branch: Branch) -> np.ndarray:
-        """Copy of the displacements in ``branch``'s window, in arrival order, m or rad."""
-        return self._windows[branch].data()[0]
-
     def nonlinearity(self, branch: Branch) -> float:
         """The nonlinearity indicator of ``branch``'s window (partitions the window, whatever the constructor's
         ``nonlinearity``); NaN while the window cannot be fitted."""
@@ -157,6 +151,10 @@ class StiffnessEstimator:
                         stamp_s=self._stamps[branch], branch=branch,
                         rls_stiffness=math.nan if rls is None else rls.stiffness,
                         rls_stderr=math.nan if rls is None else rls.stderr)
+
+    def window_data(self, branch: Branch) -> tuple[Any, Any]:
+        """Copies of ``branch``'s window: (displacements, forces), oldest first, shape (n,) each."""
+        return self._windows[branch].data()
 
     def estimates(self) -> dict[Branch, Estimate | None]:
         """Estimates of both branches."""

@@ -57,6 +57,7 @@ from collections.abc import Sequence
 from crane_stiffness.estimation.branch import BRANCHES, LOADING, Branch
 from crane_stiffness.estimation.estimator import Estimate
 from crane_stiffness.estimation.fit import t_quantile
+from crane_stiffness.estimation.fit_lines import fit_line_rows
 from crane_stiffness.estimation.quality import CommandRange
 from crane_stiffness.estimation.settings import LiveSettings
 from crane_stiffness.estimation.stream_delay import StreamDelay
@@ -70,6 +71,9 @@ from crane_stiffness.status import ERROR, OK, WARN
 from crane_stiffness.estimation.sync import (DISPLACEMENT, FORCE, ApproximateTimeSync, InterpolatingSync, Pair,
                                              SyncCounters)
 
+#: Columns of one row of :meth:`LiveStiffness.take_fitted_pairs`: stamp s, displacement m (rad), force N (N·m),
+#: branch 0 loading / 1 unloading, fit segment number.
+PAIR_FIELDS = ('stamp', 'displacement', 'force', 'branch', 'segment')
 
 # Student-t quantiles computed ahead when a fit starts (t_quantile's cache holds 1024).
 _T_CACHE = 1000
@@ -85,6 +89,9 @@ class LiveStiffness:
         self.lag = LagHistogram()
         self._settings = settings or LiveSettings()
         self._zero_epochs: dict[str, float] = {}  # the last zero epoch seen per stream (see zero_epoch)
+        #: Keep every fitted pair for :meth:`take_fitted_pairs` (the node's live view topic); off: nothing kept.
+        self.record_pairs = False
+        self._fitted_pairs: list[float] = []
         self._build(None)
 
     def _build(self, old: ApproximateTimeSync | InterpolatingSync | None) -> None:
@@ -341,6 +348,9 @@ class LiveStiffness:
             if self._suspect[branch]:
                 self._suspect[branch] -= 1
             fitted += 1
+            if self.record_pairs:
+                self._fitted_pairs += (stamp, pair.displacement, pair.force, 0.0 if branch == LOADING else 1.0,
+                                       float(self.counters.segments))
         self.counters.pairs_fitted += fitted
         return fitted
 
@@ -381,6 +391,15 @@ class LiveStiffness:
             self._rows[branch] = self._row(self._estimator.estimate(branch))
         self._dirty.clear()
 
+    def take_fitted_pairs(self) -> list[float]:
+        """The pairs fitted since the previous call (with :attr:`record_pairs`), rows × PAIR_FIELDS, row-major."""
+        out, self._fitted_pairs = self._fitted_pairs, []
+        return out
+
+    def fit_lines(self) -> list[float]:
+        """Each branch's window as a line with its band (:func:`~.fit_lines.fit_line_rows`; O(window))."""
+        return fit_line_rows(self._estimator)
+
     def published(self, now_s: float) -> None:
         """Note that :meth:`values` was published at ``now_s`` (s, the clock of the stamps): records the lag."""
         self.lag.add(now_s - self._newest_stamp)
@@ -399,7 +418,7 @@ class LiveStiffness:
         """Estimate the displacement noise of each branch's window (``displacement_noise`` -1), recompute its
         nonlinearity indicator and scatter (each a pass over the window: call it slowly)."""
         for branch in BRANCHES:
-            x_noise = self._settings.displacement_noise_of(self._estimator.window_displacements(branch))
+            x_noise = self._settings.displacement_noise_of(self._estimator.window_data(branch)[0])
             self._estimator.set_displacement_noise(branch, x_noise)
             self._dirty.add(branch)
             self._nonlinearity[branch] = self._estimator.nonlinearity(branch)

@@ -14,6 +14,9 @@ Pairs samples by header stamp, fits loading and unloading branches apart (window
   buffer is one estimate: the newest pair's stamp is its age), and
   /stiffness/estimate (DiagnosticArray: one status per branch plus an input status with the counters) and again
   /stiffness/stiffness at ``diagnostics_rate_hz``.
+For the live view (not recorded by default): /stiffness/fitted_pairs (Float64MultiArray, every pair fitted, rows ×
+PAIR_FIELDS, gathered for PAIRS_PERIOD_S) and /stiffness/fit_lines (Float64MultiArray, each branch's window as a line
+with its 95 % band, rows × FIT_LINE_FIELDS, at ``diagnostics_rate_hz``).
 Inputs are judged at every report: a stream silent for more than ``dropout_factor`` delivery periods (and at least
 ``min_silence_s``) makes the input status ERROR and both branches STALE; a stream that lost more than
 ``max_loss_fraction`` of its samples, or a
@@ -48,7 +51,8 @@ from std_srvs.srv import Trigger
 from crane_stiffness import topics
 from crane_stiffness.serde import CdrError, decode_float64, decode_stamped, stamp_seconds
 from crane_stiffness.estimation.branch import BRANCHES
-from crane_stiffness.estimation.live import VALUE_FIELDS, LiveStiffness
+from crane_stiffness.estimation.fit_lines import FIT_LINE_FIELDS
+from crane_stiffness.estimation.live import PAIR_FIELDS, VALUE_FIELDS, LiveStiffness
 from crane_stiffness.estimation.settings import ESTIMATOR_PARAMS, LiveSettings
 from crane_stiffness.params.spec import ParamSpec
 from crane_stiffness.estimation.sync import DISPLACEMENT, FORCE
@@ -68,6 +72,9 @@ _NO_EVENTS_SUB = SubscriptionEventCallbacks(use_default_callbacks=False)
 _NO_EVENTS_PUB = PublisherEventCallbacks(use_default_callbacks=False)
 #: Most queued sensor messages handled by one callback (see ``_take_queued``).
 MAX_BATCH = 400
+#: The fitted pairs are gathered this long before they are published (s): ~20 messages a second for the live view,
+#: not one per batch beside /stiffness/estimate_values.
+PAIRS_PERIOD_S = 0.05
 
 
 def _take_queued(subscription) -> tuple[Any, dict] | None:
@@ -115,6 +122,11 @@ class StiffnessEstimatorNode(Node):
                                                    event_callbacks=_NO_EVENTS_PUB)
         self.pub_estimate = self.create_publisher(DiagnosticArray, topics.STIFFNESS_ESTIMATE, RELIABLE_QOS,
                                                   event_callbacks=_NO_EVENTS_PUB)
+        self.pub_pairs = self.create_publisher(Float64MultiArray, topics.FITTED_PAIRS, RELIABLE_QOS,
+                                               event_callbacks=_NO_EVENTS_PUB)
+        self.pub_lines = self.create_publisher(Float64MultiArray, topics.FIT_LINES, RELIABLE_QOS,
+                                               event_callbacks=_NO_EVENTS_PUB)
+        self.pairs_published_s = 0.0  # node clock of the last /stiffness/fitted_pairs
         n = len(VALUE_FIELDS)
         self.values_msg = Float64MultiArray()  # reused: the layout is set once
         self.values_msg.layout.dim = [
@@ -154,6 +166,7 @@ class StiffnessEstimatorNode(Node):
         first = self.core is None
         if self.core is None:  # the start: segment 1 is fitted with these settings (not a change of parameters)
             self.core = LiveStiffness(settings)
+            self.core.record_pairs = True  # for /stiffness/fitted_pairs
         if first or self.core.configure(settings):
             where = 'at the platform centre' if settings.force_row() is None else 'moved to the platform centre'
             self.get_logger().info(f'fitting {settings.force_axis}: window {settings.window} pairs, pairing '
@@ -305,6 +318,18 @@ class StiffnessEstimatorNode(Node):
         if k != self.last_stiffness and k == k:  # changed and not NaN
             self.pub_stiffness.publish(Float64(data=k))
         self.last_stiffness = k
+        self._publish_pairs(False)
+
+    def _publish_pairs(self, now: bool) -> None:
+        """/stiffness/fitted_pairs: the pairs fitted since the last one, once PAIRS_PERIOD_S has passed (or ``now``)."""
+        assert self.core is not None
+        t = self._now_s()
+        if not now and t - self.pairs_published_s < PAIRS_PERIOD_S:
+            return
+        self.pairs_published_s = t
+        data = self.core.take_fitted_pairs()
+        if data:
+            self.pub_pairs.publish(_table(data, 'pair', PAIR_FIELDS))
 
     def _check_publishers(self) -> None:
         """A new publisher on a sensor topic while one was already matched (a sensor restarted before its old
@@ -340,6 +365,8 @@ class StiffnessEstimatorNode(Node):
                                            hardware_id=self.get_name(),
                                            values=[KeyValue(key=k, value=v) for k, v in pairs]))
         self.pub_estimate.publish(msg)
+        self._publish_pairs(True)
+        self.pub_lines.publish(_table(self.core.fit_lines(), 'branch', FIT_LINE_FIELDS))
 
     def _srv_reset(self, request, response):
         fitted = self.core.counters.pairs_fitted
@@ -350,6 +377,15 @@ class StiffnessEstimatorNode(Node):
                             f'fitted so far; segment {self.core.counters.segments})')
         self.get_logger().info(response.message)
         return response
+
+
+def _table(data: list[float], rows: str, columns: tuple[str, ...]) -> Float64MultiArray:
+    """A row-major Float64MultiArray of ``data`` with ``len(columns)`` columns, its layout labelled."""
+    n = len(columns)
+    msg = Float64MultiArray(data=data)
+    msg.layout.dim = [MultiArrayDimension(label=rows, size=len(data) // n, stride=len(data)),
+                      MultiArrayDimension(label='field', size=n, stride=n)]
+    return msg
 
 
 def main(args=None) -> int:

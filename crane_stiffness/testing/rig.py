@@ -133,12 +133,13 @@ def config_files(share: Path, program: str) -> dict[str, Path]:
 
 
 def start_rig(procs: Processes, share: Path, program: str, session: str, bags: Path, record: bool = True,
-              ready_timeout_s: float = 60.0, overrides: Mapping[str, Mapping[str, Any]] | None = None) -> LoadProgram:
+              ready_timeout_s: float = 60.0, overrides: Mapping[str, Mapping[str, Any]] | None = None,
+              live_view: bool = False) -> LoadProgram:
     """Start every node of the rig at the same instant, as ``ros2 launch crane_stiffness rig.launch.py`` does:
     load_program waits until the rig is ready (at most ``ready_timeout_s``) and exits when the program is done.
-    ``overrides``: extra parameters by node name. Returns the program."""
+    ``overrides``: extra parameters by node name; ``live_view``: start the live view too. Returns the program."""
     prog = load_program_file(config_files(share, program)['program'])
-    nodes = rig_nodes(share, {'program': program, 'record': record, 'session': session})
+    nodes = rig_nodes(share, {'program': program, 'record': record, 'session': session, 'live_view': live_view})
     if record:
         bags.mkdir(parents=True, exist_ok=True)
     for node in nodes:

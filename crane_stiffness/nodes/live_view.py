@@ -1,0 +1,319 @@
+"""live_view: the rig live, for people watching a test (a thin adapter around crane_stiffness.view).
+
+Serves, on ``host`` (127.0.0.1 by default; 0.0.0.0 opens it to the lab network):
+
+- a Foxglove WebSocket server on ``port`` (the ``foxglove-sdk`` wheel): the rig's topics (``topics``) with their
+  ROS 2 schemas (ros2msg, cdr) as foxglove_bridge offers them, each subscribed in ROS only while a client listens;
+  the derived channels under /live_view/ (JSON, at ``rate_hz`` while a client listens): ``xy`` (the current fit
+  segment's fitted pairs, force vs displacement, decimated to at most ``max_points`` for display), ``fit_lines``
+  (each branch's line and 95 % band), ``prediction`` (the model's stiffness as a line), ``estimate``, ``status``
+  (the estimator's, as text and level), ``wires`` and ``scene`` (``foxglove.SceneUpdate``: the crane with its
+  deflection × ``deflection_scale``); and the Trigger services ``services`` (tare, estimator reset, recording
+  start/stop), forwarded to the ROS services of the same name;
+- the page (crane_stiffness/view/web) on ``http_port``, which talks to the same WebSocket server.
+
+Reads /stiffness/fitted_pairs and /stiffness/fit_lines (the estimator's pairs and fit lines: nothing is refitted
+here), /stiffness/estimate_values, /stiffness/estimate, /crane/predicted_axis_stiffness, /crane/wire_states,
+/crane/platform_pose and /crane/applied_wrench; the geometry from the geometry.* parameters (the crane file).
+The high-rate inputs are taken serialized and only the newest is decoded, at ``rate_hz``. Port 0 takes a free port;
+the addresses are logged at start (``live view: page http://…, Foxglove ws://…``).
+"""
+from __future__ import annotations
+
+import importlib
+import os
+import threading
+from typing import Any, Callable
+
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseStamped, WrenchStamped
+from rclpy.event_handler import SubscriptionEventCallbacks
+from rclpy.node import Node
+from rclpy.serialization import deserialize_message
+from rclpy.subscription import Subscription
+from rclpy.timer import Timer
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64, Float64MultiArray
+from std_srvs.srv import Trigger
+
+from crane_stiffness import topics
+from crane_stiffness.model import CraneGeometry
+from crane_stiffness.nodes.qos import LATCHED_QOS, RELIABLE_QOS, rclpy_qos
+from crane_stiffness.nodes.run import run
+from crane_stiffness.nodes.parameters import Params, check
+from crane_stiffness.params.geometry import GEOMETRY_PARAMS, geometry_from_params
+from crane_stiffness.params.spec import ParamSpec
+from crane_stiffness.view import plot
+from crane_stiffness.view.msgdefs import definition
+from crane_stiffness.view.scene import SCENE_SCHEMA, SLACK_TENSION_N, CraneState, scene_update
+from crane_stiffness.view.server import FoxgloveServer, PageServer
+
+PREFIX = '/live_view/'
+#: The ROS topics offered by default: every rig topic, the model status, /diagnostics and the view topics.
+DEFAULT_TOPICS = [*topics.RIG_TOPICS, topics.MODEL_STATUS, topics.DIAGNOSTICS, *topics.VIEW_TOPICS]
+DEFAULT_SERVICES = ['/load_cell/tare', '/stiffness_estimator/reset', '/session_recorder/start',
+                    '/session_recorder/stop']
+_TYPES = {**topics.RIG_TOPICS, **topics.VIEW_TOPICS, topics.MODEL_STATUS: 'std_msgs/msg/String',
+          topics.DIAGNOSTICS: 'diagnostic_msgs/msg/DiagnosticArray'}
+_NO_EVENTS = SubscriptionEventCallbacks(use_default_callbacks=False)
+#: Every derived channel is sent at least this often (ns), changed or not.
+RESEND_NS = 1_000_000_000
+
+PARAMS = (
+    ParamSpec('host', '127.0.0.1', "address both servers listen on: 127.0.0.1 = this machine only; 0.0.0.0 = every "
+              "interface (the lab network) [-]"),
+    ParamSpec('port', 8765, 'Foxglove WebSocket port (0: any free port, logged) [-]', low=0, high=65535),
+    ParamSpec('http_port', 8080, 'port of the page (0: any free port, logged) [-]', low=0, high=65535),
+    ParamSpec('rate_hz', 15.0, 'rate of the derived channels (plot, estimate, status, scene) [Hz]', above=0.0,
+              at_most=100.0),
+    ParamSpec('max_points', 500, 'most force-displacement points shown per segment (decimated for display; the '
+              'estimator fits every pair) [-]', low=2, high=100000),
+    ParamSpec('deflection_scale', 200.0, "the platform's displacement and rotation are drawn this many times larger "
+              'in the 3D scene [-]', above=0.0),
+    ParamSpec('topics', DEFAULT_TOPICS, 'ROS topics offered to Foxglove clients (types from the rig contract) [-]'),
+    ParamSpec('services', DEFAULT_SERVICES, 'std_srvs/Trigger services offered through the WebSocket [-]'),
+    ParamSpec('service_timeout_s', 5.0, 'longest wait for a forwarded service call [s]', above=0.0),
+    *GEOMETRY_PARAMS,
+)
+
+
+def _validate(values: dict[str, Any]) -> CraneGeometry:
+    for topic in values['topics']:
+        check(topic in _TYPES, 'topics', topic, f'must be one of {", ".join(sorted(_TYPES))}')
+    for name in values['services']:
+        check(name.startswith('/'), 'services', name, 'must be an absolute service name')
+    return geometry_from_params(values)  # raises GeometryError (a ValueError) naming the field
+
+
+def _message_class(type_name: str) -> Any:
+    pkg, _, name = type_name.split('/')
+    return getattr(importlib.import_module(f'{pkg}.msg'), name)
+
+
+class LiveViewNode(Node):
+    """Subscribes to the rig, serves the view (see the module docstring)."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__('live_view', **kwargs)
+        self.lock = threading.Lock()  # the wanted ROS topics, set on the server's threads
+        self.wanted: dict[str, bool] = {}
+        self.ros_subs: dict[str, Subscription] = {}
+        self.counters = {'forwarded': 0, 'derived_sent': 0, 'service_calls': 0, 'subscriptions_changed': 0}
+        self.foxglove: FoxgloveServer | None = None
+        self.page: PageServer | None = None
+        self.timer: Timer | None = None
+        self.settings: dict[str, Any] = {}
+        self.points: plot.PointBuffer | None = None
+        self.latest: dict[str, Any] = {}  # serialized newest message per high-rate input topic
+        self.fit_lines: list[float] | None = None
+        self.prediction = float('nan')
+        self.statuses: list[tuple[str, int, str]] = []
+        self.dirty: set[str] = set()
+        self.resent_ns = 0  # when every derived channel was last sent (a client that joined since gets them all)
+        self.trigger_clients = {name: self.create_client(Trigger, name) for name in DEFAULT_SERVICES}
+        self.params = Params(self, PARAMS, _validate, self._apply)
+        self.create_subscription(Float64MultiArray, topics.FITTED_PAIRS, self._on_pairs, RELIABLE_QOS)
+        self.create_subscription(Float64MultiArray, topics.FIT_LINES, self._on_fit_lines, RELIABLE_QOS)
+        self.create_subscription(DiagnosticArray, topics.STIFFNESS_ESTIMATE, self._on_estimate, RELIABLE_QOS)
+        self.create_subscription(Float64, topics.PREDICTED_AXIS_STIFFNESS, self._on_prediction, LATCHED_QOS)
+        for topic, msg_type in ((topics.STIFFNESS_VALUES, Float64MultiArray), (topics.WIRE_STATES, JointState),
+                                (topics.PLATFORM_POSE, PoseStamped), (topics.APPLIED_WRENCH, WrenchStamped)):
+            self.create_subscription(msg_type, topic, self._keeper(topic, msg_type), RELIABLE_QOS, raw=True,
+                                     event_callbacks=_NO_EVENTS)
+
+    # --- parameters, servers ---
+    def _apply(self, geometry: CraneGeometry, values: dict[str, Any]) -> None:
+        self.geometry = geometry
+        if self.points is None or values['max_points'] != self.settings.get('max_points'):
+            self.points = plot.PointBuffer(values['max_points'])
+        if values['rate_hz'] != self.settings.get('rate_hz'):
+            if self.timer is not None:
+                self.destroy_timer(self.timer)
+            self.timer = self.create_timer(1.0 / values['rate_hz'], self._tick)
+        for name in values['services']:
+            if name not in self.trigger_clients:
+                self.trigger_clients[name] = self.create_client(Trigger, name)
+        if self.foxglove is None:
+            self._start_servers(values)
+        elif any(values[k] != self.settings[k] for k in ('host', 'port', 'http_port', 'topics', 'services')):
+            self.get_logger().warn('host, ports, topics and services take effect at the next start')
+        self.dirty.update(('xy', 'scene'))
+        self.settings = values
+
+    def _start_servers(self, values: dict[str, Any]) -> None:
+        prefixes = [p for p in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep) if p]
+        ros = {topic: (_TYPES[topic], definition(_TYPES[topic], prefixes)) for topic in values['topics']}
+        derived = {PREFIX + name: (schema['title'], schema) for name, schema in plot.SCHEMAS.items()}
+        derived[PREFIX + 'scene'] = ('foxglove.SceneUpdate', SCENE_SCHEMA)
+        services = {name: self._caller(name) for name in values['services']}
+        logger = self.get_logger()
+        self.foxglove = FoxgloveServer(values['host'], values['port'], ros, derived, services, self._want,
+                                       logger.info, logger.warn)
+        try:
+            self.page = PageServer(values['host'], values['http_port'], self.foxglove.port)
+        except ValueError:
+            self.foxglove.stop()
+            raise
+        host = values['host']
+        shown = '127.0.0.1' if host in ('0.0.0.0', '') else host
+        logger.info(f'live view: page http://{shown}:{self.page.port}/ , Foxglove ws://{shown}:{self.foxglove.port}'
+                    f' ({len(ros)} ROS topics, {len(derived)} derived channels, {len(services)} services; listening '
+                    f'on {host})')
+
+    def close(self) -> None:
+        """Stop both servers (run() calls it at exit)."""
+        if self.page is not None:
+            self.page.stop()
+        if self.foxglove is not None:
+            self.counters['service_calls'] = self.foxglove.service_calls
+            self.foxglove.stop()
+
+    # --- ROS topics offered, subscribed while a client listens ---
+    def _want(self, topic: str, wanted: bool) -> None:
+        """A server thread: the first client subscribed to ``topic`` or the last left it (handled by _tick)."""
+        with self.lock:
+            self.wanted[topic] = wanted
+
+    def _update_subscriptions(self) -> None:
+        with self.lock:
+            changes, self.wanted = self.wanted, {}
+        for topic, wanted in changes.items():
+            if wanted and topic not in self.ros_subs:
+                qos = topics.TOPIC_QOS.get(topic)
+                profile = rclpy_qos(qos) if qos is not None else rclpy_qos(topics.RELIABLE, 100)
+                self.ros_subs[topic] = self.create_subscription(_message_class(_TYPES[topic]), topic,
+                                                                self._forwarder(topic), profile, raw=True,
+                                                                event_callbacks=_NO_EVENTS)
+            elif not wanted and topic in self.ros_subs:
+                self.destroy_subscription(self.ros_subs.pop(topic))
+            self.counters['subscriptions_changed'] += 1
+
+    def _forwarder(self, topic: str):
+        assert self.foxglove is not None
+        channel = self.foxglove.ros[topic]
+        clock = self.get_clock()
+
+        def forward(data: bytes) -> None:
+            channel.log(data, log_time=clock.now().nanoseconds)
+            self.counters['forwarded'] += 1
+        return forward
+
+    # --- inputs of the derived channels ---
+    def _keeper(self, topic: str, msg_type: Any):
+        def keep(data: bytes) -> None:
+            self.latest[topic] = (data, msg_type)
+            self.dirty.add(topic)
+        return keep
+
+    def _newest(self, topic: str) -> Any:
+        entry = self.latest.get(topic)
+        return None if entry is None else deserialize_message(entry[0], entry[1])
+
+    def _on_pairs(self, msg: Float64MultiArray) -> None:
+        assert self.points is not None
+        try:
+            self.points.add(msg.data)
+        except ValueError as exc:  # not rows of PAIR_FIELDS (a foreign publisher): said, not fatal
+            self.get_logger().warn(f'live view: {topics.FITTED_PAIRS} ignored: {exc}', throttle_duration_sec=5.0)
+            return
+        self.dirty.add('xy')
+
+    def _on_fit_lines(self, msg: Float64MultiArray) -> None:
+        self.fit_lines = list(msg.data)
+        self.dirty.add('fit_lines')
+
+    def _on_prediction(self, msg: Float64) -> None:
+        self.prediction = msg.data
+        self.dirty.add('fit_lines')
+
+    def _on_estimate(self, msg: DiagnosticArray) -> None:
+        self.statuses = [(s.name, s.level[0] if isinstance(s.level, bytes) else int(s.level), s.message)
+                         for s in msg.status]
+        self.dirty.add('status')
+
+    # --- outputs ---
+    def _tick(self) -> None:
+        self._update_subscriptions()
+        fox = self.foxglove
+        now = self.get_clock().now().nanoseconds
+        if now - self.resent_ns >= RESEND_NS:  # the slow channels too, for clients that joined since
+            self.resent_ns = now
+            self.dirty.update(('status', 'fit_lines', 'scene', *self.latest))
+        if fox is None or not self.dirty:
+            return
+        dirty, self.dirty = self.dirty, set()
+        sent = 0
+        try:
+            sent += self._send_plot(fox, dirty, now)
+            if 'status' in dirty and self.statuses:
+                sent += fox.log_json(PREFIX + 'status', plot.status_message(self.statuses), now)
+            if topics.STIFFNESS_VALUES in dirty and fox.wanted(PREFIX + 'estimate'):
+                values = self._newest(topics.STIFFNESS_VALUES)
+                sent += fox.log_json(PREFIX + 'estimate', plot.estimate_message(values.data), now)
+            sent += self._send_crane(fox, dirty, now)
+        except ValueError as exc:  # a message of the wrong shape (a foreign publisher): said, not fatal
+            self.get_logger().warn(f'live view: cannot show an input: {exc}', throttle_duration_sec=5.0)
+        self.counters['derived_sent'] += sent
+
+    def _send_plot(self, fox: FoxgloveServer, dirty: set[str], now: int) -> int:
+        assert self.points is not None
+        sent = 0
+        if ('xy' in dirty or 'fit_lines' in dirty) and fox.wanted(PREFIX + 'xy'):
+            sent += fox.log_json(PREFIX + 'xy', self.points.message(self.fit_lines, self.prediction), now)
+        if 'fit_lines' in dirty or 'xy' in dirty:
+            if self.fit_lines is not None and 'fit_lines' in dirty:
+                sent += fox.log_json(PREFIX + 'fit_lines', plot.fit_lines_message(self.fit_lines), now)
+            rows = self.points.rows
+            x_range = (float(rows[:, 1].min()), float(rows[:, 1].max())) if len(rows) else None
+            sent += fox.log_json(PREFIX + 'prediction',
+                                 plot.prediction_message(self.prediction, self.fit_lines, x_range), now)
+        return sent
+
+    def _send_crane(self, fox: FoxgloveServer, dirty: set[str], now: int) -> int:
+        if not dirty & {topics.WIRE_STATES, topics.PLATFORM_POSE, topics.APPLIED_WRENCH, 'scene'}:
+            return 0
+        wires = self._newest(topics.WIRE_STATES)
+        if wires is None:
+            return 0
+        sent = fox.log_json(PREFIX + 'wires', plot.wires_message(wires.name, wires.position, wires.effort,
+                                                                 SLACK_TENSION_N), now)
+        if not fox.wanted(PREFIX + 'scene'):
+            return sent
+        pose, wrench = self._newest(topics.PLATFORM_POSE), self._newest(topics.APPLIED_WRENCH)
+        p = pose.pose if pose is not None else None
+        state = CraneState(
+            position=(p.position.x, p.position.y, p.position.z) if p else (0.0, 0.0, 0.0),
+            orientation=(p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w) if p else
+            (0.0, 0.0, 0.0, 1.0),
+            tensions=list(wires.effort),
+            force=(wrench.wrench.force.x, wrench.wrench.force.y, wrench.wrench.force.z) if wrench else (0.0,) * 3,
+            stamp_s=wires.header.stamp.sec + wires.header.stamp.nanosec * 1e-9)
+        scene = scene_update(self.geometry, state, self.settings['deflection_scale'])
+        return sent + fox.log_json(PREFIX + 'scene', scene, now)
+
+    # --- services through the bridge ---
+    def _caller(self, name: str) -> Callable[[], tuple[bool, str]]:
+        return lambda: self._call(name)
+
+    def _call(self, name: str) -> tuple[bool, str]:
+        """A server thread: call the ROS Trigger service ``name`` and wait for its answer."""
+        client = self.trigger_clients[name]
+        if not client.service_is_ready():
+            raise RuntimeError(f'service {name} is not available (is its node running?)')
+        done = threading.Event()
+        future = client.call_async(Trigger.Request())
+        future.add_done_callback(lambda _: done.set())
+        if not done.wait(self.settings['service_timeout_s']):
+            raise RuntimeError(f'service {name}: no answer in {self.settings["service_timeout_s"]:g} s')
+        response = future.result()
+        self.get_logger().info(f'service {name} called through the WebSocket: success={response.success}, '
+                               f'{response.message}')
+        return bool(response.success), str(response.message)
+
+
+def main(args=None) -> int:
+    return run(LiveViewNode, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

@@ -1,0 +1,211 @@
+// The live view page: a Foxglove WebSocket client (subprotocol from config.json) drawing the derived channels of
+// the live_view node on plain canvases. No library: JSON channels, binary messageData frames (opcode 1:
+// u32 subscription id, u64 log time, payload).
+'use strict';
+const CHANNELS = ['xy', 'fit_lines', 'prediction', 'estimate', 'status', 'wires', 'scene'];
+const state = { messages: 0, lastCount: 0, data: {} };
+const LEVELS = ['OK', 'WARN', 'ERROR', 'STALE'];
+
+function fmt(v, digits) { return v === null || v === undefined ? '–' : Number(v).toPrecision(digits); }
+
+function connect(config) {
+  const ws = new WebSocket(`ws://${location.hostname}:${config.ws_port}`, [config.subprotocol]);
+  ws.binaryType = 'arraybuffer';
+  const bySubscription = {};
+  let nextId = 1;
+  ws.onopen = () => setConnection(0, 'connected');
+  ws.onclose = () => { setConnection(2, 'disconnected, retrying'); setTimeout(() => connect(config), 1000); };
+  ws.onmessage = (event) => {
+    if (typeof event.data === 'string') {
+      const msg = JSON.parse(event.data);
+      if (msg.op === 'advertise') {
+        const subscriptions = [];
+        for (const ch of msg.channels) {
+          const name = ch.topic.startsWith('/live_view/') ? ch.topic.slice('/live_view/'.length) : null;
+          if (CHANNELS.includes(name)) {
+            const id = nextId++;
+            bySubscription[id] = name;
+            subscriptions.push({ id, channelId: ch.id });
+          }
+        }
+        if (subscriptions.length) ws.send(JSON.stringify({ op: 'subscribe', subscriptions }));
+      }
+      return;
+    }
+    const view = new DataView(event.data);
+    if (view.getUint8(0) !== 1) return;
+    const name = bySubscription[view.getUint32(1, true)];
+    if (!name) return;
+    state.data[name] = JSON.parse(new TextDecoder().decode(new Uint8Array(event.data, 13)));
+    state.messages++;
+    state.dirty = true;
+  };
+}
+
+function setConnection(level, text) {
+  const el = document.getElementById('connection');
+  el.className = `level-${level}`;
+  el.textContent = text;
+}
+
+function updateText() {
+  const est = state.data.estimate;
+  if (est) {
+    for (const b of ['loading', 'unloading']) {
+      const e = est[b];
+      const k = document.getElementById(`k-${b}`);
+      k.textContent = e.stiffness === null ? '–' : `${fmt(e.stiffness, 6)} N/m`;
+      k.dataset.value = e.stiffness === null ? '' : String(e.stiffness);
+      k.dataset.sampleStamp = e.sample_stamp === null ? '' : String(e.sample_stamp);
+      document.getElementById(`ci-${b}`).textContent =
+        e.ci95_low === null ? '–' : `${fmt(e.ci95_low, 6)} .. ${fmt(e.ci95_high, 6)}`;
+      document.getElementById(`n-${b}`).textContent = e.n === null ? '–' : e.n;
+    }
+    const p = est.loading.prediction;
+    document.getElementById('k-prediction').textContent = p === null ? '–' : `${fmt(p, 6)} N/m`;
+    const rel = est.loading.relative_error;
+    document.getElementById('rel-error').textContent = rel === null ? '' : `loading ${(100 * rel).toFixed(2)} %`;
+  }
+  const st = state.data.status;
+  if (st) {
+    const el = document.getElementById('status-level');
+    el.className = `level-${st.level}`;
+    el.textContent = st.level_name;
+    el.dataset.level = st.level;
+    document.getElementById('status').textContent =
+      st.statuses.map((s) => `${s.name.split(': ').pop()}: ${s.level_name} ${s.message}`).join('\n');
+  }
+  const wires = state.data.wires;
+  if (wires) {
+    const table = document.getElementById('wires');
+    table.innerHTML = '<tr><th>wire</th><th>tension</th><th>length</th></tr>' + wires.wires.map((w) =>
+      `<tr class="${w.slack ? 'slack' : ''}"><td>${w.name}</td><td data-value="${w.tension}">` +
+      `${w.slack ? 'slack' : fmt(w.tension, 5) + ' N'}</td><td>${fmt(w.length * 1000, 6)} mm</td></tr>`).join('');
+  }
+  const xy = state.data.xy;
+  if (xy) {
+    document.getElementById('segment').textContent =
+      `segment ${xy.segment}, ${xy.pairs} pairs fitted, every ${xy.stride}. shown`;
+  }
+}
+
+function drawPlot() {
+  const canvas = document.getElementById('xy');
+  const ctx = canvas.getContext('2d');
+  const W = canvas.width, H = canvas.height, m = { l: 70, r: 15, t: 15, b: 45 };
+  ctx.clearRect(0, 0, W, H);
+  const xy = state.data.xy || { loading: [], unloading: [] };
+  const lines = state.data.fit_lines || {};
+  const pred = state.data.prediction || { line: [] };
+  const all = [...xy.loading, ...xy.unloading];
+  for (const b of ['loading', 'unloading']) if (lines[b]) all.push(...lines[b].line);
+  if (!all.length) { ctx.fillText('waiting for fitted pairs…', W / 2 - 60, H / 2); return; }
+  let [x0, x1, y0, y1] = [Infinity, -Infinity, Infinity, -Infinity];
+  for (const p of all) { x0 = Math.min(x0, p.x); x1 = Math.max(x1, p.x); y0 = Math.min(y0, p.y); y1 = Math.max(y1, p.y); }
+  const padX = (x1 - x0) * 0.05 || 1e-6, padY = (y1 - y0) * 0.05 || 1e-3;
+  x0 -= padX; x1 += padX; y0 -= padY; y1 += padY;
+  const sx = (x) => m.l + (x - x0) / (x1 - x0) * (W - m.l - m.r);
+  const sy = (y) => H - m.b - (y - y0) / (y1 - y0) * (H - m.t - m.b);
+  ctx.strokeStyle = '#999'; ctx.fillStyle = '#333'; ctx.lineWidth = 1; ctx.font = '12px sans-serif';
+  ctx.strokeRect(m.l, m.t, W - m.l - m.r, H - m.t - m.b);
+  for (let i = 0; i <= 5; i++) {
+    const x = x0 + (x1 - x0) * i / 5, y = y0 + (y1 - y0) * i / 5;
+    ctx.fillText((x * 1e6).toFixed(1), sx(x) - 12, H - m.b + 15);
+    ctx.fillText(y.toFixed(2), 8, sy(y) + 4);
+  }
+  ctx.fillText('displacement [µm]', W / 2 - 50, H - 8);
+  ctx.save(); ctx.translate(14, H / 2 + 30); ctx.rotate(-Math.PI / 2); ctx.fillText('force [N]', 0, 0); ctx.restore();
+  const colors = { loading: '#1f77b4', unloading: '#e07b00' };
+  for (const b of ['loading', 'unloading']) {
+    ctx.fillStyle = colors[b];
+    for (const p of xy[b]) ctx.fillRect(sx(p.x) - 1.5, sy(p.y) - 1.5, 3, 3);
+    const l = lines[b];
+    if (l && l.line.length) {
+      ctx.globalAlpha = 0.2; ctx.beginPath();
+      l.upper.forEach((p, i) => (i ? ctx.lineTo(sx(p.x), sy(p.y)) : ctx.moveTo(sx(p.x), sy(p.y))));
+      [...l.lower].reverse().forEach((p) => ctx.lineTo(sx(p.x), sy(p.y)));
+      ctx.closePath(); ctx.fill(); ctx.globalAlpha = 1;
+      ctx.strokeStyle = colors[b]; ctx.lineWidth = 2; ctx.beginPath();
+      l.line.forEach((p, i) => (i ? ctx.lineTo(sx(p.x), sy(p.y)) : ctx.moveTo(sx(p.x), sy(p.y))));
+      ctx.stroke();
+    }
+  }
+  if (pred.line.length) {
+    ctx.strokeStyle = '#2a9d2a'; ctx.setLineDash([8, 5]); ctx.lineWidth = 2; ctx.beginPath();
+    pred.line.forEach((p, i) => (i ? ctx.lineTo(sx(p.x), sy(p.y)) : ctx.moveTo(sx(p.x), sy(p.y))));
+    ctx.stroke(); ctx.setLineDash([]);
+  }
+}
+
+function drawScene() {
+  // An oblique view of the SceneUpdate (frame crane_view, z up): lines, the platform triangle, the force arrow.
+  const scene = state.data.scene;
+  const canvas = document.getElementById('scene');
+  const ctx = canvas.getContext('2d');
+  ctx.clearRect(0, 0, canvas.width, canvas.height);
+  if (!scene || !scene.entities.length) return;
+  const e = scene.entities[0];
+  const yaw = 0.6, pitch = 0.35, s = 480;
+  const project = (p) => {
+    const x = p.x * Math.cos(yaw) - p.y * Math.sin(yaw), d = p.x * Math.sin(yaw) + p.y * Math.cos(yaw);
+    return [canvas.width / 2 + s * x, canvas.height - 60 - s * (p.z * Math.cos(pitch) - d * Math.sin(pitch))];
+  };
+  const rgba = (c) => `rgba(${Math.round(c.r * 255)},${Math.round(c.g * 255)},${Math.round(c.b * 255)},${c.a})`;
+  for (const t of e.triangles) {
+    ctx.fillStyle = rgba(t.color); ctx.beginPath();
+    t.points.forEach((p, i) => { const [u, v] = project(p); i ? ctx.lineTo(u, v) : ctx.moveTo(u, v); });
+    ctx.closePath(); ctx.fill();
+  }
+  for (const l of e.lines) {
+    ctx.strokeStyle = rgba(l.color); ctx.lineWidth = l.thickness; ctx.beginPath();
+    if (l.type === 2) {
+      for (let i = 0; i + 1 < l.points.length; i += 2) {
+        const [a, b] = project(l.points[i]), [c, d] = project(l.points[i + 1]);
+        ctx.moveTo(a, b); ctx.lineTo(c, d);
+      }
+    } else {
+      l.points.forEach((p, i) => { const [u, v] = project(p); i ? ctx.lineTo(u, v) : ctx.moveTo(u, v); });
+      if (l.type === 1) ctx.closePath();
+    }
+    ctx.stroke();
+  }
+  for (const a of e.arrows) {
+    const q = a.pose.orientation, o = a.pose.position;
+    // +x turned by the quaternion: the arrow's direction
+    const dir = { x: 1 - 2 * (q.y * q.y + q.z * q.z), y: 2 * (q.x * q.y + q.z * q.w), z: 2 * (q.x * q.z - q.y * q.w) };
+    const len = a.shaft_length + a.head_length;
+    const [u0, v0] = project(o), [u1, v1] = project({ x: o.x + dir.x * len, y: o.y + dir.y * len, z: o.z + dir.z * len });
+    ctx.strokeStyle = rgba(a.color); ctx.lineWidth = 3; ctx.beginPath(); ctx.moveTo(u0, v0); ctx.lineTo(u1, v1); ctx.stroke();
+    const ang = Math.atan2(v1 - v0, u1 - u0);
+    ctx.beginPath(); ctx.moveTo(u1, v1);
+    ctx.lineTo(u1 - 10 * Math.cos(ang - 0.4), v1 - 10 * Math.sin(ang - 0.4));
+    ctx.lineTo(u1 - 10 * Math.cos(ang + 0.4), v1 - 10 * Math.sin(ang + 0.4)); ctx.closePath();
+    ctx.fillStyle = rgba(a.color); ctx.fill();
+  }
+  ctx.font = '11px sans-serif';
+  for (const t of e.texts) {
+    const [u, v] = project(t.pose.position);
+    ctx.fillStyle = rgba(t.color); ctx.fillText(t.text, u + 3, v);
+  }
+  const scale = e.metadata.find((kv) => kv.key === 'deflection_scale');
+  if (scale) document.getElementById('scale').textContent = `deflection shown ×${Number(scale.value)}`;
+}
+
+function frame() {
+  if (state.dirty) {
+    state.dirty = false;
+    updateText();
+    drawPlot();
+    drawScene();
+  }
+  requestAnimationFrame(frame);
+}
+
+setInterval(() => {
+  document.getElementById('rate').textContent = `${state.messages - state.lastCount} messages/s`;
+  document.getElementById('rate').dataset.rate = state.messages - state.lastCount;
+  state.lastCount = state.messages;
+}, 1000);
+
+fetch('config.json').then((r) => r.json()).then(connect);
+requestAnimationFrame(frame);

@@ -1,0 +1,112 @@
+"""The simulated rig with the live view, for the live view tests: every node started from the colcon install as
+``ros2 launch crane_stiffness rig.launch.py live_view:=true`` starts them, and :class:`RigWatcher`, a test node that
+records what the rig published (the estimator's fitted pairs and values, the wire states, the tare epochs) on a
+thread of its own, to compare with what the view serves.
+"""
+from __future__ import annotations
+
+import contextlib
+import threading
+import time
+from pathlib import Path
+from typing import Any, Iterator
+
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64, Float64MultiArray
+
+from crane_stiffness import topics
+from crane_stiffness.estimation.live import PAIR_FIELDS, VALUE_FIELDS
+from crane_stiffness.nodes.qos import LATCHED_QOS, RELIABLE_QOS
+from crane_stiffness.testing.ports import free_port
+from crane_stiffness.testing.rig import start_rig
+from crane_stiffness.testing.rosrun import Processes
+
+
+class RigWatcher(Node):
+    """What the rig published, as received (lists are appended on the watcher's thread)."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__('live_view_test_watcher', **kwargs)
+        self.pairs: dict[float, tuple[float, float, int, int]] = {}  # stamp -> (x, force, branch, segment)
+        self.tensions: set[tuple[float, ...]] = set()
+        self.values: dict[float, float] = {}  # sample_stamp -> loading stiffness
+        self.loading: dict[str, float] = {}  # the newest loading row (VALUE_FIELDS)
+        self.tare_epochs: list[float] = []
+        self.statuses: dict[str, tuple[int, str]] = {}
+        self.status_history: list[dict[str, tuple[int, str]]] = []
+        self.create_subscription(Float64MultiArray, topics.FITTED_PAIRS, self._on_pairs, RELIABLE_QOS)
+        self.create_subscription(JointState, topics.WIRE_STATES, self._on_wires, RELIABLE_QOS)
+        self.create_subscription(Float64MultiArray, topics.STIFFNESS_VALUES, self._on_values, RELIABLE_QOS)
+        self.create_subscription(Float64, topics.LOAD_CELL_TARE, self._on_tare, LATCHED_QOS)
+        self.create_subscription(DiagnosticArray, topics.STIFFNESS_ESTIMATE, self._on_estimate, RELIABLE_QOS)
+        self.executor_ = SingleThreadedExecutor(context=self.context)
+        self.executor_.add_node(self)
+        self.stopping = False
+        self.thread = threading.Thread(target=self._spin, daemon=True)
+        self.thread.start()
+
+    def _spin(self) -> None:
+        while not self.stopping:
+            self.executor_.spin_once(timeout_sec=0.05)
+
+    def _on_pairs(self, msg: Float64MultiArray) -> None:
+        n = len(PAIR_FIELDS)
+        data = list(msg.data)
+        for i in range(0, len(data), n):
+            stamp, x, f, branch, segment = data[i:i + n]
+            self.pairs[stamp] = (x, f, int(branch), int(segment))
+
+    def _on_wires(self, msg: JointState) -> None:
+        self.tensions.add(tuple(msg.effort))
+
+    def _on_values(self, msg: Float64MultiArray) -> None:
+        row = dict(zip(VALUE_FIELDS, msg.data[:len(VALUE_FIELDS)]))  # the loading row
+        self.values[row['sample_stamp']] = row['stiffness']
+        self.loading = row
+
+    def _on_tare(self, msg: Float64) -> None:
+        self.tare_epochs.append(msg.data)
+
+    def _on_estimate(self, msg: DiagnosticArray) -> None:
+        self.statuses = {s.name.rpartition(': ')[2]: (s.level[0], s.message) for s in msg.status}
+        self.status_history.append(self.statuses)
+
+    def stop(self) -> None:
+        self.stopping = True
+        self.thread.join(5)
+        self.executor_.remove_node(self)
+        self.executor_.shutdown()
+        self.destroy_node()
+
+
+@contextlib.contextmanager
+def live_rig(env: dict[str, str], share: Path, out: Path, context: Any,
+             **view: Any) -> Iterator[tuple[Processes, RigWatcher, dict[str, int]]]:
+    """The side-force rig with the live view on free ports (``view``: more live_view parameters), the watcher
+    subscribed before anything starts; yields (processes, watcher, {'port', 'http_port'}) once the view serves."""
+    ports = {'port': free_port(), 'http_port': free_port()}
+    watcher = RigWatcher(context=context)
+    try:
+        with Processes(env, out / 'logs') as procs:
+            start_rig(procs, share, 'side_force', 'live', out / 'bags', record=False, live_view=True,
+                      overrides={'live_view': {**ports, **view}})
+            deadline = time.monotonic() + 60
+            while 'live view: page http://' not in procs.log('live_view'):
+                procs.check_alive()
+                assert time.monotonic() < deadline, procs.log('live_view')
+                time.sleep(0.1)
+            yield procs, watcher, ports
+    finally:
+        watcher.stop()
+
+
+def wait_for_pairs(procs: Processes, watcher: RigWatcher, count: int, timeout_s: float = 120.0) -> None:
+    """Until the estimator has published ``count`` fitted pairs (the program is running)."""
+    deadline = time.monotonic() + timeout_s
+    while len(watcher.pairs) < count:
+        procs.check_alive(allow_exit=('load_program',))
+        assert time.monotonic() < deadline, f'only {len(watcher.pairs)} fitted pairs after {timeout_s:g} s'
+        time.sleep(0.1)

@@ -1,0 +1,127 @@
+"""The live view over the Foxglove WebSocket protocol, on the running simulated rig: the channels and schemas it
+advertises, subscribing, decoding, and the values checked against what the rig published (the plot's points are
+the estimator's fitted pairs, the scene's wire tensions are /crane/wire_states), and a service call through the
+bridge that tares the load cell."""
+from __future__ import annotations
+
+import math
+
+import pytest
+from rclpy.serialization import deserialize_message, serialize_message
+from sensor_msgs.msg import JointState
+from std_srvs.srv import Trigger
+
+from crane_stiffness import topics
+from crane_stiffness.nodes.live_view import DEFAULT_SERVICES, DEFAULT_TOPICS, _TYPES
+from crane_stiffness.testing.rosrun import installed_config
+from helpers.foxglove_client import FoxgloveClient
+from helpers.live_rig import live_rig, wait_for_pairs
+from helpers.processes import UNCLEAN, final_counters
+
+DERIVED = ('xy', 'fit_lines', 'prediction', 'estimate', 'status', 'wires', 'scene')
+
+
+def test_protocol_channels_values_and_tare(install_tree, rclpy_context, tmp_path):
+    install, env = install_tree
+    with live_rig(env, installed_config(install), tmp_path, rclpy_context) as (procs, watcher, ports):
+        client = FoxgloveClient(ports['port'])
+        try:
+            # The rig's topics as foxglove_bridge offers them: ROS 2 schemas, CDR messages.
+            for topic in DEFAULT_TOPICS:
+                ch = client.channels[topic]
+                assert (ch['encoding'], ch['schemaEncoding'], ch['schemaName']) == ('cdr', 'ros2msg', _TYPES[topic])
+            wrench = client.channels[topics.LOAD_CELL_WRENCH]['schema']
+            assert '\nstd_msgs/Header header\nWrench wrench\n' in wrench  # the .msg text, then what it uses
+            assert 'MSG: geometry_msgs/Wrench\n' in wrench and 'MSG: builtin_interfaces/Time\n' in wrench
+            for name in DERIVED:
+                assert client.channels[f'/live_view/{name}']['encoding'] == 'json'
+            assert client.channels['/live_view/scene']['schemaName'] == 'foxglove.SceneUpdate'
+            assert set(DEFAULT_SERVICES) <= set(client.services)
+            assert client.services['/load_cell/tare']['type'] == 'std_srvs/srv/Trigger'
+
+            client.subscribe(*(f'/live_view/{name}' for name in DERIVED), topics.WIRE_STATES)
+            wait_for_pairs(procs, watcher, 3000)
+            client.poll(6.0)  # the program runs: loading, points growing
+            procs.check_alive(allow_exit=('load_program',))
+            _check_plot(client, watcher)
+            _check_crane(client, watcher)
+            _check_estimate(client, watcher)
+
+            # tare through the bridge (CDR, as Foxglove's service call panel sends for ros2msg services)
+            epochs_before = list(watcher.tare_epochs)
+            encoding, payload = client.call('/load_cell/tare', 'cdr', serialize_message(Trigger.Request()), 1)
+            response = deserialize_message(payload, Trigger.Response)
+            assert encoding == 'cdr' and response.success, response.message
+            client.poll(2.0)
+            assert watcher.tare_epochs and watcher.tare_epochs[-1] == (epochs_before or [0.0])[-1] + 1, \
+                (epochs_before, watcher.tare_epochs)
+            assert 'service /load_cell/tare called through the WebSocket: success=True' in procs.log('live_view')
+        finally:
+            client.close()
+        codes = procs.stop()
+    assert codes['live_view'] == 0
+    log = procs.log('live_view')
+    assert not any(sign in log for sign in UNCLEAN), log[-3000:]
+    counters = final_counters(log, 'live_view')
+    assert counters['derived_sent'] > 0 and counters['forwarded'] > 0 and counters['service_calls'] == 1
+
+
+def _check_plot(client: FoxgloveClient, watcher) -> None:
+    xy = client.json_messages('/live_view/xy')
+    assert len(xy) >= 10, len(xy)
+    last = xy[-1]
+    points = [(b, p) for b, branch in enumerate(('loading', 'unloading')) for p in last[branch]]
+    assert len(points) > 100, last['pairs']
+    assert len(points) <= 500  # max_points: decimated for display
+    for branch, p in points:  # every point shown is a pair the estimator fitted, exactly
+        x, force, fitted_branch, segment = watcher.pairs[p['t']]
+        assert (p['x'], p['y'], branch, segment) == (x, force, fitted_branch, last['segment'])
+    assert last['stride'] >= 1 and last['pairs'] >= len(points)
+    # the points of one segment decimated by one stride: one pair in every `stride` of those fitted
+    fitted = sorted(t for t, v in watcher.pairs.items() if v[3] == last['segment'])
+    shown = {p['t'] for _, p in points}
+    index = [i for i, t in enumerate(fitted) if t in shown]
+    assert all(i % last['stride'] == 0 for i in index), last['stride']
+    # the fit line and its band per branch, the prediction line, and each point carries them at its x
+    lines = client.json_messages('/live_view/fit_lines')[-1]
+    load = lines['loading']
+    assert len(load['line']) == 21 and all(lo['y'] < mid['y'] < hi['y'] for lo, mid, hi in
+                                            zip(load['lower'], load['line'], load['upper']))
+    k = load['stiffness']
+    assert load['line'][-1]['y'] - load['line'][0]['y'] == pytest.approx(
+        k * (load['line'][-1]['x'] - load['line'][0]['x']), rel=1e-9)
+    pred = client.json_messages('/live_view/prediction')[-1]
+    assert pred['stiffness'] > 0 and len(pred['line']) == 2
+    assert math.isfinite(last['loading'][-1]['fit']) and math.isfinite(last['loading'][-1]['prediction'])
+
+
+def _check_crane(client: FoxgloveClient, watcher) -> None:
+    scenes = client.json_messages('/live_view/scene')
+    assert scenes
+    for scene in scenes:  # each scene's tensions are one /crane/wire_states message's, exactly
+        entity = scene['entities'][0]
+        meta = {kv['key']: kv['value'] for kv in entity['metadata']}
+        tensions = tuple(float(meta[f'tension.wire_{i}']) for i in range(1, 7))
+        assert tensions in watcher.tensions, tensions
+        assert entity['frame_id'] == 'crane_view' and float(meta['deflection_scale']) == 200.0
+        assert len(entity['lines']) == 7 and len(entity['triangles']) == 1  # overhead triangle + 6 wires
+    assert any(s['entities'][0]['arrows'] for s in scenes)  # a force applied during the program
+    wires = client.json_messages('/live_view/wires')[-1]['wires']
+    assert [w['name'] for w in wires] == [f'wire_{i}' for i in range(1, 7)]
+    raw = client.messages[topics.WIRE_STATES]  # the ROS channel: CDR as published
+    assert raw
+    for payload in raw[-20:]:
+        assert tuple(deserialize_message(payload, JointState).effort) in watcher.tensions
+
+
+def _check_estimate(client: FoxgloveClient, watcher) -> None:
+    estimates = client.json_messages('/live_view/estimate')
+    assert estimates
+    for est in estimates[-20:]:
+        loading = est['loading']
+        if loading['stiffness'] is not None:
+            assert watcher.values[loading['sample_stamp']] == loading['stiffness']
+    status = client.json_messages('/live_view/status')[-1]
+    history = [{(lvl, msg) for lvl, msg in s.values()} for s in watcher.status_history]
+    assert {(s['level'], s['message']) for s in status['statuses']} in history
+    assert status['level'] == max(s['level'] for s in status['statuses'])

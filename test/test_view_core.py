@@ -1,0 +1,106 @@
+"""The live view's pure parts: the display decimation of the fitted pairs, the fit lines and their band, the scene
+of the crane, and the ROS 2 message definitions offered to Foxglove clients. No ROS."""
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from crane_stiffness.estimation.estimator import StiffnessEstimator
+from crane_stiffness.estimation.fit import fit_line, t_quantile
+from crane_stiffness.estimation.fit_lines import FIT_LINE_FIELDS, band, fit_line_rows
+from crane_stiffness.model.geometry import lab_model
+from crane_stiffness.view import plot
+from crane_stiffness.view.errors import ViewError
+from crane_stiffness.view.msgdefs import definition
+from crane_stiffness.view.scene import CraneState, scene_update
+
+
+def _pairs(n: int, segment: int = 1, start: int = 0) -> list[float]:
+    out: list[float] = []
+    for i in range(start, start + n):
+        out += [float(i), i * 1e-6, i * 0.05, 0.0, float(segment)]
+    return out
+
+
+def test_points_are_every_stride_th_pair_of_the_segment_and_never_more_than_capacity():
+    buf = plot.PointBuffer(100)
+    for start in range(0, 1000, 37):  # messages of 37 pairs
+        buf.add(_pairs(min(37, 1000 - start), start=start))
+    msg = buf.message()
+    shown = [p['t'] for p in msg['loading']]
+    assert len(shown) <= 100 and msg['pairs'] == 1000
+    assert shown == [float(i) for i in range(0, 1000, msg['stride'])]
+    assert msg['stride'] == 16
+    buf.add(_pairs(5, segment=2, start=2000))  # a new segment starts afresh
+    msg = buf.message()
+    assert msg['segment'] == 2 and msg['pairs'] == 5 and [p['t'] for p in msg['loading']] == [2000.0 + i
+                                                                                              for i in range(5)]
+    with pytest.raises(ViewError, match='max_points = 1'):
+        plot.PointBuffer(1)
+
+
+def test_fit_line_rows_and_band_match_an_independent_least_squares_fit():
+    rng = np.random.default_rng(3)
+    est = StiffnessEstimator(hysteresis=0.1, window=200)
+    x = np.linspace(0, 80e-6, 150)
+    y = 53_800.0 * x + 0.02 + rng.normal(0, 0.01, x.size)
+    for i, (xi, yi) in enumerate(zip(x, y)):
+        est.add(float(i), float(yi), float(xi), load=float(i))  # a rising load: all loading
+    rows = fit_line_rows(est)
+    loading = dict(zip(FIT_LINE_FIELDS, rows[:len(FIT_LINE_FIELDS)]))
+    assert all(math.isnan(v) for v in rows[len(FIT_LINE_FIELDS):])  # no unloading pairs
+    ref = fit_line(x, y)
+    assert loading['stiffness'] == pytest.approx(ref.stiffness, rel=1e-9)
+    assert loading['x_mean'] == pytest.approx(x.mean()) and loading['n'] == x.size
+    assert (loading['x_min'], loading['x_max']) == (x.min(), x.max())
+    # the band's half width at the mean is t·s/sqrt(n), and at any x t·se(fit) from the classical formula
+    s = math.sqrt(np.sum((y - ref.stiffness * x - ref.intercept) ** 2) / (x.size - 2))
+    line, lower, upper = band(loading, np.array([x.mean(), x.max()]))
+    assert upper[0] - line[0] == pytest.approx(t_quantile(x.size - 2) * s / math.sqrt(x.size), rel=1e-6)
+    sxx = np.sum((x - x.mean()) ** 2)
+    assert upper[1] - line[1] == pytest.approx(t_quantile(x.size - 2) * s * math.sqrt(
+        1 / x.size + (x.max() - x.mean()) ** 2 / sxx), rel=1e-6)
+    msg = plot.fit_lines_message(rows)
+    assert len(msg['loading']['line']) == plot.LINE_POINTS and msg['unloading']['line'] == []
+    json.dumps(msg, allow_nan=False)  # NaN never reaches JSON
+
+
+def test_scene_carries_the_tensions_as_published_and_draws_slack_wires_dashed():
+    geometry = lab_model(0.5, 50.0)
+    tensions = [8.6, 0.0, 13.7, 3.5, 3.5, 13.7]
+    state = CraneState(position=(0.0, 1e-4, 2e-5), orientation=(0.0, 0.0, 0.0, 1.0), tensions=tensions,
+                       force=(0.0, 3.2, 0.0), stamp_s=12.5)
+    scene = scene_update(geometry, state, 200.0)
+    entity = scene['entities'][0]
+    meta = {kv['key']: kv['value'] for kv in entity['metadata']}
+    assert [float(meta[f'tension.wire_{i}']) for i in range(1, 7)] == tensions
+    wires = entity['lines'][1:]
+    assert len(wires[1]['points']) > 2 and len(wires[0]['points']) == 2  # wire_2 slack: dashes
+    # the platform's centre drawn at 200 × its displacement, in crane_view (y and z turned over)
+    corners = np.array([[p['x'], p['y'], p['z']] for p in entity['triangles'][0]['points']])
+    assert corners.mean(axis=0) == pytest.approx([0.0, -0.02, -0.004], abs=1e-12)
+    top = np.array([[p['x'], p['y'], p['z']] for p in entity['lines'][0]['points']])
+    assert top[:, 2] == pytest.approx([geometry.height] * 3)  # the overhead triangle above, z up
+    arrow = entity['arrows'][0]
+    assert arrow['shaft_length'] == pytest.approx(0.02 * 3.2)
+    assert entity['timestamp'] == {'sec': 12, 'nsec': 500000000}
+    json.dumps(scene, allow_nan=False)
+
+
+def test_message_definitions_are_the_msg_files_and_those_they_use(tmp_path):
+    share = tmp_path / 'share'
+    (share / 'pkg_a' / 'msg').mkdir(parents=True)
+    (share / 'pkg_b' / 'msg').mkdir(parents=True)
+    (share / 'pkg_a' / 'msg' / 'Outer.msg').write_text('# comment\nInner[] items\npkg_b/Leaf leaf\nint32 X=3\n')
+    (share / 'pkg_a' / 'msg' / 'Inner.msg').write_text('pkg_b/Leaf leaf\nstring<=5 name\n')
+    (share / 'pkg_b' / 'msg' / 'Leaf.msg').write_text('float64 value\n')
+    text = definition('pkg_a/msg/Outer', [str(tmp_path)])
+    sep = '=' * 80
+    assert text == ('# comment\nInner[] items\npkg_b/Leaf leaf\nint32 X=3\n'
+                    f'{sep}\nMSG: pkg_a/Inner\npkg_b/Leaf leaf\nstring<=5 name\n'
+                    f'{sep}\nMSG: pkg_b/Leaf\nfloat64 value\n')
+    with pytest.raises(ViewError, match='pkg_a/msg/Missing.msg'):
+        definition('pkg_a/msg/Missing', [str(tmp_path)])
