@@ -67,6 +67,8 @@ def test_protocol_channels_values_and_tare(install_tree, rclpy_context, tmp_path
 
 
 def _check_plot(client: FoxgloveClient, watcher) -> None:
+    # the watcher's subscription fills its dict from another thread: one copy (atomic under the GIL) to read
+    fitted_pairs = dict(watcher.pairs)
     xy = client.json_messages('/live_view/xy')
     assert len(xy) >= 10, len(xy)
     last = xy[-1]
@@ -74,11 +76,11 @@ def _check_plot(client: FoxgloveClient, watcher) -> None:
     assert len(points) > 100, last['pairs']
     assert len(points) <= 500  # max_points: decimated for display
     for branch, p in points:  # every point shown is a pair the estimator fitted, exactly
-        x, force, fitted_branch, segment = watcher.pairs[p['t']]
+        x, force, fitted_branch, segment = fitted_pairs[p['t']]
         assert (p['x'], p['y'], branch, segment) == (x, force, fitted_branch, last['segment'])
     assert last['stride'] >= 1 and last['pairs'] >= len(points)
     # the points of one segment decimated by one stride: one pair in every `stride` of those fitted
-    fitted = sorted(t for t, v in watcher.pairs.items() if v[3] == last['segment'])
+    fitted = sorted(t for t, v in fitted_pairs.items() if v[3] == last['segment'])
     shown = {p['t'] for _, p in points}
     index = [i for i, t in enumerate(fitted) if t in shown]
     assert all(i % last['stride'] == 0 for i in index), last['stride']
