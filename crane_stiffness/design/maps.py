@@ -137,6 +137,15 @@ class MapSpec:
 def compute_rows(spec: MapSpec, rows: Iterable[int]) -> dict[str, np.ndarray]:
     """The map's columns (see COLUMNS) for the points of the given rows of axis1, flat (P,)."""
     vals = spec.point_values(rows)
+    out = compute_points(spec, vals)
+    out[spec.axis1.name] = vals[spec.axis1.name]
+    out[spec.axis2.name] = vals[spec.axis2.name]
+    return out
+
+
+def compute_points(spec: MapSpec, vals: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The map's columns (see COLUMNS) at arbitrary points: vals holds every variable of VARIABLES as (P,) arrays
+    (the spec gives the rotation, z rule, directions, cap and the wire)."""
     if np.any(vals['W'] <= 0.0):
         raise DesignInputError('weight', float(vals['W'].min()), 'must be > 0 (slack-free wires need a weight)')
     npts = vals['x'].size
@@ -176,8 +185,6 @@ def compute_rows(spec: MapSpec, rows: Iterable[int]) -> dict[str, np.ndarray]:
         out[f'margin_dir_{c}'] = np.where(ok, dirs[best, i], np.nan)
     for i in range(6):
         out[f'offset_{i + 1}_m'] = l0[:, i] - nominal
-    out[spec.axis1.name] = vals[spec.axis1.name]
-    out[spec.axis2.name] = vals[spec.axis2.name]
     return out
 
 

@@ -17,7 +17,7 @@ from crane_stiffness.model import _pose_kernels as pk
 from crane_stiffness.model.equilibrium import Equilibrium, wrench_jacobian
 from crane_stiffness.model.errors import GeometryError
 from crane_stiffness.model.geometry import CraneGeometry
-from crane_stiffness.model.rotation import euler_zxy_to_matrix
+from crane_stiffness.model.rotation import euler_zxy_to_matrix, matrix_to_euler_zxy
 
 
 class UnreachablePoseError(GeometryError):
@@ -82,7 +82,7 @@ def inverse_pose(geometry: CraneGeometry, position, rotation=None) -> PoseSoluti
     lengths, tensions = np.empty(6), np.empty(6)
     status = pk.inverse_tensions(top, plat, geometry.weight, np.array(geometry.com_offset, dtype=float), u, q,
                                  lengths, tensions, np.empty((6, 6)), np.empty(6), np.empty((6, 6)), np.empty(6))
-    where = f'position {u.tolist()} m, rotation {np.round(rotation_of(rotation), 12).tolist()}'
+    where = f'position {u.tolist()} m, angles (phi, theta, psi) {matrix_to_euler_zxy(q).round(12).tolist()} rad'
     if status == pk.SINGULAR:
         raise UnreachablePoseError('pose', where, 'the wires are degenerate there (their wrench matrix is singular)')
     if status == pk.UNREACHABLE:
