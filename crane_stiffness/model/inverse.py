@@ -93,6 +93,10 @@ def inverse_pose(geometry: CraneGeometry, position, rotation=None) -> PoseSoluti
     l0, kw = np.empty(6), np.empty(6)
     pk.wire_lengths_for(lengths, tensions, ae, k, l0, kw)
     offsets = l0 - geometry.l0
+    short = int(np.argmin(l0))
+    if l0[short] <= 0.5 * geometry.l0:  # the geometry's own rule on offsets, said of the pose
+        raise UnreachablePoseError('pose', where, f'out of reach: wire_{short + 1} would have to shorten to '
+                                   f'{l0[short]:.6g} m, less than half of l0 = {geometry.l0:.6g} m')
     held = geometry.replace(length_offsets=tuple(float(x) for x in offsets))
     w, _ = wrench_jacobian(held, u, q, np.zeros(6))
     tens = held.wire_stiffnesses * (lengths - held.unstretched_lengths)
