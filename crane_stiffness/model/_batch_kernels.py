@@ -6,8 +6,9 @@ forces and their Jacobian); this module only drives it. Per load case: a linear 
 they contract fast, else plain Newton steps with the analytic Jacobian; in place, with no allocation. A case is
 accepted when the steps shrink every iteration, the last one is below xtol, and the result lies within one
 continuation step of the rest pose (the robust solver's own acceptance test); any other case is solved again by the
-robust damped Newton (:func:`_kernels.solve_step`) from the rest pose, and what that cannot reach is left
-to load continuation in Python (status not CONVERGED).
+robust damped Newton (:func:`_kernels.solve_step`) from the rest pose, then to load continuation
+(:func:`continuation_path`); what that cannot reach is left to solve_equilibrium (status not CONVERGED), which
+raises the error that says why.
 
 Units and frames as in :mod:`._kernels`: fixed frame, z down, u [m], Q body→fixed, loads [N, N·m].
 """
@@ -179,12 +180,43 @@ def _predict(loads, c, c0, rp0, u0, q0, u, q, b, dw, m33):
     kern._rotate(q0, dw, q, m33)
 
 
+@njit(cache=True)
+def continuation_path(top, plat, l0, kw, weight, com, ploc, load, u, q, xtol, max_iter, lc, max_move, min_cos_turn,
+                      max_shift, lengths, tensions, w, max_steps, min_fraction):
+    """Load continuation from the equilibrium (u, q) under no load to ``load``, in place: the compiled twin of
+    equilibrium._continuation (steps doubled after a success, halved after a failure, down to min_fraction).
+    Returns (status, iterations): CONVERGED, or the last step's failure when the path ends."""
+    lam = 0.0
+    step = 1.0
+    iters = 0
+    target_load = np.empty(6)
+    for _ in range(max_steps):
+        target = min(1.0, lam + step)
+        for i in range(6):
+            target_load[i] = target * load[i]
+        st, it = kern.solve_step(top, plat, l0, kw, weight, com, ploc, target_load, u, q, xtol, max_iter, lc,
+                                 max_move, min_cos_turn, max_shift, lengths, tensions, w)
+        iters += it
+        if st == kern.CONVERGED:
+            lam = target
+            if lam >= 1.0:
+                return kern.CONVERGED, iters
+            step = min(2.0 * step, 1.0 - lam)
+        else:
+            step *= 0.5
+            if step < min_fraction:
+                return st, iters
+    return kern.MAX_ITERATIONS, iters
+
+
 @njit(parallel=True, cache=True)
 def batch_solve_parallel(top, plat, l0, kw, weight, com, ploc, loads, u0, q0, c0, xtol, max_iter, lc, max_move,
-                         min_cos_turn, max_shift, chunks, u_out, q_out, lengths_out, tensions_out, w_out,
-                         status_out, iters_out):
+                         min_cos_turn, max_shift, max_steps, min_fraction, chunks, u_out, q_out, lengths_out,
+                         tensions_out, w_out, status_out, iters_out):
     """Equilibria of every row of loads (N, 6) from the rest pose (u0, q0), split into ``chunks`` blocks run in
-    parallel. c0 = K0⁻¹ (6, 6) at rest. status_out: CONVERGED, or the robust solver's status for the case."""
+    parallel. c0 = K0⁻¹ (6, 6) at rest. Cases the fast path cannot take go to the robust damped Newton, then to
+    load continuation (max_steps steps, down to min_fraction of the load). status_out: CONVERGED, or the status
+    where the path ended (the caller then lets solve_equilibrium say why)."""
     n = loads.shape[0]
     rp0 = np.empty(3)
     for i in range(3):
@@ -234,6 +266,11 @@ def batch_solve_parallel(top, plat, l0, kw, weight, com, ploc, loads, u0, q0, c0
                 st, it2 = kern.solve_step(top, plat, l0, kw, weight, com, ploc, load, u, q, xtol, max_iter, lc,
                                           max_move, min_cos_turn, max_shift, lengths, tensions, w)
                 it += it2
+                if st != kern.CONVERGED:  # load continuation, as solve_equilibrium does next
+                    st, it2 = continuation_path(top, plat, l0, kw, weight, com, ploc, load, u, q, xtol, max_iter,
+                                                lc, max_move, min_cos_turn, max_shift, lengths, tensions, w,
+                                                max_steps, min_fraction)
+                    it += it2
             status_out[c] = st
             iters_out[c] = it
             for i in range(3):

@@ -11,13 +11,16 @@ import numpy as np
 
 from crane_stiffness.model import _batch_kernels as bk
 from crane_stiffness.model import _kernels as kern
-from crane_stiffness.model.equilibrium import (DEFAULT_MAX_ITER, DEFAULT_XTOL, BatchEquilibrium, _arrays, _rest,
-                                               check_load_admissible, solve_equilibrium, wrench_jacobian)
+from crane_stiffness.model.equilibrium import (DEFAULT_MAX_ITER, DEFAULT_XTOL, MIN_LOAD_FRACTION,
+                                               BatchEquilibrium, _arrays, _rest, check_load_admissible,
+                                               solve_equilibrium, wrench_jacobian)
 from crane_stiffness.model.geometry import CraneGeometry
 
 #: Cases per parallel block: large enough that a block's scratch allocation is negligible, small enough that the
 #: threads share the work evenly.
 CHUNK = 512
+#: Continuation steps per case before it is handed to solve_equilibrium (its own bound is 2000).
+MAX_STEPS = 2000
 
 
 def _threads() -> int:
@@ -83,8 +86,9 @@ def solve_batch_parallel(geometry: CraneGeometry, loads, *, xtol: float = DEFAUL
     chunks = max(1, min(-(-n // max(1, int(chunk))), 64 * _threads())) if n else 0
     if n:
         bk.batch_solve_parallel(*arr.args(), loads, u0, q0, c0, xtol, max_iter, arr.lc, arr.max_move,
-                                arr.min_cos_turn, arr.max_shift, chunks, u, q, lengths, tensions, w, status, iters)
-    for c in np.flatnonzero(status != kern.CONVERGED):  # load continuation for what Newton cannot reach directly
+                                arr.min_cos_turn, arr.max_shift, MAX_STEPS, MIN_LOAD_FRACTION, chunks, u, q, lengths,
+                                tensions, w, status, iters)
+    for c in np.flatnonzero(status != kern.CONVERGED):  # the path ended: solve_equilibrium says why (or succeeds)
         eq = solve_equilibrium(geometry, load=loads[c], xtol=xtol, max_iter=max_iter)
         u[c], q[c], lengths[c], tensions[c], w[c] = (eq.displacement, eq.rotation, eq.wire_lengths,
                                                      eq.wire_tensions, eq.residual)
