@@ -5,7 +5,8 @@
   sphere plots.
 - ``map``: two variables on a grid (CSV, resumable; heatmaps with contours and the usable-workspace outline).
 
-Geometry flags as in the other subcommands (``--lab-model``, ``--config``, ``--height``, ``--weight`` ...). Bad
+Geometry flags as in the other subcommands (``--lab-model``, ``--config``, ``--height``, ``--weight`` ...); without
+them the lab model at h = 0.5 m, W = 50 N. Bad
 input exits 2 with one line naming the value and the rule (crane_stiffness.cli.main).
 """
 from __future__ import annotations
@@ -23,11 +24,20 @@ from crane_stiffness.design.errors import DesignInputError
 from crane_stiffness.model import CraneGeometry
 from crane_stiffness.model.geometry import WIRE_NAMES
 
+#: Height [m] and weight [N] when neither flags nor --config give them: the lab's test case.
+DEFAULT_HEIGHT = 0.5
+DEFAULT_WEIGHT = 50.0
+
 
 def _geometry(args: argparse.Namespace) -> CraneGeometry:
     from crane_stiffness.cli import geometry_from_args
     if not (args.config or args.a is not None):
-        args.lab_model = True  # the rest of the geometry defaults to the paper's lab model
+        args.lab_model = True  # the rest of the geometry defaults to the paper's lab model ...
+    if not args.config:  # ... at the lab's test case, h = 0.5 m and W = 50 N
+        if args.height is None and args.l0 is None:
+            args.height = DEFAULT_HEIGHT
+        if args.weight is None:
+            args.weight = DEFAULT_WEIGHT
     if args.a is not None and args.a <= 0:
         raise DesignInputError('a', args.a, 'must be > 0 (the platform triangle cannot be inverted)')
     if args.b is not None and args.b <= 0:
@@ -50,16 +60,16 @@ def _add_pose_args(p: argparse.ArgumentParser) -> None:
 
 def _print_report(report: Any) -> None:
     d = report.to_dict()
-    print(f'pose: centre {np.round(d["position_m"], 9).tolist()} m, angles (phi, theta, psi) '
-          f'{np.round(d["rotation_zxy_rad"], 9).tolist()} rad')
+    print(f'pose: centre {(np.round(d["position_m"], 9) + 0.0).tolist()} m, angles (phi, theta, psi) '
+          f'{(np.round(d["rotation_zxy_rad"], 9) + 0.0).tolist()} rad')
     print(f'{"wire":>8} {"offset [m]":>14} {"tension [N]":>12}')
     for name in WIRE_NAMES:
         print(f'{name:>8} {d["length_offsets_m"][name]:14.6e} {d["tensions_N"][name]:12.6f}')
     print(f'smallest tension {d["tension_min_N"]:.6g} N ({d["tension_min_wire"]})')
     print(f'smallest force stiffness  {d["force_stiffness_min_N_per_m"]:.6g} N/m along '
-          f'{np.round(d["force_stiffness_direction"], 6).tolist()} (platform free to tilt)')
+          f'{(np.round(d["force_stiffness_direction"], 6) + 0.0).tolist()} (platform free to tilt)')
     print(f'smallest moment stiffness {d["moment_stiffness_min_Nm_per_rad"]:.6g} N·m/rad about '
-          f'{np.round(d["moment_stiffness_axis"], 6).tolist()} (platform free to shift)')
+          f'{(np.round(d["moment_stiffness_axis"], 6) + 0.0).tolist()} (platform free to shift)')
 
 
 def cmd_pose(args: argparse.Namespace) -> int:

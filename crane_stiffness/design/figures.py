@@ -10,6 +10,7 @@ import matplotlib
 
 matplotlib.use('Agg')  # no display on a lab PC running headless or in CI
 import matplotlib.pyplot as plt  # noqa: E402
+from matplotlib.colors import LogNorm  # noqa: E402
 import numpy as np  # noqa: E402
 
 from crane_stiffness.design.maps import VARIABLES  # noqa: E402
@@ -108,7 +109,10 @@ def plot_margin_sphere(m: Margins, path: str | Path, title: str) -> Path:
     unit = 'N' if m.kind == 'force' else 'N·m'
     fig, ax = plt.subplots(figsize=(7.5, 4.2))
     ax.scatter(az[~finite], el[~finite], c='0.75', s=18, label='no wire slack (within the cap)')
-    sc = ax.scatter(az[finite], el[finite], c=m.margin[finite], s=18, cmap='viridis')
+    values = m.margin[finite]
+    # Margins span decades (a side push against a near-downward pull): a logarithmic colour scale shows both.
+    norm = LogNorm() if values.size and values.min() > 0 and values.max() > 3 * values.min() else None
+    sc = ax.scatter(az[finite], el[finite], c=values, s=18, cmap='viridis', norm=norm)
     fig.colorbar(sc, ax=ax, label=f'slack margin [{unit}]')
     ax.set_xlabel('azimuth [deg] (0 = +x, 90 = +y)')
     ax.set_ylabel('elevation [deg] (+90 = up)')
