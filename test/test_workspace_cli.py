@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import json
 import subprocess
+import sys
 import sysconfig
 from pathlib import Path
 
@@ -123,3 +124,26 @@ def test_the_installed_command_runs_workspace(tmp_path):
     out = subprocess.run([str(exe), 'workspace', 'pose', *LAB, '--position', '0', '0', '-0.4'], capture_output=True,
                          text=True, timeout=300)
     assert out.returncode == 2 and out.stdout == '' and 'pose = ' in out.stderr
+
+
+def test_workspace_compiles_nothing_at_run_time(tmp_path):
+    """The design kernels are compiled into their cache at install time (model/kernel_cache.py) like the model's:
+    a fresh process running every workspace command and the parallel batch loads them all from the cache."""
+    code = ('import json, sys, numpy as np\n'
+            'from crane_stiffness.cli import main\n'
+            'from crane_stiffness.model import lab_model\n'
+            'from crane_stiffness.model.batch import solve_batch_parallel\n'
+            'from crane_stiffness.model.kernel_cache import cache_report\n'
+            f'out = {str(tmp_path)!r}\n'
+            'assert main(["workspace", "pose", "--position", "0.01", "0", "0"]) == 0\n'
+            'assert main(["workspace", "margins", "--directions", "5", "--moment-directions", "4", '
+            '"--polar-points", "6", "--out", out + "/m"]) == 0\n'
+            'assert main(["workspace", "map", "--grid", "b", "0.1", "0.2", "2", "--grid", "com_y", "0", "0.01", '
+            '"2", "--directions", "3", "--quiet", "--out", out + "/map"]) == 0\n'
+            'solve_batch_parallel(lab_model(0.5, 50.0), np.array([[0, 1.0, 0, 0, 0, 0], [0, 30.0, 0, 0, 0, 0]]))\n'
+            'print(json.dumps(cache_report()))\n')
+    out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True, timeout=600, cwd=tmp_path)
+    assert out.returncode == 0, out.stderr
+    report = json.loads(out.stdout.strip().splitlines()[-1])
+    assert sum(r['misses'] for r in report.values()) == 0, {k: v for k, v in report.items() if v['misses']}
+    assert report['_pose_kernels.map_points']['hits'] >= 1 and report['_batch_kernels.batch_solve_parallel']['hits']
