@@ -70,9 +70,9 @@ def parallel_figures(g, lc, rest, args) -> dict:
     for name, scale, n in (('', 1.0, args.parallel), ('hard_', 4.0, max(1, args.parallel // 10))):
         cases = load_cases(n, g.weight, seed=4, scale=scale)
         solve_batch_parallel(g, cases[:1000])  # load the compiled kernels and start the threads before timing
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         par = solve_batch_parallel(g, cases, xtol=1e-11)
-        t_par = time.perf_counter() - t0
+        t_par, cpu_par = time.perf_counter() - t0, time.process_time() - c0
         m = min(n, args.batch)
         t0 = time.perf_counter()
         solve_batch(g, cases[:m], xtol=1e-11)
@@ -86,7 +86,8 @@ def parallel_figures(g, lc, rest, args) -> dict:
                   for i, r in zip(sample, (solve_equilibrium(g, load=cases[i], xtol=1e-13) for i in sample)))
         key = name if name else 'parallel_'  # parallel_cases / hard_cases, parallel_max_... / hard_max_...
         out.update({f'{key}cases': n,
-                    f'{name}parallel_solves_per_s': n / t_par, f'{name}serial_solves_per_s': m / t_serial,
+                    f'{name}parallel_solves_per_s': n / t_par, f'{name}parallel_cpu_s': cpu_par,
+                    f'{name}parallel_wall_s': t_par, f'{name}serial_solves_per_s': m / t_serial,
                     f'{name}scipy_solves_per_s': k / t_scipy, f'{name}scipy_converged': sum(ok for *_, ok in theirs),
                     f'{key}max_pose_error_m': err})
         if name:
@@ -178,6 +179,9 @@ def main(argv=None) -> dict:
           f'solve_batch {par["serial_solves_per_s"]:,.0f}/s, scipy root {par["scipy_solves_per_s"]:,.0f}/s '
           f'({par["scipy_converged"]}/{par["scipy_cases"]} reported success) -> '
           f'{par["parallel_solves_per_s"] / par["scipy_solves_per_s"]:,.0f}x scipy')
+    print(f'  CPU time of those solves {par["parallel_cpu_s"]:.2f} s in {par["parallel_wall_s"]:.2f} s of wall time: '
+          f'{par["parallel_cases"] / par["parallel_cpu_s"]:,.0f} solves per CPU-second (the share of the 2 cores '
+          f'this process got: {par["parallel_cpu_s"] / par["parallel_wall_s"] / par["threads"]:.0%})')
     print(f'  slack-heavy, {par["hard_cases"]:,} cases ({par["hard_cases_with_slack"]:,} with slack wires): '
           f'{par["hard_parallel_solves_per_s"]:,.0f} solves/s, max error {par["hard_max_pose_error_m"]:.1e} m; '
           f'same cases: solve_batch {par["hard_serial_solves_per_s"]:,.0f}/s, scipy root '

@@ -128,7 +128,8 @@ def chord_solve(top, plat, l0, kw, weight, com, ploc, load, u, q, c0, xtol, lc, 
                 tensions, dx, q_new, dw, m33, v3):
     """Chord (simplified Newton) iterations on (u, q) in place: dx = C0·w with the rest pose's compliance C0,
     so each iteration costs one wrench and no Jacobian or solve. Each step must be less than half the one before
-    (a load that changes K much, e.g. a wire going slack, fails this at once). Returns (converged, iterations)."""
+    (a load that changes K much, e.g. a wire going slack, fails this at once); converged when the step, or the
+    error left after it at the observed rate, is below xtol. Returns (converged, iterations)."""
     prev = 1e300
     for it in range(1, max_iter + 1):
         kern.assemble_model(top, plat, l0, kw, weight, com, ploc, load, u, q, w, kmat, lengths, tensions, False,
@@ -142,6 +143,8 @@ def chord_solve(top, plat, l0, kw, weight, com, ploc, load, u, q, c0, xtol, lc, 
             size = max(size, abs(acc) if i < 3 else abs(acc) * lc)
         if not size < 0.5 * prev:
             return False, it
+        # Linear convergence at the rate size/prev: what remains after this step is about size²/(prev − size).
+        done = size <= xtol or (it > 1 and size * size <= xtol * (prev - size))
         prev = size
         for i in range(3):
             u[i] += dx[i]
@@ -150,7 +153,7 @@ def chord_solve(top, plat, l0, kw, weight, com, ploc, load, u, q, c0, xtol, lc, 
         for i in range(3):
             for j in range(3):
                 q[i, j] = q_new[i, j]
-        if size <= xtol:
+        if done:
             kern.assemble_model(top, plat, l0, kw, weight, com, ploc, load, u, q, w, kmat, lengths, tensions,
                                 False, False, m33, v3)
             return True, it
