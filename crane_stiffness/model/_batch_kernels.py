@@ -89,8 +89,8 @@ def newton_plain(top, plat, l0, kw, weight, com, ploc, load, u, q, xtol, lc, max
                  lengths, tensions, ks, rhs, dx, m, y, q_new, dw, m33, v3):
     """Plain Newton on (u (3,), q (3, 3)) in place for w = 0; no line search, no allocation.
 
-    Steps are solved in scaled units ([m, lc·rad]); each must be smaller than the one before. On return w, lengths
-    and tensions are those of the final pose. Returns (converged, iterations)."""
+    Steps are solved in scaled units ([m, lc·rad]); each must be smaller than the one before. On convergence w,
+    kmat, lengths and tensions are those of the final pose. Returns (converged, iterations)."""
     prev = 1e300
     for it in range(1, max_iter + 1):
         kern.assemble_model(top, plat, l0, kw, weight, com, ploc, load, u, q, w, kmat, lengths, tensions, True,
@@ -116,9 +116,9 @@ def newton_plain(top, plat, l0, kw, weight, com, ploc, load, u, q, xtol, lc, max
         for i in range(3):
             for j in range(3):
                 q[i, j] = q_new[i, j]
-        if size <= xtol:
+        if size <= xtol:  # the final pose's wrench and Jacobian (slack_margin continues from them)
             kern.assemble_model(top, plat, l0, kw, weight, com, ploc, load, u, q, w, kmat, lengths, tensions,
-                                False, bilateral, m33, v3)
+                                True, bilateral, m33, v3)
             return True, it
     return False, max_iter
 

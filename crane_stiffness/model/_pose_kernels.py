@@ -149,10 +149,9 @@ def slack_margin(top, plat, l0, kw, weight, com, ploc, u0, q0, d, s_max, rtol, x
     s_lo = 0.0
     s_hi = math.inf
     for it in range(MARGIN_ITER):
-        for i in range(6):
-            load[i] = s * d[i]
-        kern.assemble_model(top, plat, l0, kw, weight, com, ploc, load, u, q, w, kmat, lengths, tensions, True,
-                            True, m33, v3)
+        if it == 0:  # later iterations start from the corrector's last evaluation, at this very pose and load
+            kern.assemble_model(top, plat, l0, kw, weight, com, ploc, load, u, q, w, kmat, lengths, tensions,
+                                True, True, m33, v3)
         worst = math.inf
         for n in range(6):
             worst = min(worst, lengths[n] - l0[n])
