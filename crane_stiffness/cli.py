@@ -1,6 +1,7 @@
 """``crane-stiffness``: the offline command line, a thin layer over crane_stiffness.model and .analysis.
 
-Subcommands: solve, stiffness, sweep (and, with the bag module, analyze, compare, recover). Geometry comes from
+Subcommands: solve, stiffness, sweep, workspace (design maps: crane_stiffness.design.cli) and, with the bag
+module, analyze, compare, recover. Geometry comes from
 ``--config FILE`` (a ROS parameter YAML, the same file the nodes read) and/or flags, flags winning; SI units.
 Exit codes: 0 ok, 2 bad input (named on stderr), 3 no equilibrium for the load, 4 solver gave up.
 """
@@ -258,8 +259,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--points', type=int, default=41, help='points per force-displacement curve')
     p.add_argument('--quiet', action='store_true', help='no progress bars')
     p.set_defaults(func=cmd_sweep)
+    _add_workspace_command(sub)
     _add_bag_commands(sub)
     return parser
+
+
+def _add_workspace_command(sub: Any) -> None:
+    """workspace pose / margins / map (crane_stiffness.design.cli)."""
+    from crane_stiffness.design import cli as design_cli
+    design_cli.add_command(sub)
 
 
 def _add_bag_commands(sub: Any) -> None:

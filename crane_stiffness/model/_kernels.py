@@ -47,7 +47,18 @@ def assemble(top, plat, l0, kw, weight, com, ploc, load, u, q, w, kmat, lengths,
 
 @njit(cache=True)
 def assemble_into(top, plat, l0, kw, weight, com, ploc, load, u, q, w, kmat, lengths, tensions, want_k, m33, v3):
+    """Net wrench and, if want_k, its Jacobian of the model with slack wires; see :func:`assemble_model`."""
+    assemble_model(top, plat, l0, kw, weight, com, ploc, load, u, q, w, kmat, lengths, tensions, want_k, False,
+                   m33, v3)
+
+
+@njit(cache=True)
+def assemble_model(top, plat, l0, kw, weight, com, ploc, load, u, q, w, kmat, lengths, tensions, want_k,
+                   bilateral, m33, v3):
     """Net wrench w (6,) on the platform and, if want_k, K = −∂w/∂x (6, 6). Fills lengths and tensions (6,).
+
+    bilateral: treat every wire as a spring that also pushes (tension k(L − l0) of either sign): the smooth
+    continuation of the all-taut model past a slack onset, used to locate that onset by Newton's method.
 
     top (6,3) overhead points [m]; plat (6,3) platform points, body frame [m]; l0 (6,) unstretched lengths [m];
     kw (6,) wire stiffnesses [N/m]; weight W [N] along +z at body offset com (3,); external load (6,) = force [N] at
@@ -72,7 +83,7 @@ def assemble_into(top, plat, l0, kw, weight, com, ploc, load, u, q, w, kmat, len
         lz = top[n, 2] - u[2] - r[2]
         length = math.sqrt(lx * lx + ly * ly + lz * lz)
         lengths[n] = length
-        if length < l0[n]:  # slack: a wire carries no compression (eq. 14)
+        if length < l0[n] and not bilateral:  # slack: a wire carries no compression (eq. 14)
             tensions[n] = 0.0
             continue
         t = kw[n] * (length - l0[n])

@@ -13,7 +13,9 @@ after ``pip install``. By hand::
 :func:`exercise` runs every kernel with the argument types the package uses (the solver's single, warm-started,
 continuation, path and batch solves, the Jacobian and the tangent stiffness), so nothing is left to compile at run
 time; :func:`cache_report` says, per kernel, how many signatures came from the cache and how many were compiled
-(a kernel only called from other kernels is compiled into them and loaded with them).
+(a kernel only called from other kernels is compiled into them and loaded with them). The kernels of
+``_batch_kernels`` and ``_pose_kernels`` call those of ``_kernels``; numba keys each cache by its own file only, so
+this runs after every install, which rewrites all three files.
 """
 from __future__ import annotations
 
@@ -39,15 +41,30 @@ def exercise() -> None:
     wrench_jacobian(g, eq.displacement, eq.rotation, np.zeros(6))
     solve_batch(g, np.array([[0.0, 1.0, 0.0, 0.0, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0, 0.0, 0.0]]))
     solve_path(g, np.array([[0.0, 0.0, 0.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0, 0.0, 0.0]]))
+    # The parallel batch and the design kernels (crane-stiffness workspace, bench_solver).
+    from crane_stiffness.design.maps import GridAxis, MapSpec, compute_rows
+    from crane_stiffness.design.margins import slack_margins, sphere_directions
+    from crane_stiffness.design.pose import at_pose
+    from crane_stiffness.model.batch import solve_batch_parallel
+    solve_batch_parallel(g, np.array([[0.0, 1.0, 0.0, 0.0, 0.0, 0.0], [0.0, 20.0, 0.0, 0.0, 0.0, 0.0]]))
+    report = at_pose(g, (0.001, 0.0, 0.0))
+    slack_margins(report.solution.geometry, report.equilibrium, sphere_directions(4), 'force')
+    compute_rows(MapSpec(GridAxis('x', -0.01, 0.01, 2), GridAxis('y', -0.01, 0.01, 2), g, directions=2), range(2))
 
 
 def kernels() -> dict:
     """The compiled dispatchers of _kernels by name (empty without numba)."""
-    from crane_stiffness.model import _kernels
+    from crane_stiffness.model import _batch_kernels, _kernels, _pose_kernels
     if not _kernels.HAVE_NUMBA:
         return {}
     from numba.core.registry import CPUDispatcher
-    return {name: obj for name, obj in vars(_kernels).items() if isinstance(obj, CPUDispatcher)}
+    found: dict = {}
+    for module in (_kernels, _batch_kernels, _pose_kernels):
+        for name, obj in vars(module).items():
+            # a kernel imported from another module is listed once, under its own module
+            if isinstance(obj, CPUDispatcher) and obj.py_func.__module__ == module.__name__:
+                found[f'{module.__name__.rsplit(".", 1)[-1]}.{name}'] = obj
+    return found
 
 
 def cache_report() -> dict[str, dict[str, int]]:

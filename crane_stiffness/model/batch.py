@@ -1,0 +1,96 @@
+"""Many equilibria of one geometry at once, on every core: :func:`solve_batch_parallel`.
+
+Same contract as :func:`crane_stiffness.model.equilibrium.solve_batch` (each case solved from the rest pose under
+the weight, cases Newton cannot reach finished by load continuation), several times faster: a linear predictor
+from the tangent at rest, plain Newton without allocation, the cases split over numba's threads (kernels in
+:mod:`._batch_kernels`). Frames and units as in :mod:`.equilibrium` (z down; m, rad, N, N·m).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from crane_stiffness.model import _batch_kernels as bk
+from crane_stiffness.model import _kernels as kern
+from crane_stiffness.model.equilibrium import (DEFAULT_MAX_ITER, DEFAULT_XTOL, MIN_LOAD_FRACTION,
+                                               BatchEquilibrium, _arrays, _rest, check_load_admissible,
+                                               solve_equilibrium, wrench_jacobian)
+from crane_stiffness.model.geometry import CraneGeometry
+
+#: Cases per parallel block: large enough that a block's scratch allocation is negligible, small enough that the
+#: threads share the work evenly.
+CHUNK = 512
+#: Continuation steps per case before it is handed to solve_equilibrium (its own bound is 2000).
+MAX_STEPS = 2000
+
+
+def _threads() -> int:
+    try:
+        import numba
+        return int(numba.get_num_threads())
+    except ImportError:  # pragma: no cover - exercised only without numba
+        return 1
+
+
+def _validated(geometry: CraneGeometry, loads) -> np.ndarray:
+    loads = np.ascontiguousarray(np.asarray(loads, dtype=float).reshape(-1, 6))
+    if not np.all(np.isfinite(loads)):
+        row = int(np.argwhere(~np.all(np.isfinite(loads), axis=1))[0, 0])
+        raise ValueError(f'loads[{row}] = {loads[row].tolist()}: every component must be finite')
+    down = geometry.weight + loads[:, 2]
+    bad = np.flatnonzero((down < 0.0) | ((down == 0.0) & np.any(loads != 0.0, axis=1)))
+    if bad.size:
+        check_load_admissible(geometry, loads[bad[0]])  # raises with the reason
+    return loads
+
+
+def rest_compliance(geometry: CraneGeometry, xtol: float = DEFAULT_XTOL) -> np.ndarray:
+    """C0 = K0⁻¹ (6, 6) at the rest pose under W [m/N, rad/(N·m)], cached on the geometry."""
+    key = ('rest_compliance', xtol)
+    if key not in geometry._derived:
+        u0, q0 = _rest(geometry, xtol)
+        _, k0 = wrench_jacobian(geometry, u0, q0, np.zeros(6))
+        try:
+            c0 = np.linalg.inv(k0)
+        except np.linalg.LinAlgError:  # W = 0: no stiffness sideways at rest; predict nothing, Newton does it
+            c0 = np.zeros((6, 6))
+        geometry._derived[key] = np.ascontiguousarray(c0 if np.all(np.isfinite(c0)) else np.zeros((6, 6)))
+    return geometry._derived[key]
+
+
+def solve_batch_parallel(geometry: CraneGeometry, loads, *, xtol: float = DEFAULT_XTOL,
+                         max_iter: int = DEFAULT_MAX_ITER, chunk: int = CHUNK) -> BatchEquilibrium:
+    """Equilibria for many load cases of one geometry, spread over numba's threads.
+
+    Args:
+        geometry: the crane.
+        loads: (N, 6) array of [fx, fy, fz, mx, my, mz] [N, N·m], fixed frame.
+        xtol: tolerance on the pose [m] (as :func:`~crane_stiffness.model.equilibrium.solve_equilibrium`).
+        max_iter: iterations of the robust solver for the cases the fast path hands over.
+        chunk: cases per parallel block.
+
+    Returns the same :class:`BatchEquilibrium` as ``solve_batch``. Raises NoEquilibriumError naming the first
+    inadmissible case (an upward force above W) and ValueError for a non-finite load.
+    """
+    loads = _validated(geometry, loads)
+    arr = _arrays(geometry)
+    u0, q0 = _rest(geometry, xtol)
+    c0 = rest_compliance(geometry, xtol)
+    n = loads.shape[0]
+    u = np.empty((n, 3))
+    q = np.empty((n, 3, 3))
+    lengths = np.empty((n, 6))
+    tensions = np.empty((n, 6))
+    w = np.empty((n, 6))
+    status = np.empty(n, dtype=np.int64)
+    iters = np.empty(n, dtype=np.int64)
+    chunks = max(1, min(-(-n // max(1, int(chunk))), 64 * _threads())) if n else 0
+    if n:
+        bk.batch_solve_parallel(*arr.args(), loads, u0, q0, c0, xtol, max_iter, arr.lc, arr.max_move,
+                                arr.min_cos_turn, arr.max_shift, MAX_STEPS, MIN_LOAD_FRACTION, chunks, u, q, lengths,
+                                tensions, w, status, iters)
+    for c in np.flatnonzero(status != kern.CONVERGED):  # the path ended: solve_equilibrium says why (or succeeds)
+        eq = solve_equilibrium(geometry, load=loads[c], xtol=xtol, max_iter=max_iter)
+        u[c], q[c], lengths[c], tensions[c], w[c] = (eq.displacement, eq.rotation, eq.wire_lengths,
+                                                     eq.wire_tensions, eq.residual)
+        iters[c] = eq.iterations
+    return BatchEquilibrium(u, q, lengths, tensions, lengths < arr.l0, loads, iters, w)
