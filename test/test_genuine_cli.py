@@ -22,8 +22,8 @@ from rclpy.executors import SingleThreadedExecutor
 
 from crane_stiffness.params.files import ParamFile
 from crane_stiffness.rig_description import rig_nodes
-from crane_stiffness.testing.rig import Observer, decode_values
-from crane_stiffness.testing.rosrun import command, installed_config
+from crane_stiffness.launcher.rig import Observer, decode_values
+from crane_stiffness.launcher.rosrun import command, installed_config
 from helpers import spin_until
 from helpers.processes import UNCLEAN, assert_bag_complete
 

@@ -16,8 +16,8 @@ from helpers.processes import final_counters
 
 from crane_stiffness import topics
 from crane_stiffness.rig_description import RigError, rig_nodes
-from crane_stiffness.testing import rosrun
-from crane_stiffness.testing.rig import Observer, run_rig, start_node, wait_for_program_start
+from crane_stiffness.launcher import rosrun
+from crane_stiffness.launcher.rig import Observer, run_rig, start_node, wait_for_program_start
 
 KERNEL_CACHE = ('*.nbi', '*.nbc')
 
@@ -69,7 +69,7 @@ def test_colcon_build_installs_the_compiled_kernels_and_a_node_loads_them(instal
 
 def _run_rig(install: Path, env: dict, tmp_path: Path, program: str = 'side_force', record: bool = True,
              ready_timeout_s: float = 120.0) -> tuple[dict, Observer, float, dict]:
-    """Every node of rig.launch.py started at once (crane_stiffness.testing.rig.run_rig)."""
+    """Every node of rig.launch.py started at once (crane_stiffness.launcher.rig.run_rig)."""
     return run_rig(_share(install), env, tmp_path, program, session='startup', record=record,
                    ready_timeout_s=ready_timeout_s)
 

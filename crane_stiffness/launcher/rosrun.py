@@ -6,7 +6,7 @@ exactly that look-up and runs the executable itself, as ``ros2 launch`` does (la
 ``ros2 run``), so the demo and the tests start every node from the colcon install tree the same way with or without
 a ROS install, and the signals they send reach the node, not a wrapper (the genuine ``ros2 run`` dies at once on
 SIGTERM, leaving its node to end on its own). ``use_ros2_cli=True`` runs the genuine ``ros2 run`` instead.
-``python -m crane_stiffness.testing.rosrun PKG EXE [args]`` is the command-line form. :class:`Processes` runs a set
+``python -m crane_stiffness.launcher.rosrun PKG EXE [args]`` is the command-line form. :class:`Processes` runs a set
 of such nodes and stops them cleanly.
 """
 from __future__ import annotations
@@ -203,7 +203,7 @@ def interrupt(proc: subprocess.Popen, timeout_s: float = 10.0) -> int:
 def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if len(argv) < 2:
-        print('usage: python -m crane_stiffness.testing.rosrun PACKAGE EXECUTABLE [args...]', file=sys.stderr)
+        print('usage: python -m crane_stiffness.launcher.rosrun PACKAGE EXECUTABLE [args...]', file=sys.stderr)
         return 2
     try:
         exe = executable_path(argv[0], argv[1])

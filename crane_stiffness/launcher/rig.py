@@ -1,7 +1,7 @@
 """The simulated rig as separate node processes, started the way ``ros2 launch`` starts them, and the run's summary.
 
 Used by ``make demo`` (scripts/demo.py), the tests and the benchmarks. Every node is started the way ``ros2 run``
-starts it (crane_stiffness.testing.rosrun) with what the launch file gives it (crane_stiffness.rig_description:
+starts it (crane_stiffness.launcher.rosrun) with what the launch file gives it (crane_stiffness.rig_description:
 parameter files from the install tree's config/ directory, parameters, remappings), all at the same instant: there
 is no start order to keep, load_program waits until the rig is ready (crane_stiffness.nodes.load_program).
 """
@@ -28,7 +28,7 @@ from crane_stiffness.nodes.qos import LATCHED_QOS, RELIABLE_QOS
 from crane_stiffness.rig_description import PACKAGE, NodeStart, rig_nodes
 from crane_stiffness.rig_description import config_files as rig_config_files
 from crane_stiffness.sim.program import LoadProgram, load_program_file
-from crane_stiffness.testing.rosrun import Processes, RosRunError
+from crane_stiffness.launcher.rosrun import Processes, RosRunError
 
 if TYPE_CHECKING:
     from rclpy.executors import SingleThreadedExecutor
