@@ -100,8 +100,12 @@ class Processes:
     ``sleep``), and :meth:`signal_group` sends a signal to the whole group like Ctrl-C in that terminal.
     """
 
-    def __init__(self, env: Mapping[str, str], log_dir: str | os.PathLike, process_group: bool = False) -> None:
+    def __init__(self, env: Mapping[str, str], log_dir: str | os.PathLike, process_group: bool = False,
+                 executables: str | os.PathLike | None = None) -> None:
         self.env = dict(env)
+        #: Where the node executables are when they are not in an ament prefix's lib/<package> (the venv's bin/ of a
+        #: pip install: :func:`node_executables`); None = as ``ros2 run`` finds them.
+        self.executables = None if executables is None else Path(executables)
         self.log_dir = Path(log_dir)
         self.log_dir.mkdir(parents=True, exist_ok=True)
         self.procs: dict[str, subprocess.Popen] = {}
@@ -132,6 +136,8 @@ class Processes:
             pass
 
     def start(self, name: str, package: str, executable: str, args: Sequence[str] = ()) -> subprocess.Popen:
+        if self.executables is not None:
+            return self._popen(name, [str(self.executables / executable), *args], self.env)
         return self._popen(name, command(package, executable, args, self.env), self.env)
 
     def _popen(self, name: str, argv: Sequence[str], env: Mapping[str, str]) -> subprocess.Popen:
@@ -174,6 +180,22 @@ class Processes:
 
     def __exit__(self, *exc) -> None:
         self.stop()
+
+
+def node_executables(package: str = PACKAGE, probe: str = 'crane_model') -> Path | None:
+    """Where this installation's node executables are: None when ``ros2 run`` finds them (an ament prefix's
+    lib/<package>, a colcon workspace), else the directory beside this interpreter (``.venv/bin`` of a pip install,
+    which registers the package in the venv's ament index but puts its scripts on PATH). RosRunError if neither."""
+    try:
+        executable_path(package, probe)
+        return None
+    except RosRunError:
+        pass
+    here = Path(sys.prefix) / 'bin'
+    if (here / probe).is_file():
+        return here
+    raise RosRunError(f'no {probe} executable in an ament prefix (AMENT_PREFIX_PATH) nor in {here}: run `make '
+                      'install`, or source a workspace holding the package')
 
 
 def start_installed(executable: str, args: Sequence[str], log: str | os.PathLike) -> subprocess.Popen:

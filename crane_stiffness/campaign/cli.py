@@ -1,0 +1,82 @@
+"""``crane-stiffness campaign run | analyze`` and ``crane-stiffness calibrate``: thin command-line layers over
+crane_stiffness.campaign (added to the parser of crane_stiffness.cli by :func:`add_commands`).
+
+Exit codes: 0 ok; 2 bad input (a campaign file with an unknown key or a value against its rule, a directory that is
+not a campaign or holds another one, data that cannot determine a calibrated parameter; one stderr line naming the
+file, key or parameter); 1 a session failed on the rig (the node's log tail on stderr); 130 interrupted (Ctrl-C or
+the operator stopped it: run the same command again to resume).
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from typing import Any, Callable
+
+EXIT_OK = 0
+EXIT_FAILED = 1
+EXIT_USAGE = 2
+EXIT_INTERRUPTED = 130
+
+
+def _guarded(run: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Namespace], int]:
+    def wrapper(args: argparse.Namespace) -> int:
+        from crane_stiffness.campaign.runner import CampaignInterrupted
+        from crane_stiffness.errors import CraneStiffnessError
+        from crane_stiffness.launcher.rosrun import RosRunError
+        try:
+            return run(args)
+        except CampaignInterrupted as exc:
+            print(f'crane-stiffness: {exc}', file=sys.stderr)
+            return EXIT_INTERRUPTED
+        except KeyboardInterrupt:
+            print('crane-stiffness: interrupted', file=sys.stderr)
+            return EXIT_INTERRUPTED
+        except RosRunError as exc:
+            print(f'crane-stiffness: a session failed on the rig: {exc}', file=sys.stderr)
+            return EXIT_FAILED
+        except (CraneStiffnessError, OSError, ValueError) as exc:
+            print(f'crane-stiffness: {exc}', file=sys.stderr)
+            return EXIT_USAGE
+    wrapper.__name__ = run.__name__
+    return wrapper
+
+
+def _rig_arguments(items: list[str]) -> dict[str, str]:
+    out = {}
+    for item in items:
+        name, sep, value = item.partition(':=')
+        if not sep or not name:
+            raise ValueError(f'--rig-arg {item!r}: expected NAME:=VALUE (a rig.launch.py argument)')
+        out[name] = value
+    return out
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    from crane_stiffness.campaign.runner import run_campaign, service_confirm, terminal_confirm
+    from crane_stiffness.campaign.spec import load_campaign
+    campaign = load_campaign(args.campaign)
+    confirm = service_confirm() if args.confirm == 'service' else terminal_confirm
+    run = run_campaign(campaign, args.out, hardware=args.hardware, confirm=confirm,
+                       arguments=_rig_arguments(args.rig_arg), progress=not args.quiet)
+    print(f'campaign {campaign.name}: {len(run.ran)} session(s) run, {len(run.skipped)} done before, '
+          f'{run.planned} planned -> {run.out}')
+    return EXIT_OK
+
+
+def add_commands(subparsers: Any) -> None:
+    """Add ``campaign`` (run, analyze) and ``calibrate`` to the ``crane-stiffness`` subparsers."""
+    p = subparsers.add_parser('campaign', help="a test campaign (the paper's matrix of sessions): run, analyze")
+    sub = p.add_subparsers(dest='campaign_command', required=True)
+    r = sub.add_parser('run', help='run every session of a campaign file on the rig (resumes an interrupted one)')
+    r.add_argument('campaign', metavar='CAMPAIGN.yaml', help='campaign file (see config/campaign_paper.yaml)')
+    r.add_argument('--out', metavar='DIR', required=True, help='campaign directory (bags, logs, results)')
+    r.add_argument('--hardware', action='store_true',
+                   help="real hardware: stop before each session, say what to set up and wait for the operator's "
+                        'confirmation (recorded with the session)')
+    r.add_argument('--confirm', choices=('terminal', 'service'), default='terminal',
+                   help='with --hardware: a prompt at this terminal, or a call of /campaign/continue '
+                        '(std_srvs/srv/Trigger) from any machine of the lab (default terminal)')
+    r.add_argument('--rig-arg', action='append', default=[], metavar='NAME:=VALUE',
+                   help='a rig.launch.py argument for every session (e.g. transport:=drivers); repeatable')
+    r.add_argument('--quiet', action='store_true', help='no progress bar')
+    r.set_defaults(func=_guarded(cmd_run))
