@@ -94,6 +94,8 @@ setup(
         ('share/' + PACKAGE + '/launch', sorted(glob('launch/*.launch.py'))),
     ],
     install_requires=['setuptools'],
+    # `crane-stiffness campaign analyze --scheduler tcp://...`: per-session analyses on a Dask cluster
+    extras_require={'dask': ['dask[distributed]==2026.8.0']},
     zip_safe=False,
     maintainer='crane_stiffness maintainers',
     maintainer_email='crane-stiffness@example.org',

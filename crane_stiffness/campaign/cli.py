@@ -63,6 +63,32 @@ def cmd_run(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def cmd_analyze(args: argparse.Namespace) -> int:
+    from crane_stiffness.campaign.analyze import analyze_campaign
+    done = []
+
+    def note(bag: str) -> None:
+        done.append(bag)
+        if not args.quiet:
+            print(f'  analysed {len(done)}: {bag}', file=sys.stderr, flush=True)
+    result = analyze_campaign(args.dir, workers=args.workers, scheduler=args.scheduler, formats=(args.format,),
+                              progress=note)
+    print(f'campaign {result.campaign}: {len(result.rows)} session(s) ({len(result.analysed)} analysed now, '
+          f'{len(result.rows) - len(result.analysed)} unchanged)')
+    print(f'{"session":<20} {"k":>12} {"95 % interval":>27} {"model":>12} {"error":>9}  status')
+    for r in result.rows:
+        print(f'{r.session:<20} {r.k:>12.6g} [{r.ci95_low:>12.6g}, {r.ci95_high:>12.6g}] {r.model_tangent:>12.6g} '
+              f'{100 * r.relative_error:>+8.3f}%  {r.status}')
+    for name in result.missing:
+        print(f'  missing: {name}')
+    for name, why in result.failed.items():
+        print(f'  analysis failed: {name}: {why}', file=sys.stderr)
+    print('wrote:')
+    for path in result.files:
+        print(f'  {path}')
+    return EXIT_OK
+
+
 def add_commands(subparsers: Any) -> None:
     """Add ``campaign`` (run, analyze) and ``calibrate`` to the ``crane-stiffness`` subparsers."""
     p = subparsers.add_parser('campaign', help="a test campaign (the paper's matrix of sessions): run, analyze")
@@ -80,3 +106,13 @@ def add_commands(subparsers: Any) -> None:
                    help='a rig.launch.py argument for every session (e.g. transport:=drivers); repeatable')
     r.add_argument('--quiet', action='store_true', help='no progress bar')
     r.set_defaults(func=_guarded(cmd_run))
+    a = sub.add_parser('analyze', help='analyse every session of a campaign directory: Figs. 10 and 13 with the '
+                       'measured points, force-displacement overlays, table, report, CSV and JSON')
+    a.add_argument('dir', metavar='DIR', help='campaign directory (campaign run --out)')
+    a.add_argument('--workers', type=int, default=None, help='local worker processes (default: every core)')
+    a.add_argument('--scheduler', metavar='ADDRESS', default=None,
+                   help='a Dask scheduler (tcp://host:8786) to run the session analyses on (needs the extra '
+                        "'dask'; the workers must see DIR at the same path)")
+    a.add_argument('--format', choices=('png', 'svg'), default='png', help='figure format (default png)')
+    a.add_argument('--quiet', action='store_true', help='no progress lines')
+    a.set_defaults(func=_guarded(cmd_analyze))
