@@ -89,6 +89,24 @@ def cmd_analyze(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def cmd_calibrate(args: argparse.Namespace) -> int:
+    from crane_stiffness.campaign.calibrate import calibrate_campaign
+    cal, files = calibrate_campaign(args.dir, weight=args.weight, height=args.height, only_ok=args.only_ok,
+                                    formats=(args.format,))
+    print(f'calibrated on {len(cal.sessions)} session(s): chi2 = {cal.chi2:.4g} on {cal.dof} degrees of freedom')
+    for p in cal.parameters:
+        print(f'  {p.name:<24} {p.value:.7g} ± {p.stderr:.2g} (95 %: {p.ci95_low:.7g} .. {p.ci95_high:.7g}) '
+              f'[{p.unit}]  {p.description}')
+    names = [p.name for p in cal.parameters]
+    if len(names) > 1:
+        print('  correlations: ' + '; '.join(f'{names[i]}/{names[j]} {cal.correlation[i][j]:+.3f}'
+                                             for i in range(len(names)) for j in range(i + 1, len(names))))
+    print('wrote:')
+    for path in files:
+        print(f'  {path}')
+    return EXIT_OK
+
+
 def add_commands(subparsers: Any) -> None:
     """Add ``campaign`` (run, analyze) and ``calibrate`` to the ``crane-stiffness`` subparsers."""
     p = subparsers.add_parser('campaign', help="a test campaign (the paper's matrix of sessions): run, analyze")
@@ -116,3 +134,13 @@ def add_commands(subparsers: Any) -> None:
     a.add_argument('--format', choices=('png', 'svg'), default='png', help='figure format (default png)')
     a.add_argument('--quiet', action='store_true', help='no progress lines')
     a.set_defaults(func=_guarded(cmd_analyze))
+    c = subparsers.add_parser('calibrate', help="fit the model's uncertain parameters (wire stiffness E·A; "
+                              'optionally W and the height) to an analysed campaign, with 95 % intervals')
+    c.add_argument('dir', metavar='DIR', help='campaign directory, analysed (campaign analyze DIR)')
+    c.add_argument('--weight', choices=('none', 'scale', 'per-weight', 'per-session'), default='none',
+                   help='also fit W: one factor for the campaign, one per weight hung, one per session '
+                        '(default none)')
+    c.add_argument('--height', action='store_true', help='also fit an offset of the height of each wire length')
+    c.add_argument('--only-ok', action='store_true', help='leave out the sessions whose status is not OK')
+    c.add_argument('--format', choices=('png', 'svg'), default='png', help='figure format (default png)')
+    c.set_defaults(func=_guarded(cmd_calibrate))

@@ -10,6 +10,7 @@ from crane_stiffness.analysis.report import Block, fmt, to_html, to_markdown
 
 if TYPE_CHECKING:
     from crane_stiffness.campaign.analyze import CampaignAnalysis, SessionRow
+    from crane_stiffness.campaign.calibrate import Calibration
 
 
 def _pct(value: float) -> str:
@@ -46,14 +47,43 @@ def campaign_blocks(result: CampaignAnalysis, images: Sequence[str]) -> list[Blo
     return blocks
 
 
+def calibration_blocks(cal: Calibration, left_out: Sequence[SessionRow], images: Sequence[str]) -> list[Block]:
+    """The calibration's report: parameters with 95 % intervals, correlations, fit, per-session residuals."""
+    headers = ['parameter', 'value', 'std. error', '95 % interval', 'unit', 'what']
+    params = [[p.name, fmt(p.value, 7), fmt(p.stderr, 3), f'{fmt(p.ci95_low, 7)} … {fmt(p.ci95_high, 7)}', p.unit,
+               p.description] for p in cal.parameters]
+    names = [p.name for p in cal.parameters]
+    corr = [[n, *(fmt(v, 3) for v in row)] for n, row in zip(names, cal.correlation)]
+    per = [[s['session'], s['series'], s['holds'], fmt(s['rms_normalised_residual'], 3), fmt(s['measured_hold_slope']),
+            fmt(s['nominal_tangent']), fmt(s['calibrated_tangent'])] for s in cal.sessions]
+    blocks: list[Block] = [
+        ('h1', 'Calibration of the model on the campaign'),
+        ('p', f'Nonlinear least squares on the exact model over the hold means of {len(cal.sessions)} session(s): '
+              f'χ² = {cal.chi2:.4g} on {cal.dof} degrees of freedom (intervals scaled by χ²/dof when above 1).'),
+        ('table', headers, params),
+        ('h2', 'Wire'), ('ul', [f'{k}: {fmt(v, 7)}' for k, v in cal.wire.items()]),
+        ('h2', 'Correlations'), ('table', ['', *names], corr),
+        ('h2', 'Residuals per session'),
+        ('table', ['session', 'series', 'holds', 'rms normalised residual', 'measured slope (holds)',
+                   'nominal tangent', 'calibrated tangent'], per)]
+    for image in images:
+        blocks.append(('img', image, Path(image).stem.replace('_', ' ')))
+    if left_out:
+        blocks += [('h2', 'Sessions left out'), ('ul', [f'{r.session}: ' + ('; '.join(r.reasons) or 'no holds')
+                                                        for r in left_out])]
+    return blocks
+
+
+def write_blocks(blocks: list[Block], out: Path, stem: str, reports: Sequence[str], title: str) -> list[str]:
+    written = []
+    for kind in reports:
+        path = out / f'{stem}.{kind}'
+        path.write_text(to_markdown(blocks) if kind == 'md' else to_html(blocks, title), encoding='utf-8')
+        written.append(str(path))
+    return written
+
+
 def write_campaign_report(result: CampaignAnalysis, out: Path, reports: Sequence[str]) -> list[str]:
     """report.md / report.html in ``out``, linking the figures written there."""
     images = [Path(f).name for f in result.files if Path(f).suffix in ('.png', '.svg')]
-    blocks = campaign_blocks(result, images)
-    written = []
-    for kind in reports:
-        path = out / f'report.{kind}'
-        path.write_text(to_markdown(blocks) if kind == 'md' else to_html(blocks, f'campaign {result.campaign}'),
-                        encoding='utf-8')
-        written.append(str(path))
-    return written
+    return write_blocks(campaign_blocks(result, images), out, 'report', reports, f'campaign {result.campaign}')
