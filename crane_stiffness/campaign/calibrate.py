@@ -18,8 +18,9 @@ closed form at every θ: variable projection). Residual: (d_i − model) / σ_i,
 K_i)², K_i the model's exact tangent along the axis (crane_stiffness.model.tangent_stiffness): the noise of the
 force counted in displacement units, both noises in the weight.
 
-**Fit and intervals.** scipy's Levenberg–Marquardt; the covariance (Jᵀ J)⁻¹ at the optimum (central differences),
-scaled by χ²/dof (so a model error or correlated noise widens the intervals rather than hiding); 95 % intervals
+**Fit and intervals.** scipy's trust-region least squares; the covariance (Jᵀ J)⁻¹ at the optimum (central
+differences) scaled by χ²/dof, the noise's scale estimated from the fit (the holds' standard errors give only the
+relative weights: a model error or correlated noise then widens the intervals rather than hiding); 95 % intervals
 with Student's t on dof = holds − parameters − sessions; correlations; residuals per session.
 
 **Refusal.** Before fitting, the data are checked to determine every parameter asked for: enough holds, each
@@ -283,7 +284,7 @@ def calibrate(sessions: Sequence[CalibrationSession], *, weight: str = 'none', h
     dof = n_points - len(theta) - len(sessions)
     chi2 = float(res @ res)
     try:
-        cov = np.linalg.inv(jac.T @ jac) * max(chi2 / dof, 1.0)
+        cov = np.linalg.inv(jac.T @ jac) * (chi2 / dof)
     except np.linalg.LinAlgError:
         raise CalibrationError(f'the data cannot determine {", ".join(model.names)} (singular normal matrix)') \
             from None

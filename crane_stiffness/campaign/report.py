@@ -59,7 +59,7 @@ def calibration_blocks(cal: Calibration, left_out: Sequence[SessionRow], images:
     blocks: list[Block] = [
         ('h1', 'Calibration of the model on the campaign'),
         ('p', f'Nonlinear least squares on the exact model over the hold means of {len(cal.sessions)} session(s): '
-              f'χ² = {cal.chi2:.4g} on {cal.dof} degrees of freedom (intervals scaled by χ²/dof when above 1).'),
+              f'χ² = {cal.chi2:.4g} on {cal.dof} degrees of freedom (the covariance scaled by χ²/dof).'),
         ('table', headers, params),
         ('h2', 'Wire'), ('ul', [f'{k}: {fmt(v, 7)}' for k, v in cal.wire.items()]),
         ('h2', 'Correlations'), ('table', ['', *names], corr),

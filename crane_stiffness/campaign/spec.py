@@ -54,9 +54,9 @@ CAMPAIGN_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec('programs', ['side_force'], 'the program of each series: program_<name>.yaml in the installed config/, '
               'or a path to a program file (relative to the campaign file) [-]', rule='one per series'),
     ParamSpec('weights', [50.0], 'suspended weights W [N]', rule='at least one; each >= 0'),
-    ParamSpec('lengths', [0.0], "unstretched wire lengths l0 [m]; [0.0] = use 'heights'",
+    ParamSpec('lengths', [0.0], "unstretched wire lengths l0; [0.0] = use 'heights' [m]",
               rule="each > 0; exactly one of lengths and heights given"),
-    ParamSpec('heights', [0.0], "unloaded heights h between the triangles [m]; [0.0] = use 'lengths'",
+    ParamSpec('heights', [0.0], "unloaded heights h between the triangles; [0.0] = use 'lengths' [m]",
               rule="each > 0; exactly one of lengths and heights given"),
     ParamSpec('repeats', 1, 'sessions per series, weight and length [-]', low=1),
     ParamSpec('load_fraction', 0.5, "peak of a side-force or moment program as a fraction of the load at which the "
