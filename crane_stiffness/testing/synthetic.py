@@ -198,16 +198,17 @@ def write_synthetic_session(path: str | Path, program: LoadProgram, *, geometry:
                 if k_loading == k_loading:
                     others.append((log + 40_000, topics.STIFFNESS, encode_float64(k_loading)))
     rig = None
-    recorded = recorded_geometry if recorded_geometry is not None else geometry
-    if recorded is not None:
-        rig = {'geometry': geometry_to_params(recorded), 'l0': recorded.l0, 'k': recorded.k}
+    described = recorded_geometry if recorded_geometry is not None else geometry
+    if described is not None:
+        rig = {'geometry': geometry_to_params(described), 'l0': described.l0, 'k': described.k}
     sensors: dict[str, Any] = {'stiffness_estimator': est_params}
     if lvdt is not None:
         sensors['lvdt'] = lvdt
+    extra: dict[str, Any] = {CAMPAIGN_KEY: campaign} if campaign else {}
     meta = session_metadata(rig=rig, program={**program.to_params(), 'duration_s': program.duration_s,
                                               'source': 'synthetic'},
                             start_time_ns=start_ns, notes=notes, session=Path(path).name, sensors=sensors,
-                            **({CAMPAIGN_KEY: campaign} if campaign else {}))
+                            **extra)
     # Merge everything in log-time order and write.
     codes = {topics.LOAD_CELL_WRENCH: 0, topics.LVDT_DISPLACEMENT: 1, topics.WRENCH_COMMAND: 2}
     other_log = np.array([o[0] for o in others], dtype=np.int64)
