@@ -7,6 +7,7 @@ from __future__ import annotations
 import os
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from multiprocessing import get_context
+from multiprocessing.context import BaseContext
 from typing import Any, Callable, Sequence
 
 from crane_stiffness.campaign.errors import CampaignError
@@ -40,8 +41,7 @@ def map_sessions(func: Callable[..., str], jobs: Sequence[Job], *, workers: int 
             if progress is not None:
                 progress(str(job[0]))
         return results
-    # spawn: a clean interpreter per worker (no state forked from a caller that may hold threads or ROS)
-    with ProcessPoolExecutor(max_workers=min(workers, len(jobs)), mp_context=get_context('spawn')) as pool:
+    with ProcessPoolExecutor(max_workers=min(workers, len(jobs)), mp_context=_context(func)) as pool:
         futures = {pool.submit(func, *job): i for i, job in enumerate(jobs)}
         for future in as_completed(futures):
             i = futures[future]
@@ -49,6 +49,19 @@ def map_sessions(func: Callable[..., str], jobs: Sequence[Job], *, workers: int 
             if progress is not None:
                 progress(str(jobs[i][0]))
     return results
+
+
+def _context(func: Callable[..., str]) -> BaseContext:
+    """Worker processes forked from a server that imported ``func``'s module once (the analysis, numpy, numba's
+    kernels, matplotlib: seconds per process when each worker imports them itself), never from this process (which
+    may hold threads); a clean interpreter ('spawn') where there is no fork server."""
+    try:
+        context = get_context('forkserver')
+    except ValueError:  # no fork server on this platform
+        return get_context('spawn')
+    context.set_forkserver_preload([func.__module__, 'crane_stiffness.analysis.analyze',
+                                    'crane_stiffness.analysis.figures', 'crane_stiffness.model.equilibrium'])
+    return context
 
 
 def _on_dask(func: Callable[..., str], jobs: Sequence[Job], scheduler: str,
