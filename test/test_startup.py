@@ -3,6 +3,7 @@ install tree, cold (no compiled-kernel cache) or warm; the launch file's refusal
 from __future__ import annotations
 
 import json
+import re
 import shutil
 import subprocess
 import sys
@@ -192,8 +193,11 @@ def test_load_program_rejects_a_malformed_wait_entry(install_tree, tmp_path):
 def test_launch_file_fails_at_once_for_an_unknown_program_or_a_missing_file(tmp_path):
     """What rig.launch.py evaluates (rig_description.rig_nodes): a bad argument fails before any node starts."""
     config = _REPO / 'config'
+    # every program_<name>.yaml of config/, listed by name (the series' programs and the campaigns' short ones)
+    names = sorted(p.name[len('program_'):-len('.yaml')] for p in config.glob('program_*.yaml'))
+    assert {'force_z', 'moment_z', 'side_force', 'side_force_slack', 'campaign_side_force'} <= set(names)
     with pytest.raises(RigError, match=r"unknown program 'bogus': no file .*program_bogus\.yaml; known programs: "
-                                       r'force_z, moment_z, side_force, side_force_slack'):
+                                       + re.escape(', '.join(names))):
         rig_nodes(config, {'program': 'bogus'})
     missing = tmp_path / 'my_crane.yaml'
     with pytest.raises(RigError, match=f'crane file {missing} not found'):
