@@ -277,7 +277,7 @@ def service_confirm(timeout_s: float | None = None) -> Confirm:
                 if deadline is not None and time.monotonic() > deadline:
                     raise CampaignInterrupted(f'no /campaign/continue call for session {plan.id} in {timeout_s} s')
                 executor.spin_once(timeout_sec=0.1)
-            end = time.monotonic() + 0.3  # the answer reaches the caller
+            end = time.monotonic() + 1.5  # the answer reaches the caller before the node goes (slow when loaded)
             while time.monotonic() < end:
                 executor.spin_once(timeout_sec=0.05)
         finally:
