@@ -22,18 +22,18 @@ FORCE_NOISE = 0.01
 DISPLACEMENT_NOISE = 2e-7
 
 
-def session_program(plan: SessionPlan) -> tuple[LoadProgram, dict[str, Any]]:
-    """The session's scaled program and its stiffness_estimator section."""
+def session_program(plan: SessionPlan, repeats: int = 1) -> tuple[LoadProgram, dict[str, Any]]:
+    """The session's scaled program (played ``repeats`` times) and its stiffness_estimator section."""
     data = load_yaml(scaled_program_text(Path(plan.program), plan.program_scale))
-    program = LoadProgram.from_params(data['load_program']['ros__parameters'])
+    program = LoadProgram.from_params({**data['load_program']['ros__parameters'], 'repeats': repeats})
     estimator = dict((data.get('stiffness_estimator') or {}).get('ros__parameters') or {})
     return program, estimator
 
 
 def write_synthetic_plan(out: Path, campaign: Campaign, plan: SessionPlan, seed: int,
-                         sample_rate_hz: float = 1000.0) -> None:
+                         sample_rate_hz: float = 1000.0, repeats: int = 1) -> None:
     """One session of a synthetic campaign: its bag and its result.json."""
-    program, estimator = session_program(plan)
+    program, estimator = session_program(plan, repeats)
     # A moment series' LVDT reads the rotation itself here (no lever arm): no LVDT arrangement recorded.
     estimator.pop('lever_arm_m', None)
     entry = campaign_entry(campaign, plan, hardware=False, confirmed=None)
@@ -53,11 +53,12 @@ def write_synthetic_plan(out: Path, campaign: Campaign, plan: SessionPlan, seed:
 
 
 def write_synthetic_campaign(out: str | os.PathLike, campaign: Campaign, seed: int = 0,
-                             sample_rate_hz: float = 1000.0) -> list[SessionPlan]:
-    """Every session of ``campaign`` in ``out`` (seeds ``seed``, ``seed + 1``, ...); returns the plan."""
+                             sample_rate_hz: float = 1000.0, repeats: int = 1) -> list[SessionPlan]:
+    """Every session of ``campaign`` in ``out`` (seeds ``seed``, ``seed + 1``, ...), each program played
+    ``repeats`` times; returns the plan."""
     out = Path(out)
     plans = plan_sessions(campaign)
     _prepare(out, campaign, plans)
     for plan in plans:
-        write_synthetic_plan(out, campaign, plan, seed + plan.index, sample_rate_hz)
+        write_synthetic_plan(out, campaign, plan, seed + plan.index, sample_rate_hz, repeats)
     return plans
