@@ -97,6 +97,8 @@ setup(
         ('share/' + PACKAGE + '/foxglove', sorted(glob('foxglove/*.json'))),
     ],
     install_requires=['setuptools'],
+    # `crane-stiffness campaign analyze --scheduler tcp://...`: per-session analyses on a Dask cluster
+    extras_require={'dask': ['dask[distributed]==2026.8.0']},
     zip_safe=False,
     maintainer='crane_stiffness maintainers',
     maintainer_email='crane-stiffness@example.org',

@@ -43,7 +43,7 @@ def main(argv=None) -> int:
     ap.add_argument('--clients', type=int, default=2)
     ap.add_argument('--json', help='write the figures here')
     args = ap.parse_args(argv)
-    from crane_stiffness.testing import rosrun
+    from crane_stiffness.launcher import rosrun
     ws = REPO / 'out' / 'bench_live_view'
     env, share = rosrun.build_workspace(REPO, ws)
     runs: dict[str, list[dict]] = {'without': [], 'with': []}

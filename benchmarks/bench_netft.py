@@ -33,7 +33,7 @@ os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ.setdefault('ROS_DOMAIN_ID', str(random.randint(1, 100)))
 os.environ.setdefault('AMENT_PREFIX_PATH', sys.prefix)
 
-from crane_stiffness.testing import rosrun  # noqa: E402
+from crane_stiffness.launcher import rosrun  # noqa: E402
 import numpy as np  # noqa: E402
 
 TICKS = os.sysconf('SC_CLK_TCK')

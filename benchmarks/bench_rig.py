@@ -91,9 +91,9 @@ def run_rate(rate: float, seconds: float, env: dict, share: Path, log_dir: Path,
     from crane_stiffness.nodes.qos import RELIABLE_QOS, SENSOR_QOS
     from crane_stiffness.nodes.run import make_executor
     from crane_stiffness.rig_description import rig_nodes
-    from crane_stiffness.testing import rosrun
+    from crane_stiffness.launcher import rosrun
     from crane_stiffness.testing.lab import emulated_ports
-    from crane_stiffness.testing.rig import estimate_fields, start_node
+    from crane_stiffness.launcher.rig import estimate_fields, start_node
 
     fields = estimate_fields()
     i_stamp = fields.index('sample_stamp')
@@ -145,7 +145,7 @@ def run_rate(rate: float, seconds: float, env: dict, share: Path, log_dir: Path,
         overrides['netft'] |= {'publish_rate_hz': rate, **({'flush_rate_hz': publish_rate} if publish_rate else {})}
         overrides['modbus_lvdt'] |= {'poll_rate_hz': rate}
     if view_clients is not None:
-        from crane_stiffness.testing.ports import free_port
+        from crane_stiffness.launcher.ports import free_port
         overrides['live_view'] = {'port': free_port(), 'http_port': free_port()}
     stop_clients = threading.Event()
     client_counts: list[list[int]] = []
@@ -280,7 +280,7 @@ def main(argv=None) -> int:
                          'drivers (rig.launch.py transport:=drivers)')
     ap.add_argument('--json', help='write the figures here')
     args = ap.parse_args(argv)
-    from crane_stiffness.testing import rosrun
+    from crane_stiffness.launcher import rosrun
     ws = REPO / 'out' / 'bench_rig'
     env, share = rosrun.build_workspace(REPO, ws)
     results = [run_rate(r, args.seconds, env, share, ws / 'logs', args.publish_rate, args.warmup, transport)

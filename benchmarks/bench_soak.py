@@ -1,7 +1,7 @@
 """Soak benchmark: the whole simulated rig (recorder included) at 1 kHz for a long run, every node's memory sampled.
 
 Every node starts the way `ros2 run` starts it, from a colcon install tree, all at once as `ros2 launch` starts them
-(crane_stiffness.testing.rig.start_rig); the side-force program repeats for the whole run. Every ``--every`` seconds
+(crane_stiffness.launcher.rig.start_rig); the side-force program repeats for the whole run. Every ``--every`` seconds
 the resident set size (RSS, /proc/<pid>/status VmRSS, the node's process and any children) of every node is
 sampled. Reported per node: RSS at the start of the steady state (``--warmup`` s after the program started: start-up,
 JIT compilation and DDS discovery are over), at the end, the growth between them [MB] and the least-squares slope
@@ -70,7 +70,7 @@ def rss_bytes(pid: int, tree: dict[int, list[int]] | None = None) -> int | None:
 
 
 def program_length_s(share: Path) -> float:
-    from crane_stiffness.testing.rig import config_files
+    from crane_stiffness.launcher.rig import config_files
     from crane_stiffness.sim.program import load_program_file
     program = load_program_file(config_files(share, PROGRAM)['program'])
     return program.duration_s / program.repeats  # one pass of the segments [s]
@@ -79,8 +79,8 @@ def program_length_s(share: Path) -> float:
 def soak(seconds: float, rate: float, every: float, warmup: float, env: dict, share: Path, out: Path) -> dict:
     import rclpy
 
-    from crane_stiffness.testing import rosrun
-    from crane_stiffness.testing.rig import Observer, start_rig, wait_for_program_start
+    from crane_stiffness.launcher import rosrun
+    from crane_stiffness.launcher.rig import Observer, start_rig, wait_for_program_start
 
     repeats = max(1, math.ceil((seconds + 30.0) / program_length_s(share)))
     rates = {'sample_rate_hz': rate}
@@ -145,7 +145,7 @@ def main(argv=None) -> int:
                     help="target: the session recorder's growth at most this [MB] (it records all day)")
     ap.add_argument('--json', help='write the figures here')
     args = ap.parse_args(argv)
-    from crane_stiffness.testing import rosrun
+    from crane_stiffness.launcher import rosrun
     ws = REPO / 'out' / 'bench_soak'
     env, share = rosrun.build_workspace(REPO, ws)
     res = soak(args.seconds, args.rate, args.every, args.warmup, env, share, ws / time.strftime('%Y%m%dT%H%M%S'))

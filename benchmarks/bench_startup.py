@@ -1,7 +1,7 @@
 """Start-up benchmark: time from launch to program start, cold and warm.
 
 Every node of rig.launch.py is started at the same instant, the way `ros2 launch` starts them (as `ros2 run` runs
-each executable, from a colcon install tree; crane_stiffness.testing.rig.start_rig), and the time is taken from
+each executable, from a colcon install tree; crane_stiffness.launcher.rig.start_rig), and the time is taken from
 that instant to load_program's state 'running' arriving at an observer in this process. load_program starts the
 program only once the rig is ready (the model's prediction, both sensor streams, every reader subscribed), so this
 is the time until a load can be applied.
@@ -47,8 +47,8 @@ def launch_to_program_start(install: Path, log_dir: Path, timeout_s: float = 180
     LOADS.append(round(os.getloadavg()[0], 2))
     import rclpy
 
-    from crane_stiffness.testing import rosrun
-    from crane_stiffness.testing.rig import Observer, start_rig, wait_for_program_start
+    from crane_stiffness.launcher import rosrun
+    from crane_stiffness.launcher.rig import Observer, start_rig, wait_for_program_start
     env = rosrun.install_environment(install)
     share = rosrun.installed_config(install)
     ctx = rclpy.Context()
@@ -72,7 +72,7 @@ def main(argv=None) -> int:
     ap.add_argument('--json', help='write the figures here')
     args = ap.parse_args(argv)
 
-    from crane_stiffness.testing import rosrun
+    from crane_stiffness.launcher import rosrun
     with tempfile.TemporaryDirectory(prefix='bench_startup_') as tmp:
         ws = Path(tmp)
         src = ws / 'src' / 'crane_stiffness'

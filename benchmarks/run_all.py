@@ -16,6 +16,7 @@ BENCHMARKS = [
     ('bench_bag_decode.py', [], None),
     ('bench_sync.py', [], 'bench_sync.json'),
     ('bench_analyze.py', [], None),
+    ('bench_campaign.py', [], 'bench_campaign.json'),   # campaign analyze with 1 and 2 worker processes
     ('bench_replay.py', [], 'bench_replay.json'),
     ('bench_rig.py', [], 'bench_rig.json'),
     # The rig through the drivers (rig.launch.py transport:=drivers) against the direct topics, back to back.

@@ -1,7 +1,8 @@
 """``crane-stiffness``: the offline command line, a thin layer over crane_stiffness.model and .analysis.
 
 Subcommands: solve, stiffness, sweep, workspace (design maps: crane_stiffness.design.cli) and, with the bag
-module, analyze, compare, recover. Geometry comes from
+module, analyze, compare, recover; campaign run / analyze and calibrate (crane_stiffness.campaign.cli). Geometry
+comes from
 ``--config FILE`` (a ROS parameter YAML, the same file the nodes read) and/or flags, flags winning; SI units.
 Exit codes: 0 ok, 2 bad input (named on stderr), 3 no equilibrium for the load, 4 solver gave up.
 """
@@ -273,7 +274,9 @@ def _add_workspace_command(sub: Any) -> None:
 def _add_bag_commands(sub: Any) -> None:
     """Bag subcommands: analyze, compare, recover (crane_stiffness.analysis.session_cli)."""
     from crane_stiffness.analysis import session_cli
+    from crane_stiffness.campaign import cli as campaign_cli
     session_cli.add_commands(sub)
+    campaign_cli.add_commands(sub)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

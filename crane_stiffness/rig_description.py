@@ -1,6 +1,6 @@
 """The simulated rig as data: which nodes run, which parameter files and parameters each gets, which arguments
 choose them. Pure Python (no ROS, no launch import): ``launch/rig.launch.py`` builds its launch description from
-it for ``ros2 launch``, and crane_stiffness.testing.rig starts the same nodes as processes for the demo, the tests
+it for ``ros2 launch``, and crane_stiffness.launcher.rig starts the same nodes as processes for the demo, the tests
 and the benchmarks.
 
     ros2 launch crane_stiffness rig.launch.py program:=side_force record:=true

@@ -30,6 +30,27 @@ NODE_PARAMETERS_METADATA = 'crane_stiffness/node_parameters'
 nodes over ROS: {node name: JSON of {parameter: value}}. Preferred to the parameter files of the session record."""
 SESSION_END_METADATA = 'crane_stiffness/session_end'
 """MCAP metadata record written when the recording is closed: stop reason, end time, message counts."""
+CAMPAIGN_KEY = 'campaign'
+"""Key of :data:`SESSION_METADATA` holding a campaign session's place (the recorder's ``campaign_entry``): campaign,
+session id, series, weight, l0, height, repeat, program scale; for a simulated rig ``true_geometry`` (the
+geometry.* parameters the crane_model node ran with) beside the record's ``rig.geometry`` (the nominal crane), and
+``analysis_geometry``: 'nominal' (the analysis uses ``rig.geometry``, not the crane_model node's parameters); on
+hardware ``confirmed`` (what the operator confirmed, how and when)."""
+
+
+def analysis_geometry_params(session: Mapping[str, Any], node_parameters: Mapping[str, Mapping[str, Any]]
+                             ) -> dict[str, Any] | None:
+    """The geometry.* parameters the analysis models a session with: the nominal crane of the record's ``rig``
+    when its campaign entry says ``analysis_geometry: nominal`` (a simulated crane that differs from the nominal
+    one on purpose), else the crane_model node's parameters as it ran, else the record's ``rig.geometry``; None
+    when neither was recorded."""
+    rig = session.get('rig') if isinstance(session.get('rig'), dict) else None
+    recorded = rig.get('geometry') if rig and isinstance(rig.get('geometry'), dict) else None
+    campaign = session.get(CAMPAIGN_KEY)
+    if isinstance(campaign, dict) and campaign.get('analysis_geometry') == 'nominal' and recorded:
+        return dict(recorded)
+    model = {k: v for k, v in node_parameters.get('crane_model', {}).items() if k.startswith('geometry.')}
+    return model or (dict(recorded) if recorded else None)
 
 
 class _HasMetadataRecords(Protocol):
@@ -65,7 +86,7 @@ def session_record(*, session: str, start_ns: int, parameters: Mapping[str, Any]
                    program: LoadProgram | None, param_sections: Mapping[str, Mapping[str, Any]],
                    param_files: Sequence[Mapping[str, str]], program_keys: Collection[str],
                    own_sections: Container[str], recorder: Mapping[str, Any], ros_distro: str,
-                   host: str) -> tuple[dict[str, str], list[str]]:
+                   host: str, campaign: Mapping[str, Any] | None = None) -> tuple[dict[str, str], list[str]]:
     """The recorder's :data:`SESSION_METADATA` record, and warnings for the operator.
 
     Args:
@@ -82,6 +103,7 @@ def session_record(*, session: str, start_ns: int, parameters: Mapping[str, Any]
         own_sections: section names that hold the recorder's own parameters.
         recorder: the recorder's recording settings and node name.
         ros_distro, host: where the recording was made.
+        campaign: the session's place in a test campaign (:data:`CAMPAIGN_KEY`), or None.
     """
     warnings: list[str] = []
     source = 'none'
@@ -104,9 +126,11 @@ def session_record(*, session: str, start_ns: int, parameters: Mapping[str, Any]
                if name not in own_sections and 'segments.kind' not in section}
     rig = {'geometry': {k: parameters[k] for k in parameters if k.startswith('geometry.')},
            'l0': geometry.l0, 'k': geometry.k}
+    extra: dict[str, Any] = {CAMPAIGN_KEY: dict(campaign)} if campaign else {}
     record = session_metadata(
         rig=rig, program=program_record, start_time_ns=start_ns, notes=parameters['notes'], session=session,
-        sensors=sensors, config_files=list(param_files), recorder=dict(recorder), ros_distro=ros_distro, host=host)
+        sensors=sensors, config_files=list(param_files), recorder=dict(recorder), ros_distro=ros_distro, host=host,
+        **extra)
     return record, warnings
 
 
@@ -136,6 +160,6 @@ def read_node_parameters(source: Records) -> dict[str, dict[str, Any]]:
 
 
 __all__ = [
-    'NODE_PARAMETERS_METADATA', 'SESSION_END_METADATA', 'SESSION_METADATA', 'read_node_parameters', 'read_session',
-    'session_metadata', 'session_record',
+    'CAMPAIGN_KEY', 'NODE_PARAMETERS_METADATA', 'SESSION_END_METADATA', 'SESSION_METADATA', 'analysis_geometry_params',
+    'read_node_parameters', 'read_session', 'session_metadata', 'session_record',
 ]

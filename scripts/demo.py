@@ -61,9 +61,9 @@ def main(argv=None) -> int:
     import rclpy
     from tqdm import tqdm
 
-    from crane_stiffness.testing import rosrun
-    from crane_stiffness.testing.ports import free_port
-    from crane_stiffness.testing.rig import Observer, start_rig, summarize, wait_for_program_start
+    from crane_stiffness.launcher import rosrun
+    from crane_stiffness.launcher.ports import free_port
+    from crane_stiffness.launcher.rig import Observer, start_rig, summarize, wait_for_program_start
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

@@ -63,7 +63,7 @@ def rclpy_context(ros_domain):
 def install_tree(colcon_install, ros_domain):
     """(install_base, env) of the session's colcon build; env is what sourcing the install's local_setup gives, in
     this test's DDS domain."""
-    from crane_stiffness.testing.rosrun import install_environment
+    from crane_stiffness.launcher.rosrun import install_environment
     return colcon_install, install_environment(colcon_install)
 
 
@@ -72,7 +72,7 @@ def colcon_install(tmp_path_factory):
     """A colcon build of this package (copied out of the work tree), as a real ROS workspace would have it."""
     import shutil
 
-    from crane_stiffness.testing.rosrun import colcon_build
+    from crane_stiffness.launcher.rosrun import colcon_build
     ws = tmp_path_factory.mktemp('ws')
     src = ws / 'src' / 'crane_stiffness'
     shutil.copytree(REPO, src, ignore=shutil.ignore_patterns('.venv', '.git', 'build', 'install', 'log', 'out',

@@ -33,7 +33,7 @@ from crane_stiffness.cli import main as cli_main
 from crane_stiffness.nodes.qos import SENSOR_QOS
 from crane_stiffness.nodes.session_player import SessionPlayer
 from crane_stiffness.nodes.session_qos import message_class
-from crane_stiffness.testing import rosrun
+from crane_stiffness.launcher import rosrun
 
 NS = 1_000_000_000
 T0 = 1_700_000_000 * NS

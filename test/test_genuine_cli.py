@@ -22,8 +22,8 @@ from rclpy.executors import SingleThreadedExecutor
 
 from crane_stiffness.params.files import ParamFile
 from crane_stiffness.rig_description import rig_nodes
-from crane_stiffness.testing.rig import Observer, decode_values
-from crane_stiffness.testing.rosrun import command, installed_config
+from crane_stiffness.launcher.rig import Observer, decode_values
+from crane_stiffness.launcher.rosrun import command, installed_config
 from helpers import spin_until
 from helpers.processes import UNCLEAN, assert_bag_complete
 
@@ -217,7 +217,7 @@ def test_launch_with_live_view_serves_the_page_and_ends_cleanly(install_tree, tm
     import json
     import urllib.request
 
-    from crane_stiffness.testing.ports import free_port
+    from crane_stiffness.launcher.ports import free_port
     install, env = install_tree
     port, http_port = free_port(), free_port()
     nodes = {n.name for n in rig_nodes(installed_config(install), {'live_view': 'true', 'record': 'false'})}

@@ -16,8 +16,8 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from helpers import REPO, spin_until
 from crane_stiffness import topics
 from crane_stiffness.rig_description import rig_nodes
-from crane_stiffness.testing import rosrun
-from crane_stiffness.testing.rig import start_node
+from crane_stiffness.launcher import rosrun
+from crane_stiffness.launcher.rig import start_node
 from crane_stiffness.nodes.qos import RELIABLE_QOS
 
 pytestmark = pytest.mark.ros  # every test here starts ROS (conftest)
@@ -62,7 +62,7 @@ def test_cli_runs_from_the_install_tree_with_installed_config(install_tree):
     assert res['paper_coefficients']['Kj'] == pytest.approx(53793.509, rel=1e-6)  # lab model, h 0.5, W 50
     assert len(res['tangent']) == 6
     # And the module form of the stand-in for `ros2 run`.
-    out = subprocess.run([sys.executable, '-m', 'crane_stiffness.testing.rosrun', 'crane_stiffness', 'crane-stiffness',
+    out = subprocess.run([sys.executable, '-m', 'crane_stiffness.launcher.rosrun', 'crane_stiffness', 'crane-stiffness',
                           'solve', '--config', 'crane_lab', '--force', '0', '1', '0', '--json'],
                          env=env, capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr

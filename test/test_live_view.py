@@ -13,7 +13,7 @@ from std_srvs.srv import Trigger
 
 from crane_stiffness import topics
 from crane_stiffness.nodes.live_view import DEFAULT_SERVICES, DEFAULT_TOPICS, _TYPES
-from crane_stiffness.testing.rosrun import installed_config
+from crane_stiffness.launcher.rosrun import installed_config
 from helpers.foxglove_client import FoxgloveClient
 from helpers.live_rig import live_rig, wait_for_pairs
 from helpers.processes import UNCLEAN, final_counters

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import json
 
-from crane_stiffness.testing.rosrun import installed_config
+from crane_stiffness.launcher.rosrun import installed_config
 from helpers.foxglove_client import FoxgloveClient
 from helpers.live_rig import live_rig, wait_for_pairs
 from helpers.processes import UNCLEAN, final_counters

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from matplotlib import image
 
-from crane_stiffness.testing.rosrun import installed_config
+from crane_stiffness.launcher.rosrun import installed_config
 from helpers import REPO
 from helpers.browser import Browser, chromium
 from helpers.live_rig import live_rig, wait_for_pairs

@@ -1,6 +1,6 @@
 """Parameters as the genuine tools see them.
 
-At start: nodes started the way ``ros2 run`` does (crane_stiffness.testing.rosrun, from the colcon install tree)
+At start: nodes started the way ``ros2 run`` does (crane_stiffness.launcher.rosrun, from the colcon install tree)
 with ``--ros-args -p`` / ``--params-file``; exit status and stderr. At runtime: the parameter services
 (SetParameters, DescribeParameters, GetParameters) called from a client node, as ``ros2 param`` does.
 """
@@ -24,7 +24,7 @@ from crane_stiffness.bag import BagWriter, dump_qos_profiles, qos_profile
 from crane_stiffness.nodes.crane_model import CraneModel
 from crane_stiffness.nodes.session_player import SessionPlayer
 from crane_stiffness.nodes.session_recorder import SessionRecorder
-from crane_stiffness.testing import rosrun
+from crane_stiffness.launcher import rosrun
 
 PKG = 'crane_stiffness'
 

@@ -31,7 +31,7 @@ from crane_stiffness import topics
 from crane_stiffness.bag import BagDamageWarning, BagReader
 from crane_stiffness.cli import main as cli_main
 from crane_stiffness.nodes.qos import RELIABLE_QOS
-from crane_stiffness.testing import rosrun
+from crane_stiffness.launcher import rosrun
 
 NS = 1_000_000_000
 ERROR = 2

@@ -27,7 +27,7 @@ from std_srvs.srv import Trigger
 
 from helpers import REPO, spin_until
 from crane_stiffness import topics
-from crane_stiffness.testing import rosrun
+from crane_stiffness.launcher import rosrun
 from crane_stiffness.bag import BagDamageWarning, BagReader
 from crane_stiffness.cli import main as cli_main
 from crane_stiffness.nodes.qos import LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS

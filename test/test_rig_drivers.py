@@ -10,9 +10,9 @@ import time
 import pytest
 
 from crane_stiffness.rig_description import NODES, RigError, config_files, rig_nodes
-from crane_stiffness.testing import rosrun
+from crane_stiffness.launcher import rosrun
 from crane_stiffness.testing.lab import emulated_ports, start_rig_with
-from crane_stiffness.testing.rig import Observer, summarize, wait_for_program_start
+from crane_stiffness.launcher.rig import Observer, summarize, wait_for_program_start
 
 from helpers import REPO
 from helpers.processes import final_counters

@@ -5,8 +5,8 @@ from __future__ import annotations
 import pytest
 
 from crane_stiffness.analysis.analyze import analyze_session
-from crane_stiffness.testing import rosrun
-from crane_stiffness.testing.rig import run_rig
+from crane_stiffness.launcher import rosrun
+from crane_stiffness.launcher.rig import run_rig
 
 pytestmark = pytest.mark.ros  # every test here starts ROS (conftest)
 

@@ -23,8 +23,8 @@ from helpers import spin_until
 from helpers.processes import UNCLEAN, assert_bag_complete
 from crane_stiffness.bag import BagWriter, dump_qos_profiles, qos_profile
 from crane_stiffness.rig_description import PACKAGE, rig_nodes
-from crane_stiffness.testing import rosrun
-from crane_stiffness.testing.rig import Observer, start_node
+from crane_stiffness.launcher import rosrun
+from crane_stiffness.launcher.rig import Observer, start_node
 
 pytestmark = pytest.mark.ros  # every test here starts ROS (conftest)
 

@@ -3,6 +3,7 @@ install tree, cold (no compiled-kernel cache) or warm; the launch file's refusal
 from __future__ import annotations
 
 import json
+import re
 import shutil
 import subprocess
 import sys
@@ -16,8 +17,8 @@ from helpers.processes import final_counters
 
 from crane_stiffness import topics
 from crane_stiffness.rig_description import RigError, rig_nodes
-from crane_stiffness.testing import rosrun
-from crane_stiffness.testing.rig import Observer, run_rig, start_node, wait_for_program_start
+from crane_stiffness.launcher import rosrun
+from crane_stiffness.launcher.rig import Observer, run_rig, start_node, wait_for_program_start
 
 KERNEL_CACHE = ('*.nbi', '*.nbc')
 
@@ -69,7 +70,7 @@ def test_colcon_build_installs_the_compiled_kernels_and_a_node_loads_them(instal
 
 def _run_rig(install: Path, env: dict, tmp_path: Path, program: str = 'side_force', record: bool = True,
              ready_timeout_s: float = 120.0) -> tuple[dict, Observer, float, dict]:
-    """Every node of rig.launch.py started at once (crane_stiffness.testing.rig.run_rig)."""
+    """Every node of rig.launch.py started at once (crane_stiffness.launcher.rig.run_rig)."""
     return run_rig(_share(install), env, tmp_path, program, session='startup', record=record,
                    ready_timeout_s=ready_timeout_s)
 
@@ -192,8 +193,11 @@ def test_load_program_rejects_a_malformed_wait_entry(install_tree, tmp_path):
 def test_launch_file_fails_at_once_for_an_unknown_program_or_a_missing_file(tmp_path):
     """What rig.launch.py evaluates (rig_description.rig_nodes): a bad argument fails before any node starts."""
     config = _REPO / 'config'
+    # every program_<name>.yaml of config/, listed by name (the series' programs and the campaigns' short ones)
+    names = sorted(p.name[len('program_'):-len('.yaml')] for p in config.glob('program_*.yaml'))
+    assert {'force_z', 'moment_z', 'side_force', 'side_force_slack', 'campaign_side_force'} <= set(names)
     with pytest.raises(RigError, match=r"unknown program 'bogus': no file .*program_bogus\.yaml; known programs: "
-                                       r'force_z, moment_z, side_force, side_force_slack'):
+                                       + re.escape(', '.join(names))):
         rig_nodes(config, {'program': 'bogus'})
     missing = tmp_path / 'my_crane.yaml'
     with pytest.raises(RigError, match=f'crane file {missing} not found'):

@@ -20,7 +20,7 @@ from crane_stiffness.estimation.live import VALUE_FIELDS
 from crane_stiffness.estimation.settings import LiveSettings
 from crane_stiffness.serde.bulk import Columns
 from crane_stiffness.serde import CdrError, decode_diagnostic_array, decode_float64_multiarray, decode_string
-from crane_stiffness.session_record import read_node_parameters, read_session
+from crane_stiffness.session_record import analysis_geometry_params, read_node_parameters, read_session
 from crane_stiffness.sim.program import LoadProgram
 
 REQUIRED_TOPICS = (topics.LOAD_CELL_WRENCH, topics.LVDT_DISPLACEMENT)
@@ -180,11 +180,9 @@ def load_session(path: Path, axis: str | None, problems: list[str], missing: lis
         if chosen not in AXES:
             raise SessionAnalysisError(f'axis = {chosen!r}: must be one of {", ".join(AXES)}')
         settings = replace(settings, force_axis=chosen)
-        rig = session.get('rig') if isinstance(session.get('rig'), dict) else None
-        geometry_params = rig.get('geometry') if rig and isinstance(rig.get('geometry'), dict) else None
-        model_geometry = {k: v for k, v in nodes.get('crane_model', {}).items() if k.startswith('geometry.')}
-        if model_geometry:  # the crane_model node's geometry, as it ran
-            geometry_params = model_geometry
+        # The crane_model node's geometry as it ran, unless the record says the simulated crane differs from the
+        # nominal one on purpose (a campaign's true crane): then the nominal one, as the analysis of a real crane.
+        geometry_params = analysis_geometry_params(session, nodes)
         if geometry_params is None:
             problems.append('no rig geometry recorded: no model curves')
         data = SessionData(path=path, session=session, counts={t: i.count for t, i in known.items()},

@@ -266,6 +266,7 @@ class SessionRecorder(Node):
         record, warnings = session_record(
             session=session, start_ns=start_ns, parameters=values, geometry=self.built['geometry'],
             program=self.built.get('program'), param_sections=sections, param_files=files,
+            campaign=self.built.get('campaign'),
             program_keys=PROGRAM_KEYS, own_sections=OWN_SECTIONS,
             recorder={k: values[k] for k in RECORDING_KEYS} | {'node': self.get_fully_qualified_name()},
             ros_distro=os.environ.get('ROS_DISTRO', 'jazzy'), host=socket.gethostname())

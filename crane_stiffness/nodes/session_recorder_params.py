@@ -2,6 +2,7 @@
 with a session when they are given to it) and their validation."""
 from __future__ import annotations
 
+import json
 from datetime import datetime, timezone
 from typing import Any
 
@@ -48,6 +49,9 @@ PARAMS = GEOMETRY_PARAMS + PROGRAM_PARAMS + (
               "about a quarter of the CPU per message) or 'single' (SingleThreadedExecutor); read at start [-]",
               choices=('events', 'single')),
     ParamSpec('notes', '', 'free text stored with the session (operator, specimen, remarks) [-]'),
+    ParamSpec('campaign_entry', '', "the session's place in a test campaign, a JSON object stored with the session "
+              "under 'campaign' (series, W, l0, the true crane of a simulated rig, what the operator confirmed; "
+              "crane_stiffness.campaign); '' = not part of a campaign [-]", rule="'' or a JSON object"),
     ParamSpec('record_node_parameters', ['/crane_model', '/load_program', '/load_cell', '/lvdt',
                                          '/stiffness_estimator'],
               'nodes whose parameters are read over ROS (get_parameters) once they appear and stored with the '
@@ -72,11 +76,18 @@ def validate(values: dict[str, Any]) -> dict[str, Any]:
     for t in names:
         check(valid_topic_name(t), 'topics', names, f'{t!r} is not a valid topic name')
     geometry = geometry_from_params(values)  # GeometryError (a ValueError) names the field
+    campaign = None
+    if values['campaign_entry']:
+        try:
+            campaign = json.loads(values['campaign_entry'])
+        except ValueError:
+            campaign = None
+        check(isinstance(campaign, dict), 'campaign_entry', values['campaign_entry'], "must be '' or a JSON object")
     program_values = {k: plain(values[k]) for k in PROGRAM_KEYS}
     program = None
     if program_values != PROGRAM_DEFAULTS:
         program = LoadProgram.from_params(program_values)  # ParameterError (a ValueError) names the field
-    return {'geometry': geometry, 'program': program}
+    return {'geometry': geometry, 'program': program, 'campaign': campaign}
 
 
 def utc_session_name(now_ns: int) -> str:

@@ -2,7 +2,7 @@
 Linux network namespaces joined by a veth pair. Used by test_rig_drivers, test_lab_network and bench_rig.
 
 :func:`start_rig_with` starts the nodes :func:`crane_stiffness.rig_description.rig_nodes` gives for any rig
-arguments (the demo's :func:`crane_stiffness.testing.rig.start_rig` takes only program/record/session), each the
+arguments (the demo's :func:`crane_stiffness.launcher.rig.start_rig` takes only program/record/session), each the
 way ``ros2 run`` starts it. :func:`emulated_ports` picks free loopback ports for the emulators and points the
 drivers at them, so runs side by side on one machine do not meet on the fixed ports of config/drivers_emulated.yaml.
 
@@ -23,8 +23,8 @@ from typing import Any, Mapping, Sequence
 from crane_stiffness.errors import CraneStiffnessError
 from crane_stiffness.rig_description import PACKAGE, NodeStart, rig_nodes
 from crane_stiffness.sim.program import LoadProgram, load_program_file
-from crane_stiffness.testing.rig import start_node
-from crane_stiffness.testing.rosrun import Processes, command
+from crane_stiffness.launcher.rig import start_node
+from crane_stiffness.launcher.rosrun import Processes, command
 
 
 class LabNetworkError(CraneStiffnessError):

@@ -25,7 +25,7 @@ from crane_stiffness.estimation.settings import LiveSettings
 from crane_stiffness.model import CraneGeometry
 from crane_stiffness.serde import (encode_float64, encode_float64_multiarray, encode_stamped, encode_string,
                                    stamp_seconds)
-from crane_stiffness.session_record import SESSION_METADATA, session_metadata
+from crane_stiffness.session_record import CAMPAIGN_KEY, SESSION_METADATA, session_metadata
 from crane_stiffness.sim.program import LoadProgram
 
 T0_NS = 1_700_000_000_000_000_000
@@ -82,7 +82,8 @@ def write_synthetic_session(path: str | Path, program: LoadProgram, *, geometry:
                             chunk_size: int = 1024 * 1024, t0_ns: int = T0_NS, notes: str = 'synthetic session',
                             lvdt: dict[str, Any] | None = None, live_tail_s: float | None = None,
                             sensor: Callable[[np.ndarray], np.ndarray] | None = None,
-                            displacement_late_s: float = 0.0) -> SyntheticSession:
+                            displacement_late_s: float = 0.0, recorded_geometry: CraneGeometry | None = None,
+                            campaign: dict[str, Any] | None = None) -> SyntheticSession:
     """Write a synthetic session bag (see the module docstring) and return its truth.
 
     Args:
@@ -103,6 +104,9 @@ def write_synthetic_session(path: str | Path, program: LoadProgram, *, geometry:
             its own frame (a rotated, off-centre sensor); default: the platform's wrench as is.
         displacement_late_s: the LVDT's stamps are this much later than the instants measured [s] (a driver's
             latency); the log times follow.
+        recorded_geometry: the crane the session records (the nominal one of a campaign) when it is not the one
+            the displacements are made with (``geometry``, the true crane).
+        campaign: a campaign entry to record (crane_stiffness.session_record.CAMPAIGN_KEY).
     """
     if geometry is None and stiffness is None:
         raise ValueError('give a geometry (nonlinear model) or a stiffness (linear truth)')
@@ -194,14 +198,17 @@ def write_synthetic_session(path: str | Path, program: LoadProgram, *, geometry:
                 if k_loading == k_loading:
                     others.append((log + 40_000, topics.STIFFNESS, encode_float64(k_loading)))
     rig = None
-    if geometry is not None:
-        rig = {'geometry': geometry_to_params(geometry), 'l0': geometry.l0, 'k': geometry.k}
+    described = recorded_geometry if recorded_geometry is not None else geometry
+    if described is not None:
+        rig = {'geometry': geometry_to_params(described), 'l0': described.l0, 'k': described.k}
     sensors: dict[str, Any] = {'stiffness_estimator': est_params}
     if lvdt is not None:
         sensors['lvdt'] = lvdt
+    extra: dict[str, Any] = {CAMPAIGN_KEY: campaign} if campaign else {}
     meta = session_metadata(rig=rig, program={**program.to_params(), 'duration_s': program.duration_s,
                                               'source': 'synthetic'},
-                            start_time_ns=start_ns, notes=notes, session=Path(path).name, sensors=sensors)
+                            start_time_ns=start_ns, notes=notes, session=Path(path).name, sensors=sensors,
+                            **extra)
     # Merge everything in log-time order and write.
     codes = {topics.LOAD_CELL_WRENCH: 0, topics.LVDT_DISPLACEMENT: 1, topics.WRENCH_COMMAND: 2}
     other_log = np.array([o[0] for o in others], dtype=np.int64)

@@ -3,7 +3,7 @@
 and a recorded bag as independent readers see it.
 
 (The rig's nodes from a colcon install tree, started as ``ros2 launch`` starts them, are
-crane_stiffness.testing.rig/rosrun's.)
+crane_stiffness.launcher.rig/rosrun's.)
 """
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ from pathlib import Path
 
 import yaml
 
-from crane_stiffness.testing import rosrun
+from crane_stiffness.launcher import rosrun
 
 #: Signs of an unclean end in a node's output (rclpy's FATAL callback report, pybind11's abort, faulthandler).
 UNCLEAN = ('Traceback', 'FATAL', 'terminate called', 'Fatal Python error', 'KeyboardInterrupt')

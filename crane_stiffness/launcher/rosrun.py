@@ -6,7 +6,7 @@ exactly that look-up and runs the executable itself, as ``ros2 launch`` does (la
 ``ros2 run``), so the demo and the tests start every node from the colcon install tree the same way with or without
 a ROS install, and the signals they send reach the node, not a wrapper (the genuine ``ros2 run`` dies at once on
 SIGTERM, leaving its node to end on its own). ``use_ros2_cli=True`` runs the genuine ``ros2 run`` instead.
-``python -m crane_stiffness.testing.rosrun PKG EXE [args]`` is the command-line form. :class:`Processes` runs a set
+``python -m crane_stiffness.launcher.rosrun PKG EXE [args]`` is the command-line form. :class:`Processes` runs a set
 of such nodes and stops them cleanly.
 """
 from __future__ import annotations
@@ -100,8 +100,12 @@ class Processes:
     ``sleep``), and :meth:`signal_group` sends a signal to the whole group like Ctrl-C in that terminal.
     """
 
-    def __init__(self, env: Mapping[str, str], log_dir: str | os.PathLike, process_group: bool = False) -> None:
+    def __init__(self, env: Mapping[str, str], log_dir: str | os.PathLike, process_group: bool = False,
+                 executables: str | os.PathLike | None = None) -> None:
         self.env = dict(env)
+        #: Where the node executables are when they are not in an ament prefix's lib/<package> (the venv's bin/ of a
+        #: pip install: :func:`node_executables`); None = as ``ros2 run`` finds them.
+        self.executables = None if executables is None else Path(executables)
         self.log_dir = Path(log_dir)
         self.log_dir.mkdir(parents=True, exist_ok=True)
         self.procs: dict[str, subprocess.Popen] = {}
@@ -132,6 +136,8 @@ class Processes:
             pass
 
     def start(self, name: str, package: str, executable: str, args: Sequence[str] = ()) -> subprocess.Popen:
+        if self.executables is not None:
+            return self._popen(name, [str(self.executables / executable), *args], self.env)
         return self._popen(name, command(package, executable, args, self.env), self.env)
 
     def _popen(self, name: str, argv: Sequence[str], env: Mapping[str, str]) -> subprocess.Popen:
@@ -176,6 +182,22 @@ class Processes:
         self.stop()
 
 
+def node_executables(package: str = PACKAGE, probe: str = 'crane_model') -> Path | None:
+    """Where this installation's node executables are: None when ``ros2 run`` finds them (an ament prefix's
+    lib/<package>, a colcon workspace), else the directory beside this interpreter (``.venv/bin`` of a pip install,
+    which registers the package in the venv's ament index but puts its scripts on PATH). RosRunError if neither."""
+    try:
+        executable_path(package, probe)
+        return None
+    except RosRunError:
+        pass
+    here = Path(sys.prefix) / 'bin'
+    if (here / probe).is_file():
+        return here
+    raise RosRunError(f'no {probe} executable in an ament prefix (AMENT_PREFIX_PATH) nor in {here}: run `make '
+                      'install`, or source a workspace holding the package')
+
+
 def start_installed(executable: str, args: Sequence[str], log: str | os.PathLike) -> subprocess.Popen:
     """The executable installed beside this interpreter (``.venv/bin``: a node, ``crane-stiffness``) in a session of
     its own, its output to ``log``."""
@@ -203,7 +225,7 @@ def interrupt(proc: subprocess.Popen, timeout_s: float = 10.0) -> int:
 def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if len(argv) < 2:
-        print('usage: python -m crane_stiffness.testing.rosrun PACKAGE EXECUTABLE [args...]', file=sys.stderr)
+        print('usage: python -m crane_stiffness.launcher.rosrun PACKAGE EXECUTABLE [args...]', file=sys.stderr)
         return 2
     try:
         exe = executable_path(argv[0], argv[1])

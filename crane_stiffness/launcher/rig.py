@@ -1,7 +1,7 @@
 """The simulated rig as separate node processes, started the way ``ros2 launch`` starts them, and the run's summary.
 
 Used by ``make demo`` (scripts/demo.py), the tests and the benchmarks. Every node is started the way ``ros2 run``
-starts it (crane_stiffness.testing.rosrun) with what the launch file gives it (crane_stiffness.rig_description:
+starts it (crane_stiffness.launcher.rosrun) with what the launch file gives it (crane_stiffness.rig_description:
 parameter files from the install tree's config/ directory, parameters, remappings), all at the same instant: there
 is no start order to keep, load_program waits until the rig is ready (crane_stiffness.nodes.load_program).
 """
@@ -10,7 +10,7 @@ from __future__ import annotations
 import json
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Mapping
+from typing import TYPE_CHECKING, Any, Callable, Mapping
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
@@ -28,7 +28,7 @@ from crane_stiffness.nodes.qos import LATCHED_QOS, RELIABLE_QOS
 from crane_stiffness.rig_description import PACKAGE, NodeStart, rig_nodes
 from crane_stiffness.rig_description import config_files as rig_config_files
 from crane_stiffness.sim.program import LoadProgram, load_program_file
-from crane_stiffness.testing.rosrun import Processes, RosRunError
+from crane_stiffness.launcher.rosrun import Processes, RosRunError
 
 if TYPE_CHECKING:
     from rclpy.executors import SingleThreadedExecutor
@@ -134,12 +134,14 @@ def config_files(share: Path, program: str) -> dict[str, Path]:
 
 def start_rig(procs: Processes, share: Path, program: str, session: str, bags: Path, record: bool = True,
               ready_timeout_s: float = 60.0, overrides: Mapping[str, Mapping[str, Any]] | None = None,
-              live_view: bool = False) -> LoadProgram:
+              arguments: Mapping[str, str] | None = None, live_view: bool = False) -> LoadProgram:
     """Start every node of the rig at the same instant, as ``ros2 launch crane_stiffness rig.launch.py`` does:
     load_program waits until the rig is ready (at most ``ready_timeout_s``) and exits when the program is done.
-    ``overrides``: extra parameters by node name; ``live_view``: start the live view too. Returns the program."""
+    ``overrides``: extra parameters by node name; ``arguments``: other launch arguments (transport, sim_sensors,
+    drivers, ...); ``live_view``: start the live view too. Returns the program."""
     prog = load_program_file(config_files(share, program)['program'])
-    nodes = rig_nodes(share, {'program': program, 'record': record, 'session': session, 'live_view': live_view})
+    nodes = rig_nodes(share, {**(arguments or {}), 'program': program, 'record': record, 'session': session,
+                              'live_view': live_view})
     if record:
         bags.mkdir(parents=True, exist_ok=True)
     for node in nodes:
@@ -209,20 +211,24 @@ def summarize(share: Path, program: str, session: str, bags: Path, observer: Obs
 
 
 def run_rig(share: Path, env: Mapping[str, str], out: Path, program: str, session: str = 'rig', record: bool = True,
-            ready_timeout_s: float = 120.0, overrides: Mapping[str, Mapping[str, Any]] | None = None
+            ready_timeout_s: float = 120.0, overrides: Mapping[str, Mapping[str, Any]] | None = None,
+            executables: Path | None = None, bags: Path | None = None,
+            progress: Callable[[float], None] | None = None, arguments: Mapping[str, str] | None = None
             ) -> tuple[dict[str, Any], Observer, float, dict[str, str]]:
     """Every node of the rig started at once (:func:`start_rig`) in a DDS context of its own, the program played to
     its end: (summary, observer, launch-to-program-start [s], each node's log). Logs in ``out/logs``, bags in
-    ``out/bags``."""
+    ``bags`` (default ``out/bags``). ``executables``: see :class:`~crane_stiffness.launcher.rosrun.Processes`;
+    ``progress`` is called with the program's progress (0 .. 1) as it is reported."""
     import rclpy
+    bags = out / 'bags' if bags is None else bags
     ctx = rclpy.Context()
     rclpy.init(context=ctx)
     observer = Observer(context=ctx)
     try:
-        with Processes(env, out / 'logs') as procs:
+        with Processes(env, out / 'logs', executables=executables) as procs:
             launched = time.monotonic()
-            prog = start_rig(procs, share, program, session, out / 'bags', record=record,
-                             ready_timeout_s=ready_timeout_s, overrides=overrides)
+            prog = start_rig(procs, share, program, session, bags, record=record,
+                             ready_timeout_s=ready_timeout_s, overrides=overrides, arguments=arguments)
             wait_for_program_start(observer, procs, ready_timeout_s + 30)
             assert observer.running_at is not None  # set when the program started
             started_after = observer.running_at - launched
@@ -230,6 +236,8 @@ def run_rig(share: Path, env: Mapping[str, str], out: Path, program: str, sessio
             while procs.procs['load_program'].poll() is None and time.monotonic() < deadline:
                 procs.check_alive(allow_exit=('load_program',))
                 observer.spin_once(0.1)
+                if progress is not None:
+                    progress(observer.progress)
             if procs.procs['load_program'].poll() != 0:
                 raise RosRunError(f'load_program did not finish: {procs.log("load_program")[-3000:]}')
             end = time.monotonic() + 1.5  # the last samples reach the estimator
@@ -237,7 +245,7 @@ def run_rig(share: Path, env: Mapping[str, str], out: Path, program: str, sessio
                 observer.spin_once(0.05)
             codes = procs.stop()
             logs = {name: procs.log(name) for name in procs.procs}
-        summary = summarize(share, program, session, out / 'bags', observer, codes)
+        summary = summarize(share, program, session, bags, observer, codes)
     finally:
         observer.destroy_node()
         rclpy.shutdown(context=ctx)

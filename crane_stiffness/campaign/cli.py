@@ -1,0 +1,146 @@
+"""``crane-stiffness campaign run | analyze`` and ``crane-stiffness calibrate``: thin command-line layers over
+crane_stiffness.campaign (added to the parser of crane_stiffness.cli by :func:`add_commands`).
+
+Exit codes: 0 ok; 2 bad input (a campaign file with an unknown key or a value against its rule, a directory that is
+not a campaign or holds another one, data that cannot determine a calibrated parameter; one stderr line naming the
+file, key or parameter); 1 a session failed on the rig (the node's log tail on stderr); 130 interrupted (Ctrl-C or
+the operator stopped it: run the same command again to resume).
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from typing import Any, Callable
+
+EXIT_OK = 0
+EXIT_FAILED = 1
+EXIT_USAGE = 2
+EXIT_INTERRUPTED = 130
+
+
+def _guarded(run: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Namespace], int]:
+    def wrapper(args: argparse.Namespace) -> int:
+        from crane_stiffness.campaign.runner import CampaignInterrupted
+        from crane_stiffness.errors import CraneStiffnessError
+        from crane_stiffness.launcher.rosrun import RosRunError
+        try:
+            return run(args)
+        except CampaignInterrupted as exc:
+            print(f'crane-stiffness: {exc}', file=sys.stderr)
+            return EXIT_INTERRUPTED
+        except KeyboardInterrupt:
+            print('crane-stiffness: interrupted', file=sys.stderr)
+            return EXIT_INTERRUPTED
+        except RosRunError as exc:
+            print(f'crane-stiffness: a session failed on the rig: {exc}', file=sys.stderr)
+            return EXIT_FAILED
+        except (CraneStiffnessError, OSError, ValueError) as exc:
+            print(f'crane-stiffness: {exc}', file=sys.stderr)
+            return EXIT_USAGE
+    wrapper.__name__ = run.__name__
+    return wrapper
+
+
+def _rig_arguments(items: list[str]) -> dict[str, str]:
+    out = {}
+    for item in items:
+        name, sep, value = item.partition(':=')
+        if not sep or not name:
+            raise ValueError(f'--rig-arg {item!r}: expected NAME:=VALUE (a rig.launch.py argument)')
+        out[name] = value
+    return out
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    from crane_stiffness.campaign.runner import run_campaign, service_confirm, terminal_confirm
+    from crane_stiffness.campaign.spec import load_campaign
+    campaign = load_campaign(args.campaign)
+    confirm = service_confirm() if args.confirm == 'service' else terminal_confirm
+    run = run_campaign(campaign, args.out, hardware=args.hardware, confirm=confirm,
+                       arguments=_rig_arguments(args.rig_arg), progress=not args.quiet)
+    print(f'campaign {campaign.name}: {len(run.ran)} session(s) run, {len(run.skipped)} done before, '
+          f'{run.planned} planned -> {run.out}')
+    return EXIT_OK
+
+
+def cmd_analyze(args: argparse.Namespace) -> int:
+    from crane_stiffness.campaign.analyze import analyze_campaign
+    done = []
+
+    def note(bag: str) -> None:
+        done.append(bag)
+        if not args.quiet:
+            print(f'  analysed {len(done)}: {bag}', file=sys.stderr, flush=True)
+    result = analyze_campaign(args.dir, workers=args.workers, scheduler=args.scheduler, formats=(args.format,),
+                              progress=note)
+    print(f'campaign {result.campaign}: {len(result.rows)} session(s) ({len(result.analysed)} analysed now, '
+          f'{len(result.rows) - len(result.analysed)} unchanged)')
+    print(f'{"session":<20} {"k":>12} {"95 % interval":>27} {"model":>12} {"error":>9}  status')
+    for r in result.rows:
+        print(f'{r.session:<20} {r.k:>12.6g} [{r.ci95_low:>12.6g}, {r.ci95_high:>12.6g}] {r.model_tangent:>12.6g} '
+              f'{100 * r.relative_error:>+8.3f}%  {r.status}')
+    for name in result.missing:
+        print(f'  missing: {name}')
+    for name, why in result.failed.items():
+        print(f'  analysis failed: {name}: {why}', file=sys.stderr)
+    print('wrote:')
+    for path in result.files:
+        print(f'  {path}')
+    return EXIT_OK
+
+
+def cmd_calibrate(args: argparse.Namespace) -> int:
+    from crane_stiffness.campaign.calibrate import calibrate_campaign
+    cal, files = calibrate_campaign(args.dir, weight=args.weight, height=args.height, only_ok=args.only_ok,
+                                    formats=(args.format,))
+    print(f'calibrated on {len(cal.sessions)} session(s): chi2 = {cal.chi2:.4g} on {cal.dof} degrees of freedom')
+    for p in cal.parameters:
+        print(f'  {p.name:<24} {p.value:.7g} ± {p.stderr:.2g} (95 %: {p.ci95_low:.7g} .. {p.ci95_high:.7g}) '
+              f'[{p.unit}]  {p.description}')
+    names = [p.name for p in cal.parameters]
+    if len(names) > 1:
+        print('  correlations: ' + '; '.join(f'{names[i]}/{names[j]} {cal.correlation[i][j]:+.3f}'
+                                             for i in range(len(names)) for j in range(i + 1, len(names))))
+    print('wrote:')
+    for path in files:
+        print(f'  {path}')
+    return EXIT_OK
+
+
+def add_commands(subparsers: Any) -> None:
+    """Add ``campaign`` (run, analyze) and ``calibrate`` to the ``crane-stiffness`` subparsers."""
+    p = subparsers.add_parser('campaign', help="a test campaign (the paper's matrix of sessions): run, analyze")
+    sub = p.add_subparsers(dest='campaign_command', required=True)
+    r = sub.add_parser('run', help='run every session of a campaign file on the rig (resumes an interrupted one)')
+    r.add_argument('campaign', metavar='CAMPAIGN.yaml', help='campaign file (see config/campaign_paper.yaml)')
+    r.add_argument('--out', metavar='DIR', required=True, help='campaign directory (bags, logs, results)')
+    r.add_argument('--hardware', action='store_true',
+                   help="real hardware: stop before each session, say what to set up and wait for the operator's "
+                        'confirmation (recorded with the session)')
+    r.add_argument('--confirm', choices=('terminal', 'service'), default='terminal',
+                   help='with --hardware: a prompt at this terminal, or a call of /campaign/continue '
+                        '(std_srvs/srv/Trigger) from any machine of the lab (default terminal)')
+    r.add_argument('--rig-arg', action='append', default=[], metavar='NAME:=VALUE',
+                   help='a rig.launch.py argument for every session (e.g. transport:=drivers); repeatable')
+    r.add_argument('--quiet', action='store_true', help='no progress bar')
+    r.set_defaults(func=_guarded(cmd_run))
+    a = sub.add_parser('analyze', help='analyse every session of a campaign directory: Figs. 10 and 13 with the '
+                       'measured points, force-displacement overlays, table, report, CSV and JSON')
+    a.add_argument('dir', metavar='DIR', help='campaign directory (campaign run --out)')
+    a.add_argument('--workers', type=int, default=None, help='local worker processes (default: every core)')
+    a.add_argument('--scheduler', metavar='ADDRESS', default=None,
+                   help='a Dask scheduler (tcp://host:8786) to run the session analyses on (needs the extra '
+                        "'dask'; the workers must see DIR at the same path)")
+    a.add_argument('--format', choices=('png', 'svg'), default='png', help='figure format (default png)')
+    a.add_argument('--quiet', action='store_true', help='no progress lines')
+    a.set_defaults(func=_guarded(cmd_analyze))
+    c = subparsers.add_parser('calibrate', help="fit the model's uncertain parameters (wire stiffness E·A; "
+                              'optionally W and the height) to an analysed campaign, with 95 % intervals')
+    c.add_argument('dir', metavar='DIR', help='campaign directory, analysed (campaign analyze DIR)')
+    c.add_argument('--weight', choices=('none', 'scale', 'per-weight', 'per-session'), default='none',
+                   help='also fit W: one factor for the campaign, one per weight hung, one per session '
+                        '(default none)')
+    c.add_argument('--height', action='store_true', help='also fit an offset of the height of each wire length')
+    c.add_argument('--only-ok', action='store_true', help='leave out the sessions whose status is not OK')
+    c.add_argument('--format', choices=('png', 'svg'), default='png', help='figure format (default png)')
+    c.set_defaults(func=_guarded(cmd_calibrate))

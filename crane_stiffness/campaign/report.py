@@ -1,0 +1,89 @@
+"""The campaign's report (Markdown and HTML, the document model of crane_stiffness.analysis.report): the table of
+sessions measured against the nominal model, the figures, the sessions not OK and why, the sessions missing."""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import TYPE_CHECKING, Sequence
+
+from crane_stiffness.analysis.report import Block, fmt, to_html, to_markdown
+
+if TYPE_CHECKING:
+    from crane_stiffness.campaign.analyze import CampaignAnalysis, SessionRow
+    from crane_stiffness.campaign.calibrate import Calibration
+
+
+def _pct(value: float) -> str:
+    return '–' if not math.isfinite(value) else f'{100 * value:+.3f} %'
+
+
+def session_table(rows: Sequence[SessionRow]) -> Block:
+    headers = ['session', 'series', 'W [N]', 'l0 [m]', 'measured k', '95 % interval', 'holds k', 'model tangent',
+               'eq. (18)/(19)', 'W = 0', 'single wire W/6', 'measured vs tangent', 'status']
+    body = [[r.session, r.series, fmt(r.weight, 4), fmt(r.l0, 4), fmt(r.k), f'{fmt(r.ci95_low)} … {fmt(r.ci95_high)}',
+             fmt(r.k_holds), fmt(r.model_tangent), fmt(r.model_eq18), fmt(r.model_elastic_w0),
+             fmt(r.model_single_wire), _pct(r.relative_error), r.status] for r in rows]
+    return ('table', headers, body)
+
+
+def campaign_blocks(result: CampaignAnalysis, images: Sequence[str]) -> list[Block]:
+    rows = result.rows
+    worst = max((abs(r.relative_error) for r in rows if math.isfinite(r.relative_error)), default=math.nan)
+    blocks: list[Block] = [
+        ('h1', f'Campaign {result.campaign}: {len(rows)} session(s)'),
+        ('p', 'Measured stiffness: the loading branch fitted over all its pairs (as the live estimator fits), in the '
+              "LVDT's reading units (N/m for fy and fz, N·m/rad for mz), with its 95 % interval; the models are the "
+              "nominal crane's (the recorded geometry) at each session's W and l0. Largest |measured − tangent| / "
+              f'tangent: {_pct(worst)}.'),
+        session_table(rows)]
+    for image in images:
+        blocks.append(('img', image, Path(image).stem.replace('_', ' ')))
+    bad = [f'{r.session}: ' + '; '.join(r.reasons) for r in rows if not r.ok]
+    blocks += [('h2', 'Sessions not OK (drawn hollow)'), ('ul', bad or ['none'])]
+    if result.missing:
+        blocks += [('h2', 'Sessions planned but not run or not analysed'), ('ul', result.missing)]
+    if result.failed:
+        blocks += [('h2', 'Analyses that failed'), ('ul', [f'{k}: {v}' for k, v in result.failed.items()])]
+    return blocks
+
+
+def calibration_blocks(cal: Calibration, left_out: Sequence[SessionRow], images: Sequence[str]) -> list[Block]:
+    """The calibration's report: parameters with 95 % intervals, correlations, fit, per-session residuals."""
+    headers = ['parameter', 'value', 'std. error', '95 % interval', 'unit', 'what']
+    params = [[p.name, fmt(p.value, 7), fmt(p.stderr, 3), f'{fmt(p.ci95_low, 7)} … {fmt(p.ci95_high, 7)}', p.unit,
+               p.description] for p in cal.parameters]
+    names = [p.name for p in cal.parameters]
+    corr = [[n, *(fmt(v, 3) for v in row)] for n, row in zip(names, cal.correlation)]
+    per = [[s['session'], s['series'], s['holds'], fmt(s['rms_normalised_residual'], 3), fmt(s['measured_hold_slope']),
+            fmt(s['nominal_tangent']), fmt(s['calibrated_tangent'])] for s in cal.sessions]
+    blocks: list[Block] = [
+        ('h1', 'Calibration of the model on the campaign'),
+        ('p', f'Nonlinear least squares on the exact model over the hold means of {len(cal.sessions)} session(s): '
+              f'χ² = {cal.chi2:.4g} on {cal.dof} degrees of freedom (the covariance scaled by χ²/dof).'),
+        ('table', headers, params),
+        ('h2', 'Wire'), ('ul', [f'{k}: {fmt(v, 7)}' for k, v in cal.wire.items()]),
+        ('h2', 'Correlations'), ('table', ['', *names], corr),
+        ('h2', 'Residuals per session'),
+        ('table', ['session', 'series', 'holds', 'rms normalised residual', 'measured slope (holds)',
+                   'nominal tangent', 'calibrated tangent'], per)]
+    for image in images:
+        blocks.append(('img', image, Path(image).stem.replace('_', ' ')))
+    if left_out:
+        blocks += [('h2', 'Sessions left out'), ('ul', [f'{r.session}: ' + ('; '.join(r.reasons) or 'no holds')
+                                                        for r in left_out])]
+    return blocks
+
+
+def write_blocks(blocks: list[Block], out: Path, stem: str, reports: Sequence[str], title: str) -> list[str]:
+    written = []
+    for kind in reports:
+        path = out / f'{stem}.{kind}'
+        path.write_text(to_markdown(blocks) if kind == 'md' else to_html(blocks, title), encoding='utf-8')
+        written.append(str(path))
+    return written
+
+
+def write_campaign_report(result: CampaignAnalysis, out: Path, reports: Sequence[str]) -> list[str]:
+    """report.md / report.html in ``out``, linking the figures written there."""
+    images = [Path(f).name for f in result.files if Path(f).suffix in ('.png', '.svg')]
+    return write_blocks(campaign_blocks(result, images), out, 'report', reports, f'campaign {result.campaign}')

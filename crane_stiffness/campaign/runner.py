@@ -1,0 +1,288 @@
+"""``crane-stiffness campaign run``: a campaign's sessions played one after the other on the rig, unattended on the
+simulated rig, with the operator's confirmation before each session on hardware; resumable.
+
+Each session is the whole rig started as ``ros2 launch`` starts it (crane_stiffness.launcher.rig.run_rig: every node
+its own process, the session recorder writing its own bag), with its set-up as parameters: the crane_model node
+runs the **true** crane (``geometry.*`` of :attr:`~crane_stiffness.campaign.spec.SessionPlan.true`), the session
+recorder records the **nominal** one as the rig's geometry and the session's place in the campaign as its
+``campaign_entry`` (crane_stiffness.session_record.CAMPAIGN_KEY: ``analysis_geometry: nominal``, the true crane,
+what the operator confirmed); the program is the series' file with its levels scaled for the set-up.
+
+The campaign directory ``DIR``::
+
+    DIR/plan.json                 the sessions planned (and a fingerprint of them), the campaign file's text
+    DIR/bags/<session>/           each session's bag
+    DIR/sessions/<session>/       its program file, node logs and result.json (written last: the session is done)
+    DIR/interrupted/<session>-N/  the partial bag of a session that was interrupted, kept aside
+
+Run again with the same campaign file, ``run`` skips every session whose result.json exists and starts again the
+one that was interrupted (its partial bag moved to interrupted/): a Ctrl-C or a crash loses no finished session.
+A directory started by another campaign (a different plan) is refused.
+"""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import sys
+import time
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any, Callable, Mapping
+
+from crane_stiffness.campaign.errors import CampaignError
+from crane_stiffness.campaign.spec import (SERIES, Campaign, SessionPlan, plan_fingerprint, plan_sessions,
+                                           scaled_program_text)
+
+PLAN_FILE = 'plan.json'
+RESULT_FILE = 'result.json'
+#: A confirmation: given the session and the instructions, return what the operator confirmed (or raise).
+Confirm = Callable[[SessionPlan, str], dict[str, Any]]
+
+
+class CampaignInterrupted(CampaignError):
+    """The campaign stopped before its end (Ctrl-C, the operator quit); the message says how far it got."""
+
+
+@dataclass
+class CampaignRun:
+    """What a run did: sessions run now, skipped as done before, and their results."""
+
+    out: Path
+    planned: int
+    ran: list[str] = field(default_factory=list)
+    skipped: list[str] = field(default_factory=list)
+    results: dict[str, dict[str, Any]] = field(default_factory=dict)
+
+
+def instructions(plan: SessionPlan, total: int) -> str:
+    """What the operator sets up before a session on hardware, in words."""
+    return (f'session {plan.index + 1}/{total} {plan.id}: {SERIES[plan.series]} series ({plan.series}); hang '
+            f'W = {plan.weight:g} N, set the wires to l0 = {plan.l0:.4g} m (unloaded height {plan.height:.4g} m); '
+            f'program {Path(plan.program).name} scaled by {plan.program_scale:.4g}')
+
+
+def session_done(out: Path, plan: SessionPlan) -> bool:
+    return (out / 'sessions' / plan.id / RESULT_FILE).is_file()
+
+
+def _prepare(out: Path, campaign: Campaign, plans: list[SessionPlan]) -> None:
+    """Write the plan of a new campaign directory, or check that an existing one holds the same plan."""
+    fingerprint = plan_fingerprint(plans)
+    path = out / PLAN_FILE
+    if path.exists():
+        try:
+            old = json.loads(path.read_text())
+        except ValueError as exc:
+            raise CampaignError(f'{path}: unreadable ({exc}); give another --out') from None
+        if old.get('fingerprint') != fingerprint:
+            raise CampaignError(f'{out} holds campaign {old.get("campaign")!r} planned from {old.get("file")}, not '
+                                f'the sessions of {campaign.path}: give another --out (or run that campaign file)')
+        return
+    out.mkdir(parents=True, exist_ok=True)
+    data = {'campaign': campaign.name, 'file': str(campaign.path), 'fingerprint': fingerprint,
+            'text': campaign.path.read_text(), 'true_differs': campaign.true_differs,
+            'sessions': [p.to_dict() for p in plans]}
+    tmp = path.with_suffix('.tmp')
+    tmp.write_text(json.dumps(data, indent=1))
+    os.replace(tmp, path)
+
+
+def read_plan(out: str | os.PathLike) -> dict[str, Any]:
+    """The plan.json of a campaign directory (CampaignError when there is none)."""
+    path = Path(out) / PLAN_FILE
+    try:
+        return json.loads(path.read_text())
+    except FileNotFoundError:
+        raise CampaignError(f'{out}: not a campaign directory (no {PLAN_FILE}; `crane-stiffness campaign run` makes '
+                            'one)') from None
+
+
+def _set_aside(out: Path, plan: SessionPlan) -> None:
+    """A session started before and not finished: its partial bag and logs moved to interrupted/."""
+    for part in (out / 'bags' / plan.id, out / 'sessions' / plan.id):
+        if not part.exists():
+            continue
+        n = 1
+        while (out / 'interrupted' / f'{plan.id}-{n}').exists():
+            n += 1
+        target = out / 'interrupted' / f'{plan.id}-{n}'
+        target.mkdir(parents=True)
+        shutil.move(str(part), str(target / part.parent.name))
+
+
+def campaign_entry(campaign: Campaign, plan: SessionPlan, hardware: bool, confirmed: Mapping[str, Any] | None
+                   ) -> dict[str, Any]:
+    """The session's place in the campaign as the recorder stores it (session_record.CAMPAIGN_KEY)."""
+    entry: dict[str, Any] = {
+        'campaign': campaign.name, 'file': str(campaign.path), 'session': plan.id, 'index': plan.index,
+        'series': plan.series, 'weight': plan.weight, 'l0': plan.l0, 'height': plan.height, 'repeat': plan.repeat,
+        'program_scale': plan.program_scale, 'rig': 'hardware' if hardware else 'simulated',
+        'analysis_geometry': 'nominal'}
+    if not hardware:
+        entry['true_geometry'] = dict(plan.true)
+    if confirmed is not None:
+        entry['confirmed'] = dict(confirmed)
+    return entry
+
+
+def run_campaign(campaign: Campaign, out: str | os.PathLike, *, hardware: bool = False,
+                 confirm: Confirm | None = None, arguments: Mapping[str, str] | None = None,
+                 progress: bool = True, ready_timeout_s: float = 120.0,
+                 on_session: Callable[[SessionPlan], None] | None = None) -> CampaignRun:
+    """Run every session of ``campaign`` not done yet in ``out`` (see the module docstring).
+
+    Args:
+        hardware: stop before each session for ``confirm`` (the operator); the crane model runs the nominal crane.
+        confirm: how the operator confirms (hardware); default a prompt at the terminal.
+        arguments: other rig launch arguments (transport, sim_sensors, drivers, ...).
+        progress: a progress bar over the whole campaign on stderr.
+        on_session: called before each session is started (tests use it to interrupt a campaign).
+
+    Raises:
+        CampaignError: ``out`` holds another campaign; a true crane with --hardware.
+        CampaignInterrupted: Ctrl-C or the operator stopped it (the finished sessions are kept).
+        RosRunError: a node failed (its log tail in the message).
+    """
+    from crane_stiffness.launcher import rosrun
+    from crane_stiffness.launcher.rig import decode_values, run_rig
+    from crane_stiffness.params.files import share_dir
+
+    out = Path(out)
+    if hardware and campaign.true_differs:
+        raise CampaignError(f'{campaign.path}: true.* describes a simulated crane; with --hardware the crane is the '
+                            'real one: set true.wire_stiffness_factor and true.weight_factor to 1')
+    plans = plan_sessions(campaign)
+    _prepare(out, campaign, plans)
+    run = CampaignRun(out=out, planned=len(plans))
+    todo = [p for p in plans if not session_done(out, p)]
+    run.skipped = [p.id for p in plans if session_done(out, p)]
+    share = share_dir() / 'config'
+    executables = rosrun.node_executables()
+    env = dict(os.environ)
+    env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    bar = None
+    if progress:
+        from tqdm import tqdm
+        bar = tqdm(total=len(plans), initial=len(run.skipped), desc=f'campaign {campaign.name}', unit='session',
+                   mininterval=0.5,
+                   file=sys.stderr, bar_format='{l_bar}{bar}| {n:.1f}/{total} sessions [{elapsed}<{remaining}] '
+                   '{postfix}')
+    done_before = len(run.skipped)
+    try:
+        for plan in todo:
+            if on_session is not None:
+                on_session(plan)
+            confirmed = None
+            if hardware:
+                text = instructions(plan, len(plans))
+                confirmed = (confirm or terminal_confirm)(plan, text)
+            _set_aside(out, plan)
+            folder = out / 'sessions' / plan.id
+            folder.mkdir(parents=True)
+            program = folder / 'program.yaml'
+            program.write_text(scaled_program_text(Path(plan.program), plan.program_scale))
+            entry = campaign_entry(campaign, plan, hardware, confirmed)
+            model = plan.nominal if hardware else plan.true
+            overrides = {'crane_model': dict(model),
+                         'session_recorder': {**plan.nominal, 'campaign_entry': _yaml_string(json.dumps(entry)),
+                                              'notes': f'campaign {campaign.name}, session {plan.id}'}}
+            if bar is not None:
+                bar.set_postfix_str(plan.id)
+            base = done_before + len(run.ran)
+
+            def follow(fraction: float, base: int = base) -> None:
+                value = round(base + min(max(fraction, 0.0), 1.0) * 0.99, 2)
+                if bar is not None and value != bar.n:
+                    bar.n = value
+                    bar.refresh()
+            started = time.time()
+            summary, observer, startup_s, _ = run_rig(
+                share, env, folder, str(program), session=plan.id, ready_timeout_s=ready_timeout_s,
+                overrides=overrides, executables=executables, bags=out / 'bags', progress=follow,
+                arguments=arguments)
+            result = {'session': plan.id, 'plan': plan.to_dict(), 'campaign_entry': entry,
+                      'bag': str(out / 'bags' / plan.id), 'started_utc': _utc(started), 'finished_utc': _utc(),
+                      'startup_s': startup_s, 'estimate': decode_values(observer.values) if observer.values else None,
+                      'status': summary['status'], 'node_exit_codes': summary['node_exit_codes']}
+            tmp = folder / (RESULT_FILE + '.tmp')
+            tmp.write_text(json.dumps(result, indent=1, allow_nan=True))
+            os.replace(tmp, folder / RESULT_FILE)
+            run.ran.append(plan.id)
+            run.results[plan.id] = result
+            if bar is not None:
+                bar.n = done_before + len(run.ran)
+                bar.refresh()
+    except KeyboardInterrupt:
+        raise CampaignInterrupted(f'interrupted: {done_before + len(run.ran)} of {len(plans)} sessions done in '
+                                  f'{out}; run the same command again to resume') from None
+    finally:
+        if bar is not None:
+            bar.close()
+    return run
+
+
+def _yaml_string(text: str) -> str:
+    """``text`` as a YAML single-quoted scalar: a ``-p name:=value`` override is read as YAML, and a JSON object
+    unquoted would be a mapping, not the string parameter."""
+    return "'" + text.replace("'", "''") + "'"
+
+
+def _utc(t: float | None = None) -> str:
+    return datetime.fromtimestamp(time.time() if t is None else t, tz=timezone.utc).isoformat(timespec='seconds')
+
+
+def terminal_confirm(plan: SessionPlan, text: str) -> dict[str, Any]:
+    """Ask at the terminal: the operator types y when the set-up is done (q stops the campaign)."""
+    print(f'\n{text}', file=sys.stderr)
+    while True:
+        try:
+            answer = input('set up done? [y = run it / q = stop the campaign] ').strip().lower()
+        except EOFError:
+            raise CampaignInterrupted(f'no confirmation for session {plan.id} (end of input)') from None
+        if answer in ('y', 'yes'):
+            return {'how': 'terminal', 'at_utc': _utc(), 'user': os.environ.get('USER', ''), 'instructions': text,
+                    'weight': plan.weight, 'l0': plan.l0}
+        if answer in ('q', 'quit'):
+            raise CampaignInterrupted(f'stopped by the operator before session {plan.id}')
+
+
+def service_confirm(timeout_s: float | None = None) -> Confirm:
+    """A confirmation by a ``/campaign/continue`` service call (std_srvs/Trigger), so a second machine can confirm:
+    the node ``campaign`` offers it while waiting; the call's answer repeats the instructions."""
+    def confirm(plan: SessionPlan, text: str) -> dict[str, Any]:
+        import rclpy
+        from std_srvs.srv import Trigger
+        print(f'\n{text}\nwaiting for a call of /campaign/continue (std_srvs/srv/Trigger) ...', file=sys.stderr,
+              flush=True)
+        ctx = rclpy.Context()
+        rclpy.init(context=ctx)
+        node = rclpy.create_node('campaign', context=ctx)
+        called: dict[str, Any] = {}
+
+        def on_call(request: Any, response: Any) -> Any:
+            called.update({'how': 'service /campaign/continue', 'at_utc': _utc(), 'instructions': text,
+                           'weight': plan.weight, 'l0': plan.l0})
+            response.success = True
+            response.message = f'running {text}'
+            return response
+        node.create_service(Trigger, '~/continue', on_call)
+        from rclpy.executors import SingleThreadedExecutor
+        executor = SingleThreadedExecutor(context=ctx)
+        executor.add_node(node)
+        deadline = None if timeout_s is None else time.monotonic() + timeout_s
+        try:
+            while not called:
+                if deadline is not None and time.monotonic() > deadline:
+                    raise CampaignInterrupted(f'no /campaign/continue call for session {plan.id} in {timeout_s} s')
+                executor.spin_once(timeout_sec=0.1)
+            end = time.monotonic() + 1.5  # the answer reaches the caller before the node goes (slow when loaded)
+            while time.monotonic() < end:
+                executor.spin_once(timeout_sec=0.05)
+        finally:
+            executor.shutdown()
+            node.destroy_node()
+            rclpy.shutdown(context=ctx)
+        return called
+    return confirm

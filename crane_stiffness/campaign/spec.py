@@ -1,0 +1,304 @@
+"""A test campaign as a file: the paper's matrix of sessions, read and checked, and expanded into its sessions.
+
+The file is a ROS 2 parameter YAML with one section, ``campaign`` (see config/campaign_paper.yaml)::
+
+    campaign:
+      ros__parameters:
+        name: paper
+        crane: crane_lab.yaml                 # the nominal crane (geometry file)
+        series: [fy, fz, mz]                  # side force, vertical force, moment about z
+        programs: [campaign_side_force, campaign_force_z, campaign_moment_z]   # one per series
+        weights: [25.0, 50.0, 100.0]          # W [N]
+        lengths: [0.5, 1.5]                   # l0 [m] (or heights: h [m])
+        repeats: 1
+        load_fraction: 0.5                    # side-force/moment peak: this fraction of the first-slack load
+        true.wire_stiffness_factor: 1.0       # simulated rig only: the true crane against the nominal
+        true.weight_factor: 1.0
+
+Every key is declared once in :data:`CAMPAIGN_PARAMS` (default, unit, rule). :func:`load_campaign` raises
+:class:`~crane_stiffness.campaign.errors.CampaignFileError` naming the file and the key for an unknown key, a
+value against its rule (a negative weight), a list of the wrong length or a program file that does not exist.
+
+:func:`plan_sessions` expands a campaign into its sessions, in run order (series, length, weight, repeat), each
+with the nominal geometry parameters the analysis uses and the true ones the simulated crane runs with. No ROS.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any, Mapping
+
+from crane_stiffness.campaign.errors import CampaignFileError
+from crane_stiffness.errors import ParameterError
+from crane_stiffness.params.errors import ConfigError
+from crane_stiffness.params.files import ParamFile, config_path, load_params, load_yaml, share_dir
+from crane_stiffness.params.geometry import geometry_from_params, geometry_to_params
+from crane_stiffness.params.spec import ParamSpec, check_spec, is_number
+from crane_stiffness.sim.program import load_program_file
+
+SECTION = 'campaign'
+#: The series a campaign can run, by loaded axis, and their names in the paper.
+SERIES = {'fy': 'side force', 'fz': 'vertical force', 'mz': 'moment about z'}
+
+#: The keys of a campaign file, declared once (default, description with unit, rule).
+CAMPAIGN_PARAMS: tuple[ParamSpec, ...] = (
+    ParamSpec('name', 'campaign', 'campaign name, recorded with every session [-]'),
+    ParamSpec('crane', 'crane_lab.yaml', 'the nominal crane: a geometry parameter file, a name in the installed '
+              'config/ or a path (relative to the campaign file) [-]'),
+    ParamSpec('series', ['fy'], 'the test series by loaded axis: fy (side force), fz (vertical force), mz (moment '
+              'about z) [-]', rule='each one of fy, fz, mz, no repeats'),
+    ParamSpec('programs', ['side_force'], 'the program of each series: program_<name>.yaml in the installed config/, '
+              'or a path to a program file (relative to the campaign file) [-]', rule='one per series'),
+    ParamSpec('weights', [50.0], 'suspended weights W [N]', rule='at least one; each >= 0'),
+    ParamSpec('lengths', [0.0], "unstretched wire lengths l0; [0.0] = use 'heights' [m]",
+              rule="each > 0; exactly one of lengths and heights given"),
+    ParamSpec('heights', [0.0], "unloaded heights h between the triangles; [0.0] = use 'lengths' [m]",
+              rule="each > 0; exactly one of lengths and heights given"),
+    ParamSpec('repeats', 1, 'sessions per series, weight and length [-]', low=1),
+    ParamSpec('load_fraction', 0.5, "peak of a side-force or moment program as a fraction of the load at which the "
+              "nominal crane's first wire goes slack (the program's levels scaled to it); 0 = the levels as "
+              'written [-]', low=0.0, high=0.95),
+    ParamSpec('true.wire_stiffness_factor', 1.0, "simulated rig only: the true crane's wire stiffness k (E·A) over "
+              'the nominal one [-]', above=0.0),
+    ParamSpec('true.weight_factor', 1.0, "simulated rig only: the true crane's weight over the nominal W [-]",
+              above=0.0),
+)
+_SPECS = {spec.name: spec for spec in CAMPAIGN_PARAMS}
+
+
+@dataclass(frozen=True)
+class Campaign:
+    """A checked campaign file. Lengths in m, weights in N."""
+
+    path: Path
+    name: str
+    crane: Path
+    series: tuple[str, ...]
+    programs: tuple[Path, ...]
+    weights: tuple[float, ...]
+    lengths: tuple[float, ...]
+    """l0 of each set-up; empty when the file gives heights."""
+    heights: tuple[float, ...]
+    """h of each set-up; empty when the file gives lengths."""
+    repeats: int
+    load_fraction: float
+    true_wire_stiffness_factor: float
+    true_weight_factor: float
+
+    @property
+    def true_differs(self) -> bool:
+        """The simulated crane is not the nominal one."""
+        return self.true_wire_stiffness_factor != 1.0 or self.true_weight_factor != 1.0
+
+
+@dataclass(frozen=True)
+class SessionPlan:
+    """One session of a campaign: what the operator sets up, what the simulated crane is, what the analysis uses."""
+
+    index: int
+    id: str
+    series: str
+    program: str
+    """The program file as the campaign gives it (the runner writes its scaled copy beside the session)."""
+    program_scale: float
+    """Factor on the program's levels (and the estimator's hysteresis) for this set-up; 1 = as written."""
+    weight: float
+    l0: float
+    height: float
+    repeat: int
+    nominal: dict[str, Any]
+    """Every geometry.* parameter of the nominal crane of this set-up (the model the analysis uses)."""
+    true: dict[str, Any]
+    """Every geometry.* parameter of the crane the simulated rig runs (= nominal unless the campaign sets true.*)."""
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def _fail(path: Path, key: str, value: Any, rule: str) -> CampaignFileError:
+    return CampaignFileError(f'{path}: {key} = {value!r}: {rule}')
+
+
+def _resolve(path: Path, value: str) -> Path:
+    """A file named in the campaign: a path relative to the campaign file when it exists there, else a name in the
+    installed config/."""
+    local = (path.parent / value)
+    if local.is_file():
+        return local
+    return config_path(value)
+
+
+def _program_path(path: Path, value: str) -> Path:
+    if value.endswith('.yaml'):
+        local = path.parent / value
+        return local if local.is_file() else Path(value)
+    return share_dir() / 'config' / f'program_{value}.yaml'
+
+
+def _numbers(path: Path, key: str, value: Any) -> tuple[float, ...]:
+    if not isinstance(value, list) or not value or not all(is_number(v) for v in value):
+        raise _fail(path, key, value, 'must be a non-empty list of numbers')
+    return tuple(float(v) for v in value)
+
+
+def load_campaign(path: str | os.PathLike) -> Campaign:
+    """Read and check a campaign file (see the module docstring). Raises CampaignFileError naming file and key."""
+    path = Path(path)
+    try:
+        file = ParamFile.read(path)
+    except OSError as exc:
+        raise CampaignFileError(f'{path}: cannot read: {exc.strerror or exc}') from None
+    except Exception as exc:  # yaml.YAMLError and its kin
+        raise CampaignFileError(f'{path}: not valid YAML: {exc}') from None
+    if not file.is_mapping or set(file.sections) != {SECTION} or file.sections[SECTION] is None:
+        found = ', '.join(file.sections) if file.is_mapping else 'no mapping'
+        raise CampaignFileError(f'{path}: expected exactly one section "{SECTION}: ros__parameters: ..." '
+                                f'(found: {found})')
+    given = file.params([SECTION])
+    unknown = sorted(set(given) - set(_SPECS))
+    if unknown:
+        raise CampaignFileError(f'{path}: unknown key {unknown[0]!r} (known: {", ".join(_SPECS)})')
+    values = {name: given.get(name, spec.default) for name, spec in _SPECS.items()}
+    for name, spec in _SPECS.items():
+        value = values[name]
+        if isinstance(spec.default, str) and (not isinstance(value, str) or not value):
+            raise _fail(path, name, value, 'must be a non-empty string')
+        if isinstance(spec.default, (int, float)) and not is_number(value):
+            raise _fail(path, name, value, 'must be a number')
+        if isinstance(spec.default, int) and not isinstance(spec.default, bool) and not isinstance(value, int):
+            raise _fail(path, name, value, 'must be an integer')
+        try:
+            check_spec(spec, value)
+        except ParameterError as exc:
+            raise CampaignFileError(f'{path}: {exc}') from None
+    series = values['series']
+    if not isinstance(series, list) or not series:
+        raise _fail(path, 'series', series, 'must be a non-empty list of fy, fz, mz')
+    for i, s in enumerate(series):
+        if s not in SERIES:
+            raise _fail(path, f'series[{i}]', s, 'must be one of fy, fz, mz')
+    if len(set(series)) != len(series):
+        raise _fail(path, 'series', series, 'must not name a series twice')
+    programs = values['programs']
+    if not isinstance(programs, list) or len(programs) != len(series):
+        raise _fail(path, 'programs', programs, f'must be a list of {len(series)} program(s), one per series')
+    program_paths = []
+    for i, (axis, name) in enumerate(zip(series, programs)):
+        if not isinstance(name, str) or not name:
+            raise _fail(path, f'programs[{i}]', name, 'must be a program name or file')
+        program = _program_path(path, name)
+        if not program.is_file():
+            raise _fail(path, f'programs[{i}]', name, f'no program file {program}')
+        try:
+            loaded = load_program_file(program, 'load_program')
+        except (ValueError, CampaignFileError, ConfigError) as exc:
+            raise _fail(path, f'programs[{i}]', name, f'not a valid program: {exc}') from None
+        axes = {s.axis for s in loaded.segments if s.target != 0.0}
+        if axes != {axis}:
+            raise _fail(path, f'programs[{i}]', name, f'loads {", ".join(sorted(axes)) or "nothing"}, not the '
+                        f'series {axis}')
+        program_paths.append(program)
+    weights = _numbers(path, 'weights', values['weights'])
+    for i, w in enumerate(weights):
+        if not math.isfinite(w) or w < 0.0:
+            raise _fail(path, f'weights[{i}]', w, 'must be >= 0 [N]')
+    lengths = _numbers(path, 'lengths', values['lengths'])
+    heights = _numbers(path, 'heights', values['heights'])
+    lengths = () if lengths == (0.0,) else lengths
+    heights = () if heights == (0.0,) else heights
+    if bool(lengths) == bool(heights):
+        raise _fail(path, 'lengths', list(lengths), 'give exactly one of lengths and heights')
+    for key, seq in (('lengths', lengths), ('heights', heights)):
+        for i, v in enumerate(seq):
+            if not math.isfinite(v) or v <= 0.0:
+                raise _fail(path, f'{key}[{i}]', v, 'must be > 0 [m]')
+    crane = values['crane']
+    try:
+        crane_path = _resolve(path, crane)
+        load_params(crane_path)
+    except ConfigError as exc:
+        raise _fail(path, 'crane', crane, str(exc)) from None
+    return Campaign(path=path, name=values['name'], crane=crane_path, series=tuple(series),
+                    programs=tuple(program_paths), weights=weights, lengths=lengths, heights=heights,
+                    repeats=int(values['repeats']), load_fraction=float(values['load_fraction']),
+                    true_wire_stiffness_factor=float(values['true.wire_stiffness_factor']),
+                    true_weight_factor=float(values['true.weight_factor']))
+
+
+def _set_up(campaign: Campaign, weight: float, size: float) -> tuple[dict[str, Any], dict[str, Any]]:
+    """(nominal, true) geometry parameters of one set-up: the crane file at weight W and length l0 (or height h)."""
+    params = {k: v for k, v in load_params(campaign.crane).items() if k.startswith('geometry.')}
+    params.pop('geometry.height', None)
+    params['geometry.weight'] = weight
+    params['geometry.' + ('l0' if campaign.lengths else 'height')] = size
+    nominal = geometry_to_params(geometry_from_params(params))
+    true = dict(nominal)
+    true['geometry.weight'] = weight * campaign.true_weight_factor
+    if nominal['geometry.wire_stiffness']:  # k given: scale it; else E (k = E·A/l0 keeps its length rule)
+        true['geometry.wire_stiffness'] = nominal['geometry.wire_stiffness'] * campaign.true_wire_stiffness_factor
+    else:
+        true['geometry.youngs_modulus'] = nominal['geometry.youngs_modulus'] * campaign.true_wire_stiffness_factor
+    return nominal, true
+
+
+def program_scale(campaign: Campaign, series: str, program: Path, nominal: Mapping[str, Any]) -> float:
+    """Factor on a program's levels so that its peak is ``load_fraction`` of the load at which the nominal crane's
+    first wire goes slack (side force, moment); 1 for the vertical force (no wire goes slack) or load_fraction 0."""
+    if campaign.load_fraction == 0.0 or series == 'fz':
+        return 1.0
+    from crane_stiffness.analysis.sweep import slack_threshold
+    peak = float(abs(load_program_file(program, 'load_program').levels(series)).max())
+    threshold = slack_threshold(geometry_from_params(nominal), series)
+    if not math.isfinite(threshold) or peak == 0.0:
+        return 1.0
+    return campaign.load_fraction * threshold / peak
+
+
+def session_id(series: str, weight: float, size: float, repeat: int, by_length: bool = True) -> str:
+    """'fy_W50_l0.5_r1': series, W [N], l0 (or h) [m], repeat."""
+    return f'{series}_W{weight:g}_{"l" if by_length else "h"}{size:g}_r{repeat}'
+
+
+def plan_sessions(campaign: Campaign) -> list[SessionPlan]:
+    """The campaign's sessions in run order: by series, then length, then weight (hang the weights in turn at one
+    wire length), then repeat."""
+    plans: list[SessionPlan] = []
+    sizes = campaign.lengths or campaign.heights
+    for series, program in zip(campaign.series, campaign.programs):
+        for size in sizes:
+            for weight in campaign.weights:
+                nominal, true = _set_up(campaign, weight, size)
+                g = geometry_from_params(nominal)
+                scale = program_scale(campaign, series, program, nominal)
+                for repeat in range(1, campaign.repeats + 1):
+                    plans.append(SessionPlan(
+                        index=len(plans), id=session_id(series, weight, size, repeat, bool(campaign.lengths)),
+                        series=series, program=str(program), program_scale=scale, weight=weight, l0=g.l0,
+                        height=g.height, repeat=repeat, nominal=nominal, true=true))
+    return plans
+
+
+def plan_fingerprint(plans: list[SessionPlan]) -> str:
+    """A digest of the sessions planned: a campaign directory is resumed only by the campaign it was started with."""
+    return hashlib.sha256(json.dumps([p.to_dict() for p in plans], sort_keys=True).encode()).hexdigest()[:16]
+
+
+def scaled_program_text(program: Path, scale: float) -> str:
+    """The program file with its load levels (segments.target) and the estimator's hysteresis scaled by ``scale``
+    (a YAML of the same sections; the file itself when ``scale`` is 1)."""
+    import yaml
+    text = program.read_text()
+    if scale == 1.0:
+        return text
+    data = load_yaml(text)
+    load = data['load_program']['ros__parameters']
+    load['segments.target'] = [float(v) * scale for v in load['segments.target']]
+    estimator = data.get('stiffness_estimator', {}).get('ros__parameters')
+    if estimator is not None and 'hysteresis' in estimator:
+        estimator['hysteresis'] = float(estimator['hysteresis']) * scale
+    return f'# {program.name} with its levels scaled by {scale:.6g} for this set-up\n' + yaml.safe_dump(
+        data, sort_keys=False, default_flow_style=None)
