@@ -7,6 +7,8 @@ as the live one did (and the offline analysis reproduces them too).
 """
 from __future__ import annotations
 
+import math
+
 import json
 import time
 
@@ -270,7 +272,10 @@ def test_replay_through_the_estimator_reproduces_the_live_estimates(rclpy_contex
     assert nodes['load_program']['segments.target'] == [0.0, 2.0, 2.0, 0.0, 0.0]
     final = _values(live[-1])
     stamp = final['loading']['sample_stamp']
-    assert final['loading']['n'] == final['unloading']['n'] == 60
+    assert final['loading']['n'] == 60
+    # the unloading window may lie wholly in the last hold: no spread of the displacement beyond its noise, and then
+    # no estimate (errors in both variables) rather than a slope of noise against noise
+    assert final['unloading']['n'] == 60 or math.isnan(final['unloading']['stiffness'])
     assert final['loading']['stiffness'] == pytest.approx(53793.5, rel=0.3)  # roughly the lab crane's side stiffness
 
     # The offline analysis reproduces the live estimate from the bag alone -- exactly when the bag holds every sample

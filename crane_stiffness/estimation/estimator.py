@@ -152,6 +152,10 @@ class StiffnessEstimator:
                         rls_stiffness=math.nan if rls is None else rls.stiffness,
                         rls_stderr=math.nan if rls is None else rls.stderr)
 
+    def window_len(self, branch: Branch) -> int:
+        """Pairs held in ``branch``'s window."""
+        return len(self._windows[branch])
+
     def window_data(self, branch: Branch) -> tuple[Any, Any]:
         """Copies of ``branch``'s window: (displacements, forces), oldest first, shape (n,) each."""
         return self._windows[branch].data()

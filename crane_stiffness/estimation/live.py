@@ -127,6 +127,7 @@ class LiveStiffness:
         self._current: Branch | None = None
         self._newest_stamp = math.nan
         self._suspect: dict[Branch, int] = {b: 0 for b in BRANCHES}  # pairs until a late rejection leaves the window
+        self._noise_due: dict[Branch, int] = {b: 3 for b in BRANCHES}  # pairs until _update_noise
         self._suspect_reason = ''
 
     @property
@@ -345,6 +346,9 @@ class LiveStiffness:
             self._dirty.add(branch)
             self._current = branch
             self._newest_stamp = stamp
+            self._noise_due[branch] -= 1
+            if self._noise_due[branch] <= 0:
+                self._update_noise(branch)
             if self._suspect[branch]:
                 self._suspect[branch] -= 1
             fitted += 1
@@ -353,6 +357,16 @@ class LiveStiffness:
                                        float(self.counters.segments))
         self.counters.pairs_fitted += fitted
         return fitted
+
+    def _update_noise(self, branch: Branch) -> None:
+        """Count the displacement noise of ``branch``'s window (``displacement_noise``: declared, or estimated from
+        the window) in its fit from now on. Due after a number of the branch's pairs, never on a clock, so a replay of
+        the same pairs gives the same estimates: when the window has doubled (from 3 pairs), then every tenth of
+        ``window``."""
+        held = self._estimator.window_len(branch)
+        x_noise = self._settings.displacement_noise_of(self._estimator.window_data(branch)[0])
+        self._estimator.set_displacement_noise(branch, x_noise)
+        self._noise_due[branch] = max(3, min(held, self._settings.window // 10))
 
     # --- outputs ---
     def _row(self, est: Estimate | None) -> list[float]:
@@ -415,12 +429,9 @@ class LiveStiffness:
         return self._rows[LOADING][0]
 
     def refresh(self) -> dict[Branch, float]:
-        """Estimate the displacement noise of each branch's window (``displacement_noise`` -1), recompute its
-        nonlinearity indicator and scatter (each a pass over the window: call it slowly)."""
+        """Recompute the nonlinearity indicator and scatter of each branch's window (each a pass over the window: call
+        it slowly)."""
         for branch in BRANCHES:
-            x_noise = self._settings.displacement_noise_of(self._estimator.window_data(branch)[0])
-            self._estimator.set_displacement_noise(branch, x_noise)
-            self._dirty.add(branch)
             self._nonlinearity[branch] = self._estimator.nonlinearity(branch)
             self._scatter[branch] = self._estimator.scatter_ratio(branch)
         self._delay.update()
