@@ -65,7 +65,13 @@ def live_comparison(data: SessionData, pairs: LivePairs) -> LiveComparison | Non
             if math.isfinite(a) and math.isfinite(o):
                 diffs.append(abs(o - a) / max(abs(a), 1e-300) if f not in ('intercept',) else
                              abs(o - a) / max(abs(live[branch]['residual_rms']), abs(a), 1e-300))
-        worst[branch] = max(diffs) if diffs else math.nan
+            elif math.isfinite(a) != math.isfinite(o):
+                diffs.append(math.inf)  # one has a value, the other none: not reproduced
+        # no field with a value on either side: neither has an estimate of the branch (e.g. a window in one hold,
+        # no spread beyond the noise), which they agree on
+        both_none = all(not math.isfinite(live[branch][f]) and not math.isfinite(offline[branch][f])
+                        for f in WINDOW_FIT_FIELDS)
+        worst[branch] = max(diffs) if diffs else (0.0 if both_none else math.nan)
     comparison = LiveComparison(sample_stamp_s=stamp, log_time_s=log * 1e-9, live=live, offline=offline,
                                 max_rel_diff=worst)
     if len(data.live_inputs) == 2:

@@ -33,8 +33,10 @@ noises: the force's through the residuals and the displacement's through them an
     Var k = s_vv / SXX + (n − 1)·(σx²·s_vv + k²·σx⁴) / SXX²,   SXX = Sxx − (n − 1)·σx²,
     s_vv = Σ (y − ȳ − k·(x − x̄))² / (n − 2).
 
-With ``x_noise`` = 0 both are the ordinary least-squares formulas, to the bit. The fit is undefined (no spread of
-x beyond its noise) when ``SXX`` ≤ 0. The intercept's standard error is the first-order ``sqrt(s_vv/n + x̄²·Var k)``.
+With ``x_noise`` = 0 both are the ordinary least-squares formulas, to the bit. There is no fit when the spread of x
+is not well above its noise, ``SXX < Sxx / 2`` (:data:`MIN_RELIABILITY`: least squares would be low by more than
+half; a window inside one hold has ``SXX`` ≈ 0 of either sign, and a slope of noise against noise is no stiffness).
+The intercept's standard error is the first-order ``sqrt(s_vv/n + x̄²·Var k)``.
 """
 from __future__ import annotations
 
@@ -57,6 +59,9 @@ FloatOrArray = Union[float, NDArray[np.float64]]
 
 # Relative size below which the spread of x counts as zero (a few hundred ulps of the data's magnitude).
 _ZERO_SPREAD_REL = 1e-12
+
+#: The least reliability ratio SXX / Sxx (the share of the displacement's spread that is not noise) a fit needs.
+MIN_RELIABILITY = 0.5
 
 
 def t_quantile(dof: int, confidence: float = 0.95) -> float:
@@ -273,10 +278,10 @@ def fit_line(x: ArrayLike, y: ArrayLike, *, x_noise: ArrayLike = 0.0) -> LineFit
     if np.any(flat):
         where = '' if flat.ndim == 0 else f' in fit(s) {np.argwhere(flat).tolist()[:5]}'
         raise DataError(f'x has zero spread{where}: all displacements equal, the slope is undefined')
-    hidden = sxx - (n - 1) * noise * noise <= 0.0
+    hidden = sxx - (n - 1) * noise * noise < MIN_RELIABILITY * sxx
     if np.any(hidden):
         where = '' if hidden.ndim == 0 else f' in fit(s) {np.argwhere(hidden).tolist()[:5]}'
-        raise DataError(f'x has no spread beyond its noise{where} (Sxx <= (n - 1)·x_noise²): the slope is undefined')
+        raise DataError(f'x has no spread beyond its noise{where} ((n - 1)·x_noise² > Sxx / 2): no stiffness in it')
     k_ols = sxy / sxx
     residual = dy - k_ols[..., None] * dx
     sse = np.einsum('...i,...i->...', residual, residual)
@@ -417,7 +422,7 @@ class WindowedLeastSquares:
         x_noise = float(x_noise)
         if not (x_noise >= 0.0 and math.isfinite(x_noise)):
             raise ParameterError('x_noise', x_noise, 'must be finite and >= 0 (standard deviation, units of x)')
-        if sxx - (n - 1) * x_noise * x_noise <= 0.0:
+        if sxx - (n - 1) * x_noise * x_noise < MIN_RELIABILITY * sxx:
             return None  # no spread beyond the noise
         sxy = self._sxy - self._sx * self._sy / n
         syy = max(self._syy - self._sy * self._sy / n, 0.0)

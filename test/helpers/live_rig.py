@@ -14,6 +14,7 @@ from typing import Any, Iterator
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, Float64MultiArray
 
@@ -37,7 +38,9 @@ class RigWatcher(Node):
         self.tare_epochs: list[float] = []
         self.statuses: dict[str, tuple[int, str]] = {}
         self.status_history: list[dict[str, tuple[int, str]]] = []
-        self.create_subscription(Float64MultiArray, topics.FITTED_PAIRS, self._on_pairs, RELIABLE_QOS)
+        # a deep queue: this thread may fall a few seconds behind on a loaded machine and must not drop a pair
+        deep = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+        self.create_subscription(Float64MultiArray, topics.FITTED_PAIRS, self._on_pairs, deep)
         self.create_subscription(JointState, topics.WIRE_STATES, self._on_wires, RELIABLE_QOS)
         self.create_subscription(Float64MultiArray, topics.STIFFNESS_VALUES, self._on_values, RELIABLE_QOS)
         self.create_subscription(Float64, topics.LOAD_CELL_TARE, self._on_tare, LATCHED_QOS)
