@@ -32,6 +32,8 @@ def _window_fit(pairs: LivePairs, cut: int, branch: str, window: int, forgetting
     fit = fit_or_none(pairs.displacement[last], pairs.force[last], x_noise)
     if fit is not None:
         out.update({k: float(getattr(fit, k)) for k in WINDOW_FIT_FIELDS})
+    else:  # no estimate (too few pairs, no spread beyond the noise): the noise it was judged with
+        out['x_noise'] = x_noise
     rls = RecursiveLeastSquares(forgetting)
     tail = sel[-RLS_REPLAY_PAIRS:]
     for x, y in zip(pairs.displacement[tail].tolist(), pairs.force[tail].tolist()):

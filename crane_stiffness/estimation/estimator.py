@@ -152,6 +152,10 @@ class StiffnessEstimator:
                         rls_stiffness=math.nan if rls is None else rls.stiffness,
                         rls_stderr=math.nan if rls is None else rls.stderr)
 
+    def x_noise(self, branch: Branch) -> float:
+        """The displacement noise ``branch``'s windowed fit counts now, m or rad (0: ordinary least squares)."""
+        return self._x_noise[branch]
+
     def window_len(self, branch: Branch) -> int:
         """Pairs held in ``branch``'s window."""
         return len(self._windows[branch])

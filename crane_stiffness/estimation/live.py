@@ -369,12 +369,13 @@ class LiveStiffness:
         self._noise_due[branch] = max(3, min(held, self._settings.window // 10))
 
     # --- outputs ---
-    def _row(self, est: Estimate | None) -> list[float]:
+    def _row(self, est: Estimate | None, x_noise: float = math.nan) -> list[float]:
         nan = math.nan
         pred = self.prediction
-        if est is None:
+        if est is None:  # no estimate; the noise it would have counted (analyze reproduces the "none" with it)
             row = [nan] * len(VALUE_FIELDS)
             row[VALUE_FIELDS.index('prediction')] = pred
+            row[VALUE_FIELDS.index('x_noise')] = x_noise
             return row
         # One windowed fit: its LineFit fields (typed float or array) are floats; float() keeps them as they are.
         k, c, se, lo, hi, r2, rms = map(float, (est.stiffness, est.intercept, est.stderr, est.ci95_low, est.ci95_high,
@@ -402,7 +403,7 @@ class LiveStiffness:
 
     def _update_rows(self) -> None:
         for branch in self._dirty:
-            self._rows[branch] = self._row(self._estimator.estimate(branch))
+            self._rows[branch] = self._row(self._estimator.estimate(branch), self._estimator.x_noise(branch))
         self._dirty.clear()
 
     def take_fitted_pairs(self) -> list[float]:
