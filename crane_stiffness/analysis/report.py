@@ -214,7 +214,8 @@ def to_html(blocks: Sequence[Block], title: str) -> str:
             f'<style>{style}</style></head><body>\n' + '\n'.join(body) + '\n</body></html>\n')
 
 
-def _write(blocks: list[Block], out: Path, stem: str, reports: Sequence[str], title: str) -> list[str]:
+def write_blocks(blocks: list[Block], out: Path, stem: str, reports: Sequence[str], title: str) -> list[str]:
+    """``<stem>.md`` / ``<stem>.html`` (``reports``) of ``blocks`` in ``out``; returns the paths written."""
     written = []
     for kind in reports:
         path = out / f'{stem}.{kind}'
@@ -226,9 +227,9 @@ def _write(blocks: list[Block], out: Path, stem: str, reports: Sequence[str], ti
 def write_session_report(a: SessionAnalysis, out: Path, reports: Sequence[str]) -> list[str]:
     """report.md / report.html in ``out`` (figures already written there are linked)."""
     images = [Path(f).name for f in a.files if Path(f).suffix in ('.png', '.svg')]
-    return _write(session_blocks(a, images), Path(out), 'report', reports, f'session {a.session}')
+    return write_blocks(session_blocks(a, images), Path(out), 'report', reports, f'session {a.session}')
 
 
 def write_comparison_report(c: SessionComparison, out: Path, reports: Sequence[str]) -> list[str]:
     images = [Path(f).name for f in c.files if Path(f).suffix in ('.png', '.svg')]
-    return _write(comparison_blocks(c, images), Path(out), 'compare', reports, 'sessions compared')
+    return write_blocks(comparison_blocks(c, images), Path(out), 'compare', reports, 'sessions compared')

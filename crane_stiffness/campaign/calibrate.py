@@ -334,7 +334,8 @@ def calibrate_campaign(out: Any, *, weight: str = 'none', height: bool = False, 
 
     from crane_stiffness.campaign import figures
     from crane_stiffness.campaign.analyze import campaign_rows
-    from crane_stiffness.campaign.report import calibration_blocks, write_blocks
+    from crane_stiffness.analysis.report import write_blocks
+    from crane_stiffness.campaign.report import calibration_blocks
     out = Path(out)
     _, rows, missing = campaign_rows(out)
     used = [r for r in rows if r.ok or not only_ok]

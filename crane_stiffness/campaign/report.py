@@ -6,7 +6,7 @@ import math
 from pathlib import Path
 from typing import TYPE_CHECKING, Sequence
 
-from crane_stiffness.analysis.report import Block, fmt, to_html, to_markdown
+from crane_stiffness.analysis.report import Block, fmt, write_blocks
 
 if TYPE_CHECKING:
     from crane_stiffness.campaign.analyze import CampaignAnalysis, SessionRow
@@ -72,15 +72,6 @@ def calibration_blocks(cal: Calibration, left_out: Sequence[SessionRow], images:
         blocks += [('h2', 'Sessions left out'), ('ul', [f'{r.session}: ' + ('; '.join(r.reasons) or 'no holds')
                                                         for r in left_out])]
     return blocks
-
-
-def write_blocks(blocks: list[Block], out: Path, stem: str, reports: Sequence[str], title: str) -> list[str]:
-    written = []
-    for kind in reports:
-        path = out / f'{stem}.{kind}'
-        path.write_text(to_markdown(blocks) if kind == 'md' else to_html(blocks, title), encoding='utf-8')
-        written.append(str(path))
-    return written
 
 
 def write_campaign_report(result: CampaignAnalysis, out: Path, reports: Sequence[str]) -> list[str]:
