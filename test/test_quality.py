@@ -118,7 +118,9 @@ def test_live_estimate_fitting_another_axis_than_the_loaded_one_is_never_ok():
     for r in reports:
         assert r.level >= WARN, r
         assert 'fitting fy' in r.message and 'load mz' in r.message, r.message
-    assert 'fit not trusted' in reports[0].message
+    # the y LVDT reads noise: least squares would fit noise against noise (a slope of -447 N/m); the fit with the
+    # displacement noise counted finds no spread beyond it and gives no estimate at all
+    assert 'no estimate yet' in reports[0].message and math.isnan(live.loading_stiffness())
     # The same program with the estimator on mz and an angle reading: OK.
     live = LiveStiffness(LiveSettings.from_params({'force_axis': 'mz', 'lever_arm_m': 0.1, 'hysteresis': 0.02,
                                                    'window': 30_000, 'delay_window_s': 0.0}))
