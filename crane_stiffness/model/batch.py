@@ -11,9 +11,8 @@ import numpy as np
 
 from crane_stiffness.model import _batch_kernels as bk
 from crane_stiffness.model import _kernels as kern
-from crane_stiffness.model.equilibrium import (DEFAULT_MAX_ITER, DEFAULT_XTOL, MIN_LOAD_FRACTION,
-                                               BatchEquilibrium, _arrays, _rest, check_load_admissible,
-                                               solve_equilibrium, wrench_jacobian)
+from crane_stiffness.model.equilibrium import (DEFAULT_MAX_ITER, DEFAULT_XTOL, MIN_LOAD_FRACTION, BatchEquilibrium,
+                                               _arrays, _rest, checked_loads, solve_equilibrium, wrench_jacobian)
 from crane_stiffness.model.geometry import CraneGeometry
 
 #: Cases per parallel block: large enough that a block's scratch allocation is negligible, small enough that the
@@ -29,18 +28,6 @@ def _threads() -> int:
         return int(numba.get_num_threads())
     except ImportError:  # pragma: no cover - exercised only without numba
         return 1
-
-
-def _validated(geometry: CraneGeometry, loads) -> np.ndarray:
-    loads = np.ascontiguousarray(np.asarray(loads, dtype=float).reshape(-1, 6))
-    if not np.all(np.isfinite(loads)):
-        row = int(np.argwhere(~np.all(np.isfinite(loads), axis=1))[0, 0])
-        raise ValueError(f'loads[{row}] = {loads[row].tolist()}: every component must be finite')
-    down = geometry.weight + loads[:, 2]
-    bad = np.flatnonzero((down < 0.0) | ((down == 0.0) & np.any(loads != 0.0, axis=1)))
-    if bad.size:
-        check_load_admissible(geometry, loads[bad[0]])  # raises with the reason
-    return loads
 
 
 def rest_compliance(geometry: CraneGeometry, xtol: float = DEFAULT_XTOL) -> np.ndarray:
@@ -71,7 +58,7 @@ def solve_batch_parallel(geometry: CraneGeometry, loads, *, xtol: float = DEFAUL
     Returns the same :class:`BatchEquilibrium` as ``solve_batch``. Raises NoEquilibriumError naming the first
     inadmissible case (an upward force above W) and ValueError for a non-finite load.
     """
-    loads = _validated(geometry, loads)
+    loads = checked_loads(geometry, loads)
     arr = _arrays(geometry)
     u0, q0 = _rest(geometry, xtol)
     c0 = rest_compliance(geometry, xtol)

@@ -347,6 +347,21 @@ def solve_equilibrium(geometry: CraneGeometry, force=None, moment=None, *, load=
     return Equilibrium(u, q, lengths, tensions, slack, load, total_iters, w, steps)
 
 
+def checked_loads(geometry: CraneGeometry, loads) -> np.ndarray:
+    """``loads`` as a contiguous (N, 6) float array [fx, fy, fz, mx, my, mz] [N, N·m], checked for the batch
+    solvers: ValueError naming the first row with a non-finite component, NoEquilibriumError (with the reason) for
+    the first load that pushes the platform up harder than its weight holds it down."""
+    loads = np.ascontiguousarray(np.asarray(loads, dtype=float).reshape(-1, 6))
+    if not np.all(np.isfinite(loads)):
+        row = int(np.argwhere(~np.all(np.isfinite(loads), axis=1))[0, 0])
+        raise ValueError(f'loads[{row}] = {loads[row].tolist()}: every component must be finite')
+    down = geometry.weight + loads[:, 2]
+    bad = np.flatnonzero((down < 0.0) | ((down == 0.0) & np.any(loads != 0.0, axis=1)))
+    if bad.size:
+        check_load_admissible(geometry, loads[bad[0]])  # raises with the reason
+    return loads
+
+
 def solve_batch(geometry: CraneGeometry, loads, *, xtol: float = DEFAULT_XTOL,
                 max_iter: int = DEFAULT_MAX_ITER) -> BatchEquilibrium:
     """Equilibria for many load cases of one geometry, compiled loop over cases.
@@ -358,14 +373,7 @@ def solve_batch(geometry: CraneGeometry, loads, *, xtol: float = DEFAULT_XTOL,
     Each case is solved from the rest pose under the weight; cases that need load continuation (large loads) are
     finished by :func:`solve_equilibrium`. Raises NoEquilibriumError naming the first inadmissible case.
     """
-    loads = np.ascontiguousarray(np.asarray(loads, dtype=float).reshape(-1, 6))
-    if not np.all(np.isfinite(loads)):
-        row = int(np.argwhere(~np.all(np.isfinite(loads), axis=1))[0, 0])
-        raise ValueError(f'loads[{row}] = {loads[row].tolist()}: every component must be finite')
-    down = geometry.weight + loads[:, 2]
-    bad = np.flatnonzero((down < 0.0) | ((down == 0.0) & np.any(loads != 0.0, axis=1)))
-    if bad.size:
-        check_load_admissible(geometry, loads[bad[0]])  # raises with the reason
+    loads = checked_loads(geometry, loads)
     arr = _arrays(geometry)
     u0, q0 = _rest(geometry, xtol)
     n = loads.shape[0]
