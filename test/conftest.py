@@ -88,40 +88,52 @@ def colcon_install(tmp_path_factory):
 # others that start ROS without these fixtures (a node's main() in-process) carry the mark on the test.
 ROS_FIXTURES = {'rclpy_context', 'install_tree', 'colcon_install'}
 
-# Tests marked ``genuine_cli`` drive the real `ros2` (ros2cli, launch, launch_ros) the way a ROS user has it: on
-# PATH from a sourced setup file. Without it they cannot run; they are left out and the run says so in one line.
+# Tests that need an outside tool the project does not install drive it the way a user has it; without it they
+# cannot run: they are left out and the run says so in one line per tool.
+# ``genuine_cli``: the real `ros2` (ros2cli, launch, launch_ros), on PATH from a sourced setup file.
 GENUINE_CLI = __import__('shutil').which('ros2')
-_NOT_RUN: list[str] = []
+# ``lichtblick``: a web build of Lichtblick (the open-source Foxglove app; not in any registry as a built app), the
+# directory holding its index.html named by LICHTBLICK_WEB.
+LICHTBLICK_WEB = os.environ.get('LICHTBLICK_WEB', '')
+OUTSIDE_TOOLS = {
+    'genuine_cli': (GENUINE_CLI, 'genuine ros2 CLI', 'not on PATH (source its setup file to run them)'),
+    'lichtblick': (LICHTBLICK_WEB if os.path.isfile(os.path.join(LICHTBLICK_WEB, 'index.html')) else None,
+                   'Lichtblick web build', 'not found (set LICHTBLICK_WEB to the directory of its index.html)'),
+}
+_NOT_RUN: dict[str, list[str]] = {marker: [] for marker in OUTSIDE_TOOLS}
 
 
 def pytest_configure(config):
     config.addinivalue_line('markers', 'ros: starts ROS (rclpy nodes, node processes, DDS); deselect with -m "not ros"')
     config.addinivalue_line('markers', 'genuine_cli: drives the genuine ros2 CLI (needs `ros2` on PATH)')
+    config.addinivalue_line('markers', 'lichtblick: opens the layouts in Lichtblick (needs LICHTBLICK_WEB)')
 
 
 def pytest_itemcollected(item):
-    if ROS_FIXTURES & set(item.fixturenames) or item.get_closest_marker('genuine_cli') is not None:
+    if ROS_FIXTURES & set(item.fixturenames) or any(item.get_closest_marker(m) for m in OUTSIDE_TOOLS):
         item.add_marker(pytest.mark.ros)
 
 
-@pytest.hookimpl(trylast=True)  # after -m and -k: what they left out is not reported as not run for want of ros2
+@pytest.hookimpl(trylast=True)  # after -m and -k: what they left out is not reported as not run for want of a tool
 def pytest_collection_modifyitems(config, items):
-    if GENUINE_CLI:
-        return
-    kept = [item for item in items if item.get_closest_marker('genuine_cli') is None]
-    _NOT_RUN.extend(item.nodeid for item in items if item.get_closest_marker('genuine_cli') is not None)
-    if _NOT_RUN:
-        config.hook.pytest_deselected(items=[item for item in items if item not in kept])
-        items[:] = kept
+    left_out = []
+    for marker, (found, _, _) in OUTSIDE_TOOLS.items():
+        if not found:
+            missing = [item for item in items if item.get_closest_marker(marker) is not None]
+            _NOT_RUN[marker].extend(item.nodeid for item in missing)
+            left_out += missing
+    if left_out:
+        config.hook.pytest_deselected(items=left_out)
+        items[:] = [item for item in items if item not in left_out]
 
 
 def pytest_terminal_summary(terminalreporter):
-    if _NOT_RUN:
-        terminalreporter.write_line(
-            f'genuine ros2 CLI not on PATH (source its setup file to run them): {len(_NOT_RUN)} check(s) not run: '
-            + ', '.join(n.split('::')[-1] for n in _NOT_RUN))
-    elif GENUINE_CLI:
-        terminalreporter.write_line(f'genuine ros2 CLI: {GENUINE_CLI}')
+    for marker, (found, name, absent) in OUTSIDE_TOOLS.items():
+        if _NOT_RUN[marker]:
+            terminalreporter.write_line(f'{name} {absent}: {len(_NOT_RUN[marker])} check(s) not run: '
+                                        + ', '.join(n.split('::')[-1] for n in _NOT_RUN[marker]))
+        elif found:
+            terminalreporter.write_line(f'{name}: {found}')
 
 
 # --- the bag of the bag I/O tests (test_bag_io, test_bag_damage): one per module ---

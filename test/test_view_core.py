@@ -104,3 +104,58 @@ def test_message_definitions_are_the_msg_files_and_those_they_use(tmp_path):
                     f'{sep}\nMSG: pkg_b/Leaf\nfloat64 value\n')
     with pytest.raises(ViewError, match='pkg_a/msg/Missing.msg'):
         definition('pkg_a/msg/Missing', [str(tmp_path)])
+
+
+def _conforms(value, schema, path='') -> list[str]:
+    """Where ``value`` (a decoded JSON message) leaves ``schema``: a field the schema does not name or of another
+    type (null stands for a missing number: NaN)."""
+    kind = schema['type']
+    if kind == 'object':
+        if not isinstance(value, dict):
+            return [f'{path}: {value!r} is not an object']
+        props = schema.get('properties', {})
+        out = [f'{path}.{k}: not in the schema' for k in value if k not in props]
+        return out + [p for k, v in value.items() if k in props for p in _conforms(v, props[k], f'{path}.{k}')]
+    if kind == 'array':
+        if not isinstance(value, list):
+            return [f'{path}: {value!r} is not an array']
+        return [p for i, v in enumerate(value) for p in _conforms(v, schema['items'], f'{path}[{i}]')]
+    ok = {'number': lambda v: v is None or (isinstance(v, (int, float)) and not isinstance(v, bool)),
+          'integer': lambda v: isinstance(v, int) and not isinstance(v, bool),
+          'string': lambda v: isinstance(v, str), 'boolean': lambda v: isinstance(v, bool)}[kind]
+    return [] if ok(value) else [f'{path}: {value!r} is not {kind}']
+
+
+def test_every_derived_channel_has_a_schema_foxglove_apps_parse_and_its_messages_follow_it():
+    from crane_stiffness.estimation.live_status import VALUE_FIELDS
+    from crane_stiffness.view.jsonschema import foxglove_parsable
+    from crane_stiffness.view.scene import SCENE_SCHEMA
+    # The rule that refused three channels in Lichtblick ("Player alert schema"): an array without items.
+    assert foxglove_parsable({'type': 'object', 'properties': {'wires': {'type': 'array'}}}) == [
+        'wires: an array needs "items"']
+    schemas = {**plot.SCHEMAS, 'scene': SCENE_SCHEMA}
+    for name, schema in schemas.items():
+        assert foxglove_parsable(schema) == [], name
+    est = StiffnessEstimator(hysteresis=0.1, window=200)
+    rng = np.random.default_rng(3)
+    x = np.linspace(0.0, 1e-4, 200)
+    y = 50_000.0 * x + rng.normal(0.0, 0.01, x.size)
+    for i, (xi, yi) in enumerate(zip(x, y)):
+        est.add(float(i), float(yi), float(xi), load=float(i))
+    rows = fit_line_rows(est)
+    buf = plot.PointBuffer(100)
+    buf.add([v for i in range(0, 200, 7) for v in (float(i), x[i], y[i], 0.0, 1.0)])
+    values = [float(i) for i in range(len(VALUE_FIELDS))] + [math.nan] * len(VALUE_FIELDS)
+    geometry = lab_model(0.5, 50.0)
+    state = CraneState(position=(0.0, 1e-4, 0.0), orientation=(0.0, 0.0, 0.0, 1.0),
+                       tensions=[8.6, 0.0, 13.7, 3.5, 3.5, 13.7], force=(0.0, 3.2, 0.0), stamp_s=1.0)
+    messages = {'xy': buf.message(rows, 52_000.0), 'fit_lines': plot.fit_lines_message(rows),
+                'prediction': plot.prediction_message(52_000.0, rows, (0.0, 1e-4)),
+                'estimate': plot.estimate_message(values),
+                'status': plot.status_message([('loading', 0, 'OK k = 50000'), ('input', 1, 'late')]),
+                'wires': plot.wires_message(['wire_1', 'wire_2'], [0.5, 0.5], [8.6, 0.0], 1e-6),
+                'scene': scene_update(geometry, state, 200.0)}
+    assert set(messages) == set(schemas)
+    for name, message in messages.items():
+        decoded = json.loads(json.dumps(message, allow_nan=False))
+        assert _conforms(decoded, schemas[name]) == [], name

@@ -15,6 +15,7 @@ from crane_stiffness.estimation.branch import BRANCHES
 from crane_stiffness.estimation.fit_lines import FIT_LINE_FIELDS, band
 from crane_stiffness.estimation.live import PAIR_FIELDS, VALUE_FIELDS
 from crane_stiffness.status import NAMES, OK
+from crane_stiffness.view import jsonschema as js
 from crane_stiffness.view.errors import ViewError
 
 #: Points along each drawn fit line and band.
@@ -127,9 +128,7 @@ def prediction_message(prediction: float, fit_lines: Sequence[float] | None,
 def estimate_message(values: Sequence[float]) -> dict[str, Any]:
     """The live estimate per branch from a /stiffness/estimate_values message's data (rows × VALUE_FIELDS)."""
     rows = _rows(values, VALUE_FIELDS)
-    keep = ('stiffness', 'ci95_low', 'ci95_high', 'r2', 'n', 'prediction', 'relative_error', 'current',
-            'sample_stamp')
-    return {b: {k: _num(row[k]) for k in keep} for b, row in rows.items()}
+    return {b: {k: _num(row[k]) for k in _ESTIMATE_FIELDS} for b, row in rows.items()}
 
 
 def status_message(statuses: Sequence[tuple[str, int, str]]) -> dict[str, Any]:
@@ -149,25 +148,24 @@ def wires_message(names: Sequence[str], lengths: Sequence[float], tensions: Sequ
                       for n, length, t in zip(names, lengths, tensions)]}
 
 
-def _schema(title: str, properties: dict[str, Any]) -> dict[str, Any]:
-    return {'title': title, 'type': 'object', 'properties': properties}
-
-
-_POINTS = {'type': 'array', 'items': {'type': 'object', 'properties': {'x': {'type': 'number'},
-                                                                       'y': {'type': 'number'}}}}
-_XY_POINTS = {'type': 'array', 'items': {'type': 'object', 'properties': {
-    k: {'type': 'number'} for k in ('t', 'x', 'y', 'fit', 'lower', 'upper', 'prediction')}}}
-#: JSON schemas of the derived channels (names and top-level fields; what Foxglove's panels offer as paths).
+_POINTS = js.array(js.obj({'x': js.NUMBER, 'y': js.NUMBER}))
+_XY_POINTS = js.array(js.obj({k: js.NUMBER for k in ('t', 'x', 'y', 'fit', 'lower', 'upper', 'prediction')}))
+_ESTIMATE_FIELDS = ('stiffness', 'ci95_low', 'ci95_high', 'r2', 'n', 'prediction', 'relative_error', 'current',
+                    'sample_stamp')
+#: JSON schemas of the derived channels: every field the messages carry, typed: what Foxglove's panels offer as
+#: paths (e.g. ``/live_view/estimate.loading.stiffness``); a field without a type makes the apps refuse the channel.
 SCHEMAS: dict[str, dict[str, Any]] = {
-    'xy': _schema('crane_stiffness.ForceDisplacement', {'segment': {'type': 'number'}, 'stride': {'type': 'integer'},
-                                                        'pairs': {'type': 'integer'}, 'loading': _XY_POINTS,
-                                                        'unloading': _XY_POINTS}),
-    'fit_lines': _schema('crane_stiffness.FitLines', {b: _schema(b, {'stiffness': {'type': 'number'},
-                                                                     'line': _POINTS, 'lower': _POINTS,
-                                                                     'upper': _POINTS}) for b in BRANCHES}),
-    'prediction': _schema('crane_stiffness.PredictionLine', {'stiffness': {'type': 'number'}, 'line': _POINTS}),
-    'estimate': _schema('crane_stiffness.Estimate', {b: {'type': 'object'} for b in BRANCHES}),
-    'status': _schema('crane_stiffness.Status', {'level': {'type': 'integer'}, 'level_name': {'type': 'string'},
-                                                 'text': {'type': 'string'}, 'statuses': {'type': 'array'}}),
-    'wires': _schema('crane_stiffness.Wires', {'wires': {'type': 'array'}}),
+    'xy': js.obj({'segment': js.NUMBER, 'stride': js.INTEGER, 'pairs': js.INTEGER, 'loading': _XY_POINTS,
+                  'unloading': _XY_POINTS}, 'crane_stiffness.ForceDisplacement'),
+    'fit_lines': js.obj({b: js.obj({'stiffness': js.NUMBER, 'intercept': js.NUMBER, 'x_mean': js.NUMBER,
+                                    'n': js.NUMBER, 'line': _POINTS, 'lower': _POINTS, 'upper': _POINTS})
+                         for b in BRANCHES}, 'crane_stiffness.FitLines'),
+    'prediction': js.obj({'stiffness': js.NUMBER, 'line': _POINTS}, 'crane_stiffness.PredictionLine'),
+    'estimate': js.obj({b: js.obj({k: js.NUMBER for k in _ESTIMATE_FIELDS}) for b in BRANCHES},
+                       'crane_stiffness.Estimate'),
+    'status': js.obj({'level': js.INTEGER, 'level_name': js.STRING, 'text': js.STRING,
+                      'statuses': js.array(js.obj({'name': js.STRING, 'level': js.INTEGER, 'level_name': js.STRING,
+                                                   'message': js.STRING}))}, 'crane_stiffness.Status'),
+    'wires': js.obj({'wires': js.array(js.obj({'name': js.STRING, 'length': js.NUMBER, 'tension': js.NUMBER,
+                                               'slack': js.BOOLEAN}))}, 'crane_stiffness.Wires'),
 }

@@ -16,6 +16,7 @@ import numpy as np
 
 from crane_stiffness.model.geometry import WIRE_NAMES, CraneGeometry
 from crane_stiffness.model.rotation import quaternion_to_matrix
+from crane_stiffness.view import jsonschema as js
 
 FRAME = 'crane_view'
 #: crane_base → crane_view (180° about x).
@@ -146,7 +147,33 @@ def _quat_from_x(direction: np.ndarray) -> np.ndarray:
     return quat / np.linalg.norm(quat)
 
 
-#: A JSON schema of foxglove.SceneUpdate: the name is what Foxglove and Lichtblick recognise; the body names the
-#: top-level fields only (the full schema is Foxglove's own).
-SCENE_SCHEMA = {'title': 'foxglove.SceneUpdate', 'type': 'object',
-                'properties': {'deletions': {'type': 'array'}, 'entities': {'type': 'array'}}}
+_VEC3 = js.obj({'x': js.NUMBER, 'y': js.NUMBER, 'z': js.NUMBER})
+_POSE = js.obj({'position': _VEC3, 'orientation': js.obj({k: js.NUMBER for k in 'xyzw'})})
+_COLOR = js.obj({k: js.NUMBER for k in 'rgba'})
+_TIME = js.obj({'sec': js.COUNT, 'nsec': js.COUNT})
+_DURATION = js.obj({'sec': js.INTEGER, 'nsec': js.COUNT})
+_LINE = js.obj({'type': js.enum(LINE_STRIP=0, LINE_LOOP=1, LINE_LIST=2), 'pose': _POSE, 'thickness': js.NUMBER,
+                'scale_invariant': js.BOOLEAN, 'points': js.array(_VEC3), 'color': _COLOR,
+                'colors': js.array(_COLOR), 'indices': js.array(js.COUNT)})
+_TRIANGLES = js.obj({'pose': _POSE, 'points': js.array(_VEC3), 'color': _COLOR, 'colors': js.array(_COLOR),
+                     'indices': js.array(js.COUNT)})
+_ARROW = js.obj({'pose': _POSE, 'shaft_length': js.NUMBER, 'shaft_diameter': js.NUMBER, 'head_length': js.NUMBER,
+                 'head_diameter': js.NUMBER, 'color': _COLOR})
+_TEXT = js.obj({'pose': _POSE, 'billboard': js.BOOLEAN, 'font_size': js.NUMBER, 'scale_invariant': js.BOOLEAN,
+                'color': _COLOR, 'text': js.STRING})
+_SIZED = js.obj({'pose': _POSE, 'size': _VEC3, 'color': _COLOR})  # cubes and spheres (never sent here)
+#: The JSON schema of ``foxglove.SceneUpdate`` as this module writes it: Foxglove's field names and types for the
+#: primitives used (lines, triangles, arrows, texts; cubes, spheres, cylinders and models stay empty). The name is
+#: what Foxglove and Lichtblick's 3D panel recognise; the fields are what they parse (see view.jsonschema).
+SCENE_SCHEMA = js.obj({
+    'deletions': js.array(js.obj({'timestamp': _TIME, 'type': js.enum(MATCHING_ID=0, ALL=1), 'id': js.STRING})),
+    'entities': js.array(js.obj({
+        'timestamp': _TIME, 'frame_id': js.STRING, 'id': js.STRING, 'lifetime': _DURATION,
+        'frame_locked': js.BOOLEAN, 'metadata': js.array(js.obj({'key': js.STRING, 'value': js.STRING})),
+        'arrows': js.array(_ARROW), 'cubes': js.array(_SIZED), 'spheres': js.array(_SIZED),
+        'cylinders': js.array(js.obj({'pose': _POSE, 'size': _VEC3, 'bottom_scale': js.NUMBER,
+                                      'top_scale': js.NUMBER, 'color': _COLOR})),
+        'lines': js.array(_LINE), 'triangles': js.array(_TRIANGLES), 'texts': js.array(_TEXT),
+        'models': js.array(js.obj({'pose': _POSE, 'scale': _VEC3, 'color': _COLOR, 'override_color': js.BOOLEAN,
+                                   'url': js.STRING, 'media_type': js.STRING}))}))},
+    'foxglove.SceneUpdate')

@@ -45,15 +45,20 @@ def chromium() -> str:
 
 
 class Browser:
-    """One headless Chromium with one page (a fixed 1280×900 viewport, device scale 1)."""
+    """One headless Chromium with one page (a fixed viewport, 1280×900 unless ``size``, device scale 1). With
+    ``webgl`` it renders WebGL in software (SwiftShader), for pages that draw 3D; otherwise the GPU is off. The
+    page's console errors and warnings are kept in ``console`` as (level, text), read as commands are sent."""
 
-    def __init__(self, executable: str, log: Path) -> None:
+    def __init__(self, executable: str, log: Path, *, size: tuple[int, int] = (1280, 900),
+                 webgl: bool = False) -> None:
         self.profile = tempfile.mkdtemp(prefix='chromium-profile-')
         self.log = log
         self._log_file = open(log, 'w')
         self.proc = subprocess.Popen(
-            [executable, '--headless=new', '--no-sandbox', '--disable-gpu', '--disable-dev-shm-usage',
-             '--no-first-run', '--force-device-scale-factor=1', '--window-size=1280,900',
+            [executable, '--headless=new', '--no-sandbox', '--disable-dev-shm-usage', *(
+                ['--use-angle=swiftshader', '--enable-unsafe-swiftshader', '--ignore-gpu-blocklist'] if webgl
+                else ['--disable-gpu']),
+             '--no-first-run', '--force-device-scale-factor=1', f'--window-size={size[0]},{size[1]}',
              '--remote-debugging-port=0', '--remote-debugging-address=127.0.0.1', f'--user-data-dir={self.profile}',
              'about:blank'], stdout=self._log_file, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
             start_new_session=True)
@@ -62,7 +67,9 @@ class Browser:
         self._ids = itertools.count(1)
         target = self.send('Target.createTarget', url='about:blank')['targetId']
         self.session = self.send('Target.attachToTarget', targetId=target, flatten=True)['sessionId']
+        self.console: list[tuple[str, str]] = []
         self.send('Page.enable', session=True)
+        self.send('Runtime.enable', session=True)
 
     def _devtools_url(self, timeout_s: float) -> str:
         deadline = time.monotonic() + timeout_s
@@ -85,6 +92,9 @@ class Browser:
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:
             reply = json.loads(self.ws.recv(timeout=max(deadline - time.monotonic(), 0.01)))
+            if reply.get('method') == 'Runtime.consoleAPICalled' and reply['params']['type'] in ('error', 'warning'):
+                self.console.append((reply['params']['type'], ' '.join(
+                    str(a.get('value', a.get('description', ''))) for a in reply['params'].get('args', []))))
             if reply.get('id') == call_id:
                 if 'error' in reply:
                     raise RuntimeError(f'{method}: {reply["error"]}')
