@@ -1,0 +1,149 @@
+"""The shipped Foxglove layouts opened in a real Foxglove app: Lichtblick (the open-source Foxglove Studio), its web
+build in headless Chromium with WebGL in software, connected to the live view's WebSocket server as a user connects
+(``?ds=foxglove-websocket&ds.url=…``) and loading each installed layout (``layoutUrl=…``) while the program runs.
+
+What it checks is what a user would see go wrong: a channel the app refuses (its "Player alert schema" console error:
+a derived channel's JSON schema it cannot parse leaves the panel empty), a panel whose topic or path gives nothing,
+and the 3D crane not drawn. The screenshots are saved in out/live_view/ (docs/figures/ holds copies of them).
+
+Lichtblick's built app is in no registry (its npm packages are libraries): the test runs where a web build is, named
+by LICHTBLICK_WEB (the directory of its index.html), and the test run says in one line when it is not (conftest).
+"""
+from __future__ import annotations
+
+import functools
+import io
+import os
+import shutil
+import threading
+import time
+from http.server import SimpleHTTPRequestHandler, ThreadingHTTPServer
+from pathlib import Path
+from urllib.parse import quote
+
+import numpy as np
+import pytest
+from matplotlib import image
+
+from crane_stiffness.launcher.rosrun import installed_config
+from helpers import REPO
+from helpers.browser import Browser, chromium
+from helpers.live_rig import live_rig, wait_for_pairs
+
+pytestmark = pytest.mark.lichtblick
+
+SHOTS = REPO / 'out' / 'live_view'
+SIZE = (1600, 900)
+
+
+class _Handler(SimpleHTTPRequestHandler):
+    """Lichtblick's files at /, the installed layouts at /layouts/ (one origin: the app fetches the layout)."""
+
+    def __init__(self, *args, app: str, layouts: str, **kwargs):
+        self.app, self.layouts = app, layouts
+        super().__init__(*args, directory=app, **kwargs)
+
+    def translate_path(self, path: str) -> str:
+        if path.startswith('/layouts/'):
+            return os.path.join(self.layouts, os.path.basename(path.split('?')[0]))
+        return super().translate_path(path)
+
+    def log_message(self, *args) -> None:
+        pass
+
+
+@pytest.fixture
+def lichtblick(install_tree):
+    """(base URL, server) serving LICHTBLICK_WEB and the install's layouts on a free loopback port."""
+    install, _ = install_tree
+    layouts = installed_config(install).parent / 'foxglove'
+    handler = functools.partial(_Handler, app=os.environ['LICHTBLICK_WEB'], layouts=str(layouts))
+    server = ThreadingHTTPServer(('127.0.0.1', 0), handler)
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    try:
+        yield f'http://127.0.0.1:{server.server_address[1]}'
+    finally:
+        server.shutdown()
+        server.server_close()
+
+
+def _panel(browser: Browser, title: str) -> dict:
+    """The text of the panel whose toolbar shows ``title`` and the box of its largest canvas, where it draws (the
+    legends and buttons are HTML beside or over it); an empty dict while the panel is not there."""
+    return browser.evaluate(f"""(() => {{
+        const header = [...document.querySelectorAll('header')]
+            .find(h => h.innerText.trim().split('\\n')[0].trim() === {title!r});
+        if (!header) return {{}};
+        const panel = header.closest('.mosaic-tile') || header.parentElement;
+        const canvases = [...panel.querySelectorAll('canvas')].map(c => c.getBoundingClientRect())
+            .sort((a, b) => b.width * b.height - a.width * a.height);
+        const r = canvases.length ? canvases[0] : {{top: 0, left: 0, width: 0, height: 0}};
+        return {{top: r.top, left: r.left, width: r.width, height: r.height, text: panel.innerText}};
+    }})()""")
+
+
+def _open(browser: Browser, base: str, ws_port: int, layout: str, titles: list[str], timeout_s: float = 120.0) -> None:
+    url = (f'{base}/?ds=foxglove-websocket&ds.url={quote(f"ws://127.0.0.1:{ws_port}")}&openIn=web'
+           f'&layoutUrl={quote(f"{base}/layouts/{layout}.json")}')
+    browser.open(url)
+    deadline = time.monotonic() + timeout_s
+    while not all(_panel(browser, t) for t in titles):
+        if time.monotonic() > deadline:
+            shot = browser.screenshot(browser.log.with_suffix('.png'))
+            raise AssertionError(f'{layout}: panels {titles} not all shown (screenshot {shot}): {browser.console[-5:]}')
+        time.sleep(0.5)
+
+
+def _pixels(png: bytes, box: dict) -> np.ndarray:
+    pixels = image.imread(io.BytesIO(png), format='png')[:, :, :3]
+    top, left = int(box['top']), int(box['left'])
+    return pixels[top:top + int(box['height']), left:left + int(box['width']) - 60]  # not the 3D panel's buttons
+
+
+def test_layouts_open_in_lichtblick_every_channel_parsed_and_the_crane_drawn(install_tree, rclpy_context, tmp_path,
+                                                                            lichtblick):
+    install, env = install_tree
+    path = chromium()
+    # Three times the side-force program (63 s): the app takes tens of seconds to load in software rendering.
+    with live_rig(env, installed_config(install), tmp_path, rclpy_context,
+                  overrides={'load_program': {'repeats': 3}}) as (procs, watcher, ports):
+        wait_for_pairs(procs, watcher, 500)
+        shots = {}
+        for layout, titles in (('stiffness_test', ['3D crane (deflection exaggerated)', 'Estimator status',
+                                                   'Force vs displacement: loading', 'Wire tensions [N]']),
+                               ('sensors', ['Load cell [N, N·m]', 'LVDT [m]', 'Command and applied load [N]'])):
+            browser = Browser(path, tmp_path / f'chromium_{layout}.log', size=SIZE, webgl=True)
+            try:
+                _open(browser, lichtblick, ports['port'], layout, titles)
+                time.sleep(15.0)  # the panels fill while the program runs
+                panels = {t: _panel(browser, t) for t in titles}
+                png = browser.screenshot(tmp_path / f'lichtblick_{layout}.png').read_bytes()
+                console = list(browser.console)
+            finally:
+                browser.close()
+            refused = [text for level, text in console if 'Player alert schema' in text]
+            assert not refused, f'{layout}: Lichtblick refused channels: {refused}'
+            shots[layout] = (png, panels)
+        procs.check_alive(allow_exit=('load_program',))
+    png, panels = shots['stiffness_test']
+    # The status the estimator publishes, shown by the indicator (its fallback, "no status", means no message).
+    assert panels['Estimator status']['text'].split()[-1] in ('OK', 'WARN'), panels['Estimator status']['text']
+    # The 3D crane: its dark overhead triangle and the labels (wire tensions, force, scale) on the panel, which
+    # without the scene shows only the blue grid on white.
+    crane = _pixels(png, panels['3D crane (deflection exaggerated)'])
+    dark = (crane.sum(axis=-1) < 1.2).sum()
+    assert dark > 300, f'{dark} dark pixels in the 3D panel: the crane is not drawn'
+    # The force-displacement points and the tensions plotted (a plot with no data is a blank grid).
+    for title in ('Force vs displacement: loading', 'Wire tensions [N]'):
+        region = _pixels(png, panels[title])
+        coloured = (region.max(axis=-1) - region.min(axis=-1) > 0.3).sum()
+        assert coloured > 100, f'{title}: {coloured} coloured pixels: nothing plotted'
+    png, panels = shots['sensors']
+    region = _pixels(png, panels['Load cell [N, N·m]'])
+    assert (region.max(axis=-1) - region.min(axis=-1) > 0.3).sum() > 100, "the load cell plot is empty"
+    SHOTS.mkdir(parents=True, exist_ok=True)
+    for layout in shots:
+        shutil.copy(tmp_path / f'lichtblick_{layout}.png', SHOTS / f'lichtblick_{layout}.png')
+    image.imsave(SHOTS / 'lichtblick_crane.png', crane)
+    assert Path(SHOTS / 'lichtblick_crane.png').stat().st_size > 0
