@@ -125,6 +125,13 @@ def _box(signal: NDArray[np.float64], width: int) -> NDArray[np.float64]:
 #: recording gave 0.8 ms, and two moment sessions of a rig without delay gave 9.2–9.6 ms; a real delay among clear
 #: load changes correlates at 0.9 and more (3 ms injected: 0.96).
 MIN_PEAK_CORRELATION = 0.5
+#: A second peak of the correlation at least this fraction of the highest, outside its lobe, makes the delay
+#: ambiguous: a load commanded in steps at a fixed rate (the load programs' 100 Hz) makes the derivatives a pulse
+#: train whose correlation repeats every period, and noise decides which repeat is highest (10 ms off).
+MAX_RIVAL_PEAK = 0.8
+#: The shortest smoothing before differentiating [s]: longer than the load programs' command period (100 Hz), so a
+#: ramp commanded in steps differentiates to a plateau, not to a pulse train whose correlation repeats every 10 ms.
+SMOOTH_S = 0.025
 
 
 def estimate_delay(t_a: ArrayLike, y_a: ArrayLike, t_b: ArrayLike, y_b: ArrayLike, max_lag_s: float = 0.05,
@@ -168,30 +175,27 @@ def estimate_delay(t_a: ArrayLike, y_a: ArrayLike, t_b: ArrayLike, y_b: ArrayLik
     grid = np.arange(start, end, grid_s)
     ga = np.interp(grid, t_a, y_a)
     gb = np.interp(grid, t_b, y_b)
-    # Both smoothed to the slower stream's bandwidth (a box of its period), then differentiated: what is left is
-    # where the load changes (ramps, steps), the same shape in both streams, shifted by the delay.
-    width = max(int(round(slow / grid_s)), 1)
-    da = np.diff(_box(ga, width))
-    db = np.diff(_box(gb, width))
-    cut = width  # the box's edge effects
-    da, db = da[cut:-cut or None], db[cut:-cut or None]
-    da = da - da.mean()
-    db = db - db.mean()
-    na, nb = np.sqrt(da @ da), np.sqrt(db @ db)
-    if na == 0 or nb == 0:
+    # Both smoothed, then differentiated: what is left is where the load changes (ramps, steps), the same shape
+    # in both streams, shifted by the delay. Twice: smoothed over at least SMOOTH_S (coarse: a ramp commanded in
+    # steps is a plateau there, so the correlation has one lobe, which says where the delay is), and over the
+    # slower stream's period (fine: the peak within that lobe, as sharp as the data allow).
+    fine_width = max(int(round(slow / grid_s)), 1)
+    max_lag = int(np.ceil(max_lag_s / grid_s))
+    coarse = _correlation(ga, gb, max(int(round(SMOOTH_S / grid_s)), fine_width), max_lag)
+    fine = _correlation(ga, gb, fine_width, max_lag)
+    if coarse is None or fine is None:
         return DelayEstimate(float('nan'), float('nan'), 0.0, grid_s, max_lag_s, grid.size, False,
                              'a stream does not change in the overlap: nothing to correlate')
-    n = da.size
-    size = 1 << int(np.ceil(np.log2(2 * n)))
-    # corr[L] = sum_i db[i + L]·da[i]: b lags a by L grid steps when the peak is at L > 0.
-    corr = np.fft.irfft(np.fft.rfft(db, size) * np.conj(np.fft.rfft(da, size)), size)
-    max_lag = min(int(np.ceil(max_lag_s / grid_s)), n - 1)
-    lags = np.arange(-max_lag, max_lag + 1)
-    c = corr[lags % size] / (na * nb)
-    # The relation may be inverted (a sign convention): take the strongest peak of either sign.
-    k = int(np.argmax(np.abs(c)))
+    lags, cc = coarse
+    cut = (fine[1].size - cc.size) // 2  # the coarse one may search fewer lags on short data: the same lags
+    c = fine[1][cut:cut + cc.size]
+    # The relation may be inverted (a sign convention): take the strongest coarse peak of either sign.
+    kc = int(np.argmax(np.abs(cc)))
+    sign = 1.0 if cc[kc] >= 0 else -1.0
+    half = max(int(round(SMOOTH_S / 2 / grid_s)), 1)
+    lo, hi = max(kc - half, 0), min(kc + half, lags.size - 1)
+    k = lo + int(np.argmax(sign * c[lo:hi + 1]))
     peak = float(c[k])
-    sign = 1.0 if peak >= 0 else -1.0
     frac = 0.0
     if 0 < k < lags.size - 1:
         y0, y1, y2 = sign * c[k - 1], sign * c[k], sign * c[k + 1]
@@ -202,13 +206,54 @@ def estimate_delay(t_a: ArrayLike, y_a: ArrayLike, t_b: ArrayLike, y_b: ArrayLik
     if abs(peak) < min_correlation:
         ok, reason = False, (f'peak correlation {abs(peak):.3f} < {min_correlation}: too little load change '
                              '(ramps or steps) to find the delay')
-    elif k in (0, lags.size - 1):
+    elif kc in (0, lags.size - 1) or k in (0, lags.size - 1):
         ok, reason = False, f'the correlation peaks at the edge of ±{max_lag_s} s: the delay may be larger'
+    else:
+        rival = _rival_peak(sign * cc, kc)
+        if rival is not None and sign * cc[rival] >= MAX_RIVAL_PEAK * abs(cc[kc]):
+            ok, reason = False, (f'two correlation peaks of nearly equal height, at {lags[kc] * grid_s * 1e3:+.3g} '
+                                 f'ms and {lags[rival] * grid_s * 1e3:+.3g} ms ({sign * cc[rival] / abs(cc[kc]):.2f} '
+                                 'of the highest): the load changes repeat, the delay is ambiguous')
     delay = xcorr
     if refine and ok:
         delay = _refine(t_a, y_a, t_b, y_b, xcorr, max(10.0 * grid_s, slow / 2.0))
     return DelayEstimate(float(delay), xcorr, abs(peak), float(grid_s), float(max_lag_s), int(grid.size), ok,
                          reason)
+
+
+def _correlation(ga: NDArray[np.float64], gb: NDArray[np.float64], width: int,
+                 max_lag: int) -> tuple[NDArray[np.int64], NDArray[np.float64]] | None:
+    """(lags, normalised correlation) of the derivatives of ga and gb (one grid) smoothed by a box of ``width``
+    points, over lags ±max_lag grid steps (fewer when the data are short); None when a derivative is all zero.
+    corr[L] = sum_i db[i + L]·da[i]: b lags a by L grid steps when the peak is at L > 0."""
+    da = np.diff(_box(ga, width))
+    db = np.diff(_box(gb, width))
+    da, db = da[width:-width or None], db[width:-width or None]  # the box's edge effects
+    da = da - da.mean()
+    db = db - db.mean()
+    na, nb = np.sqrt(da @ da), np.sqrt(db @ db)
+    if na == 0 or nb == 0:
+        return None
+    n = da.size
+    size = 1 << int(np.ceil(np.log2(2 * n)))
+    corr = np.fft.irfft(np.fft.rfft(db, size) * np.conj(np.fft.rfft(da, size)), size)
+    lag = min(max_lag, n - 1)
+    lags = np.arange(-lag, lag + 1)
+    return lags, corr[lags % size] / (na * nb)
+
+
+def _rival_peak(s: NDArray[np.float64], k: int) -> int | None:
+    """The highest local maximum of ``s`` outside the lobe of its maximum at ``k`` (where ``s`` stays above half
+    of ``s[k]``), or None."""
+    lo, hi = k, k
+    while lo > 0 and s[lo - 1] > 0.5 * s[k]:
+        lo -= 1
+    while hi < s.size - 1 and s[hi + 1] > 0.5 * s[k]:
+        hi += 1
+    inner = np.arange(1, s.size - 1)
+    is_max = (s[inner] >= s[inner - 1]) & (s[inner] >= s[inner + 1]) & ((inner < lo) | (inner > hi))
+    candidates = inner[is_max]
+    return int(candidates[np.argmax(s[candidates])]) if candidates.size else None
 
 
 def _refine(t_a, y_a, t_b, y_b, guess: float, half_width: float) -> float:
