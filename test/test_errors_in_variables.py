@@ -142,3 +142,21 @@ def test_the_setting_names_the_bad_value_and_counts_a_fixed_noise_from_the_first
     est = estimator.estimate('loading')
     assert est is not None and est.x_noise == 1e-6
     assert float(est.stiffness) == pytest.approx(float(fit_line(x, f, x_noise=1e-6).stiffness), rel=1e-9)
+
+
+def test_no_nonlinearity_from_a_half_that_is_one_hold_split_by_its_noise():
+    """The rig at rest before a program fills the window's start with one hold. Split at the median load, a half is
+    then that hold divided by its displacement noise: no spread beyond the noise, so its corrected slope was anything
+    (the live status once said 'nonlinear (slack wire?)', 0.80, at rest; here the old halves gave -295 .. +58). The
+    half needs the full fit's own rule (SXX >= Sxx / 2), else there is no indicator; a straight window keeps it."""
+    k, sx = 53_793.0, 1.8e-7
+    for seed in range(10):
+        rng = np.random.default_rng(seed)
+        load = np.r_[np.zeros(2000), np.linspace(0.0, 0.3, 384)]
+        x = load / k + rng.normal(0.0, sx, load.size)
+        y = load + rng.normal(0.0, 0.01, load.size)
+        assert np.isnan(fit_line(x, y, x_noise=sx).nonlinearity)
+        ramp = np.linspace(0.0, 4.0, 2384)  # the same noise over a whole ramp: an indicator, near 0
+        fit = fit_line(ramp / k + rng.normal(0.0, sx, ramp.size), ramp + rng.normal(0.0, 0.01, ramp.size),
+                       x_noise=sx)
+        assert abs(fit.nonlinearity) < 0.02

@@ -16,7 +16,8 @@ odd); a line is fitted to each half and ``nonlinearity = 1 − k_upper / k_lower
 line, positive when the curve softens at larger loads (the slack-wire bend of the paper's Fig. 9: equal load steps
 give growing displacement steps), negative when it stiffens. The split uses the fitted load, a function of x,
 rather than the measured y, because selecting points on the noisy response would bias both half slopes low.
-It is NaN when a half has no spread in x or ``k_lower`` is 0.
+It is NaN when a half has no spread in x beyond its noise (the full fit's rule, ``SXX >= Sxx / 2``: a window
+mostly one hold has halves split by noise alone) or ``k_lower`` is 0.
 
 Errors in both variables: both sensors are noisy. Ordinary least squares of y on x attenuates the slope by the
 reliability ratio ``Sxx_true / Sxx``, i.e. by about ``(σx / sd x)²`` (a 1 µm-noise LVDT over a stroke of 10 µm
@@ -197,8 +198,11 @@ def _slopes(x: NDArray[np.float64], y: NDArray[np.float64], x_noise: Any = 0.0) 
     sxy = np.einsum('...i,...i->...', dx, y - y.mean(axis=-1, keepdims=True))
     scale = np.abs(x).max(axis=-1)
     flat = sxx <= x.shape[-1] * (_ZERO_SPREAD_REL * scale) ** 2
-    sxx = sxx - (x.shape[-1] - 1) * np.asarray(x_noise, dtype=float) ** 2
-    flat = flat | ~(sxx > 0.0)
+    true_sxx = sxx - (x.shape[-1] - 1) * np.asarray(x_noise, dtype=float) ** 2
+    # The full fit's rule: no slope without spread well beyond the noise. A half of a window that is mostly one
+    # hold (the rig at rest before a program) is split by its noise alone; its corrected slope was anything.
+    flat = flat | ~(true_sxx > 0.0) | ~(true_sxx >= MIN_RELIABILITY * sxx)
+    sxx = true_sxx
     with np.errstate(invalid='ignore', divide='ignore'):
         return np.where(flat, np.nan, sxy / np.where(flat, 1.0, sxx))
 
