@@ -6,8 +6,10 @@ this module finds how far apart their clocks are. Pure numpy, no ROS.
 
 :func:`estimate_delay` finds how much later one stream's stamps are than the other's for the same physical instant:
 during load ramps and steps both streams change together, so the normalised cross-correlation of their time
-derivatives (both resampled on one uniform grid and smoothed to the slower stream's bandwidth) peaks at the delay;
-a parabola through the peak refines it below the grid step, and a bounded least-squares search (the lag that makes
+derivatives (both resampled on one uniform grid and smoothed) peaks at the delay: smoothed over ``SMOOTH_S`` it has
+one lobe, which says where (a ramp commanded in 10 ms steps would otherwise correlate again every 10 ms), and
+smoothed to the slower stream's bandwidth it gives the peak within ``FINE_HALF_S`` of that lobe's; a parabola
+through the peak refines it below the grid step, and a bounded least-squares search (the lag that makes
 the slow stream the best straight-line function of the fast one at the shifted stamps) refines it further.
 :func:`correct_stamps` applies it. The result says how sure it is (:attr:`DelayEstimate.ok`, ``reason``): without
 load changes there is nothing to correlate, and it says so.
@@ -96,7 +98,8 @@ class DelayEstimate:
         max_lag_s: The lags searched: ±max_lag_s [s].
         samples: Grid points in the overlap of the two streams.
         ok: Whether the estimate can be trusted: a clear peak (``peak_correlation`` >= ``min_correlation``) inside
-            the searched lags (not at their edge).
+            the searched lags (not at their edge), with no second peak of the coarse correlation at
+            ``MAX_RIVAL_PEAK`` of the highest.
         reason: Why not, when ``ok`` is False ('' otherwise).
     """
 
@@ -132,6 +135,9 @@ MAX_RIVAL_PEAK = 0.8
 #: The shortest smoothing before differentiating [s]: longer than the load programs' command period (100 Hz), so a
 #: ramp commanded in steps differentiates to a plateau, not to a pulse train whose correlation repeats every 10 ms.
 SMOOTH_S = 0.025
+#: The fine peak is looked for within this of the coarse one [s]: under half the programs' 10 ms command period, so
+#: a repeat of the fine correlation 10 ms away (a 500 Hz LVDT smooths over 2 ms only) is never taken for it.
+FINE_HALF_S = 0.004
 
 
 def estimate_delay(t_a: ArrayLike, y_a: ArrayLike, t_b: ArrayLike, y_b: ArrayLike, max_lag_s: float = 0.05,
@@ -192,7 +198,7 @@ def estimate_delay(t_a: ArrayLike, y_a: ArrayLike, t_b: ArrayLike, y_b: ArrayLik
     # The relation may be inverted (a sign convention): take the strongest coarse peak of either sign.
     kc = int(np.argmax(np.abs(cc)))
     sign = 1.0 if cc[kc] >= 0 else -1.0
-    half = max(int(round(SMOOTH_S / 2 / grid_s)), 1)
+    half = max(int(round(FINE_HALF_S / grid_s)), 1)
     lo, hi = max(kc - half, 0), min(kc + half, lags.size - 1)
     k = lo + int(np.argmax(sign * c[lo:hi + 1]))
     peak = float(c[k])
@@ -200,7 +206,8 @@ def estimate_delay(t_a: ArrayLike, y_a: ArrayLike, t_b: ArrayLike, y_b: ArrayLik
     if 0 < k < lags.size - 1:
         y0, y1, y2 = sign * c[k - 1], sign * c[k], sign * c[k + 1]
         denom = y0 - 2 * y1 + y2
-        frac = 0.5 * (y0 - y2) / denom if denom != 0 else 0.0
+        if y1 >= max(y0, y2) and denom < 0:  # a maximum: the parabola's vertex lies within half a step
+            frac = 0.5 * (y0 - y2) / denom
     xcorr = float((lags[k] + frac) * grid_s)
     ok, reason = True, ''
     if abs(peak) < min_correlation:
