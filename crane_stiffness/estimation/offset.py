@@ -118,9 +118,16 @@ def _median_period(t: NDArray[np.float64]) -> float:
 
 
 def _box(signal: NDArray[np.float64], width: int) -> NDArray[np.float64]:
+    """Moving average over ``width`` points, centred as ``np.convolve(…, mode='same')`` (zeros beyond the ends), by
+    a cumulative sum: O(n) whatever the width (a 25 ms box on a 0.1 ms grid is 250 points)."""
     if width <= 1:
         return signal
-    return np.convolve(signal, np.ones(width) / width, mode='same')
+    n = signal.size
+    csum = np.concatenate(([0.0], np.cumsum(signal)))
+    start = np.arange(n) - width // 2  # first index of each window, as np.convolve 'same' has it
+    lo = np.clip(start, 0, n)
+    hi = np.clip(start + width, 0, n)
+    return (csum[hi] - csum[lo]) / width
 
 
 #: Peak correlation below which a delay estimate is not trusted. Peaks of 0.35–0.46 were seen to place a delay
