@@ -65,6 +65,12 @@ _ZERO_SPREAD_REL = 1e-12
 MIN_RELIABILITY = 0.5
 
 
+def hidden_by_noise(sxx: Any, n: Any, x_noise: Any) -> Any:
+    """The rule for every slope here: True where the displacement's spread is not well beyond its noise,
+    ``Sxx − (n − 1)·x_noise² < MIN_RELIABILITY·Sxx`` (centred sum ``sxx`` of n points; arrays broadcast)."""
+    return sxx - (n - 1) * np.asarray(x_noise, dtype=float) ** 2 < MIN_RELIABILITY * sxx
+
+
 def t_quantile(dof: int, confidence: float = 0.95) -> float:
     """Two-sided Student-t quantile for ``dof`` degrees of freedom, e.g. 4.303 for dof=2 at 95 %.
 
@@ -201,7 +207,7 @@ def _slopes(x: NDArray[np.float64], y: NDArray[np.float64], x_noise: Any = 0.0) 
     true_sxx = sxx - (x.shape[-1] - 1) * np.asarray(x_noise, dtype=float) ** 2
     # The full fit's rule: no slope without spread well beyond the noise. A half of a window that is mostly one
     # hold (the rig at rest before a program) is split by its noise alone; its corrected slope was anything.
-    flat = flat | ~(true_sxx > 0.0) | ~(true_sxx >= MIN_RELIABILITY * sxx)
+    flat = flat | ~(true_sxx > 0.0) | hidden_by_noise(sxx, x.shape[-1], x_noise)
     sxx = true_sxx
     with np.errstate(invalid='ignore', divide='ignore'):
         return np.where(flat, np.nan, sxy / np.where(flat, 1.0, sxx))
@@ -282,7 +288,7 @@ def fit_line(x: ArrayLike, y: ArrayLike, *, x_noise: ArrayLike = 0.0) -> LineFit
     if np.any(flat):
         where = '' if flat.ndim == 0 else f' in fit(s) {np.argwhere(flat).tolist()[:5]}'
         raise DataError(f'x has zero spread{where}: all displacements equal, the slope is undefined')
-    hidden = sxx - (n - 1) * noise * noise < MIN_RELIABILITY * sxx
+    hidden = hidden_by_noise(sxx, n, noise)
     if np.any(hidden):
         where = '' if hidden.ndim == 0 else f' in fit(s) {np.argwhere(hidden).tolist()[:5]}'
         raise DataError(f'x has no spread beyond its noise{where} ((n - 1)·x_noise² > Sxx / 2): no stiffness in it')
@@ -426,7 +432,7 @@ class WindowedLeastSquares:
         x_noise = float(x_noise)
         if not (x_noise >= 0.0 and math.isfinite(x_noise)):
             raise ParameterError('x_noise', x_noise, 'must be finite and >= 0 (standard deviation, units of x)')
-        if sxx - (n - 1) * x_noise * x_noise < MIN_RELIABILITY * sxx:
+        if hidden_by_noise(sxx, n, x_noise):
             return None  # no spread beyond the noise
         sxy = self._sxy - self._sx * self._sy / n
         syy = max(self._syy - self._sy * self._sy / n, 0.0)
