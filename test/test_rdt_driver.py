@@ -12,7 +12,8 @@ import pytest
 from crane_stiffness.devices.rdt_device import RdtDevice
 from crane_stiffness.drivers import rdt
 from crane_stiffness.drivers.errors import DeviceAddressError, DeviceSilentError
-from crane_stiffness.drivers.rdt_client import RdtPipeline, RdtReceiver, fetch_netftapi2
+from crane_stiffness.drivers.rdt_client import RdtReceiver, fetch_netftapi2
+from crane_stiffness.drivers.rdt_pipeline import RdtPipeline
 
 WRENCH = np.array([1.5, -2.25, 30.0, 0.125, -0.0625, 0.01])
 CAL = rdt.Calibration(1e6, 1e6)

@@ -1,5 +1,5 @@
 """netft: a real six-axis F/T sensor over RDT (ATI Net F/T, Ethernet Axia, OnRobot HEX) — a thin adapter around
-crane_stiffness.drivers.rdt_client.
+crane_stiffness.drivers.rdt_client and rdt_pipeline.
 
 Requests the sensor's UDP stream (``command``: real-time or buffered) from ``host:port`` and publishes
 /load_cell/wrench (WrenchStamped [N, N·m] in the sensor's own frame ``frame_id``, sensor QoS; remap it like any
@@ -32,7 +32,8 @@ from crane_stiffness import topics
 from crane_stiffness.params.spec import ParamSpec
 from crane_stiffness.drivers import rdt
 from crane_stiffness.drivers.errors import DriverError
-from crane_stiffness.drivers.rdt_client import RdtPipeline, RdtReceiver, fetch_netftapi2
+from crane_stiffness.drivers.rdt_client import RdtReceiver, fetch_netftapi2
+from crane_stiffness.drivers.rdt_pipeline import RdtPipeline
 from crane_stiffness.nodes.qos import SENSOR_QOS
 from crane_stiffness.nodes.diagnostics import Counters, Diagnostics
 from crane_stiffness.nodes.sensor_timing import ZeroEpoch, create_grid_timer
