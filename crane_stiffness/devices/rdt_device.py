@@ -11,7 +11,10 @@ the n samples of the burst, shape (n, 6), e.g. with independent noise), converte
 
 Fault injection for tests: ``drop`` (a predicate on rdt_sequence: that record is never sent), ``reorder_every``
 (every n-th datagram is held back and sent after the next one), ``status`` (the status word of every record),
-``silent`` (receive requests but send nothing). :meth:`stop` then :meth:`start` is a power cycle on the same port.
+``silent`` (receive requests but send nothing). :meth:`stop` then :meth:`start` is a power cycle on the same port;
+:meth:`power_cycle` does both with the records a real outage leaves in flight: the last datagrams sent before the
+power-down reach the client only after the device is back (a switch or the host's socket still held them), before
+the device answers a new stream request.
 Pure Python, no ROS; for 127.0.0.1 (any address can be given, for a test's own network namespace).
 """
 from __future__ import annotations
@@ -82,6 +85,10 @@ class RdtDevice:
         self._running = False
         # Stream state, set by each stream request:
         self._leftover = b''                 # buffered: records short of a full datagram
+        self._hold = 0                       # datagrams to hold back as in flight at the next power-down
+        self._held_event = threading.Event()
+        self.in_flight: list[tuple[bytes, tuple]] = []  # (datagram, client) held across the power cycle
+        self.power_cycles = 0
         self._remaining: int | None = None   # records left of a counted request; None: endless
 
     # --- life cycle -------------------------------------------------------------------------------------------
@@ -100,6 +107,12 @@ class RdtDevice:
         self._client: tuple | None = None
         self._t0 = time.monotonic()
         self._running = True
+        in_flight, self.in_flight = self.in_flight, []
+        for packet, client in in_flight:  # records sent before the power-down, arriving only now
+            try:
+                sock.sendto(packet, client)
+            except OSError:
+                pass
         self._thread = threading.Thread(target=self._loop, name=f'rdt-device-{self.port}', daemon=True)
         self._thread.start()
         if self.http_port is not None and self._http is None:
@@ -119,6 +132,25 @@ class RdtDevice:
             self._http.shutdown()
             self._http.server_close()
             self._http = None
+
+    def power_cycle(self, off_s: float, in_flight: int = 0) -> int:
+        """Power down for ``off_s`` seconds and up again on the same port, as a real sensor does when its supply
+        drops: its sample counter (ft_sequence) starts again at ``start_counter``, the stream and the bias are
+        gone (the client must request the stream again, rdt_sequence counts from 1), and the last ``in_flight``
+        datagrams sent before the power-down reach the client only after the power-up (with a stream running;
+        up to 2 s is waited for them). Blocks for ``off_s``; returns the datagrams held in flight."""
+        if in_flight and self.streaming:
+            self._held_event.clear()
+            self._hold = int(in_flight)
+            self._held_event.wait(2.0)
+        self.stop()
+        self._hold = 0
+        self._held_event.clear()
+        self.power_cycles += 1
+        time.sleep(off_s)
+        held = len(self.in_flight)
+        self.start()
+        return held
 
     def __enter__(self) -> RdtDevice:
         return self.start()
@@ -173,6 +205,9 @@ class RdtDevice:
         held: bytes | None = None      # a datagram held back to reorder
         datagrams = 0
         while self._running:
+            if self._held_event.is_set():  # in flight and about to lose power: nothing more goes out
+                time.sleep(self.burst_interval_s)
+                continue
             try:
                 data, peer = sock.recvfrom(64)
                 self._on_request(data, peer)
@@ -218,8 +253,12 @@ class RdtDevice:
                 payload = self._leftover + payload
                 full = len(payload) // step * step
                 payload, self._leftover = payload[:full], payload[full:]
+            hold_from = len(payload) - self._hold * step if self._hold else len(payload)
             for i in range(0, len(payload), step):
                 packet = payload[i:i + step]
+                if i >= hold_from and hold_from >= 0:  # the last datagrams before the power-down: in flight
+                    self.in_flight.append((packet, client[0]))
+                    continue
                 datagrams += 1
                 try:
                     if self.reorder_every and held is None and datagrams % self.reorder_every == 0:
@@ -232,6 +271,8 @@ class RdtDevice:
                 except OSError:
                     pass  # the client went away: a device keeps streaming into the void until told to stop
             self.records_sent += int(keep.sum())
+            if self._hold and len(payload) >= self._hold * step:
+                self._held_event.set()
             if self._remaining == 0:
                 self._client = None
 
