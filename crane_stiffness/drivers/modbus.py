@@ -163,7 +163,10 @@ class ModbusPoller:
 
     :meth:`open` connects (raising DeviceAddressError when nothing accepts the connection). A failed read raises
     DeviceSilentError (no answer in time, or the connection dropped) or DeviceResponseError (a Modbus exception
-    response); after a dropped connection the next :meth:`read` connects again.
+    response); after a dropped connection the next :meth:`read` connects again. The first reading after the device
+    was unreachable (no answer, connection dropped or refused) counts a restart (:attr:`restarts`, described in
+    :attr:`last_restart`): a DAQ has no counter to say whether it restarted, so a caller drops what it holds from
+    before (e.g. readings to zero on).
     """
 
     def __init__(self, host: str, port: int = MODBUS_TCP_PORT, unit_id: int = 1, channel: Channel = Channel(),
@@ -179,6 +182,9 @@ class ModbusPoller:
         self._clock = clock_ns
         self._client: ModbusTcpClient | None = None
         self.connects = 0
+        self.restarts = 0                      # readings again after the device was unreachable
+        self.last_restart = ''
+        self._down_since_ns: int | None = None  # first failed attempt of the current outage [ns, host clock]
         logging.getLogger('pymodbus').setLevel(logging.CRITICAL)  # it logs every failure itself; we raise instead
 
     @property
@@ -202,7 +208,11 @@ class ModbusPoller:
         """One request for the channel's registers; the reading with the request's start and end times."""
         from pymodbus.exceptions import ConnectionException, ModbusException
         if self._client is None:
-            self.open()
+            try:
+                self.open()
+            except DeviceAddressError:
+                self._went_down()
+                raise
         client = self._client
         assert client is not None  # open() connected it, or raised
         ch = self.channel
@@ -212,9 +222,11 @@ class ModbusPoller:
             response = fn(ch.register, count=ch.count, device_id=self.unit_id)
         except ConnectionException as exc:
             self.close()
+            self._went_down(start)
             raise DeviceSilentError(f'connection to {self.where} lost: {exc}') from None
         except ModbusException as exc:  # ModbusIOException: no answer within timeout_s
             self.close()
+            self._went_down(start)
             raise DeviceSilentError(f'no answer from {self.where} within {self.timeout_s} s: {exc}') from None
         end = self._clock()
         if response.isError():
@@ -228,7 +240,16 @@ class ModbusPoller:
         if len(registers) != ch.count:
             raise DeviceResponseError(f'{self.where} returned {len(registers)} registers, asked for {ch.count}')
         raw = ch.decode(registers)
+        if self._down_since_ns is not None:
+            self.restarts += 1
+            self.last_restart = (f'{self.where} answers again after {(start - self._down_since_ns) / 1e9:.1f} s '
+                                 'unreachable: readings from before are not used')
+            self._down_since_ns = None
         return Reading(raw, ch.to_metres(raw), start, end)
+
+    def _went_down(self, t_ns: int | None = None) -> None:
+        if self._down_since_ns is None:
+            self._down_since_ns = self._clock() if t_ns is None else t_ns
 
     def close(self) -> None:
         if self._client is not None:

@@ -95,6 +95,7 @@ class PollCounters(Counters):
     exception_responses: int = 0
     reconnects: int = 0
     late_polls: int = 0
+    stream_restarts: int = 0
 
 
 class ModbusLvdt(Node):
@@ -157,6 +158,9 @@ class ModbusLvdt(Node):
         if self.last_error:
             self.get_logger().info(f'{self.poller.where} answers again')
             self.last_error = ''
+        if self.poller.restarts != self.counters.stream_restarts:  # the device was gone: zero on new readings only
+            self.counters.stream_restarts = self.poller.restarts
+            self._recent.clear()
         self.counters.received += 1
         late = (reading.start_ns % self.period_ns)
         self._jitter_ns.append(late)
@@ -201,10 +205,14 @@ class ModbusLvdt(Node):
                  if jitter.size else ('nan', 'nan', 'nan'))
         pairs = c.as_pairs() + [('poll_jitter_p50_us', stats[0]), ('poll_jitter_p99_us', stats[1]),
                                 ('poll_jitter_max_us', stats[2]), ('zero_m', f'{self.zero_m:.9f}'),
-                                ('device', self.poller.where), ('last_error', self.last_error)]
+                                ('device', self.poller.where), ('last_error', self.last_error),
+                                ('last_restart', self.poller.last_restart)]
         new_failures = c.failures - prev.failures
         if self.last_error:
             return ERROR, f'{new_failures} failed polls since the last report: {self.last_error}', pairs
+        restarts = c.stream_restarts - prev.stream_restarts
+        if restarts:
+            return WARN, f'{restarts} restart(s) since the last report: {self.poller.last_restart}', pairs
         if new_failures:
             return WARN, f'{new_failures} failed polls since the last report', pairs
         return OK, f'{c.published} readings published', pairs
