@@ -11,6 +11,7 @@ import itertools
 import math
 import os
 import socket
+import threading
 import time
 
 import numpy as np
@@ -253,6 +254,54 @@ def test_netft_reports_lost_records_status_word_and_a_device_that_goes_away(rclp
         # zeros published before the device went away: wait for the newest).
         assert spin_until(ex, lambda: np.abs(probe.wrenches[-1][2] - wrench).max() < 1e-5, 10.0)
         assert node.counters.reconnects >= 1 and node.receiver.streaming
+    finally:
+        ex.shutdown()
+        node.close()
+        dev.stop()
+
+
+def test_netft_after_a_power_cycle_publishes_nothing_from_before_it(rclpy_context):
+    """The F/T device stops for 2 s and restarts as after a power cycle (counters from 1 again, 2 datagrams in
+    flight across the outage): no wrench published after the restart carries a record from before it (the device
+    serves another wrench after it), and the counters and /diagnostics name the restart."""
+    before, after = np.array([1.0, 2.0, 3.0, 0.1, 0.2, 0.3]), np.array([-4.0, 5.0, 6.0, -0.4, 0.5, 0.6])
+    dev = RdtDevice(lambda: after if dev.power_cycles else before, sample_rate_hz=7000.0).start()
+    name, prefix, args = isolated('netft')
+    node = netft.NetFt(context=rclpy_context, cli_args=args, parameter_overrides=[
+        Parameter('host', value='127.0.0.1'), Parameter('port', value=dev.port),
+        Parameter('counts_per_force', value=1e6), Parameter('counts_per_torque', value=1e6),
+        Parameter('sample_rate_hz', value=7000.0), Parameter('publish_rate_hz', value=1000.0),
+        Parameter('timeout_s', value=0.5), Parameter('reconnect_interval_s', value=0.25)])
+    published: list[tuple[int, int, np.ndarray]] = []   # (wall time of publish, stamp, wrench) as netft publishes
+    publish = node.pub.publish
+    node.pub.publish = lambda m: (published.append((time.time_ns(), stamp_ns(m.header.stamp), wrench_vector(m))),
+                                  publish(m))[-1]
+    probe, ex = spin_node(rclpy_context, node, prefix)
+    done: dict[str, int] = {}
+
+    def cycle() -> None:
+        done['held'] = dev.power_cycle(2.0, in_flight=2)
+        done['up_ns'] = time.time_ns()
+    try:
+        assert spin_until(ex, lambda: len(probe.wrenches) > 200, 10.0)
+        thread = threading.Thread(target=cycle)
+        thread.start()
+        assert spin_until(ex, lambda: (s := probe.status(name, b'\x02')) is not None and 'no record' in
+                          s[0].message, 10.0)
+        assert spin_until(ex, lambda: not thread.is_alive(), 10.0) and done['held'] == 2
+        assert spin_until(ex, lambda: sum(t > done['up_ns'] for t, _, _ in published) >= 500, 20.0)
+        assert spin_until(ex, lambda: (s := probe.status(name, b'\x01')) is not None and 'device restarted' in
+                          s[0].message, 10.0)
+        late = [(s, w) for t, s, w in published if t > done['up_ns']]
+        np.testing.assert_allclose([w for _, w in late], np.tile(after, (len(late), 1)), atol=1e-9)
+        last_before = max(s for t, s, _ in published if t <= done['up_ns'])
+        assert min(s for s, _ in late) > last_before
+        c = node.counters
+        assert (c.stream_restarts, c.clock_resets, c.records_lost, c.records_duplicate) == (1, 1, 0, 0)
+        assert c.records_stale_dropped >= 2
+        status, values = probe.status(name, b'\x01')
+        assert values['stream_restarts'] == '1' and values['clock_resets'] == '1'
+        assert 'counter started again' in status.message and 'before the outage not published' in status.message
     finally:
         ex.shutdown()
         node.close()

@@ -15,7 +15,8 @@ which carries the constant part of the delay (unobservable from one direction; m
 the jitter. Until three bins are complete the line is flat through the least delay seen so far.
 
 The counter is unwrapped (32-bit rollover). A step of more than ``max_step_s`` (the device restarted, or a stream
-from another device) restarts the clock (:attr:`resets`).
+from another device) restarts the clock (:attr:`resets`). After a stream stopped, :meth:`continues` says whether a
+record of the new stream is on the same counter (the device kept running) or not (it restarted: :meth:`restart`).
 Pure numpy, no ROS. Times are integer nanoseconds of the host clock the arrival times come from.
 """
 from __future__ import annotations
@@ -75,8 +76,28 @@ class CounterClock:
         self._min_residual = math.inf
 
     def reset(self) -> None:
-        """Forget everything (the device restarted): the next record is a new origin."""
+        """Forget everything: the next record is a new origin (not counted; see :meth:`restart`)."""
         self._start()
+
+    def restart(self) -> None:
+        """The device's counter started again: forget everything and count a reset (:attr:`resets`)."""
+        if self._t0 is not None:
+            self.resets += 1
+        self._start()
+
+    def continues(self, counter: int, arrival_ns: int, tolerance_s: float = 0.25) -> bool:
+        """Whether a record (raw ``counter``, arrived at ``arrival_ns`` [ns, host clock]) lies on this clock's
+        counter: a step forwards of at most ``max_step_s`` from the last record, and the line stamps it no later
+        than its arrival and no more than ``tolerance_s`` [s] before it. A counter that started again after a power
+        cycle fails (a step backwards, or a stamp seconds before the arrival). True before the first record."""
+        if self._raw_last is None or self._t0 is None:
+            return True
+        step = (int(counter) - self._raw_last + _HALF) % _MOD - _HALF
+        if not 0 < step <= self.max_step:
+            return False
+        stamp = int(self._stamps(np.array([self._unwrapped_last + step - self._x0]))[0])
+        late_ns = int(arrival_ns) - stamp
+        return -0.001 * NS_PER_S <= late_ns <= tolerance_s * NS_PER_S
 
     @property
     def skew_ppm(self) -> float:

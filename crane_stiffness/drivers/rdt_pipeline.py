@@ -5,6 +5,15 @@ decode all records at once, account for lost / out-of-order / duplicate records 
 stamp them from the sensor's sample counter (:class:`~.clock.CounterClock`), drop records with a status word of
 concern, convert counts to N and N·m, subtract the software tare and optionally average blocks of samples to a lower
 output rate. Pure numpy, no sockets and no ROS.
+
+**After an outage** (a new stream request: the receiver's next *generation*) nothing received before the stream
+stopped is delivered: the open averaging interval, records not yet handed over, and records of the old stream that
+arrive only after the new request (in flight across the outage: recognised by their two counters keeping the old
+stream's relation, ``ft_sequence − D·rdt_sequence`` with D the sample counter's step per record) are dropped and
+counted (``records_stale_dropped``), and the software tare's readings are forgotten. The first record of the new
+stream counts a stream restart; if its sample counter does not continue the old one (the device restarted: it
+counts from its power-up again) the clock is restarted too (``clock_resets``). :attr:`RdtPipeline.last_restart`
+says which, for people.
 """
 from __future__ import annotations
 
@@ -17,6 +26,10 @@ from numpy.typing import NDArray
 from crane_stiffness.drivers import rdt
 from crane_stiffness.drivers.clock import CounterClock
 from crane_stiffness.drivers.errors import DeviceSilentError, ParameterError
+
+_MOD = 1 << 32
+#: Records of the old stream still recognised as such after a new stream request [records].
+STALE_WINDOW = 4096
 
 
 @dataclass
@@ -59,6 +72,15 @@ class RdtPipeline:
         self.last_status = 0
         self.late_dropped = 0                           # arrived after newer records were delivered
         self.delivered_records = 0
+        self.stream_resumes = 0                         # new streams after the first (after an outage)
+        self.stale_dropped = 0                          # records from before an outage, not delivered after it
+        self._stale_unseen = 0                          # of those, dropped before the sequence accounting saw them
+        self._stale_outage = 0                          # of those, in the current outage
+        self.last_restart = ''                          # the last restart, for people
+        self._stream: list[int] | None = None           # this stream's first and last (rdt, ft) raw counters
+        self._prev: list[int] | None = None             # the same of the stream before the outage
+        self._starting = False                          # a new stream was requested: its first record not seen yet
+        self._screen_left = 0                           # records of the new stream still checked for old ones
         self._out_stamps: list[NDArray[np.int64]] = []
         self._out_wrench: list[NDArray[np.float64]] = []
 
@@ -96,8 +118,7 @@ class RdtPipeline:
                     self._consume(payloads, arrivals, counts)
                     payloads, arrivals, counts = [], [], []
                 if self._generation is not None:
-                    self.tracker.reset()  # a new stream request restarts rdt_sequence
-                    self.clock.reset()
+                    self._stream_stopped()
                 self._generation = generation
             payloads.append(data)
             arrivals.append(t_ns)
@@ -106,12 +127,76 @@ class RdtPipeline:
             self._consume(payloads, arrivals, counts)
         return self._take()
 
+    # --- outages --------------------------------------------------------------------------------------------
+
+    def _stream_stopped(self) -> None:
+        """A new stream was requested (the old one fell silent): drop what is held from the old one."""
+        held = sum(b.shape[0] for b in self._block_stamps) + sum(b.shape[0] for b in self._out_stamps)
+        self._block_stamps, self._block_wrench = [], []
+        self._out_stamps, self._out_wrench = [], []
+        self.stale_dropped += held
+        self._ring_next = self._ring_count = 0           # the tare averages readings of the new stream only
+        if self._stream is not None:
+            self._prev, self._stream = self._stream, None
+            self._stale_outage = held
+        else:
+            self._stale_outage += held
+        self._starting = True
+        self._screen_left = STALE_WINDOW if self._prev is not None else 0
+        self.tracker.reset()                             # a new stream request restarts rdt_sequence
+
+    def _of_previous_stream(self, seq: NDArray[np.int64], ft: NDArray[np.int64]) -> NDArray[np.bool_]:
+        """Records whose counters keep the previous stream's relation (ft − D·rdt within D + 1 of its last)."""
+        assert self._prev is not None
+        rdt0, ft0, rdt1, ft1 = self._prev
+        step = max(1, round(((ft1 - ft0) % _MOD) / max(1, (rdt1 - rdt0) % _MOD)))
+        d_rdt = (seq - rdt1 + _MOD // 2) % _MOD - _MOD // 2
+        d_ft = (ft - ft1 + _MOD // 2) % _MOD - _MOD // 2
+        return (np.abs(d_rdt) <= STALE_WINDOW) & (np.abs(d_ft - step * d_rdt) <= step + 1)
+
+    def _stream_started(self, seq: int, ft: int, arrival_ns: int) -> None:
+        """The first record of a new stream after an outage: count the restart, restart the clock if the
+        device's sample counter started again."""
+        self._starting = False
+        if self._prev is None:
+            return
+        self.stream_resumes += 1
+        ft_last = self._prev[3]
+        if self.clock.continues(ft, arrival_ns):
+            what = (f'stream restarted: the sample counter ran on ({(ft - ft_last) % _MOD} samples later, '
+                    'clock kept)')
+        else:
+            self.clock.restart()
+            what = (f'device restarted: its sample counter started again (ft_sequence {ft} after {ft_last}, '
+                    f'rdt_sequence {seq}), clock reset')
+        self.last_restart = f'{what}; {self._stale_outage} records from before the outage not published'
+
     def _consume(self, payloads: list[bytes], arrivals: list[int], counts: list[int]) -> None:
         records = rdt.decode_records(b''.join(payloads))
-        n = records.size
         arrival = np.asarray(arrivals, dtype=np.int64)
-        if arrival.size != n:
+        if arrival.size != records.size:
             arrival = np.repeat(arrival, counts)
+        if self._screen_left > 0 or self._starting:
+            if self._screen_left > 0:  # in flight across the outage: the old stream's records
+                self._screen_left -= records.size
+                stale = self._of_previous_stream(records['rdt_sequence'].astype(np.int64),
+                                                  records['ft_sequence'].astype(np.int64))
+                if stale.any():
+                    k = int(stale.sum())
+                    self.stale_dropped += k
+                    self._stale_unseen += k
+                    self._stale_outage += k
+                    records, arrival = records[~stale], arrival[~stale]
+                    if records.size == 0:
+                        return
+            if self._starting:
+                self._stream_started(int(records['rdt_sequence'][0]), int(records['ft_sequence'][0]),
+                                     int(arrival[0]))
+        first, last = records[0], records[-1]
+        if self._stream is None:
+            self._stream = [int(first['rdt_sequence']), int(first['ft_sequence']), 0, 0]
+        self._stream[2:] = [int(last['rdt_sequence']), int(last['ft_sequence'])]
+        n = records.size
         deliver, unwrapped = self.tracker.update(records['rdt_sequence'])
         in_order = self.tracker.in_order          # every record new and in order: nothing to select or sort
         stamps = self.clock.update(records['ft_sequence'], arrival)
@@ -235,7 +320,10 @@ class RdtPipeline:
         return self._ring_count
 
     def counters(self) -> dict[str, int]:
-        return {**self.tracker.as_dict(), 'records_delivered': self.delivered_records,
+        counts = self.tracker.as_dict()
+        counts['records_received'] += self._stale_unseen
+        counts['stream_restarts'] += self.stream_resumes
+        return {**counts, 'records_stale_dropped': self.stale_dropped, 'records_delivered': self.delivered_records,
                 'records_late_dropped': self.late_dropped, 'malformed_datagrams': self.malformed_datagrams,
                 'status_records': self.status_records, 'status_dropped': self.dropped_status,
                 'clock_resets': self.clock.resets}

@@ -13,11 +13,13 @@ with the other sensors) publishes what arrived since its last tick.
 /diagnostics: records received, published, lost, out of order, late or duplicate (from rdt_sequence), records with
 a non-zero status word (ERROR with the word in hex; ``drop_status_mask`` decides which are not published), the
 clock's estimated rate error, reconnects (ERROR while the sensor is silent: the stream is requested again every
-``reconnect_interval_s``). Service ~/tare (std_srvs/Trigger): ``tare_mode`` 'software' subtracts the mean of the
-last ``tare_samples`` readings; 'hardware' sends the device's bias command (0x0042);
-either way the number of tares since start is published, latched, on /load_cell/tare (std_msgs/Float64, at start
-and after every tare) so the estimator starts a new fit segment. At start a wrong address or a
-silent device stops the node (exit 2) with the reason, after trying for ``wait_for_device_s``.
+``reconnect_interval_s``), and when it flows again the restart (WARN for one report: the stream restarted, or the
+device restarted and the clock with it; nothing received before the outage is published after it). Service ~/tare
+(std_srvs/Trigger): ``tare_mode`` 'software' subtracts the mean of the last ``tare_samples`` readings (of the
+current stream); 'hardware' sends the device's bias command (0x0042); either way the number of tares since start
+is published, latched, on /load_cell/tare (std_msgs/Float64, at start and after every tare) so the estimator starts
+a new fit segment. At start a wrong address or a silent device stops the node (exit 2) with the reason, after
+trying for ``wait_for_device_s``.
 """
 from __future__ import annotations
 
@@ -113,6 +115,7 @@ class FtCounters(Counters):
     reconnects: int = 0
     stream_restarts: int = 0
     clock_resets: int = 0
+    records_stale_dropped: int = 0
 
 
 class NetFt(Node):
@@ -194,7 +197,8 @@ class NetFt(Node):
         c = self.pipeline.counters()
         self.counters.received = c['records_received']
         for name in ('records_lost', 'records_out_of_order', 'records_late_dropped', 'records_duplicate',
-                     'status_records', 'status_dropped', 'malformed_datagrams', 'stream_restarts', 'clock_resets'):
+                     'status_records', 'status_dropped', 'malformed_datagrams', 'stream_restarts', 'clock_resets',
+                     'records_stale_dropped'):
             setattr(self.counters, name, c[name])
         self.counters.reconnects = self.receiver.reconnects
 
@@ -227,10 +231,18 @@ class NetFt(Node):
             ('streaming', str(rx.streaming).lower()), ('last_status', f'0x{self.pipeline.last_status:08x}'),
             ('clock_skew_ppm', f'{clock.skew_ppm:.2f}'), ('clock_drift_tracked', str(clock.fitted).lower()),
             ('kernel_timestamps', str(rx.kernel_timestamps).lower()), ('device', rx.where),
-            ('offset', str([round(v, 7) for v in self.pipeline.offset.tolist()]))]
+            ('offset', str([round(v, 7) for v in self.pipeline.offset.tolist()])),
+            ('last_restart', self.pipeline.last_restart)]
         if not rx.streaming:
             return ERROR, (f'no record from {rx.where} for more than {rx.timeout_s} s: requesting the stream again '
                            f'every {rx.reconnect_interval_s} s ({rx.reconnects} requests so far)'), pairs
+        restarts = c.stream_restarts - prev.stream_restarts
+        if restarts:
+            note = ''
+            if c.clock_resets > prev.clock_resets and self.settings['tare_mode'] == 'hardware':
+                note = ' (its hardware bias is gone with the power cycle: tare again)'
+            return WARN, (f'{restarts} stream restart(s) since the last report: {self.pipeline.last_restart}'
+                          f'{note}'), pairs
         new_status = c.status_records - prev.status_records
         if new_status:
             return ERROR, (f'status word 0x{self.pipeline.last_status:08x} on {new_status} records since the last '
