@@ -95,6 +95,8 @@ setup(
         ('share/' + PACKAGE + '/config', sorted(glob('config/*.yaml'))),
         ('share/' + PACKAGE + '/launch', sorted(glob('launch/*.launch.py'))),
         ('share/' + PACKAGE + '/foxglove', sorted(glob('foxglove/*.json'))),
+        # rosdep keys for what only PyPI has (docs/running.md: rosdep reads it from the source tree, before a build)
+        ('share/' + PACKAGE + '/rosdep', ['rosdep/crane_stiffness.yaml']),
     ],
     install_requires=['setuptools'],
     # `crane-stiffness campaign analyze --scheduler tcp://...`: per-session analyses on a Dask cluster

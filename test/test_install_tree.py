@@ -41,6 +41,7 @@ def test_install_tree_has_index_marker_executables_config_and_launch(install_tre
                  'program_side_force_slack.yaml', 'sensors.yaml'):
         assert (prefix / 'share/crane_stiffness/config' / name).is_file(), name
     assert (prefix / 'share/crane_stiffness/launch/rig.launch.py').is_file()
+    assert (prefix / 'share/crane_stiffness/rosdep/crane_stiffness.yaml').is_file()  # the rosdep keys it ships
     for name in ('stiffness_test.json', 'sensors.json'):  # the Foxglove layouts, read back as JSON
         layout = json.loads((prefix / 'share/crane_stiffness/foxglove' / name).read_text())
         assert layout['configById'] and layout['layout']
