@@ -136,7 +136,7 @@ def main(argv=None) -> int:
     # The estimator's own verdict on those numbers (its last /stiffness/estimate statuses).
     for part in ('loading', 'unloading', 'input'):
         st = summary['status'].get(part, {'level': 'NONE', 'message': 'no status received'})
-        print(f"  estimator status {part:9s} {st['level']:5s} {st['message']}")
+        print(f"  estimator status {part:9s} {st['level']:7s} {st['message']}")
     print(f"  relative error (loading) {100 * summary['relative_error']:+.2f} %   -> {out / 'summary.json'}")
     if summary.get('bag'):
         print(f"  session recorded: {summary['bag']}")

@@ -13,7 +13,7 @@ from crane_stiffness.estimation.live import VALUE_FIELDS, LiveStiffness
 from crane_stiffness.estimation.lag import LagHistogram
 from crane_stiffness.estimation.quality import noise_std
 from crane_stiffness.estimation.settings import LiveSettings
-from crane_stiffness.status import OK, STALE, WARN
+from crane_stiffness.status import OK, WAITING, WARN
 
 K = 2000.0      # N/m
 C = 0.1         # N
@@ -123,7 +123,8 @@ def test_bad_samples_are_dropped_and_counted_and_never_fitted() -> None:
     assert live.sync_counters.force.received == 0
     level, message, pairs = live.input_report()
     assert level == WARN and '6 dropped' in message
-    assert live.input_report()[0] == OK  # nothing new since
+    level, message, _ = live.input_report()  # nothing new since; no usable sample yet: the inputs wait
+    assert level == WAITING and message.startswith('waiting: no usable force or displacement sample yet'), message
 
 
 def test_out_of_order_samples_are_counted_and_not_fitted() -> None:
@@ -153,7 +154,7 @@ def test_volts_channel_and_reset_and_restart_on_change() -> None:
     assert _row(live.values(), 0)['stiffness'] == pytest.approx(K, rel=1e-9)
     live.reset()
     assert math.isnan(_row(live.values(), 0)['stiffness'])
-    assert live.report()[0].level == STALE
+    assert live.report()[0].level == WAITING  # a fresh start: nothing stopped, the branch has not begun again
     # A threshold change keeps the fit; a fit setting restarts it.
     assert not live.configure(LiveSettings(displacement_gain=0.002, displacement_offset=-0.001,
                                            nonlinearity_warn=0.5))

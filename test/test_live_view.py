@@ -15,6 +15,7 @@ from std_srvs.srv import Trigger
 from crane_stiffness import topics
 from crane_stiffness.nodes.live_view import DEFAULT_SERVICES, DEFAULT_TOPICS, _TYPES
 from crane_stiffness.launcher.rosrun import installed_config
+from crane_stiffness.status import ERROR, NAMES, STALE, WAITING_PREFIX, overall, read_level
 from helpers.foxglove_client import FoxgloveClient
 from helpers.live_rig import live_rig, wait_for_pairs
 from helpers.processes import UNCLEAN, final_counters
@@ -133,7 +134,17 @@ def _check_estimate(client: FoxgloveClient, watcher) -> None:
         loading = est['loading']
         if loading['stiffness'] is not None:
             assert watcher.values[loading['sample_stamp']] == loading['stiffness']
-    status = client.json_messages('/live_view/status')[-1]
-    history = [{(lvl, msg) for lvl, msg in s.values()} for s in watcher.status_history]
-    assert {(s['level'], s['message']) for s in status['statuses']} in history
-    assert status['level'] == max(s['level'] for s in status['statuses'])
+    # The page's badge and the layout's indicator: the estimator's statuses as published, a part that has not begun
+    # read back as WAITING (published OK, 'waiting: ...'), the overall the worst of them; STALE only for a branch
+    # whose inputs stopped (input ERROR), never for one that waits (the unloading branch during the loading ramp).
+    history = [{(read_level(lvl, msg), msg) for lvl, msg in s.values()} for s in watcher.status_history]
+    channel = client.json_messages('/live_view/status')
+    assert {(s['level'], s['message']) for s in channel[-1]['statuses']} in history
+    for status in channel:
+        parts = {s['name'].rpartition(': ')[2]: s for s in status['statuses']}
+        assert status['level'] == overall(s['level'] for s in status['statuses'])
+        assert status['level_name'] == NAMES[status['level']]
+        if parts['input']['level'] != ERROR:
+            assert all(s['level'] != STALE for s in status['statuses']), status['text']
+        if parts['unloading']['message'].startswith(WAITING_PREFIX):
+            assert parts['unloading']['level_name'] == 'WAITING' and status['level'] != STALE, status['text']

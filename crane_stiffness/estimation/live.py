@@ -39,7 +39,8 @@ publishing one:
 4. Outputs. :meth:`LiveStiffness.values` is the cheap O(1) numeric estimate (rows ``BRANCHES`` × ``VALUE_FIELDS``)
    for publishing after every batch of new pairs; its ``nonlinearity`` is the value of the last
    :meth:`LiveStiffness.refresh`, which sorts the windows and is meant for a slow timer together with
-   :meth:`LiveStiffness.report` (per-branch text for people, with a level).
+   :meth:`LiveStiffness.report` (per-branch text for people, with a level: WAITING for a branch without an
+   estimate yet, STALE for every branch once a stream that delivered goes silent; :mod:`crane_stiffness.status`).
 
 The model prediction (``set_prediction``) gives ``relative_error = (estimate − prediction) / prediction``.
 
@@ -480,7 +481,8 @@ class LiveStiffness:
 
     def report(self, now_s: float = math.nan) -> list[BranchReport]:
         """Per-branch status for people (:func:`~.live_status.branch_reports`); call after :meth:`refresh` and
-        :meth:`values`. With ``now_s`` (the node clock, s) a dead input stream makes every branch STALE."""
+        :meth:`values`. A branch without an estimate yet is WAITING; with ``now_s`` (the node clock, s) a dead
+        input stream makes every branch STALE."""
         self._update_rows()
         return live_status.branch_reports(self, now_s)
 

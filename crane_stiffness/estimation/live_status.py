@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 from crane_stiffness.estimation.sync import DISPLACEMENT, FORCE
 from crane_stiffness.estimation.branch import BRANCHES, Branch
 from crane_stiffness.estimation.quality import fit_problems
-from crane_stiffness.status import ERROR, OK, STALE, WARN, status_value
+from crane_stiffness.status import ERROR, OK, STALE, WAITING, WAITING_PREFIX, WARN, status_value
 
 if TYPE_CHECKING:
     from crane_stiffness.estimation.live import LiveStiffness
@@ -30,7 +30,8 @@ VALUE_FIELDS = ('stiffness', 'intercept', 'stderr', 'ci95_low', 'ci95_high', 'r2
 
 @dataclass(frozen=True)
 class BranchReport:
-    """One branch's status for people: level (OK/WARN/STALE), a one-line message and key/value strings."""
+    """One branch's status for people: level (WAITING/OK/WARN/STALE, :mod:`crane_stiffness.status`), a one-line
+    message and key/value strings."""
 
     branch: Branch
     level: int
@@ -58,7 +59,8 @@ def input_report(live: LiveStiffness, consumer: str = '', now_s: float = math.na
              ) -> tuple[int, str, list[tuple[str, str]]]:
     """Input health: (level, message, key/values); ERROR if a stream is silent (``now_s``: node clock, s), WARN
     if a rejected command is in force, a stream lost too many samples, or samples were dropped, out of order,
-    stale or lost in a dropout since this ``consumer``'s previous call."""
+    stale or lost in a dropout since this ``consumer``'s previous call; else WAITING while a stream has not
+    delivered its first sample, then OK."""
     c = live.counters
     sc = live._sync.counters
     problems = {
@@ -90,13 +92,18 @@ def input_report(live: LiveStiffness, consumer: str = '', now_s: float = math.na
         reasons.append('since last report: ' + ', '.join(f'{v} {k}' for k, v in new.items()))
     if reasons:
         return level, '; '.join(reasons), pairs
-    return OK, f'{sc.pairs} pairs, {c.pairs_fitted} fitted', pairs
+    summary = f'{sc.pairs} pairs, {c.pairs_fitted} fitted'
+    missing = [stream for stream, health in live.health.items() if not health.count]
+    if missing:  # a stream that has not begun: nothing wrong yet, nothing to stand by either
+        return WAITING, f'{WAITING_PREFIX}no usable {" or ".join(missing)} sample yet; {summary}', pairs
+    return OK, summary, pairs
 
 
 def branch_reports(live: LiveStiffness, now_s: float = math.nan) -> list[BranchReport]:
     """Per-branch status for people (:meth:`LiveStiffness.report <crane_stiffness.estimation.live.LiveStiffness.
-    report>`, its rows up to date). With ``now_s`` (the node clock, s) a dead input stream makes every branch STALE:
-    never OK while its inputs are invalid."""
+    report>`, its rows up to date). A branch without an estimate is WAITING (it has not begun: the unloading branch
+    during the first loading ramp), WARN with an input problem. With ``now_s`` (the node clock, s) a stream that
+    delivered and went silent makes every branch STALE: never OK nor WAITING while its inputs are invalid."""
     s = live._settings
     unit = s.stiffness_unit
     problem_level, problems = live.input_problems(now_s)
@@ -110,7 +117,9 @@ def branch_reports(live: LiveStiffness, now_s: float = math.nan) -> list[BranchR
         pairs = [(k, status_value(row[k])) for k in names]
         pairs.append(('scatter_ratio', status_value(live._scatter[branch])))
         if math.isnan(row['stiffness']):
-            level, message = STALE, 'no estimate yet (needs 3 pairs with spread in displacement beyond its noise)'
+            level = WAITING
+            message = (f'no estimate yet (needs 3 pairs with spread in displacement beyond its noise; '
+                       f'{live._estimator.window_len(branch)} pairs in its window)')
             pairs = [(k, 'nan') for k in names] + [('scatter_ratio', 'nan')]
             pairs[names.index('prediction')] = ('prediction', status_value(live.prediction))
         else:
@@ -130,11 +139,14 @@ def branch_reports(live: LiveStiffness, now_s: float = math.nan) -> list[BranchR
                 message = (f'the window holds pairs fitted under a rejected command: {live._suspect_reason} '
                            f'({live._suspect[branch]} more pairs until they leave it); ' + message)
         if problem_level == ERROR:
+            frozen, last = ('nothing to estimate from', '') if level == WAITING else ('estimate frozen', 'last ')
             level = STALE
-            message = 'inputs invalid, estimate frozen: ' + '; '.join(problems) + '; last ' + message
+            message = f'inputs invalid, {frozen}: ' + '; '.join(problems) + f'; {last}' + message
         elif problem_level == WARN:
             level = max(level, WARN) if level != STALE else STALE
             message = '; '.join(problems) + '; ' + message
+        elif level == WAITING:
+            message = WAITING_PREFIX + message
         if live.counters.segments > 1:
             message += f'; new fit {segment}'
         pairs += [('unit', unit), ('axis', s.force_axis), ('current', str(branch == live._current).lower()),

@@ -18,7 +18,7 @@ from rclpy.node import Node
 from std_msgs.msg import Float64, Float64MultiArray, String
 
 from crane_stiffness import __version__, topics
-from crane_stiffness.status import NAMES as LEVEL_NAMES
+from crane_stiffness.status import NAMES as LEVEL_NAMES, read_level
 from crane_stiffness.params.geometry import geometry_from_params
 from crane_stiffness.params.files import load_params
 from crane_stiffness.analysis.sweep import unit
@@ -69,8 +69,9 @@ class Observer(Node):
         self.values_count += 1
 
     def _on_estimate(self, msg: DiagnosticArray) -> None:
-        for st in msg.status:
-            self.statuses[st.name.rpartition(': ')[2]] = (LEVEL_NAMES.get(st.level[0], str(st.level[0])), st.message)
+        for st in msg.status:  # a part that has not begun reads WAITING (published as OK, 'waiting: ...')
+            level = read_level(st.level[0], st.message)
+            self.statuses[st.name.rpartition(': ')[2]] = (LEVEL_NAMES.get(level, str(level)), st.message)
 
     def _on_predicted(self, msg: Float64) -> None:
         self.predicted = msg.data

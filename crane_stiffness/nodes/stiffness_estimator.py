@@ -13,7 +13,9 @@ Pairs samples by header stamp, fits loading and unloading branches apart (window
   /stiffness/stiffness (Float64, loading branch) once per batch of queued messages that changed it (a sensor
   buffer is one estimate: the newest pair's stamp is its age), and
   /stiffness/estimate (DiagnosticArray: one status per branch plus an input status with the counters) and again
-  /stiffness/stiffness at ``diagnostics_rate_hz``.
+  /stiffness/stiffness at ``diagnostics_rate_hz``. A part that has not begun (a branch without an estimate yet, the
+  inputs before each stream's first sample) is published as level OK with a message starting 'waiting: '
+  (crane_stiffness.status.WAITING).
 For the live view (not recorded by default): /stiffness/fitted_pairs (Float64MultiArray, every pair fitted, rows ×
 PAIR_FIELDS, gathered for PAIRS_PERIOD_S) and /stiffness/fit_lines (Float64MultiArray, each branch's window as a line
 with its 95 % band, rows × FIT_LINE_FIELDS, at ``diagnostics_rate_hz``).
@@ -55,6 +57,7 @@ from crane_stiffness.estimation.fit_lines import FIT_LINE_FIELDS
 from crane_stiffness.estimation.live import PAIR_FIELDS, VALUE_FIELDS, LiveStiffness
 from crane_stiffness.estimation.settings import ESTIMATOR_PARAMS, LiveSettings
 from crane_stiffness.params.spec import ParamSpec
+from crane_stiffness.status import wire_level
 from crane_stiffness.estimation.sync import DISPLACEMENT, FORCE
 from crane_stiffness.nodes.qos import LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS
 from crane_stiffness.nodes.diagnostics import Diagnostics
@@ -150,7 +153,8 @@ class StiffnessEstimatorNode(Node):
 
     def _diagnostics_report(self) -> tuple[int, str, list[tuple[str, str]]]:
         assert self.core is not None
-        return self.core.input_report('diagnostics', self._now_s())
+        level, message, pairs = self.core.input_report('diagnostics', self._now_s())
+        return wire_level(level), message, pairs
 
     @property
     def counters(self) -> dict[str, int]:
@@ -357,11 +361,11 @@ class StiffnessEstimatorNode(Node):
         msg.header.stamp = self.get_clock().now().to_msg()
         now = self._now_s()
         for r in self.core.report(now):
-            msg.status.append(DiagnosticStatus(level=bytes([r.level]), name=f'{name}: {r.branch}',
+            msg.status.append(DiagnosticStatus(level=bytes([wire_level(r.level)]), name=f'{name}: {r.branch}',
                                                message=r.message, hardware_id=self.get_name(),
                                                values=[KeyValue(key=k, value=v) for k, v in r.values]))
         level, message, pairs = self.core.input_report('estimate', now)
-        msg.status.append(DiagnosticStatus(level=bytes([level]), name=f'{name}: input', message=message,
+        msg.status.append(DiagnosticStatus(level=bytes([wire_level(level)]), name=f'{name}: input', message=message,
                                            hardware_id=self.get_name(),
                                            values=[KeyValue(key=k, value=v) for k, v in pairs]))
         self.pub_estimate.publish(msg)

@@ -14,7 +14,7 @@ import numpy as np
 from crane_stiffness.estimation.branch import BRANCHES
 from crane_stiffness.estimation.fit_lines import FIT_LINE_FIELDS, band
 from crane_stiffness.estimation.live import PAIR_FIELDS, VALUE_FIELDS
-from crane_stiffness.status import NAMES, OK
+from crane_stiffness.status import NAMES, overall, read_level
 from crane_stiffness.view import jsonschema as js
 from crane_stiffness.view.errors import ViewError
 
@@ -132,11 +132,14 @@ def estimate_message(values: Sequence[float]) -> dict[str, Any]:
 
 
 def status_message(statuses: Sequence[tuple[str, int, str]]) -> dict[str, Any]:
-    """The estimator's status (/stiffness/estimate: (name, level, message) per status) as text and level: the
-    worst level, and each status."""
-    level = max((s[1] for s in statuses), default=OK)
+    """The estimator's status (/stiffness/estimate: (name, level, message) per status, as published) as text and
+    level: each status, its level read back (:func:`~crane_stiffness.status.read_level`: WAITING for a part that has
+    not begun), and the overall level (:func:`~crane_stiffness.status.overall`: the worst of the parts, a waiting
+    part never worse than those running)."""
+    levels = [read_level(published, message) for _, published, message in statuses]
     items = [{'name': name, 'level': lvl, 'level_name': NAMES.get(lvl, str(lvl)), 'message': message}
-             for name, lvl, message in statuses]
+             for (name, _, message), lvl in zip(statuses, levels)]
+    level = overall(levels)
     text = '\n'.join(f'{i["name"]}: {i["level_name"]} {i["message"]}' for i in items)
     return {'level': level, 'level_name': NAMES.get(level, str(level)), 'text': text, 'statuses': items}
 

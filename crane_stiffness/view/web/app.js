@@ -4,7 +4,8 @@
 'use strict';
 const CHANNELS = ['xy', 'fit_lines', 'prediction', 'estimate', 'status', 'wires', 'scene'];
 const state = { messages: 0, lastCount: 0, data: {} };
-const LEVELS = ['OK', 'WARN', 'ERROR', 'STALE'];
+// Status levels (crane_stiffness.status), each a CSS class level-<n>: -1 WAITING (not begun), 0 OK, 1 WARN, 2 ERROR,
+// 3 STALE (data that was flowing stopped). The status channel names them (level_name).
 
 function fmt(v, digits) { return v === null || v === undefined ? '–' : Number(v).toPrecision(digits); }
 
