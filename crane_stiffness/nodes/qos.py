@@ -17,3 +17,12 @@ def rclpy_qos(qos: topics.QoS, depth: int | None = None) -> QoSProfile:
 RELIABLE_QOS = rclpy_qos(topics.RELIABLE)
 SENSOR_QOS = rclpy_qos(topics.SENSOR_DATA)
 LATCHED_QOS = rclpy_qos(topics.LATCHED)
+#: The sensor streams on simulated time: reliable (the clock waits for every reader to acknowledge, so nothing is
+#: lost at any load), as deep as the sensor-data class. A best-effort reader (``ros2 topic echo``) still matches.
+SIM_SENSOR_QOS = rclpy_qos(topics.QoS('reliable', 'volatile', topics.SENSOR_QUEUE_DEPTH))
+
+
+def sensor_qos(sim_time: bool) -> QoSProfile:
+    """The QoS of a sensor stream's publisher or reader: best effort on wall-clock time (real drivers publish so),
+    reliable on simulated time."""
+    return SIM_SENSOR_QOS if sim_time else SENSOR_QOS

@@ -147,6 +147,9 @@ def run(node_factory: Callable[[], NodeT], args: Sequence[str] | None = None,
     except ExternalShutdownException:
         pass
     finally:
+        sim = getattr(node, 'sim', None)  # a SimTimeParticipant: simulated time waits for this node no more
+        if sim is not None:
+            sim.leave()
         close = getattr(node, 'close', None)
         if close is not None:
             close()

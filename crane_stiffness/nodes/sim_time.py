@@ -1,0 +1,176 @@
+"""A node's part in simulated time (crane_stiffness.sim.lockstep): follow the stage's watermark, report progress.
+
+A node of the simulated rig that runs with ``use_sim_time`` creates a :class:`SimTimeParticipant` with its stage.
+The participant subscribes the clock source's watermarks (topics.SIM_WATERMARKS) and calls ``on_watermark(t_ns)``
+each time its stage's watermark moves on and every input message the stages below published up to it has been
+handled: each participant counts what it publishes (:meth:`counted`) and reports the counts with its progress, the
+clock sums them per stage, and a node waits (taking what is queued, ``drain``) until it has handled as many messages
+of each input topic (:meth:`received`). Nothing depends on the order in which the executor hands over messages or
+on how fast DDS delivers them. The node calls :meth:`report` once it has published its own outputs up to some time.
+On close, :meth:`leave` tells the clock not to wait for this node any more. Messages are std_msgs/String holding
+JSON (topics.SIM_PROGRESS: name, stage, t [ns], sent {topic: count}; topics.SIM_WATERMARKS: t [ns] per stage, sent
+per stage {topic: count}).
+
+Without ``use_sim_time`` nothing of this exists (:attr:`active` is False) and the node keeps wall-clock time.
+"""
+from __future__ import annotations
+
+import json
+import time
+from typing import Any, Callable, Sequence
+
+from rclpy.clock import Clock, ClockType
+from rclpy.node import Node
+from rclpy.publisher import Publisher
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from std_msgs.msg import String
+
+from crane_stiffness import topics
+from crane_stiffness.sim.lockstep import LEFT_NS
+
+#: The progress and watermark topics: reliable, volatile, deep enough for a reader starved of CPU for a while.
+SIM_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000, reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.VOLATILE)
+#: Longest a watermark waits for input messages the stages below published (wall time) [s]: past it the node says
+#: which are missing (ERROR in its log, counted) and goes on, so a message lost for good cannot stop the rig.
+WAIT_LIMIT_S = 5.0
+_STEADY = Clock(clock_type=ClockType.STEADY_TIME)
+
+
+def uses_sim_time(node: Node) -> bool:
+    """Whether ``node`` runs on simulated time (its ``use_sim_time`` parameter)."""
+    return bool(node.get_parameter('use_sim_time').value)
+
+
+def take_queued(subscription) -> tuple[Any, Any] | None:
+    """The next (message, message info) already queued on ``subscription`` (what the executor would take next), or
+    None. Draining with it before acting on a watermark makes the order of callbacks irrelevant."""
+    with subscription.handle:
+        return subscription.handle.take_message(subscription.msg_type, subscription.raw)
+
+
+def drain(subscription, handle: Callable[[Any], Any], limit: int = 100_000) -> None:
+    """Hand every message queued on ``subscription`` to ``handle`` (at most ``limit``)."""
+    n = 0
+    while n < limit:
+        taken = take_queued(subscription)
+        if taken is None:
+            break
+        handle(taken[0])
+        n += 1
+
+
+class SimTimeParticipant:
+    """This node's part in simulated time (see the module docstring).
+
+    Args:
+        node: The node (its ``use_sim_time`` parameter decides whether anything happens).
+        stage: 0 the load program, 1 the crane model, 2 the sensors, 3 the consumers (estimator, recorder).
+        on_watermark: Called with the stage's new watermark [ns], once every input message the stages below have
+            published up to it has been handled (``drain`` takes what is queued).
+        drain: Takes every input already queued (see :func:`drain`); None: nothing to take.
+        inputs: Topics this node reads from the stages below: their messages are counted (:meth:`received`) and
+            a watermark waits until as many have arrived as the stages below published (:meth:`counted`).
+    """
+
+    def __init__(self, node: Node, stage: int, on_watermark: Callable[[int], None],
+                 drain: Callable[[], None] | None = None, inputs: Sequence[str] = ()) -> None:
+        self.node = node
+        self.stage = stage
+        self.active = uses_sim_time(node)
+        self.watermark_ns = -1
+        self.reported_ns = -1
+        self.inputs = [node.resolve_topic_name(t) for t in inputs]
+        self.sent: dict[str, int] = {}       # messages published per topic since the first report
+        self.got: dict[str, int] = {t: 0 for t in self.inputs}  # messages handled per input topic
+        self.gave_up = 0  # watermarks acted on although inputs were missing after WAIT_LIMIT_S
+        self._counting = False
+        self._pending: tuple[int, dict[str, int]] | None = None
+        self._pending_since = 0.0
+        self._on_watermark = on_watermark
+        self._drain = drain
+        self._name = node.get_fully_qualified_name().lstrip('/')
+        self._pub: Publisher | None = None
+        self._timer: Any = None  # a wall-clock timer re-trying a watermark whose inputs are still in flight
+        if self.active:
+            self._pub = node.create_publisher(String, topics.SIM_PROGRESS, SIM_QOS)
+            node.create_subscription(String, topics.SIM_WATERMARKS, self._on_marks, SIM_QOS)
+
+    # --- counting ---
+    def counted(self, pub: Publisher) -> Publisher:
+        """``pub`` with its messages counted (from the first report on): the stages above wait for them."""
+        if not self.active:
+            return pub
+        publish, topic = pub.publish, pub.topic_name
+
+        def counting(msg: Any) -> None:
+            publish(msg)
+            if self._counting:
+                self.sent[topic] = self.sent.get(topic, 0) + 1
+        pub.publish = counting  # type: ignore[method-assign]
+        return pub
+
+    def received(self, topic: str, n: int = 1) -> None:
+        """``n`` messages of input ``topic`` handled."""
+        if self.active and topic in self.got:
+            self.got[topic] += n
+
+    # --- watermarks ---
+    def _on_marks(self, msg: String) -> None:
+        marks = json.loads(msg.data)
+        mark = int(marks['t'][self.stage])
+        if mark < self.watermark_ns or (mark == self.watermark_ns and self.reported_ns >= 0):
+            return  # nothing new (a mark repeated for nodes that join late)
+        sent = marks['sent'][self.stage]
+        if self._pending is None or self._pending[0] != mark:
+            self._pending_since = time.monotonic()  # a repeated mark does not restart the wait
+        self._pending = (mark, {t: int(sent.get(t, 0)) for t in self.inputs})
+        self._try()
+
+    def _try(self) -> None:
+        """Act on the pending watermark once every input message up to it is in."""
+        if self._pending is None:
+            return
+        if self._drain is not None:
+            self._drain()
+        mark, expected = self._pending
+        short = {t: n - self.got[t] for t, n in expected.items() if self.got[t] < n}
+        if short:
+            waited = time.monotonic() - self._pending_since
+            if waited < WAIT_LIMIT_S:
+                if self._timer is None:
+                    self._timer = self.node.create_timer(0.002, self._try, clock=_STEADY)
+                else:
+                    self._timer.reset()
+                return
+            self.gave_up += 1
+            self.node.get_logger().error(
+                f'simulated time {mark * 1e-9:.3f} s: after {waited:.0f} s still missing '
+                f'{", ".join(f"{n} on {t}" for t, n in short.items())}; going on without them',
+                throttle_duration_sec=5.0)
+            for t in short:
+                self.got[t] = expected[t]
+        if self._timer is not None:
+            self._timer.cancel()
+        self._pending = None
+        self.watermark_ns = max(self.watermark_ns, mark)
+        self._counting = True  # from time's start on: what was sent before (to readers not yet matched) is not
+        self._on_watermark(mark)
+
+    def report(self, progress_ns: int, *, force: bool = False) -> None:
+        """Everything this node publishes up to ``progress_ns`` is out (counted): say so to the clock."""
+        if self._pub is None or (progress_ns <= self.reported_ns and not force):
+            return
+        self._counting = True
+        self.reported_ns = max(self.reported_ns, progress_ns)
+        self._publish(self.reported_ns)
+
+    def leave(self) -> None:
+        """This node ends: the clock waits for it no more."""
+        if self._pub is not None and self.node.context.ok():
+            self._publish(LEFT_NS)
+
+    def _publish(self, progress_ns: int) -> None:
+        assert self._pub is not None
+        self._pub.publish(String(data=json.dumps({'name': self._name, 'stage': self.stage, 't': progress_ns,
+                                                   'sent': self.sent})))
