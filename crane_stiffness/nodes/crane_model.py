@@ -34,6 +34,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PoseStamped, WrenchStamped
 from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.node import Node
@@ -53,6 +54,7 @@ from crane_stiffness.nodes.diagnostics import Counters, Diagnostics
 from crane_stiffness.nodes.messages import finite
 from crane_stiffness.nodes.run import run
 from crane_stiffness.nodes.parameters import Params, check
+from crane_stiffness.nodes.sim_time import SimTimeParticipant, drain, uses_sim_time
 from crane_stiffness.status import ERROR, OK
 
 MODEL_STATUS = topics.MODEL_STATUS
@@ -120,6 +122,8 @@ class CraneModel(Node):
         self._readers: dict[str, int] = {}  # matched readers by kind, as last reported
         self._resend_from = 0
         self._resend_timer: Timer | None = None
+        self._sim_start_ns: int | None = None  # simulated time: when time starts, and whether the state went out
+        self._sim_started = False
         self.pub_applied = self.create_publisher(
             WrenchStamped, topics.APPLIED_WRENCH, RELIABLE_QOS,
             event_callbacks=PublisherEventCallbacks(matched=self._on_applied_matched))
@@ -133,7 +137,29 @@ class CraneModel(Node):
         self.diagnostics = Diagnostics(self, self._report)
         self.settings: dict[str, Any] = {}
         self.params = Params(self, PARAMS, _validate, self._set_geometry)
-        self.create_subscription(WrenchStamped, topics.WRENCH_COMMAND, self._on_command, RELIABLE_QOS)
+        self.sub_command = self.create_subscription(WrenchStamped, topics.WRENCH_COMMAND, self._on_command,
+                                                    RELIABLE_QOS)
+        # Simulated time: every command up to the watermark is in (drained first) and answered; once the sensors
+        # have acknowledged the answers, the model's progress says so.
+        self.sim = SimTimeParticipant(self, 1, self._on_watermark, inputs=[topics.WRENCH_COMMAND],
+                                      drain=lambda: drain(self.sub_command, self._on_command))
+        for pub in (self.pub_applied, self.pub_pose, self.pub_wires, self.pub_rejected):
+            self.sim.counted(pub)
+
+    def _on_watermark(self, t_ns: int) -> None:
+        if self._sim_start_ns is None:
+            self._sim_start_ns = t_ns  # the first watermark: the start, while time waits for every node to join
+        elif not self._sim_started and t_ns > self._sim_start_ns:
+            # Time has started, so every reader has matched (sim_clock waited): the state in force is sent once,
+            # stamped with the start, instead of re-sent on matching at times that differ from run to run.
+            self._sim_started = True
+            start = Time(sec=self._sim_start_ns // 1_000_000_000, nanosec=self._sim_start_ns % 1_000_000_000)
+            self._publish_applied(start)
+            if self.equilibrium is not None:
+                stamp, self.stamp = self.stamp, start
+                self._publish_pose(self.equilibrium)
+                self.stamp = stamp
+        self.sim.report(t_ns)
 
     # --- callbacks ---
     def _set_geometry(self, geometry: CraneGeometry, values: dict[str, Any]) -> None:
@@ -152,6 +178,7 @@ class CraneModel(Node):
 
     def _on_command(self, msg: WrenchStamped) -> None:
         self.counters.received += 1
+        self.sim.received(topics.WRENCH_COMMAND)
         f, m = msg.wrench.force, msg.wrench.torque
         load = np.array([f.x, f.y, f.z, m.x, m.y, m.z])
         fault = self._command_fault(load)
@@ -233,13 +260,13 @@ class CraneModel(Node):
     def _on_applied_matched(self, status) -> None:
         """A new reader of the applied wrench (a sensor started after this node): send it the load in force,
         stamped now, so it can start measuring before the first command (and again, see :meth:`_late_joiner`)."""
-        if self._new_reader('applied', status):
+        if self._new_reader('applied', status) and not uses_sim_time(self):
             self._publish_applied(self.get_clock().now().to_msg())
             self._late_joiner('applied')
 
     def _on_pose_matched(self, status) -> None:
         """A new pose reader: send it the current pose (stamped now), as a latched topic would."""
-        if self._new_reader('pose', status):
+        if self._new_reader('pose', status) and not uses_sim_time(self):
             self._publish_current_pose()
             self._late_joiner('pose')
 

@@ -32,9 +32,10 @@ from std_srvs.srv import Trigger
 from crane_stiffness import topics
 from crane_stiffness.axes import AXES
 from crane_stiffness.params.spec import ParamSpec
-from crane_stiffness.nodes.qos import RELIABLE_QOS, SENSOR_QOS
+from crane_stiffness.nodes.qos import RELIABLE_QOS, sensor_qos
 from crane_stiffness.nodes.diagnostics import Diagnostics, SensorCounters
-from crane_stiffness.nodes.sensor_timing import SampleSchedule, ZeroEpoch, check_sensor_params
+from crane_stiffness.nodes.sensor_timing import STATE_WAIT_PARAM, SampleSchedule, ZeroEpoch, check_sensor_params
+from crane_stiffness.nodes.sim_time import SimTimeParticipant, drain
 from crane_stiffness.nodes.messages import finite
 from crane_stiffness.nodes.run import run
 from crane_stiffness.nodes.parameters import Params
@@ -51,6 +52,7 @@ PARAMS = (
     ParamSpec('frame_id', 'load_cell', 'header.frame_id of the published wrench; axes aligned with crane_base [-]'),
     *LOAD_CELL_PARAMS,
     ParamSpec('tare_samples', 100, 'readings averaged by the ~/tare service [samples]', low=1),
+    STATE_WAIT_PARAM,
 )
 
 
@@ -72,11 +74,17 @@ class LoadCell(Node):
         self.model: LoadCellModel | None = None  # set by _apply (Params, below): _tick asserts it
         self.schedule = SampleSchedule(self, self._tick)
         self.settings: dict[str, Any] = {}
-        self.t0_ns = self.get_clock().now().nanoseconds  # drift time origin; also the start reported
-        self.pub = self.create_publisher(WrenchStamped, topics.LOAD_CELL_WRENCH, SENSOR_QOS)
+        # Drift time origin; also the start reported. On simulated time the clock reads 0 until the first /clock:
+        # then the first sample instant is the origin.
+        self.t0_ns = self.get_clock().now().nanoseconds
+        self.pub = self.create_publisher(WrenchStamped, topics.LOAD_CELL_WRENCH, sensor_qos(self.schedule.sim_time))
         self.tare_epoch = ZeroEpoch(self, topics.LOAD_CELL_TARE)  # tares since start, latched on /load_cell/tare
         self.params = Params(self, PARAMS, _validate, self._apply)
-        self.create_subscription(WrenchStamped, topics.APPLIED_WRENCH, self._on_applied, RELIABLE_QOS)
+        self.sub_applied = self.create_subscription(WrenchStamped, topics.APPLIED_WRENCH, self._on_applied,
+                                                    RELIABLE_QOS)
+        self.sim = SimTimeParticipant(self, 2, self._on_watermark, inputs=[topics.APPLIED_WRENCH],
+                                      drain=lambda: drain(self.sub_applied, self._on_applied))
+        self.sim.counted(self.pub)
         self.create_service(Trigger, '~/tare', self._srv_tare)
         self.diagnostics = Diagnostics(self, self._report)
         self.get_logger().info(f'{topics.WAITING_FOR_LOAD} before publishing')
@@ -97,10 +105,12 @@ class LoadCell(Node):
             model.tare(self.model.offset)  # keep the tare across a parameter change
         self.model = model
         self.schedule.configure(values['sample_rate_hz'], values['publish_rate_hz'])
+        self.schedule.gate.wait_ns = round(values['state_wait_s'] * 1e9)
         self.settings = values
 
     def _on_applied(self, msg: WrenchStamped) -> None:
         self.counters.received += 1
+        self.sim.received(topics.APPLIED_WRENCH)
         f, m = msg.wrench.force, msg.wrench.torque
         wrench = (f.x, f.y, f.z, m.x, m.y, m.z)
         if not finite(wrench):  # crane_model never sends one; another publisher might
@@ -109,15 +119,31 @@ class LoadCell(Node):
             return
         first = not self.applied.has_value
         stamp_ns = msg.header.stamp.sec * NS_PER_S + msg.header.stamp.nanosec
-        self.applied.update(wrench, stamp_ns, self.get_clock().now().nanoseconds)
+        self.applied.update(wrench, stamp_ns, self._arrival_ns(stamp_ns))
         self.counters.used += 1
         if first:
             self.get_logger().info(f'first applied wrench {list(wrench)}: publishing')
 
+    def _on_watermark(self, t_ns: int) -> None:
+        """Simulated time: every applied wrench up to ``t_ns`` is in: measure and publish the instants up to it."""
+        self._measure(self.schedule.due_until(t_ns))
+        self.sim.report(t_ns)
+
+    def _arrival_ns(self, stamp_ns: int) -> int:
+        """The node clock's now for a stamped input. On simulated time the watermarks, not the node's clock
+        (updated by /clock on its own schedule), say what is known: a stamp is never "in the future" there."""
+        now = self.get_clock().now().nanoseconds
+        return max(now, stamp_ns) if self.sim.active else now
+
     def _tick(self) -> None:
-        times = self.schedule.due()
+        self._measure(self.schedule.released(self.applied))
+
+    def _measure(self, times) -> None:
+        """Measure and publish the sample instants ``times`` (int64 ns, ascending)."""
         if times.size == 0:
             return
+        if self.t0_ns <= 0:
+            self.t0_ns = int(times[0])
         true_wrench, valid = self.applied.read(times)
         if not valid.all():  # instants before the first applied wrench: nothing to measure
             self.counters.waiting_samples += int((~valid).sum())
@@ -163,7 +189,7 @@ class LoadCell(Node):
         new = self.saturated - self._saturated_reported
         self._saturated_reported = self.saturated.copy()
         pairs = self.counters.as_pairs() + [
-            ('skipped_samples', str(self.clock.skipped)),
+            ('skipped_samples', str(self.clock.skipped)), ('late_state_updates', str(self.applied.late)),
             ('offset', str([round(v, 7) for v in self.model.offset.tolist()])),
             ('tare_count', str(self.tare_count)), ('tared_at', str(self.tared_at_ns)),
             ('started_at', str(self.t0_ns)),
@@ -173,6 +199,9 @@ class LoadCell(Node):
             return WARN, f'overload: {axes} saturated at full scale since the last report', pairs
         if not self.applied.has_value:
             return OK, topics.WAITING_FOR_LOAD, pairs
+        if self.applied.late and self.settings['state_wait_s'] > 0:
+            return WARN, (f'{self.applied.late} applied wrench(es) arrived after samples at their stamps were '
+                          f'published (longer than state_wait_s = {self.settings["state_wait_s"]:g} s)'), pairs
         return OK, f'{self.counters.published} samples published', pairs
 
 

@@ -23,6 +23,7 @@ from functools import partial
 from typing import Any, Callable
 
 from geometry_msgs.msg import WrenchStamped
+from rclpy.clock import Clock, ClockType
 from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.subscription import Subscription
@@ -36,6 +37,7 @@ from crane_stiffness.nodes.qos import LATCHED_QOS, RELIABLE_QOS, rclpy_qos
 from crane_stiffness.nodes.diagnostics import Counters, Diagnostics
 from crane_stiffness.nodes.run import run
 from crane_stiffness.nodes.parameters import Params, check
+from crane_stiffness.nodes.sim_time import SimTimeParticipant, uses_sim_time
 from crane_stiffness.rig_description import NODES as RIG_NODES
 from crane_stiffness.rig_description import readiness
 from crane_stiffness.sim.program import PROGRAM_KEYS, PROGRAM_PARAMS, LoadProgram, ProgramState
@@ -167,6 +169,13 @@ class LoadProgramNode(Node):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('load_program', **kwargs)
+        # Simulated time: the stage-0 watermark (the clock) drives the program's ticks, each command stamped on the
+        # grid k / rate_hz, and the program starts start_delay_s after the time starts: the same commands at the
+        # same stamps in every run, whatever the machine's load (see _on_watermark).
+        self.sim_time = uses_sim_time(self)
+        self._ready = not self.sim_time  # simulated time: the readiness below was met
+        self._start_at_ns: int | None = None
+        self._last_tick_ns: int | None = None
         self.state = 'idle'
         self.elapsed = 0.0        # program time reached when last paused [s]
         self.started_at: float | None = None    # node-clock time of (re)start [s]
@@ -179,6 +188,8 @@ class LoadProgramNode(Node):
         self.pub_progress = self.create_publisher(Float64, topics.PROGRAM_PROGRESS, LATCHED_QOS)
         self.pub_state = self.create_publisher(String, topics.PROGRAM_STATE, LATCHED_QOS)
         self.params = Params(self, PARAMS, self._validate, self._apply)
+        self.sim = SimTimeParticipant(self, 0, self._on_watermark)
+        self.sim.counted(self.pub_cmd)
         self.create_service(Trigger, '~/start', self._srv_start)
         self.create_service(Trigger, '~/pause', self._srv_pause)
         self.create_service(Trigger, '~/stop', self._srv_stop)
@@ -188,7 +199,9 @@ class LoadProgramNode(Node):
         self._wait_started = self._next_report = 0.0  # time.monotonic() [s], set with the readiness
         if self.params['autostart']:
             assert self.program is not None
-            self._readiness = _Readiness(self, self.params['wait_for_messages'],
+            # On simulated time no message can come before time starts, and time starts only when every node of
+            # the rig is there (sim_clock): the program waits for the readers of its commands alone.
+            self._readiness = _Readiness(self, [] if self.sim_time else self.params['wait_for_messages'],
                                          wanted_subscribers(self.params['wait_for_subscribers']),
                                          self.params['min_subscribers'], self.pub_cmd.get_subscription_count)
             self._wait_started = time.monotonic()
@@ -198,7 +211,10 @@ class LoadProgramNode(Node):
             timeout = self.params['ready_timeout_s']
             self.get_logger().info(f'waiting for the rig before starting {self.program.name!r} '
                                    f'({f"at most {timeout:g} s" if timeout > 0 else "no time limit"}): {what}')
-            self._autostart = self.create_timer(0.05, self._auto)
+            self._autostart = self.create_timer(0.05, self._auto, clock=Clock(clock_type=ClockType.STEADY_TIME)
+                                                if self.sim_time else None)
+        else:
+            self._ready = True
 
     # --- parameters ---
     def _validate(self, values: dict[str, Any]) -> LoadProgram:
@@ -213,7 +229,8 @@ class LoadProgramNode(Node):
         self.program = program
         if self.timer is not None:
             self.destroy_timer(self.timer)
-        self.timer = self.create_timer(1.0 / program.rate_hz, self._tick)
+        if not self.sim_time:
+            self.timer = self.create_timer(1.0 / program.rate_hz, self._tick)
         self.get_logger().info(f'program {program.name!r}: {len(program.segments)} segments x {program.repeats}, '
                                f'{program.duration_s:.3g} s')
 
@@ -221,10 +238,11 @@ class LoadProgramNode(Node):
     def _now(self) -> float:
         return self.get_clock().now().nanoseconds * 1e-9
 
-    def _program_time(self) -> float:
+    def _program_time(self, now_s: float | None = None) -> float:
+        """Program time [s] at node-clock time ``now_s`` (default: now)."""
         if self.state == 'running':
             assert self.started_at is not None  # set by _start
-            return self.elapsed + self._now() - self.started_at
+            return self.elapsed + (self._now() if now_s is None else now_s) - self.started_at
         return self.elapsed
 
     def _auto(self) -> None:
@@ -237,6 +255,13 @@ class LoadProgramNode(Node):
             if not missing:
                 self._ready_at = now
                 self._readiness.close()
+                if self.sim_time:  # the program starts start_delay_s of simulated time after time starts
+                    self.destroy_timer(self._autostart)
+                    self._autostart = None
+                    self._ready = True
+                    self.get_logger().info(f'rig ready; {self.program.name!r} starts '
+                                           f'{self.params["start_delay_s"]:g} s after simulated time starts')
+                    return
                 self.get_logger().info(f'rig ready after {waited:.1f} s; starting {self.program.name!r} in '
                                        f'{self.params["start_delay_s"]:g} s')
             elif 0 < self.params['ready_timeout_s'] <= waited:
@@ -260,25 +285,51 @@ class LoadProgramNode(Node):
         if self.state == 'idle':
             self._start()
 
-    def _start(self) -> str:
+    def _start(self, at_s: float | None = None) -> str:
         if self.state == 'running':
             return 'already running'
         if self.state in ('done', 'stopped', 'idle'):
             self.elapsed = 0.0
         assert self.program is not None
-        self.started_at = self._now()
+        self.started_at = self._now() if at_s is None else at_s
         self.state = 'running'
         self._publish_state()
         return f'running {self.program.name!r} from t = {self.elapsed:.3f} s'
 
+    def _on_watermark(self, t_ns: int) -> None:
+        """Simulated time reached ``t_ns``: play the program's ticks on the grid k / rate_hz up to it, then report."""
+        if not self._ready:
+            return  # not reporting holds simulated time at its start
+        assert self.program is not None
+        period = round(1e9 / self.program.rate_hz)
+        if self._last_tick_ns is None:
+            self._last_tick_ns = t_ns // period * period
+            if self.params['autostart']:
+                start = t_ns + round(self.params['start_delay_s'] * 1e9)
+                self._start_at_ns = -(-start // period) * period
+        tick = self._last_tick_ns + period
+        while tick <= t_ns:
+            if self.state == 'idle' and self._start_at_ns is not None and tick >= self._start_at_ns:
+                self._start_at_ns = None
+                self._start(at_s=tick * 1e-9)
+                self.get_logger().info(f'started {self.program.name!r} at simulated time {tick * 1e-9:.3f} s')
+            self._emit(tick)
+            tick += period
+        self._last_tick_ns = tick - period
+        self.sim.report(t_ns)
+
     def _tick(self) -> None:
+        self._emit(self.get_clock().now().nanoseconds)
+
+    def _emit(self, t_ns: int) -> None:
+        """The program's command at node-clock time ``t_ns`` (while running or paused), stamped ``t_ns``."""
         if self.state not in ('running', 'paused'):
             return
         assert self.program is not None
-        st = self.program.wrench_at(self._program_time())
+        st = self.program.wrench_at(self._program_time(t_ns * 1e-9))
         self.last = st
         cmd = WrenchStamped()
-        cmd.header.stamp = self.get_clock().now().to_msg()
+        cmd.header.stamp.sec, cmd.header.stamp.nanosec = divmod(t_ns, 1_000_000_000)
         cmd.header.frame_id = topics.FRAME_BASE
         w = [float(v) for v in st.wrench]
         cmd.wrench.force.x, cmd.wrench.force.y, cmd.wrench.force.z = w[:3]

@@ -27,9 +27,10 @@ from std_srvs.srv import Trigger
 
 from crane_stiffness import topics
 from crane_stiffness.params.spec import ParamSpec
-from crane_stiffness.nodes.qos import RELIABLE_QOS, SENSOR_QOS
+from crane_stiffness.nodes.qos import RELIABLE_QOS, sensor_qos
 from crane_stiffness.nodes.diagnostics import Diagnostics, SensorCounters
-from crane_stiffness.nodes.sensor_timing import SampleSchedule, ZeroEpoch, check_sensor_params
+from crane_stiffness.nodes.sensor_timing import STATE_WAIT_PARAM, SampleSchedule, ZeroEpoch, check_sensor_params
+from crane_stiffness.nodes.sim_time import SimTimeParticipant, drain
 from crane_stiffness.nodes.messages import pose_vector
 from crane_stiffness.nodes.run import run
 from crane_stiffness.nodes.parameters import Params
@@ -45,6 +46,7 @@ PARAMS = (
               'rate deliver together. Higher: lower latency, more CPU [Hz]', above=0.0),
     ParamSpec('frame_id', 'lvdt', 'header.frame_id of the published reading [-]'),
     *LVDT_PARAMS,
+    STATE_WAIT_PARAM,
 )
 
 
@@ -68,12 +70,15 @@ class Lvdt(Node):
         self.model: LvdtModel | None = None  # set by _apply (Params, below): the methods assert it
         self.schedule = SampleSchedule(self, self._tick)
         self.settings: dict[str, Any] = {}
-        self.pub = self.create_publisher(PointStamped, topics.LVDT_DISPLACEMENT, SENSOR_QOS)
+        self.pub = self.create_publisher(PointStamped, topics.LVDT_DISPLACEMENT, sensor_qos(self.schedule.sim_time))
         self.zero_epoch = ZeroEpoch(self, topics.LVDT_ZERO, publish=False)  # zeros since start, latched
         self.params = Params(self, PARAMS, _validate, self._apply)
         if not self.settings['zero_on_first_pose']:  # else epoch 1 at the first pose, before any reading
             self.zero_epoch.step(0)
-        self.create_subscription(PoseStamped, topics.PLATFORM_POSE, self._on_pose, RELIABLE_QOS)
+        self.sub_pose = self.create_subscription(PoseStamped, topics.PLATFORM_POSE, self._on_pose, RELIABLE_QOS)
+        self.sim = SimTimeParticipant(self, 2, self._on_watermark, inputs=[topics.PLATFORM_POSE],
+                                      drain=lambda: drain(self.sub_pose, self._on_pose))
+        self.sim.counted(self.pub)
         self.create_service(Trigger, '~/zero', self._srv_zero)
         self.diagnostics = Diagnostics(self, self._report)
 
@@ -93,6 +98,7 @@ class Lvdt(Node):
         if self.zero_pose is not None:
             self._zero(self.zero_pose, new=False)  # the new sensor set-up keeps the zero
         self.schedule.configure(values['sample_rate_hz'], values['publish_rate_hz'])
+        self.schedule.gate.wait_ns = round(values['state_wait_s'] * 1e9)
         self.settings = values
 
     def _zero(self, pose: np.ndarray, *, new: bool = True) -> None:
@@ -106,13 +112,14 @@ class Lvdt(Node):
 
     def _on_pose(self, msg: PoseStamped) -> None:
         self.counters.received += 1
+        self.sim.received(topics.PLATFORM_POSE)
         pose = pose_vector(msg)
         if pose is None:
             self.counters.dropped_non_finite += 1
             return
         first = not self.pose.has_value
         stamp_ns = msg.header.stamp.sec * NS_PER_S + msg.header.stamp.nanosec
-        self.pose.update(pose, stamp_ns, self.get_clock().now().nanoseconds)
+        self.pose.update(pose, stamp_ns, self._arrival_ns(stamp_ns))
         self.counters.used += 1
         if first and self.settings['zero_on_first_pose']:
             self._zero(pose)
@@ -120,8 +127,22 @@ class Lvdt(Node):
             self.get_logger().info(f'zeroed at the first pose: u = {pose[:3].tolist()} m, zero offset '
                                    f'{self.model.zero_offset:.9g} m')
 
+    def _on_watermark(self, t_ns: int) -> None:
+        """Simulated time: every pose up to ``t_ns`` is in: measure and publish the instants up to it."""
+        self._measure(self.schedule.due_until(t_ns))
+        self.sim.report(t_ns)
+
+    def _arrival_ns(self, stamp_ns: int) -> int:
+        """The node clock's now for a stamped input. On simulated time the watermarks, not the node's clock
+        (updated by /clock on its own schedule), say what is known: a stamp is never "in the future" there."""
+        now = self.get_clock().now().nanoseconds
+        return max(now, stamp_ns) if self.sim.active else now
+
     def _tick(self) -> None:
-        times = self.schedule.due()
+        self._measure(self.schedule.released(self.pose))
+
+    def _measure(self, times) -> None:
+        """Measure and publish the sample instants ``times`` (int64 ns, ascending)."""
         if times.size == 0:
             return
         poses, valid = self.pose.read(times)
@@ -162,6 +183,7 @@ class Lvdt(Node):
         self._out_of_range_reported = self.out_of_range
         pairs = self.counters.as_pairs() + [('out_of_range', str(self.out_of_range)),
                                             ('skipped_samples', str(self.clock.skipped)),
+                                            ('late_state_updates', str(self.pose.late)),
                                             ('zeroed', str(self.zero_pose is not None).lower()),
                                             ('zero_offset_m', repr(self.model.zero_offset)),
                                             ('zero_count', str(self.zero_count)),
@@ -171,6 +193,9 @@ class Lvdt(Node):
             return WARN, f'out of range: {new} samples saturated at the stroke {self.model.range_m} m', pairs
         if not self.pose.has_value:
             return OK, f'waiting for {topics.PLATFORM_POSE}', pairs
+        if self.pose.late and self.settings['state_wait_s'] > 0:
+            return WARN, (f'{self.pose.late} pose(s) arrived after samples at their stamps were published (longer '
+                          f'than state_wait_s = {self.settings["state_wait_s"]:g} s)'), pairs
         return OK, f'{self.counters.published} samples published', pairs
 
 

@@ -10,8 +10,18 @@ from std_msgs.msg import Float64
 
 from crane_stiffness.nodes.parameters import check, positive
 from crane_stiffness.nodes.qos import LATCHED_QOS
-from crane_stiffness.sim.sampling import SampleClock
+from crane_stiffness.nodes.sim_time import uses_sim_time
+from crane_stiffness.params.spec import ParamSpec
+from crane_stiffness.sim.sampling import ReleaseGate, SampleClock, StampedHold
 
+
+#: The longest a simulated sensor waits on wall-clock time for the input in force at a sample instant (see
+#: crane_stiffness.sim.sampling.ReleaseGate); on simulated time it never needs to.
+STATE_WAIT_PARAM = ParamSpec('state_wait_s', 0.0, 'on wall-clock time, the longest a sample waits for the '
+                             "model's state at its instant before the state held is taken as in force; 0 = no "
+                             'wait. Updates that arrive after samples at their stamps went out are counted '
+                             '(late_state_updates on /diagnostics; WARN when this is > 0). Unused on simulated time, '
+                             'where the clock waits instead [s]', low=0.0, high=10.0)
 
 #: Longest a node waits at start (or on a rate change) to put its timer on the clock grid [s].
 MAX_ALIGN_WAIT_S = 0.05
@@ -64,12 +74,17 @@ class SampleSchedule:
         self._rates: tuple[float, float] | None = None
         self.clock: SampleClock | None = None
         self.timer = None
+        #: On simulated time the stage's watermark drives the sampling (:meth:`due_until`), not a timer.
+        self.sim_time = uses_sim_time(node)
+        self.gate = ReleaseGate(0)
 
     def configure(self, sample_rate_hz: float, publish_rate_hz: float) -> None:
         previous = self._rates or (None, None)
         if self.clock is None or sample_rate_hz != previous[0]:
             self.clock = SampleClock(sample_rate_hz, start_after_ns=None if self.clock is None else self.clock.last_ns)
-        if self.timer is None or publish_rate_hz != previous[1]:
+        if self.sim_time:
+            pass
+        elif self.timer is None or publish_rate_hz != previous[1]:
             if self.timer is not None:
                 self._node.destroy_timer(self.timer)
             self.timer = create_grid_timer(self._node, 1.0 / publish_rate_hz, self._tick)
@@ -78,6 +93,19 @@ class SampleSchedule:
     def due(self):
         """The sample instants since the previous call (int64 ns, ascending; see SampleClock.due)."""
         return self.clock.due(self._node.get_clock().now().nanoseconds)
+
+    def due_until(self, t_ns: int):
+        """Simulated time: the sample instants since the previous call up to ``t_ns`` (the stage's watermark)."""
+        assert self.clock is not None
+        return self.clock.due(t_ns)
+
+    def released(self, hold: StampedHold):
+        """Wall-clock time: the instants due now, held back until ``hold`` knows the input at them or
+        ``state_wait_s`` has passed (:class:`~crane_stiffness.sim.sampling.ReleaseGate`)."""
+        now = self._node.get_clock().now().nanoseconds
+        assert self.clock is not None  # configured on start
+        self.gate.add(self.clock.due(now))
+        return self.gate.release(hold.known_through_ns, now)
 
 
 class ZeroEpoch:

@@ -40,6 +40,7 @@ import json
 import os
 import socket
 import threading
+import time
 from functools import partial
 from pathlib import Path
 from typing import Any, Sequence
@@ -61,6 +62,8 @@ from crane_stiffness.nodes.heap import TRIM_INTERVAL_S, release_free_memory, tri
 from crane_stiffness.nodes.run import run
 from crane_stiffness.nodes.parameter_reader import NodeParameterReader, plain
 from crane_stiffness.nodes.parameters import Params
+from crane_stiffness.nodes.qos import SIM_SENSOR_QOS
+from crane_stiffness.nodes.sim_time import SimTimeParticipant, drain, uses_sim_time
 from crane_stiffness.nodes.session_recorder_params import (OWN_SECTIONS, PARAMS, RECORDING_KEYS, utc_session_name,
                                                           validate)
 from crane_stiffness.nodes.session_qos import (adapted_qos, contract_qos, has_header, message_class,
@@ -94,11 +97,20 @@ class _Channel:
         self.count = 0
 
 
+#: What the stages below the recorder publish (crane_stiffness.sim.lockstep): on simulated time the recorder waits
+#: until it has every message of them up to the stage's watermark.
+SIM_INPUTS = (topics.WRENCH_COMMAND, topics.APPLIED_WRENCH, topics.REJECTED_COMMAND, topics.PLATFORM_POSE,
+              topics.WIRE_STATES, topics.LOAD_CELL_WRENCH, topics.LVDT_DISPLACEMENT)
+
+
 class SessionRecorder(Node):
     """Idle ⇄ recording; one BagWriter per recording. See the module docstring."""
 
     def __init__(self, params_files: Sequence[str] = (), **kwargs: Any) -> None:
         super().__init__('session_recorder', **kwargs)
+        # Simulated time: /clock is recorded too, the sensor streams are taken reliably, and the clock waits for
+        # this node (stage 3), so nothing published is lost at any load.
+        self.sim_time = uses_sim_time(self)
         self.writer: BagWriter | None = None
         self.bag_path: Path | None = None
         self.channels: dict[str, _Channel] = {}
@@ -128,6 +140,9 @@ class SessionRecorder(Node):
         self.create_service(Trigger, '~/start', self._srv_start)
         self.create_service(Trigger, '~/stop', self._srv_stop)
         self.diagnostics = Diagnostics(self, self._report)
+        recorded = {self.resolve_topic_name(t) for t in self.params['topics']}
+        self.sim = SimTimeParticipant(self, 3, self._sim_report, drain=self._drain_channels,
+                                      inputs=[t for t in SIM_INPUTS if t in recorded])
         self.discovery_timer = self.create_timer(0.2, self._discover)
         self.flush_timer: Timer | None = None
         # A recorder runs all day: the pages its allocator freed go back to the system now and then (nodes/heap.py).
@@ -148,7 +163,9 @@ class SessionRecorder(Node):
 
     def _session_dir(self) -> Path:
         p = self.params
-        name = p['session'] or utc_session_name(self.get_clock().now().nanoseconds)
+        # Named by the wall clock also on simulated time (which starts at the same instant in every run).
+        name = p['session'] or utc_session_name(time.time_ns() if self.sim_time
+                                                else self.get_clock().now().nanoseconds)
         path = Path(p['output_dir']).expanduser() / name
         if self.recordings and p['session']:
             n = 2
@@ -268,7 +285,8 @@ class SessionRecorder(Node):
             program=self.built.get('program'), param_sections=sections, param_files=files,
             campaign=self.built.get('campaign'),
             program_keys=PROGRAM_KEYS, own_sections=OWN_SECTIONS,
-            recorder={k: values[k] for k in RECORDING_KEYS} | {'node': self.get_fully_qualified_name()},
+            recorder={k: values[k] for k in RECORDING_KEYS} | {'node': self.get_fully_qualified_name(),
+                                                               'time': 'simulated' if self.sim_time else 'wall'},
             ros_distro=os.environ.get('ROS_DISTRO', 'jazzy'), host=socket.gethostname())
         for warning in warnings:
             self.get_logger().warning(warning)
@@ -278,7 +296,7 @@ class SessionRecorder(Node):
     def _subscribe_all(self) -> None:
         self.channels = {}
         self.pending = []
-        for name in self.params['topics']:
+        for name in [*self.params['topics'], *([topics.CLOCK] if self.sim_time else [])]:
             topic = self.resolve_topic_name(name)
             if topic in self.channels or topic in self.pending:
                 continue
@@ -294,8 +312,19 @@ class SessionRecorder(Node):
             self.state_subscription = self.create_subscription(String, topics.PROGRAM_STATE,
                                                                self._on_program_state_msg, qos)
 
+    def _sim_report(self, t_ns: int) -> None:
+        """Simulated time: everything up to ``t_ns`` is recorded (drained before this call)."""
+        self.sim.report(t_ns)
+
+    def _drain_channels(self) -> None:
+        for channel in list(self.channels.values()):
+            if channel.subscription is not None:
+                drain(channel.subscription, partial(self._on_message, channel))
+
     def _subscribe(self, topic: str, msg_type: str) -> None:
         qos = contract_qos(topic)
+        if self.sim_time and topics.TOPIC_QOS.get(topic) == topics.SENSOR_DATA:
+            qos = SIM_SENSOR_QOS
         if qos is None:
             qos = adapted_qos([i.qos_profile for i in self.get_publishers_info_by_topic(topic)])
         try:
@@ -355,6 +384,7 @@ class SessionRecorder(Node):
     # --- messages ---
     def _on_message(self, channel: _Channel, data: bytes) -> None:
         self.received += 1
+        self.sim.received(channel.topic)
         writer = self.writer
         if writer is None:
             self.dropped['not_recording'] += 1  # delivered after the bag was closed

@@ -59,7 +59,8 @@ from crane_stiffness.estimation.settings import ESTIMATOR_PARAMS, LiveSettings
 from crane_stiffness.params.spec import ParamSpec
 from crane_stiffness.status import wire_level
 from crane_stiffness.estimation.sync import DISPLACEMENT, FORCE
-from crane_stiffness.nodes.qos import LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS
+from crane_stiffness.nodes.qos import LATCHED_QOS, RELIABLE_QOS, sensor_qos
+from crane_stiffness.nodes.sim_time import SimTimeParticipant, uses_sim_time
 from crane_stiffness.nodes.diagnostics import Diagnostics
 from crane_stiffness.nodes.run import run
 from crane_stiffness.nodes.messages import stamp_to_s
@@ -141,8 +142,10 @@ class StiffnessEstimatorNode(Node):
                                                      RELIABLE_QOS)
         self.publisher_counts: dict[str, int] = {}  # matched publishers per sensor stream at the last report
         # The sensor streams are taken serialized and decoded here (serde.cdr): a quarter of the CPU per message.
+        # On simulated time the streams are reliable and the clock waits for this node (stage 3): nothing is lost.
+        self.sim_time = uses_sim_time(self)
         self.sub_force = self.create_subscription(WrenchStamped, topics.LOAD_CELL_WRENCH,
-                                                  self._then_drain(self._on_force), SENSOR_QOS,
+                                                  self._then_drain(self._on_force), sensor_qos(self.sim_time),
                                                   event_callbacks=_NO_EVENTS_SUB, raw=True)
         self.params = Params(self, PARAMS, _validate, self._apply)  # subscribes the displacement
         self.create_subscription(Float64, topics.PREDICTED_AXIS_STIFFNESS, self._on_prediction, LATCHED_QOS)
@@ -150,6 +153,13 @@ class StiffnessEstimatorNode(Node):
             self.create_subscription(Float64, topic, partial(self._on_zero_epoch, stream), LATCHED_QOS)
         self.create_service(Trigger, '~/reset', self._srv_reset)
         self.diagnostics = Diagnostics(self, self._diagnostics_report)
+        self.sim = SimTimeParticipant(self, 3, self.sim_report, drain=self._drain_all,
+                                      inputs=[topics.WRENCH_COMMAND, topics.REJECTED_COMMAND, topics.LOAD_CELL_WRENCH,
+                                              topics.LVDT_DISPLACEMENT])
+
+    def sim_report(self, t_ns: int) -> None:
+        """Simulated time: every input up to ``t_ns`` has been handled (drained before this call)."""
+        self.sim.report(t_ns)
 
     def _diagnostics_report(self) -> tuple[int, str, list[tuple[str, str]]]:
         assert self.core is not None
@@ -183,7 +193,8 @@ class StiffnessEstimatorNode(Node):
             msg_type, handle = ((Float64, self._on_volts) if values['displacement_type'] == 'float64'
                                 else (PointStamped, self._on_point))
             self.sub_displacement = self.create_subscription(msg_type, topics.LVDT_DISPLACEMENT,
-                                                             self._then_drain(handle), SENSOR_QOS,
+                                                             self._then_drain(handle),
+                                                             sensor_qos(self.sim_time),
                                                              event_callbacks=_NO_EVENTS_SUB, raw=True)
             self.drained = [(self.sub_command, self._on_command), (self.sub_rejected, self._on_rejected),
                             (self.sub_force, self._on_force), (self.sub_displacement, handle)]
@@ -213,6 +224,7 @@ class StiffnessEstimatorNode(Node):
 
     def _on_force(self, data: bytes, info: dict | None = None) -> None:
         assert self.core is not None
+        self.sim.received(topics.LOAD_CELL_WRENCH)
         sample = self._decode(data, 6, FORCE)
         if sample is not None and self.core.add_force(sample[0], sample[1], self._sensor_arrival_s(info),
                                                       self._sequence(info)):
@@ -220,6 +232,7 @@ class StiffnessEstimatorNode(Node):
 
     def _on_point(self, data: bytes, info: dict | None = None) -> None:
         assert self.core is not None
+        self.sim.received(topics.LVDT_DISPLACEMENT)
         sample = self._decode(data, 3, DISPLACEMENT)
         if sample is not None and self.core.add_displacement(sample[0], sample[1][0], self._sensor_arrival_s(info),
                                                              self._sequence(info)):
@@ -227,6 +240,7 @@ class StiffnessEstimatorNode(Node):
 
     def _on_volts(self, data: bytes, info: dict | None = None) -> None:
         assert self.core is not None
+        self.sim.received(topics.LVDT_DISPLACEMENT)
         try:
             volts = decode_float64(data)
         except CdrError:
@@ -237,12 +251,14 @@ class StiffnessEstimatorNode(Node):
 
     def _on_command(self, msg: WrenchStamped, info: dict | None = None) -> None:
         assert self.core is not None
+        self.sim.received(topics.WRENCH_COMMAND)
         f, m = msg.wrench.force, msg.wrench.torque
         self.core.add_command(stamp_to_s(msg.header.stamp), (f.x, f.y, f.z, m.x, m.y, m.z),
                               self._arrival_s(info))
 
     def _on_rejected(self, msg: WrenchStamped, info: dict | None = None) -> None:
         assert self.core is not None
+        self.sim.received(topics.REJECTED_COMMAND)
         f, m = msg.wrench.force, msg.wrench.torque
         self.core.add_rejected(stamp_to_s(msg.header.stamp), (f.x, f.y, f.z, m.x, m.y, m.z), self._arrival_s(info))
 
@@ -280,9 +296,10 @@ class StiffnessEstimatorNode(Node):
             self._catch_up()
         return callback
 
-    def _drain(self) -> None:
+    def _drain(self) -> bool:
         """Handle the queued messages: commands first (a pair's branch follows the command in effect at its stamp),
-        then force and displacement alternately (neither stream runs ahead of the other)."""
+        then force and displacement alternately (neither stream runs ahead of the other). True if it stopped at
+        MAX_BATCH rounds (more may be queued)."""
         for _ in range(MAX_BATCH):
             progress = False
             for subscription, handle in self.drained:
@@ -291,7 +308,15 @@ class StiffnessEstimatorNode(Node):
                     handle(*taken)
                     progress = True
             if not progress:
-                return
+                return False
+        return True
+
+    def _drain_all(self) -> None:
+        """Simulated time: handle everything queued (however much), then publish the estimate once if it changed."""
+        while self._drain():
+            pass
+        if self.changed:
+            self._publish_values()
 
     def _catch_up(self) -> None:
         """Handle what is queued (:meth:`_drain`), then publish the estimate once if it changed."""

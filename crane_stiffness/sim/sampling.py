@@ -97,6 +97,8 @@ class StampedHold:
         self._times: list[int] = []
         self._values: list[NDArray[np.float64]] = []
         self._read_until = -1
+        self.known_through_ns = -1  #: newest effective time of an update: the input is known up to here
+        self.late = 0  #: updates stamped at or before an instant already read (they took effect later)
 
     def _vector(self, name: str, value: ArrayLike) -> NDArray[np.float64]:
         v = np.asarray(value, dtype=float).reshape(-1)
@@ -122,7 +124,10 @@ class StampedHold:
         stamp_ns = int(stamp_ns)
         now_ns = int(now_ns)
         t = stamp_ns if 0 < stamp_ns <= now_ns else now_ns
+        if 0 < t <= self._read_until:
+            self.late += 1
         t = max(t, self._read_until + 1)
+        self.known_through_ns = max(self.known_through_ns, t)
         i = bisect.bisect_right(self._times, t)
         self._times.insert(i, t)
         self._values.insert(i, v)
@@ -159,3 +164,37 @@ class StampedHold:
             self._initial = None
         self._read_until = max(self._read_until, int(times[-1]))
         return out, valid
+
+
+class ReleaseGate:
+    """Sample instants held back until the input in force at them is known (wall-clock time).
+
+    A reading stamped t must be the input in force at t. On wall-clock time an update stamped before t may still be
+    on its way when t has passed, so an instant is released only once an update at or after it has arrived
+    (``known_through_ns``) or, failing that, once ``wait_ns`` of the clock has passed it: the stated longest wait,
+    after which the held input is taken as in force (a later update stamped before it counts as late,
+    :attr:`StampedHold.late`).
+    """
+
+    def __init__(self, wait_ns: int) -> None:
+        if wait_ns < 0:
+            raise ParameterError('wait_ns', wait_ns, 'must be >= 0')
+        self.wait_ns = int(wait_ns)
+        self._pending = np.empty(0, dtype=np.int64)
+
+    @property
+    def pending(self) -> int:
+        """Instants held back now."""
+        return int(self._pending.size)
+
+    def add(self, times_ns: NDArray[np.int64]) -> None:
+        """Instants that have passed (ascending, after those already added)."""
+        if times_ns.size:
+            self._pending = np.concatenate((self._pending, times_ns))
+
+    def release(self, known_through_ns: int, now_ns: int) -> NDArray[np.int64]:
+        """The instants whose input is known (at or before ``known_through_ns``) or waited for long enough."""
+        limit = max(int(known_through_ns), int(now_ns) - self.wait_ns)
+        n = int(np.searchsorted(self._pending, limit, side='right'))
+        out, self._pending = self._pending[:n], self._pending[n:]
+        return out
