@@ -80,6 +80,10 @@ ARGUMENTS: tuple[Argument, ...] = (
     Argument('view_host', '127.0.0.1', "address the live view listens on (0.0.0.0: the lab network)"),
     Argument('view_port', '8765', "the live view's Foxglove WebSocket port"),
     Argument('view_http_port', '8080', "the live view's page port"),
+    Argument('use_sim_time', 'false', 'simulated time: sim_clock publishes /clock and every node follows it; time '
+             'slows down when the machine is busy instead of samples being lost (transport:=sim only)'),
+    Argument('real_time_factor', '1.0', "with use_sim_time: simulated seconds per wall second (0 or 'max': as fast "
+             'as the rig keeps up)'),
 )
 #: The values of the ``transport`` argument.
 TRANSPORTS = ('sim', 'drivers')
@@ -111,6 +115,10 @@ class RigNode:
     machine: str = 'daq'
     #: Parameters of ``arguments`` given as integers (launch hands a plain string to the node as a string).
     integers: tuple[str, ...] = ()
+    #: Parameters of ``arguments`` given as floating-point numbers.
+    floats: tuple[str, ...] = ()
+    #: Its stage in simulated time (crane_stiffness.sim.lockstep): the clock waits for it; None: not a participant.
+    sim_stage: int | None = None
 
     @property
     def name(self) -> str:
@@ -123,9 +131,14 @@ _SIM = (('transport', 'sim'),)
 _DRIVERS = (('transport', 'drivers'),)
 
 NODES: tuple[RigNode, ...] = (
-    RigNode('crane_model', ('crane', 'program'), reads=(topics.WRENCH_COMMAND,)),
-    RigNode('load_cell', ('sensors',), condition='sim_sensors', when=_SIM, reads=(topics.APPLIED_WRENCH,)),
-    RigNode('lvdt', ('sensors', 'program'), condition='sim_sensors', when=_SIM, reads=(topics.PLATFORM_POSE,)),
+    # On simulated time a clock source drives every node (see crane_stiffness.sim.lockstep).
+    RigNode('sim_clock', (), condition='use_sim_time', arguments={'real_time_factor': 'real_time_factor'},
+            floats=('real_time_factor',)),
+    RigNode('crane_model', ('crane', 'program'), reads=(topics.WRENCH_COMMAND,), sim_stage=1),
+    RigNode('load_cell', ('sensors',), condition='sim_sensors', when=_SIM, reads=(topics.APPLIED_WRENCH,),
+            sim_stage=2),
+    RigNode('lvdt', ('sensors', 'program'), condition='sim_sensors', when=_SIM, reads=(topics.PLATFORM_POSE,),
+            sim_stage=2),
     # transport:=drivers: the simulated physics served as devices (only with sim_sensors), read by the drivers.
     RigNode('rdt_emulator', ('drivers',), condition='sim_sensors', when=_DRIVERS,
             reads=(topics.APPLIED_WRENCH,)),
@@ -138,11 +151,11 @@ NODES: tuple[RigNode, ...] = (
     # With transport:=drivers the estimator reads the drivers file last: how to pair depends on the drivers' rates
     # (a 1 kHz F/T sensor and a 100 Hz DAQ: pairing interpolate_force), and a lab's file may set its lever arm.
     RigNode('stiffness_estimator', ('crane', 'sensors', 'program', 'drivers'), reads=(topics.WRENCH_COMMAND, *_STREAMS),
-            machine='analysis'),
+            machine='analysis', sim_stage=3),
     RigNode('session_recorder', ('crane', 'sensors', 'program'), arguments={'session': 'session'},
             condition='record', reads=(topics.WRENCH_COMMAND, topics.APPLIED_WRENCH, topics.REJECTED_COMMAND,
-                                        topics.PLATFORM_POSE, *_STREAMS), machine='analysis'),
-    RigNode('load_program', ('program',), runs_program=True),
+                                        topics.PLATFORM_POSE, *_STREAMS), machine='analysis', sim_stage=3),
+    RigNode('load_program', ('program',), runs_program=True, sim_stage=0),
     # For people watching: reads the rig's topics, waits for nothing, and the program does not wait for it.
     RigNode('live_view', ('crane',), condition='live_view', machine='analysis',
             arguments={'host': 'view_host', 'port': 'view_port', 'http_port': 'view_http_port'},
@@ -247,8 +260,15 @@ def readiness(started: list[RigNode]) -> dict[str, list[str]]:
             'wait_for_subscribers': [f'{topic}: {" ".join(names)}' for topic, names in readers.items()] or ['']}
 
 
-def _argument(node: RigNode, param: str, arg: str, value: Any) -> str | int:
-    """The value of parameter ``param`` from argument ``arg``: a string, or an integer for ``node.integers``."""
+def _argument(node: RigNode, param: str, arg: str, value: Any) -> str | int | float:
+    """The value of parameter ``param`` from argument ``arg``: a string, or an integer for ``node.integers``, a
+    float for ``node.floats`` ('max' = 0.0, the real-time factor's 'as fast as possible')."""
+    if param in node.floats:
+        text = str(value).strip().lower()
+        try:
+            return 0.0 if text == 'max' else float(text)
+        except ValueError:
+            raise RigError(f'{arg}:={value}: expected a number') from None
     if param not in node.integers:
         return str(value)
     try:
@@ -265,12 +285,24 @@ def rig_nodes(config_dir: str | os.PathLike, given: Mapping[str, str | bool] | N
     if values['machine'] not in ('all', *MACHINES):
         raise RigError(f"machine {values['machine']!r}: expected one of all, {', '.join(MACHINES)}")
     files = config_files(config_dir, values)
+    sim_time = flag(values['use_sim_time'])
+    if sim_time and values['transport'] != 'sim':
+        raise RigError('use_sim_time:=true runs the simulated sensors only (transport:=sim): the drivers and their '
+                       'device protocols keep wall-clock time')
     started = [node for node in NODES if (node.condition is None or flag(values[node.condition]))
                and all(str(values[arg]) == value for arg, value in node.when)]
+
+    def clock(node: RigNode) -> dict[str, Any]:
+        """Simulated time: every node follows /clock; the clock source waits for the participants started."""
+        if not sim_time:
+            return {}
+        if node.name == 'sim_clock':
+            return {'participants': [n.name for n in started if n.sim_stage is not None]}
+        return {'use_sim_time': True}
     # load_program waits for the whole rig, the other machine's nodes too.
     return [NodeStart(node.name, node.executable,
                       tuple(files[f] for f in node.files if f != 'drivers' or values['transport'] == 'drivers'),
                       {**{param: _argument(node, param, arg, values[arg]) for param, arg in node.arguments.items()},
-                       **(readiness(started) if node.runs_program else {})}, node.remappings, node.runs_program,
-                      node.machine)
+                       **(readiness(started) if node.runs_program else {}), **clock(node)},
+                      node.remappings, node.runs_program, node.machine)
             for node in started if values['machine'] in ('all', node.machine)]
