@@ -126,11 +126,10 @@ class LockstepClock:
                 self._anchor = (wall_ns, self.now_ns)
             wall0, sim0 = self._anchor
             paced = sim0 + int((wall_ns - wall0) * self.real_time_factor)
-            if paced > allowed:  # held back: pace on from here, do not rush to catch up afterwards
-                self.held += 1
-                self._anchor = (wall_ns, min(allowed, self.now_ns + self.step_ns) if allowed > self.now_ns
-                                else self.now_ns)
             target = min(paced, allowed)
+            if paced > allowed:  # held back: pace on from where it is held, do not rush to catch up afterwards
+                self.held += 1
+                self._anchor = (wall_ns, max(self.now_ns, (target // self.step_ns) * self.step_ns))
         new = (target // self.step_ns) * self.step_ns
         if new <= self.now_ns:
             return False
