@@ -6,6 +6,10 @@ other two series, each with its own measuring arrangement from its program file)
    tree, all at the same instant as `ros2 launch` does: crane_model, load_cell, lvdt, stiffness_estimator,
    session_recorder and load_program, which starts the program once the rig is ready;
    and live_view (unless --no-live-view), printing the page's and the Foxglove WebSocket's addresses;
+   By default the rig runs on simulated time (sim_clock publishes /clock, every node follows it) at real-time
+   factor 1: you watch it in real time, and a busy machine (a browser on the page, say) slows simulated time
+   instead of losing samples; --wall-time runs it on the wall clock as before, --real-time-factor max as fast as
+   the rig keeps up;
 3. follows the program with a progress bar, then prints the estimated side stiffness beside the model's
    prediction and writes out/demo/summary.json; the session is recorded to bags/<session>/.
 
@@ -56,7 +60,20 @@ def main(argv=None) -> int:
     ap.add_argument('--tolerance', type=float, default=0.02, help='allowed relative error of the estimate')
     ap.add_argument('--no-live-view', dest='live_view', action='store_false',
                     help='do not start live_view (the page and the Foxglove WebSocket server)')
+    time_mode = ap.add_mutually_exclusive_group()
+    time_mode.add_argument('--sim-time', dest='sim_time', action='store_true', default=True,
+                           help='run the rig on simulated time (the default; docs/simulated_time.md)')
+    time_mode.add_argument('--wall-time', dest='sim_time', action='store_false',
+                           help='run the rig on the wall clock (samples can be lost on a busy machine)')
+    ap.add_argument('--real-time-factor', default='1.0',
+                    help="simulated seconds per wall second on simulated time; 'max' = as fast as the rig keeps up")
     args = ap.parse_args(argv)
+    if args.real_time_factor != 'max':
+        try:
+            if float(args.real_time_factor) < 0:
+                raise ValueError
+        except ValueError:
+            ap.error(f'--real-time-factor {args.real_time_factor!r}: expected a number >= 0 or max')
 
     import rclpy
     from tqdm import tqdm
@@ -73,15 +90,17 @@ def main(argv=None) -> int:
         shutil.rmtree(stale, ignore_errors=True)
     env, share = rosrun.build_workspace(REPO, REPO)  # REPO/build, REPO/install, REPO/log
     session = f'demo_{args.program}_{datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%SZ")}'
+    clock = (f'simulated time at real-time factor {args.real_time_factor}' if args.sim_time else 'wall-clock time')
     print(f'[2/3] starting the rig (ROS_DOMAIN_ID={env["ROS_DOMAIN_ID"]}, loopback only), '
-          f'program {args.program!r}, recording bags/{session}', flush=True)
+          f'program {args.program!r} on {clock}, recording bags/{session}', flush=True)
+    arguments = {'use_sim_time': 'true', 'real_time_factor': args.real_time_factor} if args.sim_time else {}
     rclpy.init()
     observer = Observer()
     with rosrun.Processes(env, out / 'logs') as procs:
         launched = time.monotonic()
         view = {'port': free_port(8765), 'http_port': free_port(8080)}  # the defaults unless taken
         program = start_rig(procs, share, args.program, session, Path(args.bags), live_view=args.live_view,
-                            overrides={'live_view': view})
+                            overrides={'live_view': view}, arguments=arguments)
         print(f'  started {len(procs.procs)} nodes at once; load_program waits for the rig ...', flush=True)
         if args.live_view:
             print(f"  live view: open http://127.0.0.1:{view['http_port']}/ in a browser; Foxglove or Lichtblick: "
@@ -111,6 +130,7 @@ def main(argv=None) -> int:
         while time.monotonic() < end:
             observer.spin_once(0.05)
         codes = procs.stop()
+        clock_log = procs.log('sim_clock') if 'sim_clock' in procs.procs else ''
     observer.destroy_node()
     rclpy.shutdown()
     print('[3/3] result', flush=True)
@@ -119,6 +139,11 @@ def main(argv=None) -> int:
     except rosrun.RosRunError as exc:
         print(f'no result: {exc}; logs in {out / "logs"}', file=sys.stderr)
         return 1
+    summary['time'] = {'mode': 'simulated' if args.sim_time else 'wall'}
+    if args.sim_time:
+        counters = next((json.loads(line.split(' ', 2)[2]) for line in reversed(clock_log.splitlines())
+                         if line.startswith('FINAL_COUNTERS sim_clock ')), {})
+        summary['time'].update(real_time_factor_asked=args.real_time_factor, **counters)
     (out / 'summary.json').write_text(json.dumps(summary, indent=1))
     est, pred = summary['estimate'], summary['prediction']
     prog, k_unit = summary['program'], summary['unit']
@@ -137,6 +162,13 @@ def main(argv=None) -> int:
     for part in ('loading', 'unloading', 'input'):
         st = summary['status'].get(part, {'level': 'NONE', 'message': 'no status received'})
         print(f"  estimator status {part:9s} {st['level']:7s} {st['message']}")
+    low, high = est['loading']['ci95_low'], est['loading']['ci95_high']
+    covers = 'covers' if low <= pred['stiffness'] <= high else 'does NOT cover'
+    print(f"  the loading 95 % interval {covers} the prediction")
+    if args.sim_time and 'simulated_s' in summary['time']:
+        t = summary['time']
+        print(f"  simulated time: {t['simulated_s']:.1f} s in {t['wall_s']:.1f} s of wall time (real-time factor "
+              f"{t['real_time_factor']:.2f}; held back by the rig {t['held']} times)")
     print(f"  relative error (loading) {100 * summary['relative_error']:+.2f} %   -> {out / 'summary.json'}")
     if summary.get('bag'):
         print(f"  session recorded: {summary['bag']}")
