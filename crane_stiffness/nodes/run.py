@@ -42,6 +42,11 @@ class ShutdownRequest:
     (``wake``): a main thread waiting in C++ sees the flag at once. A signal, once or repeated (Ctrl-C reaches every
     node and ``ros2 launch`` forwards it once more), ends the spin loop after the running callback; the node closes
     its files and exits with status 0. :meth:`ignore` keeps a late signal from killing the finished process.
+
+    The executor is reached only through :meth:`attach` / :meth:`detach`, under a lock: once the teardown has
+    detached it, a signal arriving then (the second or third Ctrl-C) never calls into an executor that is being
+    shut down, and the signal thread never holds the last reference to it (its C++ destructor would then run on
+    that daemon thread, possibly while the interpreter finalizes).
     """
 
     SIGNALS = (signal.SIGINT, signal.SIGTERM)
@@ -49,21 +54,32 @@ class ShutdownRequest:
     def __init__(self) -> None:
         self.signum: int | None = None
         self.count = 0
-        self.wake: Callable[[], None] | None = None
+        self._wake: Callable[[], None] | None = None
+        self._lock = threading.Lock()  # wake() never runs while the teardown detaches the executor
 
     def __bool__(self) -> bool:
         return self.signum is not None
+
+    def attach(self, wake: Callable[[], None]) -> None:
+        """A signal from now on also calls ``wake`` (the executor's), so a main thread waiting in C++ sees it."""
+        with self._lock:
+            self._wake = wake
+
+    def detach(self) -> None:
+        """No signal calls the executor any more; returns once a ``wake`` under way has returned."""
+        with self._lock:
+            self._wake = None
 
     def handle(self, signum: int, frame: Any = None) -> None:
         self.count += 1
         if self.signum is None:
             self.signum = signum
-        wake = self.wake
-        if wake is not None:
-            try:
-                wake()
-            except Exception:  # an executor already shut down: the flag is enough
-                pass
+        with self._lock:
+            if self._wake is not None:
+                try:
+                    self._wake()
+                except Exception:  # the flag is enough
+                    pass
 
     def install(self) -> bool:
         """Install the handlers and the wake-up thread (main thread only: Python runs signal handlers there);
@@ -140,27 +156,29 @@ def run(node_factory: Callable[[], NodeT], args: Sequence[str] | None = None,
         return 2
     ex = make_executor(executor(node) if callable(executor) else executor, node.context)
     ex.add_node(node)
-    request.wake = ex.wake
+    request.attach(ex.wake)
     try:
         while not request and rclpy.ok(context=node.context) and not getattr(node, 'exit_requested', False):
             ex.spin_once(timeout_sec=0.1)
     except ExternalShutdownException:
         pass
     finally:
+        request.detach()  # first: a later signal must not call into the executor being shut down
         sim = getattr(node, 'sim', None)  # a SimTimeParticipant: simulated time waits for this node no more
         if sim is not None:
             sim.leave()
         close = getattr(node, 'close', None)
         if close is not None:
             close()
+        status = int(getattr(node, 'exit_status', 0) or 0)
         final_counters(node)
         ex.remove_node(node)
         ex.shutdown()
-        request.wake = None
+        del ex  # its C++ destructor runs here, on the main thread, not later in the interpreter's finalization
         node.destroy_node()
         rclpy.try_shutdown()
         request.ignore()
-    return int(getattr(node, 'exit_status', 0) or 0)
+    return status
 
 
 def final_counters(node: Node) -> None:
