@@ -81,8 +81,20 @@ def config_dir(install: Path) -> Path:
     return rosrun.installed_config(install)
 
 
-@pytest.mark.parametrize('how', ['sigint', 'sigint_twice', 'sigterm'])
+def signal_group_repeatedly(procs: rosrun.Processes, sig: int, times: int, gap_s: float = 0.05) -> None:
+    """``sig`` to the whole group ``times`` times, ``gap_s`` apart (Ctrl-C pressed again, launch forwarding it)."""
+    for i in range(times):
+        if i:
+            time.sleep(gap_s)
+        try:
+            procs.signal_group(sig)
+        except ProcessLookupError:
+            return  # every process already gone
+
+
+@pytest.mark.parametrize('how', ['sigint', 'sigint_twice', 'sigint_thrice', 'sigterm'])
 def test_rig_ends_cleanly_on_signals_to_the_process_group(install_tree, rclpy_context, tmp_path, how):
+    """Ctrl-C once, twice (launch forwards it once more to each node) or three times, or SIGTERM."""
     install, env = install_tree
     bags = tmp_path / 'bags'
     bags.mkdir()
@@ -92,14 +104,8 @@ def test_rig_ends_cleanly_on_signals_to_the_process_group(install_tree, rclpy_co
         wait_until_running(rclpy_context, procs)
         if how == 'sigterm':
             procs.signal_group(signal.SIGTERM)
-        else:
-            procs.signal_group(signal.SIGINT)  # Ctrl-C: launch and every node
-            if how == 'sigint_twice':
-                time.sleep(0.05)
-                try:
-                    procs.signal_group(signal.SIGINT)  # launch forwards it once more to each node
-                except ProcessLookupError:
-                    pass  # every process already gone
+        else:  # Ctrl-C: launch and every node
+            signal_group_repeatedly(procs, signal.SIGINT, {'sigint': 1, 'sigint_twice': 2, 'sigint_thrice': 3}[how])
         codes = wait_all(procs)
         logs = {n: procs.log(n) for n in procs.procs}
     for name in procs.procs:
@@ -202,5 +208,34 @@ def test_a_signal_while_the_node_still_imports_ends_it_cleanly(install_tree, tmp
         codes = wait_all(procs)
         logs = {n: procs.log(n) for n in procs.procs}
     assert all(importing.values()), importing
+    for name in names:
+        assert_clean_exit(name, codes[name], logs[name])
+
+
+@pytest.mark.parametrize('how', ['sigint_thrice', 'sigterm'])
+def test_signals_while_the_node_initialises_end_it_cleanly(install_tree, tmp_path, how):
+    """Ctrl-C pressed three times (or SIGTERM) once rclpy is loaded: the node is initialising rclpy, building its
+    node or starting to spin when the signals come, some of them while it already shuts down. It ends with status 0
+    and its FINAL_COUNTERS line all the same."""
+    _, env = install_tree
+    names = ('crane_model', 'lvdt', 'session_recorder')
+    with rosrun.Processes(env, tmp_path / 'logs') as procs:
+        for name in names:  # one at a time: each node's initialisation is the window to hit
+            proc = procs.start(name, PACKAGE, name, ['--ros-args', '-p', f'output_dir:={tmp_path}']
+                               if name == 'session_recorder' else [])
+            deadline = time.monotonic() + 60.0
+            while '_rclpy_pybind11' not in Path(f'/proc/{proc.pid}/maps').read_text():
+                assert proc.poll() is None and time.monotonic() < deadline, procs.log(name)
+                time.sleep(0.001)
+            if how == 'sigterm':
+                proc.send_signal(signal.SIGTERM)
+            else:
+                for i in range(3):
+                    if i:
+                        time.sleep(0.05)
+                    if proc.poll() is None:
+                        proc.send_signal(signal.SIGINT)
+        codes = wait_all(procs)
+        logs = {n: procs.log(n) for n in procs.procs}
     for name in names:
         assert_clean_exit(name, codes[name], logs[name])
