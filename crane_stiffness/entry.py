@@ -12,7 +12,9 @@ from __future__ import annotations
 
 import importlib
 import importlib.util
+import os
 import signal
+import sys
 from typing import Callable
 
 #: The signals that arrived before the node's own handlers were installed, in order.
@@ -33,7 +35,13 @@ def pending() -> list[int]:
 def _main(module: str) -> int:
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, _note)
-    return importlib.import_module(f'crane_stiffness.nodes.{module}').main()
+    status = importlib.import_module(f'crane_stiffness.nodes.{module}').main()
+    # The node has closed its files, printed its counters, destroyed itself and shut rclpy down: what is left is
+    # the interpreter's finalization, which with numpy, numba and rclpy loaded can take seconds on a busy machine
+    # (a Ctrl-C'd rig then looks hung after FINAL_COUNTERS). The process ends here, with its status.
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(int(status or 0))
 
 
 def __getattr__(name: str) -> Callable[[], int]:
