@@ -67,16 +67,19 @@ class LoadCellProbe(ProbeNode):
 def test_load_cell_rate_stamps_noise_and_applied_wrench(rclpy_context):
     noise = np.array([0.02, 0.05, 0.1, 0.001, 0.002, 0.003])
     name, prefix, args = isolated('load_cell')
+    # On wall-clock time a command can reach the sensor after instants at its stamp have passed: with state_wait_s
+    # the sensor holds a sample back until the wrench in force at its instant is known (at most that long), so every
+    # reading stamped t is the load in force at t however late the command arrives (within the wait).
     node = load_cell.LoadCell(context=rclpy_context, cli_args=args, parameter_overrides=[
         Parameter('noise_std', value=noise.tolist()), Parameter('bias', value=[0.0] * 6),
-        Parameter('resolution', value=[0.0] * 6), Parameter('seed', value=3)])
+        Parameter('resolution', value=[0.0] * 6), Parameter('seed', value=3), Parameter('state_wait_s', value=0.25)])
     probe = LoadCellProbe(rclpy_context, prefix)
     ex = SingleThreadedExecutor(context=rclpy_context)
     ex.add_node(node)
     ex.add_node(probe.node)
     wait_connected(ex, probe.cmd)
     # Nothing is measured before the first applied wrench, and the load cell says what it waits for.
-    collect_for(ex, 0.3)
+    collect_for(ex, 0.6)
     assert probe.samples == [] and node.counters.waiting_samples > 100
     assert spin_until(ex, lambda: any(s.hardware_id == name and '/crane/applied_wrench' in s.message
                                       for s in probe.diagnostics), 3.0)
@@ -107,6 +110,7 @@ def test_load_cell_rate_stamps_noise_and_applied_wrench(rclpy_context):
     before = np.array([w for s, _, w in probe.samples if s < t_cmd - MS])
     assert np.all(np.abs(before.mean(axis=0)) < 4 * noise / math.sqrt(len(before)))
     assert node.counters.received == node.counters.used == 2 and node.clock.skipped == 0
+    assert node.applied.late == 0  # no command arrived later than state_wait_s after its stamp
     ex.shutdown()
 
 
