@@ -126,9 +126,7 @@ def main(argv=None) -> int:
         if not finished():
             print('the load program did not finish in time; logs in', out / 'logs', file=sys.stderr)
             return 1
-        end = time.monotonic() + 1.5  # let the last samples reach the estimator
-        while time.monotonic() < end:
-            observer.spin_once(0.05)
+        observer.settle(procs)  # the last samples reach the estimator (simulated time: through the run's end)
         codes = procs.stop()
         clock_log = procs.log('sim_clock') if 'sim_clock' in procs.procs else ''
     observer.destroy_node()

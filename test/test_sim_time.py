@@ -101,9 +101,13 @@ def test_the_same_streams_at_any_speed_and_load(install_tree, tmp_path):
             p.wait()
     for summary, logs in ((quiet, quiet_logs), (fast, fast_logs)):
         assert set(summary['node_exit_codes'].values()) == {0}, summary['node_exit_codes']
-        assert 'still missing' not in ''.join(logs.values())  # no watermark went on without its inputs
+        assert 'still missing' not in ''.join(logs.values())  # no watermark waited long for its inputs
         assert summary['status']['loading']['level'] == 'OK', summary['status']
         assert summary['status']['input']['level'] == 'OK', summary['status']
+    # The run ends at the same simulated time (the program's end and a second): the same final estimates.
+    for branch in ('loading', 'unloading'):
+        for field in ('stiffness', 'ci95_low', 'ci95_high', 'n'):
+            assert fast['estimate'][branch][field] == pytest.approx(quiet['estimate'][branch][field], rel=1e-9)
     a, b = _streams(tmp_path / 'quiet' / 'bags' / 's'), _streams(tmp_path / 'busy' / 'bags' / 's')
     for topic in STREAMS:
         end = min(a[topic][-1][0], b[topic][-1][0])  # the runs stop at different simulated times after the program

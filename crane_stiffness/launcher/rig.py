@@ -25,6 +25,7 @@ from crane_stiffness.analysis.sweep import unit
 from crane_stiffness.model import (axis_stiffness, directional_stiffness, paper_stiffness, rest_pose,
                                    tangent_stiffness)
 from crane_stiffness.nodes.qos import LATCHED_QOS, RELIABLE_QOS
+from crane_stiffness.nodes.sim_time import SIM_QOS
 from crane_stiffness.rig_description import PACKAGE, NodeStart, rig_nodes
 from crane_stiffness.rig_description import config_files as rig_config_files
 from crane_stiffness.sim.program import LoadProgram, load_program_file
@@ -55,6 +56,30 @@ class Observer(Node):
         #: The estimator's latest statuses: {'loading' | 'unloading' | 'input': (level name, message)}.
         self.statuses: dict[str, tuple[str, str]] = {}
         self.create_subscription(DiagnosticArray, topics.STIFFNESS_ESTIMATE, self._on_estimate, RELIABLE_QOS)
+        #: Simulated time (sim_clock's watermarks): where the run ends, and through when every node has published.
+        self.sim_end_ns: int | None = None
+        self.sim_done_ns = -1
+        self.create_subscription(String, topics.SIM_WATERMARKS, self._on_marks, SIM_QOS)
+
+    def _on_marks(self, msg: String) -> None:
+        marks = json.loads(msg.data)
+        self.sim_end_ns = marks.get('end')
+        self.sim_done_ns = int(marks.get('done', -1))
+
+    @property
+    def sim_ended(self) -> bool:
+        """Simulated time reached the run's end and every node has published through it."""
+        return self.sim_end_ns is not None and self.sim_done_ns >= self.sim_end_ns
+
+    def settle(self, procs: Processes | None = None, wall_s: float = 1.5) -> None:
+        """After the program: on simulated time until every node has published through the run's end (then the
+        estimator's last outputs, 0.3 s), else ``wall_s`` for the last samples to reach the estimator."""
+        if self.sim_end_ns is not None:
+            self.spin_until(lambda: self.sim_ended, 60.0, 'every node to reach the end of simulated time', procs)
+            wall_s = 0.3
+        end = time.monotonic() + wall_s
+        while time.monotonic() < end:
+            self.spin_once(0.05)
 
     def _on_progress(self, msg: Float64) -> None:
         self.progress = msg.data
@@ -241,9 +266,7 @@ def run_rig(share: Path, env: Mapping[str, str], out: Path, program: str, sessio
                     progress(observer.progress)
             if procs.procs['load_program'].poll() != 0:
                 raise RosRunError(f'load_program did not finish: {procs.log("load_program")[-3000:]}')
-            end = time.monotonic() + 1.5  # the last samples reach the estimator
-            while time.monotonic() < end:
-                observer.spin_once(0.05)
+            observer.settle()  # the last samples reach the estimator
             codes = procs.stop()
             logs = {name: procs.log(name) for name in procs.procs}
         summary = summarize(share, program, session, bags, observer, codes)

@@ -106,6 +106,11 @@ class CraneModel(Node):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('crane_model', **kwargs)
+        # Simulated time: the pose, wires and load in force go out from time's start on (counted, stamped on the
+        # grid), never at construction, when a reader may or may not have matched yet.
+        self.sim_time = uses_sim_time(self)
+        self._sim_start_ns: int | None = None  # simulated time: when time starts, and whether the state went out
+        self._sim_started = False
         self.counters = ModelCounters()
         self.failures = 0  # solves that found no equilibrium (also on a parameter change)
         self.status = 'starting'
@@ -122,8 +127,6 @@ class CraneModel(Node):
         self._readers: dict[str, int] = {}  # matched readers by kind, as last reported
         self._resend_from = 0
         self._resend_timer: Timer | None = None
-        self._sim_start_ns: int | None = None  # simulated time: when time starts, and whether the state went out
-        self._sim_started = False
         self.pub_applied = self.create_publisher(
             WrenchStamped, topics.APPLIED_WRENCH, RELIABLE_QOS,
             event_callbacks=PublisherEventCallbacks(matched=self._on_applied_matched))
@@ -250,6 +253,8 @@ class CraneModel(Node):
 
     def _publish_applied(self, stamp) -> None:
         """The load in force on /crane/applied_wrench [N, N·m], frame crane_base, with ``stamp``."""
+        if self.sim_time and not self._sim_started:
+            return
         out = WrenchStamped()
         out.header.stamp = stamp
         out.header.frame_id = topics.FRAME_BASE
@@ -260,13 +265,13 @@ class CraneModel(Node):
     def _on_applied_matched(self, status) -> None:
         """A new reader of the applied wrench (a sensor started after this node): send it the load in force,
         stamped now, so it can start measuring before the first command (and again, see :meth:`_late_joiner`)."""
-        if self._new_reader('applied', status) and not uses_sim_time(self):
+        if self._new_reader('applied', status) and not self.sim_time:
             self._publish_applied(self.get_clock().now().to_msg())
             self._late_joiner('applied')
 
     def _on_pose_matched(self, status) -> None:
         """A new pose reader: send it the current pose (stamped now), as a latched topic would."""
-        if self._new_reader('pose', status) and not uses_sim_time(self):
+        if self._new_reader('pose', status) and not self.sim_time:
             self._publish_current_pose()
             self._late_joiner('pose')
 
@@ -363,6 +368,8 @@ class CraneModel(Node):
 
     def _publish_pose(self, eq: Equilibrium) -> None:
         """The platform pose and the wire states of ``eq``, stamped with the command's stamp (else now)."""
+        if self.sim_time and not self._sim_started:
+            return
         pose = PoseStamped()
         pose.header.stamp = self.stamp or self.get_clock().now().to_msg()
         pose.header.frame_id = topics.FRAME_BASE

@@ -41,7 +41,7 @@ from crane_stiffness.nodes.run import run
 from crane_stiffness.nodes.parameters import Params
 from crane_stiffness.sim.sampling import NS_PER_S, SampleClock, StampedHold
 from crane_stiffness.sim.sensors import LOAD_CELL_PARAMS, LoadCellModel, load_cell_from_params
-from crane_stiffness.status import OK, WARN
+from crane_stiffness.status import ERROR, OK, WARN
 
 PARAMS = (
     ParamSpec('sample_rate_hz', 1000.0, 'sample rate; stamps are 1/sample_rate_hz apart on a grid of the node '
@@ -199,6 +199,9 @@ class LoadCell(Node):
             return WARN, f'overload: {axes} saturated at full scale since the last report', pairs
         if not self.applied.has_value:
             return OK, topics.WAITING_FOR_LOAD, pairs
+        if self.applied.late and self.sim.active:  # cannot happen on simulated time unless the clock's protocol failed
+            return ERROR, (f'{self.applied.late} applied wrench(es) arrived after samples at their stamps were '
+                           'published'), pairs
         if self.applied.late and self.settings['state_wait_s'] > 0:
             return WARN, (f'{self.applied.late} applied wrench(es) arrived after samples at their stamps were '
                           f'published (longer than state_wait_s = {self.settings["state_wait_s"]:g} s)'), pairs

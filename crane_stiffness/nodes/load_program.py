@@ -49,6 +49,9 @@ from crane_stiffness.status import OK, WARN
 _FULL_RIG = readiness(list(RIG_NODES))
 DEFAULT_WAIT_FOR_MESSAGES = tuple(_FULL_RIG['wait_for_messages'])
 DEFAULT_WAIT_FOR_SUBSCRIBERS = tuple(_FULL_RIG['wait_for_subscribers'])
+#: exit_on_done: how long the node lingers after the program so the last commands and state reach every reader [s];
+#: on simulated time the run ends there, the same instant in every run.
+EXIT_LINGER_S = 1.0
 #: Longest exit_on_done waits for every reader to acknowledge the last commands and state [s].
 EXIT_ACK_TIMEOUT_S = 5.0
 #: How the log names the source of a topic waited for.
@@ -176,6 +179,7 @@ class LoadProgramNode(Node):
         self._ready = not self.sim_time  # simulated time: the readiness below was met
         self._start_at_ns: int | None = None
         self._last_tick_ns: int | None = None
+        self._end_ns: int | None = None  # simulated time, exit_on_done: where the run ends
         self.state = 'idle'
         self.elapsed = 0.0        # program time reached when last paused [s]
         self.started_at: float | None = None    # node-clock time of (re)start [s]
@@ -195,6 +199,7 @@ class LoadProgramNode(Node):
         self.create_service(Trigger, '~/stop', self._srv_stop)
         self.diagnostics = Diagnostics(self, self._report)
         self._autostart: Timer | None = None
+        self._exit_timer: Timer | None = None
         self._readiness: _Readiness | None = None
         self._wait_started = self._next_report = 0.0  # time.monotonic() [s], set with the readiness
         if self.params['autostart']:
@@ -313,10 +318,16 @@ class LoadProgramNode(Node):
                 self._start_at_ns = None
                 self._start(at_s=tick * 1e-9)
                 self.get_logger().info(f'started {self.program.name!r} at simulated time {tick * 1e-9:.3f} s')
+                if self.params['exit_on_done']:  # the run's end, known now: simulated time stops there
+                    self._end_ns = tick + -(-round(self.program.duration_s * 1e9) // period) * period \
+                        + round(EXIT_LINGER_S * 1e9)
             self._emit(tick)
             tick += period
         self._last_tick_ns = tick - period
-        self.sim.report(t_ns)
+        self.sim.report(t_ns, end_ns=self._end_ns)
+        if (self._end_ns is not None and t_ns >= self._end_ns and self.state == 'done'
+                and not getattr(self, 'exit_requested', False)):
+            self._exit()
 
     def _tick(self) -> None:
         self._emit(self.get_clock().now().nanoseconds)
@@ -342,12 +353,13 @@ class LoadProgramNode(Node):
             self.elapsed = self.program.duration_s
             self._publish_state()
             self.get_logger().info(f'program {self.program.name!r} finished')
-            if self.params['exit_on_done']:
+            if self.params['exit_on_done'] and not self.sim_time:  # (simulated time: at _end_ns, _on_watermark)
                 # Linger a moment so the final state and command reach every subscriber before the exit.
-                self._exit_timer = self.create_timer(1.0, self._exit)
+                self._exit_timer = self.create_timer(EXIT_LINGER_S, self._exit)
 
     def _exit(self) -> None:
-        self.destroy_timer(self._exit_timer)
+        if self._exit_timer is not None:
+            self.destroy_timer(self._exit_timer)
         # A reliable command lost at a busy reader's socket is sent again only at the writer's next heartbeat
         # (Fast DDS: 3 s): leaving before every reader acknowledged would take the repair with it, and a recorder
         # would miss a command for good.

@@ -36,7 +36,7 @@ from crane_stiffness.nodes.run import run
 from crane_stiffness.nodes.parameters import Params
 from crane_stiffness.sim.sampling import NS_PER_S, SampleClock, StampedHold
 from crane_stiffness.sim.sensors import LVDT_PARAMS, LvdtModel, lvdt_from_params
-from crane_stiffness.status import OK, WARN
+from crane_stiffness.status import ERROR, OK, WARN
 
 PARAMS = (
     ParamSpec('sample_rate_hz', 1000.0, 'sample rate; stamps are 1/sample_rate_hz apart on a grid of the node '
@@ -193,6 +193,8 @@ class Lvdt(Node):
             return WARN, f'out of range: {new} samples saturated at the stroke {self.model.range_m} m', pairs
         if not self.pose.has_value:
             return OK, f'waiting for {topics.PLATFORM_POSE}', pairs
+        if self.pose.late and self.sim.active:  # cannot happen on simulated time unless the clock's protocol failed
+            return ERROR, f'{self.pose.late} pose(s) arrived after samples at their stamps were published', pairs
         if self.pose.late and self.settings['state_wait_s'] > 0:
             return WARN, (f'{self.pose.late} pose(s) arrived after samples at their stamps were published (longer '
                           f'than state_wait_s = {self.settings["state_wait_s"]:g} s)'), pairs

@@ -223,6 +223,7 @@ class SessionRecorder(Node):
                     self.destroy_timer(timer)
                     setattr(self, timer_name, None)
             self._unsubscribe_all()
+            self.sim.leave()  # simulated time: no more inputs taken, so none waited for
             if self.parameter_reader is not None:
                 self.parameter_reader.close()
                 self.parameter_reader = None
@@ -313,7 +314,11 @@ class SessionRecorder(Node):
                                                                self._on_program_state_msg, qos)
 
     def _sim_report(self, t_ns: int) -> None:
-        """Simulated time: everything up to ``t_ns`` is recorded (drained before this call)."""
+        """Simulated time: everything up to ``t_ns`` is recorded (drained before this call). Not recording (never
+        started, or stopped), the recorder takes no part: time does not wait for it."""
+        if self.writer is None:
+            self.sim.leave()
+            return
         self.sim.report(t_ns)
 
     def _drain_channels(self) -> None:

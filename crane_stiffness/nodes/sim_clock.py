@@ -56,6 +56,10 @@ CLOCK_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=Re
                        durability=DurabilityPolicy.VOLATILE)
 
 
+#: What cannot change once the clock exists (the pace can).
+FIXED_AT_START = ('participants', 'step_s', 'start_time_s', 'settle_s')
+
+
 def _validate(values: dict[str, Any]) -> dict[str, Any]:
     check(values['max_lead_s'] >= values['step_s'], 'max_lead_s', values['max_lead_s'],
           f'must be >= step_s ({values["step_s"]})')
@@ -80,7 +84,9 @@ class SimClock(Node):
         self.counters: dict[str, Any] = {'steps': 0, 'simulated_s': 0.0, 'wall_s': 0.0, 'real_time_factor': 0.0,
                                          'held': 0}
         self.exit_requested = False
-        self.params = Params(self, PARAMS, _validate, self._apply)
+        self._started_values: dict[str, Any] | None = None
+        self.params = Params(self, PARAMS, self._checked, self._apply)
+        self._started_values = {k: self.params[k] for k in FIXED_AT_START}
         self.pub_clock = self.create_publisher(ClockMsg, topics.CLOCK, CLOCK_QOS)
         self.pub_marks = self.create_publisher(String, topics.SIM_WATERMARKS, SIM_QOS)
         self.create_subscription(String, topics.SIM_PROGRESS, self._on_progress, SIM_QOS)
@@ -90,20 +96,32 @@ class SimClock(Node):
         self._last_log = time.monotonic()
         self._last_marks: list[int] = []
         self._last_clock_pub = 0.0
+        self._held_since: float | None = None  # time.monotonic() since the participants hold time, None: not held
+        self._held_by = ''
         self.diagnostics = Diagnostics(self, self._report)
         self.timer = self.create_timer(self._period(), self._tick, clock=self.wall)
         assert self.lockstep is not None  # built by _apply (Params, above)
         self.get_logger().info(f'simulated time for {", ".join(self.lockstep.participants)}; starting at '
                                f'{self.params["start_time_s"]:g} s once all have reported')
 
+    def _checked(self, values: dict[str, Any]) -> dict[str, Any]:
+        if self._started_values is not None:
+            for name in FIXED_AT_START:
+                check(values[name] == self._started_values[name], name, values[name],
+                      'cannot change while the clock runs (only real_time_factor and max_lead_s can)')
+        return _validate(values)
+
     def _period(self) -> float:
         rtf = self.params['real_time_factor']
         return 0.001 if rtf == 0 else max(0.001, self.params['step_s'] / rtf)
 
     def _apply(self, values: dict[str, Any], _all: dict[str, Any]) -> None:
-        if self.lockstep is not None:  # after start only the pace may change
+        if self.lockstep is not None:  # after start only the pace may change (_validate refuses the rest)
             self.lockstep.real_time_factor = float(values['real_time_factor'])
             self.lockstep.max_lead_ns = round(values['max_lead_s'] * 1e9)
+            self.lockstep.repace()
+            self.destroy_timer(self.timer)
+            self.timer = self.create_timer(self._period(), self._tick, clock=self.wall)
             return
         self.lockstep = LockstepClock(list(values['participants']), round(values['start_time_s'] * 1e9),
                                       round(values['step_s'] * 1e9), float(values['real_time_factor']),
@@ -116,6 +134,9 @@ class SimClock(Node):
             p = json.loads(msg.data)
             if self.lockstep.report(str(p['name']), int(p['stage']), int(p['t'])):
                 self.sent[str(p['name'])] = {str(k): int(v) for k, v in dict(p['sent']).items()}
+                if 'end' in p and self.lockstep.end_ns is None:
+                    self.lockstep.end_ns = int(p['end'])
+                    self.get_logger().info(f'{p["name"]}: the run ends at simulated time {int(p["end"]) * 1e-9:.3f} s')
         except (ValueError, KeyError, TypeError):
             self.get_logger().warning(f'malformed progress {msg.data[:200]!r} ignored', throttle_duration_sec=5.0)
             return
@@ -158,14 +179,20 @@ class SimClock(Node):
         else:
             slowest = ls.slowest()
             if slowest is not None and slowest.progress_ns + ls.max_lead_ns <= ls.now_ns:
-                self._log_held(now, f'held at {ls.now_ns * 1e-9:.3f} s by {slowest.name} (through '
-                                    f'{slowest.progress_ns * 1e-9:.3f} s)')
+                if self._held_since is None:
+                    self._held_since = now
+                self._held_by = slowest.name
+                self._log_held(now, f'held at {ls.now_ns * 1e-9:.3f} s for {now - self._held_since:.0f} s by '
+                                    f'{slowest.name} (through {slowest.progress_ns * 1e-9:.3f} s)', warn=True)
+                self._publish_marks()
+                return
+        self._held_since = None
         self._publish_marks()
 
-    def _log_held(self, now: float, what: str) -> None:
+    def _log_held(self, now: float, what: str, warn: bool = False) -> None:
         if now - self._last_log >= self.params['log_period_s']:
             self._last_log = now
-            self.get_logger().info(what)
+            (self.get_logger().warning if warn else self.get_logger().info)(what)
 
     def _publish_clock(self) -> None:
         assert self.lockstep is not None
@@ -188,7 +215,8 @@ class SimClock(Node):
                         for topic, n in self.sent.get(p.name, {}).items():
                             total[topic] = total.get(topic, 0) + n
                 sums.append(total)
-            self.pub_marks.publish(String(data=json.dumps({'t': marks, 'sent': sums})))
+            self.pub_marks.publish(String(data=json.dumps({'t': marks, 'sent': sums, 'done': self.lockstep.done_ns(),
+                                                           'end': self.lockstep.end_ns})))
 
     def close(self) -> None:
         ls = self.lockstep
@@ -207,6 +235,11 @@ class SimClock(Node):
         missing = ls.missing()
         if missing:
             return WARN, f'waiting for {", ".join(missing)}', pairs
+        if self._held_since is not None and time.monotonic() - self._held_since >= self.params['log_period_s']:
+            return WARN, (f'simulated time held at {ls.now_ns * 1e-9:.3f} s for '
+                          f'{time.monotonic() - self._held_since:.0f} s by {self._held_by}'), pairs
+        if ls.end_ns is not None and ls.now_ns >= ls.end_ns:
+            return OK, f'the run ended at simulated time {ls.end_ns * 1e-9:.3f} s', pairs
         return OK, f'simulated time {ls.now_ns * 1e-9:.3f} s', pairs
 
 

@@ -20,6 +20,7 @@ import time
 from typing import Any, Callable, Sequence
 
 from rclpy.clock import Clock, ClockType
+from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.publisher import Publisher
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -31,9 +32,9 @@ from crane_stiffness.sim.lockstep import LEFT_NS
 #: The progress and watermark topics: reliable, volatile, deep enough for a reader starved of CPU for a while.
 SIM_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.VOLATILE)
-#: Longest a watermark waits for input messages the stages below published (wall time) [s]: past it the node says
-#: which are missing (ERROR in its log, counted) and goes on, so a message lost for good cannot stop the rig.
-WAIT_LIMIT_S = 5.0
+#: While a watermark waits for input messages the stages below published, the node says which this often (wall
+#: time, ERROR in its log) [s]. It keeps waiting: simulated time holds rather than a reading being guessed.
+WAIT_REPORT_S = 5.0
 _STEADY = Clock(clock_type=ClockType.STEADY_TIME)
 
 
@@ -83,10 +84,12 @@ class SimTimeParticipant:
         self.inputs = [node.resolve_topic_name(t) for t in inputs]
         self.sent: dict[str, int] = {}       # messages published per topic since the first report
         self.got: dict[str, int] = {t: 0 for t in self.inputs}  # messages handled per input topic
-        self.gave_up = 0  # watermarks acted on although inputs were missing after WAIT_LIMIT_S
+        self.left = False
         self._counting = False
         self._pending: tuple[int, dict[str, int]] | None = None
         self._pending_since = 0.0
+        self._said_at = 0.0
+        self._resolved: dict[str, str] = {}
         self._on_watermark = on_watermark
         self._drain = drain
         self._name = node.get_fully_qualified_name().lstrip('/')
@@ -111,12 +114,19 @@ class SimTimeParticipant:
         return pub
 
     def received(self, topic: str, n: int = 1) -> None:
-        """``n`` messages of input ``topic`` handled."""
-        if self.active and topic in self.got:
-            self.got[topic] += n
+        """``n`` messages of input ``topic`` (its name in the code; resolved here, remappings included) handled."""
+        if not self.active:
+            return
+        resolved = self._resolved.get(topic)
+        if resolved is None:
+            resolved = self._resolved[topic] = self.node.resolve_topic_name(topic)
+        if resolved in self.got:
+            self.got[resolved] += n
 
     # --- watermarks ---
     def _on_marks(self, msg: String) -> None:
+        if self.left:
+            return
         marks = json.loads(msg.data)
         mark = int(marks['t'][self.stage])
         if mark < self.watermark_ns or (mark == self.watermark_ns and self.reported_ns >= 0):
@@ -136,20 +146,18 @@ class SimTimeParticipant:
         mark, expected = self._pending
         short = {t: n - self.got[t] for t, n in expected.items() if self.got[t] < n}
         if short:
-            waited = time.monotonic() - self._pending_since
-            if waited < WAIT_LIMIT_S:
-                if self._timer is None:
-                    self._timer = self.node.create_timer(0.002, self._try, clock=_STEADY)
-                else:
-                    self._timer.reset()
-                return
-            self.gave_up += 1
-            self.node.get_logger().error(
-                f'simulated time {mark * 1e-9:.3f} s: after {waited:.0f} s still missing '
-                f'{", ".join(f"{n} on {t}" for t, n in short.items())}; going on without them',
-                throttle_duration_sec=5.0)
-            for t in short:
-                self.got[t] = expected[t]
+            now = time.monotonic()
+            if now - self._pending_since >= WAIT_REPORT_S and now - self._said_at >= WAIT_REPORT_S:
+                self._said_at = now
+                self.node.get_logger().error(
+                    f'simulated time held at {mark * 1e-9:.3f} s for {now - self._pending_since:.0f} s: still '
+                    f'missing {", ".join(f"{n} message(s) on {t}" for t, n in short.items())} that the rig\'s '
+                    'nodes published (a reader that never matched?)')
+            if self._timer is None:
+                self._timer = self.node.create_timer(0.002, self._try, clock=_STEADY)
+            else:
+                self._timer.reset()
+            return
         if self._timer is not None:
             self._timer.cancel()
         self._pending = None
@@ -157,20 +165,25 @@ class SimTimeParticipant:
         self._counting = True  # from time's start on: what was sent before (to readers not yet matched) is not
         self._on_watermark(mark)
 
-    def report(self, progress_ns: int, *, force: bool = False) -> None:
-        """Everything this node publishes up to ``progress_ns`` is out (counted): say so to the clock."""
-        if self._pub is None or (progress_ns <= self.reported_ns and not force):
+    def report(self, progress_ns: int, *, end_ns: int | None = None) -> None:
+        """Everything this node publishes up to ``progress_ns`` is out (counted): say so to the clock. ``end_ns``:
+        simulated time is to stop there (the load program, when it will end the run)."""
+        if self._pub is None or self.left or (progress_ns <= self.reported_ns and end_ns is None):
             return
         self._counting = True
         self.reported_ns = max(self.reported_ns, progress_ns)
-        self._publish(self.reported_ns)
+        self._publish(self.reported_ns, end_ns)
 
     def leave(self) -> None:
-        """This node ends: the clock waits for it no more."""
-        if self._pub is not None and self.node.context.ok():
+        """This node ends (or stops taking part): the clock waits for it no more."""
+        if self._pub is not None and not self.left and self.node.context.ok():
+            self.left = True
             self._publish(LEFT_NS)
+            self._pub.wait_for_all_acked(Duration(seconds=1.0))  # the process may end right after
 
-    def _publish(self, progress_ns: int) -> None:
+    def _publish(self, progress_ns: int, end_ns: int | None = None) -> None:
         assert self._pub is not None
-        self._pub.publish(String(data=json.dumps({'name': self._name, 'stage': self.stage, 't': progress_ns,
-                                                   'sent': self.sent})))
+        report: dict[str, Any] = {'name': self._name, 'stage': self.stage, 't': progress_ns, 'sent': self.sent}
+        if end_ns is not None:
+            report['end'] = end_ns
+        self._pub.publish(String(data=json.dumps(report)))

@@ -38,7 +38,7 @@ Service ~/reset (std_srvs/Trigger) starts afresh: fits, branch tracker, pairing 
 from __future__ import annotations
 
 from functools import partial
-from typing import Any, cast
+from typing import Any, Callable, cast
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PointStamped, WrenchStamped
@@ -136,14 +136,18 @@ class StiffnessEstimatorNode(Node):
         self.values_msg.layout.dim = [
             MultiArrayDimension(label='branch', size=len(BRANCHES), stride=len(BRANCHES) * n),
             MultiArrayDimension(label='field', size=n, stride=n)]
-        self.sub_command = self.create_subscription(WrenchStamped, topics.WRENCH_COMMAND, self._on_command,
+        # On simulated time the streams are reliable and the clock waits for this node (stage 3): nothing is lost,
+        # and what arrives is held until the watermark says every input up to it is in (_drain_all).
+        self.sim_time = uses_sim_time(self)
+        self.held: list[tuple[bool, Callable[..., None], Any]] = []  # simulated time: (is a command, handler, msg)
+        self.sub_command = self.create_subscription(WrenchStamped, topics.WRENCH_COMMAND,
+                                                    self._held_until_watermark(self._on_command, command=True),
                                                     RELIABLE_QOS)
-        self.sub_rejected = self.create_subscription(WrenchStamped, topics.REJECTED_COMMAND, self._on_rejected,
+        self.sub_rejected = self.create_subscription(WrenchStamped, topics.REJECTED_COMMAND,
+                                                     self._held_until_watermark(self._on_rejected, command=True),
                                                      RELIABLE_QOS)
         self.publisher_counts: dict[str, int] = {}  # matched publishers per sensor stream at the last report
         # The sensor streams are taken serialized and decoded here (serde.cdr): a quarter of the CPU per message.
-        # On simulated time the streams are reliable and the clock waits for this node (stage 3): nothing is lost.
-        self.sim_time = uses_sim_time(self)
         self.sub_force = self.create_subscription(WrenchStamped, topics.LOAD_CELL_WRENCH,
                                                   self._then_drain(self._on_force), sensor_qos(self.sim_time),
                                                   event_callbacks=_NO_EVENTS_SUB, raw=True)
@@ -277,12 +281,25 @@ class StiffnessEstimatorNode(Node):
             return received * 1e-9
         return clock.now().nanoseconds * 1e-9
 
+    def _held_until_watermark(self, handle, command: bool = False):
+        """``handle`` itself on wall-clock time; on simulated time a callback that holds the message until the
+        watermark (:meth:`_drain_all` handles it then, commands first: the same order in every run)."""
+        if not self.sim_time:
+            return handle
+
+        def hold(msg) -> None:
+            self.held.append((command, handle, msg))
+        return hold
+
     def _then_drain(self, handle):
         """A subscription callback: ``handle`` the message, then what is already queued (see ``_take_queued``),
         then publish the estimate once if any of them changed it.
 
         Message-only on purpose: rclpy's EventsExecutor (Jazzy) fails on callbacks that take the message info.
         """
+        if self.sim_time:
+            return self._held_until_watermark(handle)
+
         def callback(msg) -> None:
             # Commands and rejections already queued go first: a sample must be judged under the command in force
             # at its stamp (a command published just before it may be queued but not yet taken).
@@ -312,15 +329,29 @@ class StiffnessEstimatorNode(Node):
         return True
 
     def _drain_all(self) -> None:
-        """Simulated time: handle everything queued (however much), then publish the estimate once if it changed."""
+        """Simulated time: handle everything held and queued (however much): the commands and rejections first (a
+        pair is judged under the command in force at its stamp), then the samples in the order they came; then
+        publish the estimate once if it changed."""
+        held, self.held = self.held, []
+        for command, handle, msg in held:
+            if command:
+                handle(msg)
+        for subscription, handle in self.drained[:2]:
+            while (taken := _take_queued(subscription)) is not None:
+                handle(*taken)
+        for command, handle, msg in held:
+            if not command:
+                handle(msg)
         while self._drain():
             pass
         if self.changed:
             self._publish_values()
 
     def _catch_up(self) -> None:
-        """Handle what is queued (:meth:`_drain`), then publish the estimate once if it changed."""
-        self._drain()
+        """Handle what is queued (:meth:`_drain`; on simulated time only the watermark does), then publish the
+        estimate once if it changed."""
+        if not self.sim_time:
+            self._drain()
         if self.changed:
             self._publish_values()
 

@@ -66,6 +66,8 @@ class LockstepClock:
     table: dict[str, Participant] = field(init=False)
     _anchor: tuple[int, int] | None = field(init=False, default=None)  # (wall ns, simulated ns) of the pacing
     held: int = field(init=False, default=0)  #: advances the participants held back (the wall clock allowed more)
+    #: Where time stops, ns (a run with a known end: every run then ends at the same simulated time); None: never.
+    end_ns: int | None = field(init=False, default=None)
 
     def __post_init__(self) -> None:
         if not self.participants:
@@ -92,6 +94,15 @@ class LockstepClock:
         p.stage = stage
         p.progress_ns = max(p.progress_ns, int(progress_ns))
         return True
+
+    def repace(self) -> None:
+        """The pace changed (real_time_factor): pace on from now, at the new factor."""
+        self._anchor = None
+
+    def done_ns(self) -> int:
+        """The time through which every participant still there has published (the clock when all have left)."""
+        running = [p.progress_ns for p in self.table.values() if not p.left]
+        return min(running) if running else self.now_ns
 
     def missing(self) -> list[str]:
         """Participants not heard from yet (time does not start before they are all there)."""
@@ -130,6 +141,8 @@ class LockstepClock:
             if paced > allowed:  # held back: pace on from where it is held, do not rush to catch up afterwards
                 self.held += 1
                 self._anchor = (wall_ns, max(self.now_ns, (target // self.step_ns) * self.step_ns))
+        if self.end_ns is not None:
+            target = min(target, self.end_ns)
         new = (target // self.step_ns) * self.step_ns
         if new <= self.now_ns:
             return False
