@@ -63,9 +63,8 @@ FIT_LINES = '/stiffness/fit_lines'
 
 # Simulated time (crane_stiffness.sim.lockstep): the clock source publishes the time on /clock
 # (rosgraph_msgs/Clock, as Gazebo does; every node of the simulated rig runs with use_sim_time) and, with it, one
-# watermark per stage on SIM_WATERMARKS (std_msgs/Int64MultiArray, data[s] = simulated time [ns] through which every
-# participant of the stages below s has published); each participant reports on SIM_PROGRESS (std_msgs/Header:
-# stamp = simulated time through which it has published, frame_id = '<stage> <node name>'). Reliable, volatile.
+# watermark per stage on SIM_WATERMARKS; each participant reports its progress on SIM_PROGRESS. Both std_msgs/String
+# holding JSON, reliable, volatile (the fields: crane_stiffness.nodes.sim_time).
 CLOCK = '/clock'
 SIM_WATERMARKS = '/sim/watermarks'
 SIM_PROGRESS = '/sim/progress'
