@@ -94,15 +94,16 @@ def test_show_args_prints_readable_defaults(install_tree):
     assert 'Substitution' not in out.stdout and 'PathJoin' not in out.stdout, out.stdout
 
 
-@pytest.mark.parametrize('transport', ['sim', 'drivers'])
+@pytest.mark.parametrize('transport, sim_time', [('sim', 'false'), ('drivers', 'false'), ('sim', 'true')])
 def test_launch_side_force_gives_the_prediction_and_one_ctrl_c_ends_every_node(install_tree, rclpy_context,
-                                                                                 tmp_path, transport):
-    """The README's `ros2 launch crane_stiffness rig.launch.py program:=side_force` (and transport:=drivers):
-    the program runs, the loading estimate is within 2 % of the prediction, one Ctrl-C ends every process with
-    exit status 0, and the bag is complete."""
+                                                                                 tmp_path, transport, sim_time):
+    """The README's `ros2 launch crane_stiffness rig.launch.py program:=side_force` (and transport:=drivers, and
+    use_sim_time:=true): the program runs, the loading estimate is within 2 % of the prediction, one Ctrl-C ends every
+    process with exit status 0, and the bag is complete."""
     install, env = install_tree
-    nodes = {n.name for n in rig_nodes(installed_config(install), {'transport': transport})}
-    launch = Launch(env, tmp_path, 'program:=side_force', f'transport:={transport}', 'session:=genuine')
+    nodes = {n.name for n in rig_nodes(installed_config(install), {'transport': transport, 'use_sim_time': sim_time})}
+    launch = Launch(env, tmp_path, 'program:=side_force', f'transport:={transport}', f'use_sim_time:={sim_time}',
+                    'session:=genuine')
     observer, ex = watch(rclpy_context)
     try:
         deadline = time.monotonic() + 150
