@@ -133,16 +133,23 @@ class RdtDevice:
             self._http.server_close()
             self._http = None
 
+    #: Longest power_cycle waits for a running stream and for the datagrams it holds in flight [s].
+    HOLD_WAIT_S = 10.0
+
     def power_cycle(self, off_s: float, in_flight: int = 0) -> int:
         """Power down for ``off_s`` seconds and up again on the same port, as a real sensor does when its supply
         drops: its sample counter (ft_sequence) starts again at ``start_counter``, the stream and the bias are
         gone (the client must request the stream again, rdt_sequence counts from 1), and the last ``in_flight``
-        datagrams sent before the power-down reach the client only after the power-up (with a stream running;
-        up to 2 s is waited for them). Blocks for ``off_s``; returns the datagrams held in flight."""
+        datagrams sent before the power-down reach the client only after the power-up (up to ``HOLD_WAIT_S`` is
+        waited for a stream to run and for them, so a busy machine does not skip the case). Blocks for ``off_s``;
+        returns the datagrams held in flight."""
+        deadline = time.monotonic() + self.HOLD_WAIT_S
+        while in_flight and not self.streaming and time.monotonic() < deadline:
+            time.sleep(0.005)  # a client re-requesting its stream (it timed out on a busy machine)
         if in_flight and self.streaming:
             self._held_event.clear()
             self._hold = int(in_flight)
-            self._held_event.wait(2.0)
+            self._held_event.wait(max(0.0, deadline - time.monotonic()))
         self.stop()
         self._hold = 0
         self._held_event.clear()
