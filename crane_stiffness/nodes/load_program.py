@@ -52,6 +52,8 @@ DEFAULT_WAIT_FOR_SUBSCRIBERS = tuple(_FULL_RIG['wait_for_subscribers'])
 #: exit_on_done: how long the node lingers after the program so the last commands and state reach every reader [s];
 #: on simulated time the run ends there, the same instant in every run.
 EXIT_LINGER_S = 1.0
+#: Wall-clock time: the longest stretch of program ticks a late timer call catches up on [s] (older ones skipped).
+MAX_CATCH_UP_S = 2.0
 #: Longest exit_on_done waits for every reader to acknowledge the last commands and state [s].
 EXIT_ACK_TIMEOUT_S = 5.0
 #: How the log names the source of a topic waited for.
@@ -330,12 +332,27 @@ class LoadProgramNode(Node):
             self._exit()
 
     def _tick(self) -> None:
-        self._emit(self.get_clock().now().nanoseconds)
+        """Wall-clock time: the program's ticks on the grid k / rate_hz since the last call, each its own command
+        stamped on the grid (a busy machine delays them, it does not drop them: at most MAX_CATCH_UP_S of them)."""
+        assert self.program is not None
+        now = self.get_clock().now().nanoseconds
+        period = round(1e9 / self.program.rate_hz)
+        running = self.state in ('running', 'paused')
+        if self._last_tick_ns is None or not running:
+            self._last_tick_ns = now // period * period  # nothing to catch up while nothing plays
+            if not running:
+                return
+        first = max(self._last_tick_ns + period, (now - round(MAX_CATCH_UP_S * 1e9)) // period * period)
+        for tick in range(first, now // period * period + 1, period):
+            self._emit(tick)
+            self._last_tick_ns = tick
 
     def _emit(self, t_ns: int) -> None:
         """The program's command at node-clock time ``t_ns`` (while running or paused), stamped ``t_ns``."""
         if self.state not in ('running', 'paused'):
             return
+        if self.state == 'running' and self.started_at is not None and t_ns * 1e-9 < self.started_at:
+            return  # a tick before the (re)start: the program had not begun
         assert self.program is not None
         st = self.program.wrench_at(self._program_time(t_ns * 1e-9))
         self.last = st
