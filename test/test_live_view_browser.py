@@ -45,8 +45,8 @@ def test_page_shows_the_estimators_estimate_and_points(install_tree, rclpy_conte
                                      " return [k.dataset.value, k.dataset.sampleStamp, k.textContent,"
                                      " document.getElementById('status-level').dataset.level,"
                                      " Object.keys(state.data).join(' ')]; })()")
-            # the whole page: where its parts are depends on the numbers shown (a wider table wraps the side
-            # column under the plot, the crane below the viewport)
+            # the whole page: where the crane is depends on the fonts and on what the page shows (the side column
+            # can wrap under the plot, the crane then lies below the window)
             png = browser.screenshot(tmp_path / 'page.png', full_page=True).read_bytes()
             plot, crane = browser.box('#xy'), browser.box('#scene')
         finally:

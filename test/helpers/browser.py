@@ -55,7 +55,9 @@ def chromium() -> str:
 class Browser:
     """One headless Chromium with one page (a fixed viewport, 1280×900 unless ``size``, device scale 1). With
     ``webgl`` it renders WebGL in software (SwiftShader), for pages that draw 3D; otherwise the GPU is off. The
-    page's console errors and warnings are kept in ``console`` as (level, text), read as commands are sent."""
+    page's console errors and warnings are kept in ``console`` as (level, text), read as commands are sent.
+    Scrollbars are hidden: a page taller than the window is laid out as wide as one that fits, so a full-page
+    screenshot (which takes the scrollbar away) shows the layout the element boxes were read from."""
 
     def __init__(self, executable: str, log: Path, *, size: tuple[int, int] = (1280, 900),
                  webgl: bool = False) -> None:
@@ -66,12 +68,15 @@ class Browser:
             [executable, '--headless=new', '--no-sandbox', '--disable-dev-shm-usage', *(
                 ['--use-angle=swiftshader', '--enable-unsafe-swiftshader', '--ignore-gpu-blocklist'] if webgl
                 else ['--disable-gpu']),
-             '--no-first-run', '--force-device-scale-factor=1', f'--window-size={size[0]},{size[1]}',
+             '--no-first-run', '--hide-scrollbars', '--force-device-scale-factor=1',
+             f'--window-size={size[0]},{size[1]}',
              '--remote-debugging-port=0', '--remote-debugging-address=127.0.0.1', f'--user-data-dir={self.profile}',
              'about:blank'], stdout=self._log_file, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
             start_new_session=True)
         url = self._devtools_url(60.0)
-        self.ws = connect(url, max_size=None, open_timeout=30, legacy=True)
+        # as the Foxglove test client: no keepalive pings, and events (console, page) buffered between commands
+        # instead of a paused socket, however long a test goes between two commands
+        self.ws = connect(url, max_size=None, max_queue=None, ping_interval=None, open_timeout=30, legacy=True)
         self._ids = itertools.count(1)
         target = self.send('Target.createTarget', url='about:blank')['targetId']
         self.session = self.send('Target.attachToTarget', targetId=target, flatten=True)['sessionId']
