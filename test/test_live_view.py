@@ -4,8 +4,10 @@ the estimator's fitted pairs, the scene's wire tensions are /crane/wire_states),
 bridge that tares the load cell."""
 from __future__ import annotations
 
+import json
 import math
 import time
+from typing import Any, Callable
 
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
@@ -16,7 +18,7 @@ from crane_stiffness import topics
 from crane_stiffness.nodes.live_view import DEFAULT_SERVICES, DEFAULT_TOPICS, _TYPES
 from crane_stiffness.launcher.rosrun import installed_config
 from crane_stiffness.status import ERROR, NAMES, STALE, WAITING_PREFIX, overall, read_level
-from helpers.foxglove_client import FoxgloveClient
+from helpers.foxglove_client import PATIENCE_S, FoxgloveClient
 from helpers.live_rig import live_rig, wait_for_pairs
 from helpers.processes import UNCLEAN, final_counters
 
@@ -43,7 +45,8 @@ def test_protocol_channels_values_and_tare(install_tree, rclpy_context, tmp_path
 
             client.subscribe(*(f'/live_view/{name}' for name in DERIVED), topics.WIRE_STATES)
             wait_for_pairs(procs, watcher, 3000)
-            client.poll(6.0)  # the program runs: loading, points growing
+            # the program runs: loading, points growing, until the client has what the checks look at
+            assert client.poll_until(_Enough(client)), {t: len(m) for t, m in client.messages.items()}
             procs.check_alive(allow_exit=('load_program',))
             _check_plot(client, watcher)
             _check_crane(client, watcher)
@@ -54,7 +57,9 @@ def test_protocol_channels_values_and_tare(install_tree, rclpy_context, tmp_path
             encoding, payload = client.call('/load_cell/tare', 'cdr', serialize_message(Trigger.Request()), 1)
             response = deserialize_message(payload, Trigger.Response)
             assert encoding == 'cdr' and response.success, response.message
-            client.poll(2.0)
+            expected = (epochs_before or [0.0])[-1] + 1
+            _wait_for(lambda: watcher.tare_epochs and watcher.tare_epochs[-1] == expected and
+                      'service /load_cell/tare called through the WebSocket' in procs.log('live_view'))
             assert watcher.tare_epochs and watcher.tare_epochs[-1] == (epochs_before or [0.0])[-1] + 1, \
                 (epochs_before, watcher.tare_epochs)
             assert 'service /load_cell/tare called through the WebSocket: success=True' in procs.log('live_view')
@@ -68,6 +73,36 @@ def test_protocol_channels_values_and_tare(install_tree, rclpy_context, tmp_path
     assert counters['derived_sent'] > 0 and counters['forwarded'] > 0 and counters['service_calls'] == 1
 
 
+class _Enough:
+    """Whether the client holds what the checks below look at: 10 plots, the newest with more than 120 points (more
+    than 100 of them the watcher's), a message of every derived channel, a scene with the applied force drawn, and
+    the raw wire states (each scene read once: they pile up while the test waits)."""
+
+    def __init__(self, client: FoxgloveClient) -> None:
+        self.client, self.scenes_read, self.force_drawn = client, 0, False
+
+    def __call__(self) -> bool:
+        messages = self.client.messages
+        scenes = messages.get('/live_view/scene', [])
+        while not self.force_drawn and self.scenes_read < len(scenes):
+            self.force_drawn = bool(json.loads(scenes[self.scenes_read])['entities'][0]['arrows'])
+            self.scenes_read += 1
+        xy = messages.get('/live_view/xy', [])
+        if not self.force_drawn or len(xy) < 10:
+            return False
+        last = json.loads(xy[-1])
+        return (len(last['loading']) + len(last['unloading']) > 120 and bool(messages.get(topics.WIRE_STATES))
+                and all(messages.get(f'/live_view/{name}') for name in DERIVED))
+
+
+def _wait_for(condition: Callable[[], Any], timeout_s: float = PATIENCE_S) -> None:
+    """Until ``condition()`` holds or ``timeout_s`` passed (the caller then asserts what it needs): the watcher's
+    subscriptions fill its records on another thread, and may be a moment behind the view."""
+    deadline = time.monotonic() + timeout_s
+    while not condition() and time.monotonic() < deadline:
+        time.sleep(0.05)
+
+
 def _check_plot(client: FoxgloveClient, watcher) -> None:
     xy = client.json_messages('/live_view/xy')
     assert len(xy) >= 10, len(xy)
@@ -76,9 +111,7 @@ def _check_plot(client: FoxgloveClient, watcher) -> None:
     # The watcher's subscription fills its dict from another thread, and may be a moment behind the view: wait until
     # it holds every pair shown, then read one copy (atomic under the GIL).
     shown_stamps = {p['t'] for _, p in points}
-    deadline = time.monotonic() + 10.0
-    while not shown_stamps <= watcher.pairs.keys() and time.monotonic() < deadline:
-        time.sleep(0.05)
+    _wait_for(lambda: shown_stamps <= watcher.pairs.keys())
     fitted_pairs = dict(watcher.pairs)
     missing = shown_stamps - fitted_pairs.keys()
     assert len(missing) <= 0.02 * len(shown_stamps), f'{len(missing)} of {len(shown_stamps)} shown pairs never seen'
@@ -111,6 +144,11 @@ def _check_plot(client: FoxgloveClient, watcher) -> None:
 def _check_crane(client: FoxgloveClient, watcher) -> None:
     scenes = client.json_messages('/live_view/scene')
     assert scenes
+    metas = [{kv['key']: kv['value'] for kv in s['entities'][0]['metadata']} for s in scenes]
+    shown = {tuple(float(meta[f'tension.wire_{i}']) for i in range(1, 7)) for meta in metas}
+    raw = client.messages[topics.WIRE_STATES]  # the ROS channel: CDR as published
+    published = {tuple(deserialize_message(payload, JointState).effort) for payload in raw[-20:]}
+    _wait_for(lambda: (shown | published) <= watcher.tensions)
     for scene in scenes:  # each scene's tensions are one /crane/wire_states message's, exactly
         entity = scene['entities'][0]
         meta = {kv['key']: kv['value'] for kv in entity['metadata']}
@@ -121,7 +159,6 @@ def _check_crane(client: FoxgloveClient, watcher) -> None:
     assert any(s['entities'][0]['arrows'] for s in scenes)  # a force applied during the program
     wires = client.json_messages('/live_view/wires')[-1]['wires']
     assert [w['name'] for w in wires] == [f'wire_{i}' for i in range(1, 7)]
-    raw = client.messages[topics.WIRE_STATES]  # the ROS channel: CDR as published
     assert raw
     for payload in raw[-20:]:
         assert tuple(deserialize_message(payload, JointState).effort) in watcher.tensions
@@ -130,6 +167,8 @@ def _check_crane(client: FoxgloveClient, watcher) -> None:
 def _check_estimate(client: FoxgloveClient, watcher) -> None:
     estimates = client.json_messages('/live_view/estimate')
     assert estimates
+    stamps = {e['loading']['sample_stamp'] for e in estimates[-20:] if e['loading']['stiffness'] is not None}
+    _wait_for(lambda: stamps <= watcher.values.keys())
     for est in estimates[-20:]:
         loading = est['loading']
         if loading['stiffness'] is not None:
@@ -137,9 +176,12 @@ def _check_estimate(client: FoxgloveClient, watcher) -> None:
     # The page's badge and the layout's indicator: the estimator's statuses as published, a part that has not begun
     # read back as WAITING (published OK, 'waiting: ...'), the overall the worst of them; STALE only for a branch
     # whose inputs stopped (input ERROR), never for one that waits (the unloading branch during the loading ramp).
-    history = [{(read_level(lvl, msg), msg) for lvl, msg in s.values()} for s in watcher.status_history]
     channel = client.json_messages('/live_view/status')
-    assert {(s['level'], s['message']) for s in channel[-1]['statuses']} in history
+    shown = {(s['level'], s['message']) for s in channel[-1]['statuses']}
+    _wait_for(lambda: any({(read_level(lvl, msg), msg) for lvl, msg in s.values()} == shown
+                          for s in list(watcher.status_history)))
+    history = [{(read_level(lvl, msg), msg) for lvl, msg in s.values()} for s in watcher.status_history]
+    assert shown in history
     for status in channel:
         parts = {s['name'].rpartition(': ')[2]: s for s in status['statuses']}
         assert status['level'] == overall(s['level'] for s in status['statuses'])

@@ -12,7 +12,6 @@ by LICHTBLICK_WEB (the directory of its index.html), and the test run says in on
 from __future__ import annotations
 
 import functools
-import io
 import os
 import shutil
 import threading
@@ -27,7 +26,7 @@ from matplotlib import image
 
 from crane_stiffness.launcher.rosrun import installed_config
 from helpers import REPO
-from helpers.browser import Browser, chromium
+from helpers.browser import Browser, chromium, crop
 from helpers.live_rig import live_rig, wait_for_pairs
 
 pytestmark = pytest.mark.lichtblick
@@ -96,9 +95,7 @@ def _open(browser: Browser, base: str, ws_port: int, layout: str, titles: list[s
 
 
 def _pixels(png: bytes, box: dict) -> np.ndarray:
-    pixels = image.imread(io.BytesIO(png), format='png')[:, :, :3]
-    top, left = int(box['top']), int(box['left'])
-    return pixels[top:top + int(box['height']), left:left + int(box['width']) - 60]  # not the 3D panel's buttons
+    return crop(png, box)[:, :-60]  # not the 3D panel's buttons
 
 
 def test_layouts_open_in_lichtblick_every_channel_parsed_and_the_crane_drawn(install_tree, rclpy_context, tmp_path,

@@ -2,25 +2,36 @@
 subprotocol): JSON control messages (serverInfo, advertise, advertiseServices, subscribe, status) and binary frames
 (opcode 1 messageData: u32 subscription id, u64 log time, payload; 2 serviceCallRequest: u32 service id, u32 call
 id, u32 encoding length, encoding, payload; 3 serviceCallResponse, the same layout). Imports no rclpy.
+
+The connection neither pings nor stops reading: the tests check what the server sends, not how fast it answers a
+keepalive ping, and a client that reads from the socket only in :meth:`FoxgloveClient.poll` (websockets' default
+``max_queue``) would leave the server's frames, pongs included, unread between two polls. A test waits for what it
+needs with :meth:`FoxgloveClient.poll_until`, under a deadline only a hung server exceeds.
 """
 from __future__ import annotations
 
 import json
 import struct
 import time
-from typing import Any
+from typing import Any, Callable
 
 from websockets.sync.client import ClientConnection, connect
 
 SUBPROTOCOL = 'foxglove.sdk.v1'
+#: How long a test waits for something the server must send: far beyond any answer of a working server on a
+#: loaded machine; only a server that hangs takes this long.
+PATIENCE_S = 120.0
 
 
 class FoxgloveClient:
     """One connection: what the server advertised, and the messages of the subscribed channels by topic."""
 
-    def __init__(self, port: int, host: str = '127.0.0.1', timeout_s: float = 10.0) -> None:
+    def __init__(self, port: int, host: str = '127.0.0.1', timeout_s: float = PATIENCE_S) -> None:
+        # no keepalive pings (ping_interval=None), and the receiving thread buffers every frame (max_queue=None)
+        # instead of pausing until the test reads: the connection stays up however long the test looks away
         self.ws: ClientConnection = connect(f'ws://{host}:{port}', subprotocols=[SUBPROTOCOL],
-                                            open_timeout=timeout_s, max_size=None, legacy=True)
+                                            open_timeout=timeout_s, max_size=None, max_queue=None,
+                                            ping_interval=None, legacy=True)
         self.server_info: dict[str, Any] = {}
         self.channels: dict[str, dict[str, Any]] = {}  # topic -> advertised channel
         self.services: dict[str, dict[str, Any]] = {}  # name -> advertised service
@@ -29,9 +40,7 @@ class FoxgloveClient:
         self.responses: dict[int, tuple[str, bytes]] = {}  # call id -> (encoding, payload)
         self.failures: dict[int, str] = {}  # call id -> message
         self._subscriptions: dict[int, str] = {}
-        deadline = time.monotonic() + timeout_s
-        while not (self.server_info and self.channels and self.services) and time.monotonic() < deadline:
-            self.poll(0.2)
+        self.poll_until(lambda: bool(self.server_info and self.channels and self.services), timeout_s)
 
     def poll(self, duration_s: float) -> None:
         """Receive for ``duration_s``."""
@@ -45,6 +54,16 @@ class FoxgloveClient:
             except TimeoutError:
                 return
             self._handle(frame)
+
+    def poll_until(self, condition: Callable[[], bool], timeout_s: float = PATIENCE_S) -> bool:
+        """Receive until ``condition()`` holds (checked every 50 ms) or ``timeout_s`` passed; whether it holds."""
+        deadline = time.monotonic() + timeout_s
+        while not condition():
+            left = deadline - time.monotonic()
+            if left <= 0:
+                return False
+            self.poll(min(left, 0.05))
+        return True
 
     def _handle(self, frame: str | bytes) -> None:
         if isinstance(frame, str):
@@ -82,13 +101,11 @@ class FoxgloveClient:
     def json_messages(self, topic: str) -> list[dict[str, Any]]:
         return [json.loads(p) for p in self.messages.get(topic, [])]
 
-    def call(self, service: str, encoding: str, payload: bytes, call_id: int, timeout_s: float = 15.0
+    def call(self, service: str, encoding: str, payload: bytes, call_id: int, timeout_s: float = PATIENCE_S
              ) -> tuple[str, bytes]:
         """Call an advertised service; (encoding, payload) of the response (AssertionError on a failure)."""
         self.call_raw(self.services[service]['id'], encoding, payload, call_id)
-        deadline = time.monotonic() + timeout_s
-        while call_id not in self.responses and call_id not in self.failures and time.monotonic() < deadline:
-            self.poll(0.1)
+        self.poll_until(lambda: call_id in self.responses or call_id in self.failures, timeout_s)
         assert call_id not in self.failures, f'{service}: {self.failures[call_id]}'
         assert call_id in self.responses, f'{service}: no answer in {timeout_s:g} s'
         return self.responses[call_id]

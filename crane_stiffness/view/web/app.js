@@ -96,6 +96,7 @@ function drawPlot() {
   const W = canvas.width, H = canvas.height, m = { l: 70, r: 15, t: 15, b: 45 };
   ctx.clearRect(0, 0, W, H);
   const xy = state.data.xy || { loading: [], unloading: [] };
+  canvas.dataset.loadingPoints = xy.loading.length;  // drawn below: what a test waits for before a screenshot
   const lines = state.data.fit_lines || {};
   const pred = state.data.prediction || { line: [] };
   const all = [...xy.loading, ...xy.unloading];
@@ -144,6 +145,7 @@ function drawScene() {
   const canvas = document.getElementById('scene');
   const ctx = canvas.getContext('2d');
   ctx.clearRect(0, 0, canvas.width, canvas.height);
+  canvas.dataset.drawn = scene && scene.entities.length ? 'crane' : '';  // what a test waits for (as above)
   if (!scene || !scene.entities.length) return;
   const e = scene.entities[0];
   const yaw = 0.6, pitch = 0.35, s = 480;
