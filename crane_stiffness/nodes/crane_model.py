@@ -49,7 +49,7 @@ from crane_stiffness.params.spec import ParamSpec
 from crane_stiffness.model import (AXES, WIRE_NAMES, CraneGeometry, Equilibrium, ModelError, axis_stiffness,
                                    rest_pose, solve_equilibrium, tangent_stiffness)
 from crane_stiffness.model.rotation import matrix_to_quaternion
-from crane_stiffness.nodes.qos import LATCHED_QOS, RELIABLE_QOS
+from crane_stiffness.nodes.qos import LATCHED_QOS, RELIABLE_QOS, stream_qos
 from crane_stiffness.nodes.diagnostics import Counters, Diagnostics
 from crane_stiffness.nodes.messages import finite
 from crane_stiffness.nodes.run import run
@@ -128,12 +128,14 @@ class CraneModel(Node):
         self._resend_from = 0
         self._resend_timer: Timer | None = None
         self.pub_applied = self.create_publisher(
-            WrenchStamped, topics.APPLIED_WRENCH, RELIABLE_QOS,
+            WrenchStamped, topics.APPLIED_WRENCH, stream_qos(RELIABLE_QOS, self.sim_time),
             event_callbacks=PublisherEventCallbacks(matched=self._on_applied_matched))
-        self.pub_rejected = self.create_publisher(WrenchStamped, topics.REJECTED_COMMAND, RELIABLE_QOS)
-        self.pub_pose = self.create_publisher(PoseStamped, topics.PLATFORM_POSE, RELIABLE_QOS,
+        self.pub_rejected = self.create_publisher(WrenchStamped, topics.REJECTED_COMMAND,
+                                                  stream_qos(RELIABLE_QOS, self.sim_time))
+        self.pub_pose = self.create_publisher(PoseStamped, topics.PLATFORM_POSE,
+                                              stream_qos(RELIABLE_QOS, self.sim_time),
                                               event_callbacks=PublisherEventCallbacks(matched=self._on_pose_matched))
-        self.pub_wires = self.create_publisher(JointState, topics.WIRE_STATES, RELIABLE_QOS)
+        self.pub_wires = self.create_publisher(JointState, topics.WIRE_STATES, stream_qos(RELIABLE_QOS, self.sim_time))
         self.pub_k = self.create_publisher(Float64MultiArray, topics.PREDICTED_STIFFNESS, LATCHED_QOS)
         self.pub_axis = self.create_publisher(Float64, topics.PREDICTED_AXIS_STIFFNESS, LATCHED_QOS)
         self.pub_status = self.create_publisher(String, MODEL_STATUS, LATCHED_QOS)
@@ -141,7 +143,7 @@ class CraneModel(Node):
         self.settings: dict[str, Any] = {}
         self.params = Params(self, PARAMS, _validate, self._set_geometry)
         self.sub_command = self.create_subscription(WrenchStamped, topics.WRENCH_COMMAND, self._on_command,
-                                                    RELIABLE_QOS)
+                                                    stream_qos(RELIABLE_QOS, self.sim_time))
         # Simulated time: every command up to the watermark is in (drained first) and answered; once the sensors
         # have acknowledged the answers, the model's progress says so.
         self.sim = SimTimeParticipant(self, 1, self._on_watermark, inputs=[topics.WRENCH_COMMAND],

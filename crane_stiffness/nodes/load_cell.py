@@ -32,7 +32,7 @@ from std_srvs.srv import Trigger
 from crane_stiffness import topics
 from crane_stiffness.axes import AXES
 from crane_stiffness.params.spec import ParamSpec
-from crane_stiffness.nodes.qos import RELIABLE_QOS, sensor_qos
+from crane_stiffness.nodes.qos import RELIABLE_QOS, sensor_qos, stream_qos
 from crane_stiffness.nodes.diagnostics import Diagnostics, SensorCounters
 from crane_stiffness.nodes.sensor_timing import STATE_WAIT_PARAM, SampleSchedule, ZeroEpoch, check_sensor_params
 from crane_stiffness.nodes.sim_time import SimTimeParticipant, drain
@@ -81,7 +81,7 @@ class LoadCell(Node):
         self.tare_epoch = ZeroEpoch(self, topics.LOAD_CELL_TARE)  # tares since start, latched on /load_cell/tare
         self.params = Params(self, PARAMS, _validate, self._apply)
         self.sub_applied = self.create_subscription(WrenchStamped, topics.APPLIED_WRENCH, self._on_applied,
-                                                    RELIABLE_QOS)
+                                                    stream_qos(RELIABLE_QOS, self.schedule.sim_time))
         self.sim = SimTimeParticipant(self, 2, self._on_watermark, inputs=[topics.APPLIED_WRENCH],
                                       drain=lambda: drain(self.sub_applied, self._on_applied))
         self.sim.counted(self.pub)

@@ -33,7 +33,7 @@ from std_srvs.srv import Trigger
 
 from crane_stiffness import topics
 from crane_stiffness.params.spec import ParamSpec
-from crane_stiffness.nodes.qos import LATCHED_QOS, RELIABLE_QOS, rclpy_qos
+from crane_stiffness.nodes.qos import LATCHED_QOS, RELIABLE_QOS, rclpy_qos, stream_qos
 from crane_stiffness.nodes.diagnostics import Counters, Diagnostics
 from crane_stiffness.nodes.run import run
 from crane_stiffness.nodes.parameters import Params, check
@@ -190,7 +190,8 @@ class LoadProgramNode(Node):
         self.timer: Timer | None = None
         self.counters = Counters()  # published = commands published (FINAL_COUNTERS at exit)
         self.exit_status = 0
-        self.pub_cmd = self.create_publisher(WrenchStamped, topics.WRENCH_COMMAND, RELIABLE_QOS)
+        self.pub_cmd = self.create_publisher(WrenchStamped, topics.WRENCH_COMMAND,
+                                             stream_qos(RELIABLE_QOS, self.sim_time))
         self.pub_progress = self.create_publisher(Float64, topics.PROGRAM_PROGRESS, LATCHED_QOS)
         self.pub_state = self.create_publisher(String, topics.PROGRAM_STATE, LATCHED_QOS)
         self.params = Params(self, PARAMS, self._validate, self._apply)

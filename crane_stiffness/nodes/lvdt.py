@@ -27,7 +27,7 @@ from std_srvs.srv import Trigger
 
 from crane_stiffness import topics
 from crane_stiffness.params.spec import ParamSpec
-from crane_stiffness.nodes.qos import RELIABLE_QOS, sensor_qos
+from crane_stiffness.nodes.qos import RELIABLE_QOS, sensor_qos, stream_qos
 from crane_stiffness.nodes.diagnostics import Diagnostics, SensorCounters
 from crane_stiffness.nodes.sensor_timing import STATE_WAIT_PARAM, SampleSchedule, ZeroEpoch, check_sensor_params
 from crane_stiffness.nodes.sim_time import SimTimeParticipant, drain
@@ -75,7 +75,8 @@ class Lvdt(Node):
         self.params = Params(self, PARAMS, _validate, self._apply)
         if not self.settings['zero_on_first_pose']:  # else epoch 1 at the first pose, before any reading
             self.zero_epoch.step(0)
-        self.sub_pose = self.create_subscription(PoseStamped, topics.PLATFORM_POSE, self._on_pose, RELIABLE_QOS)
+        self.sub_pose = self.create_subscription(PoseStamped, topics.PLATFORM_POSE, self._on_pose,
+                                                 stream_qos(RELIABLE_QOS, self.schedule.sim_time))
         self.sim = SimTimeParticipant(self, 2, self._on_watermark, inputs=[topics.PLATFORM_POSE],
                                       drain=lambda: drain(self.sub_pose, self._on_pose))
         self.sim.counted(self.pub)

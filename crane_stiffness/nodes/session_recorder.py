@@ -62,7 +62,7 @@ from crane_stiffness.nodes.heap import TRIM_INTERVAL_S, release_free_memory, tri
 from crane_stiffness.nodes.run import run
 from crane_stiffness.nodes.parameter_reader import NodeParameterReader, plain
 from crane_stiffness.nodes.parameters import Params
-from crane_stiffness.nodes.qos import SIM_SENSOR_QOS
+from crane_stiffness.nodes.qos import SIM_STREAM_QOS
 from crane_stiffness.nodes.sim_time import SimTimeParticipant, drain, uses_sim_time
 from crane_stiffness.nodes.session_recorder_params import (OWN_SECTIONS, PARAMS, RECORDING_KEYS, utc_session_name,
                                                           validate)
@@ -328,8 +328,8 @@ class SessionRecorder(Node):
 
     def _subscribe(self, topic: str, msg_type: str) -> None:
         qos = contract_qos(topic)
-        if self.sim_time and topics.TOPIC_QOS.get(topic) == topics.SENSOR_DATA:
-            qos = SIM_SENSOR_QOS
+        if self.sim_time and topic in SIM_INPUTS:
+            qos = SIM_STREAM_QOS
         if qos is None:
             qos = adapted_qos([i.qos_profile for i in self.get_publishers_info_by_topic(topic)])
         try:

@@ -59,7 +59,7 @@ from crane_stiffness.estimation.settings import ESTIMATOR_PARAMS, LiveSettings
 from crane_stiffness.params.spec import ParamSpec
 from crane_stiffness.status import wire_level
 from crane_stiffness.estimation.sync import DISPLACEMENT, FORCE
-from crane_stiffness.nodes.qos import LATCHED_QOS, RELIABLE_QOS, sensor_qos
+from crane_stiffness.nodes.qos import LATCHED_QOS, RELIABLE_QOS, sensor_qos, stream_qos
 from crane_stiffness.nodes.sim_time import SimTimeParticipant, uses_sim_time
 from crane_stiffness.nodes.diagnostics import Diagnostics
 from crane_stiffness.nodes.run import run
@@ -142,10 +142,10 @@ class StiffnessEstimatorNode(Node):
         self.held: list[tuple[bool, Callable[..., None], Any]] = []  # simulated time: (is a command, handler, msg)
         self.sub_command = self.create_subscription(WrenchStamped, topics.WRENCH_COMMAND,
                                                     self._held_until_watermark(self._on_command, command=True),
-                                                    RELIABLE_QOS)
+                                                    stream_qos(RELIABLE_QOS, self.sim_time))
         self.sub_rejected = self.create_subscription(WrenchStamped, topics.REJECTED_COMMAND,
                                                      self._held_until_watermark(self._on_rejected, command=True),
-                                                     RELIABLE_QOS)
+                                                     stream_qos(RELIABLE_QOS, self.sim_time))
         self.publisher_counts: dict[str, int] = {}  # matched publishers per sensor stream at the last report
         # The sensor streams are taken serialized and decoded here (serde.cdr): a quarter of the CPU per message.
         self.sub_force = self.create_subscription(WrenchStamped, topics.LOAD_CELL_WRENCH,
