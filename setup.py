@@ -79,9 +79,12 @@ class InstallAndCompileKernels(install):
         env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [self.install_lib,
                                                                          os.environ.get('PYTHONPATH')])))
         # From the install directory, so the installed package (not this source tree) is the one compiled; seeded
-        # with the cache of this interpreter's own installation of the package if its files are the same.
-        result = subprocess.run([sys.executable, '-m', 'crane_stiffness.model.kernel_cache',
-                                 '--seed-from', sysconfig.get_paths()['purelib']], env=env, cwd=self.install_lib)
+        # with the cache of this interpreter's own installation of the package if its files are the same (colcon's
+        # prefix_override/sitecustomize.py moves sys.prefix to the install prefix and keeps the real one aside).
+        prefix = getattr(sys, 'real_prefix', sys.prefix)
+        site = sysconfig.get_paths(vars={'base': prefix, 'platbase': prefix})['purelib']
+        result = subprocess.run([sys.executable, '-m', 'crane_stiffness.model.kernel_cache', '--seed-from', site],
+                                env=env, cwd=self.install_lib)
         if result.returncode:
             self.warn('compiling the model kernels failed; crane_model will compile them at its first start')
 
