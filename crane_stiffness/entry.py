@@ -33,6 +33,8 @@ def pending() -> list[int]:
 def _main(module: str) -> int:
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, _note)
+    from crane_stiffness.discovery import use_quick_discovery
+    use_quick_discovery()  # before rclpy makes the participant
     return importlib.import_module(f'crane_stiffness.nodes.{module}').main()
 
 
