@@ -40,8 +40,13 @@ $(STAMP): requirements.txt requirements-test.txt $(SOURCES)
 	@# (PYTHONDONTWRITEBYTECODE=1 above). The kernel compile writes the .pyc of what it imports itself, so it does not
 	@# wait for them; both write each file atomically. compileall's status is ignored like pip's own compile step
 	@# ignores it: a few packages ship files for other Python versions that do not compile.
+	@# The source tree gets a copy of the cache too: scripts/demo.py and the tests import the package from it (the
+	@# demo's summary solves the model in its own process). A cache of an earlier install goes first: numba checks
+	@# each kernel's cache against its own file only, and a kernel compiled into another would stay stale.
+	find $(VENV)/lib/python*/site-packages/crane_stiffness crane_stiffness -name '*.nb[ic]' -delete
 	($(BIN)/python -m compileall -q $(VENV)/lib >/dev/null || true) & \
-	(cd $(VENV) && PYTHONDONTWRITEBYTECODE= bin/python -m crane_stiffness.model.kernel_cache) && wait $$!
+	(cd $(VENV) && PYTHONDONTWRITEBYTECODE= bin/python -m crane_stiffness.model.kernel_cache --copy-to $(CURDIR)) \
+		&& wait $$!
 	@touch $(STAMP)
 
 demo: $(STAMP)

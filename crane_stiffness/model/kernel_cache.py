@@ -16,7 +16,8 @@ bytes (numba 0.68, as pinned: ``numba/core/caching.py``), and its entries are ke
 the function's bytecode. So a cache compiled for one installation of the package serves another with the same
 files: ``--seed-from`` copies it over (:func:`seed`) before the kernels are exercised, and they are then loaded, not
 compiled. ``colcon build`` seeds the install tree this way from the installation of the interpreter that runs it
-(``make install``'s ``.venv``), so the kernels are compiled once for both.
+(``make install``'s ``.venv``), so the kernels are compiled once for both; ``make install`` also copies them into
+the source tree (``--copy-to``), whose modules the demo's own process and the tests import.
 
 :func:`exercise` runs every kernel with the argument types the package uses (the solver's single, warm-started,
 continuation, path and batch solves, the Jacobian and the tangent stiffness), so nothing is left to compile at run
@@ -134,6 +135,9 @@ def main(argv: list[str] | None = None) -> int:
                     help='first copy the compiled kernels of the package installed in DIR (a site-packages '
                          'directory) when its files are the same as this one\'s (repeatable: the first that '
                          'matches)')
+    ap.add_argument('--copy-to', metavar='DIR', action='append', default=[],
+                    help='then copy the compiled kernels into the package in DIR (a source tree, a site-packages '
+                         'directory) when its files are the same as this one\'s (repeatable)')
     args = ap.parse_args(argv)
     from crane_stiffness.model import _kernels
     if not _kernels.HAVE_NUMBA:
@@ -153,6 +157,10 @@ def main(argv: list[str] | None = None) -> int:
     where = next(iter(kernels().values())).stats.cache_path
     print(f'kernel cache: {compiled} signature(s) compiled, {loaded} loaded from {where} '
           f'in {time.perf_counter() - t0:.1f} s', flush=True)
+    for target in args.copy_to:
+        copied = seed(here, target)
+        print(f'kernel cache: {copied} file(s) copied to {target}' if copied else
+              f'kernel cache: nothing copied to {target} (not the same package files)', flush=True)
     return 0
 
 
