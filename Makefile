@@ -4,7 +4,7 @@ PYTHON ?= python3.11
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.crane_stiffness-installed
-SOURCES := $(shell find crane_stiffness config launch nodes_bin foxglove rosdep -type f \( -name '*.py' -o -name '*.yaml' -o -path 'nodes_bin/*' -o -path '*/web/*' -o -name '*.json' \) 2>/dev/null) \
+SOURCES := $(shell find crane_stiffness config launch nodes_bin foxglove rosdep -type f \( -name '*.py' -o -name '*.yaml' -o -path 'nodes_bin/*' -o -path '*/web/*' -o -name '*.json' -o -name '*.xml' \) 2>/dev/null) \
            setup.py setup.cfg package.xml resource/crane_stiffness
 
 # DDS stays on this machine: loopback discovery only, and a domain id of its own for every run.
@@ -23,17 +23,30 @@ install: $(STAMP)
 
 $(STAMP): requirements.txt requirements-test.txt $(SOURCES)
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --disable-pip-version-check -r requirements-test.txt
+	@# --no-compile: the modules are byte-compiled below, beside the kernel compile (pip does it on one core, ~12 s
+	@# of CPU for the ~6,600 modules of the requirements).
+	$(BIN)/python -m pip install --quiet --disable-pip-version-check --no-compile -r requirements-test.txt
 	@# setuptools reuses build/lib: a module moved or deleted in the tree would stay installed from it.
 	rm -rf build/lib build/bdist.* crane_stiffness.egg-info
 	@# As a wheel, with the venv's pinned setuptools and wheel: the console script and the node executables go to
 	@# .venv/bin with any pip (pip < 23.1 would otherwise run the legacy `setup.py install`, which follows setup.cfg's
 	@# colcon layout and puts them in .venv/lib/crane_stiffness).
-	$(BIN)/python -m pip install --quiet --disable-pip-version-check --use-pep517 --no-build-isolation --no-deps \
-		--force-reinstall .
+	$(BIN)/python -m pip install --quiet --disable-pip-version-check --no-compile --use-pep517 \
+		--no-build-isolation --no-deps --force-reinstall .
 	@# Compile the model's numba kernels into their cache beside the installed modules (numba keys it by the
-	@# installed files' times): no node or CLI call compiles them at run time (colcon does this in setup.py).
-	cd $(VENV) && bin/python -m crane_stiffness.model.kernel_cache
+	@# files' contents): no node or CLI call compiles them at run time; colcon build copies this cache into its
+	@# install tree (setup.py). The kernel compile is one thread: meanwhile the other core byte-compiles the
+	@# installed modules, which every process started from the venv then loads instead of compiling them in memory
+	@# (PYTHONDONTWRITEBYTECODE=1 above). The kernel compile writes the .pyc of what it imports itself, so it does not
+	@# wait for them; both write each file atomically. compileall's status is ignored like pip's own compile step
+	@# ignores it: a few packages ship files for other Python versions that do not compile.
+	@# The source tree gets a copy of the cache too: scripts/demo.py and the tests import the package from it (the
+	@# demo's summary solves the model in its own process). A cache of an earlier install goes first: numba checks
+	@# each kernel's cache against its own file only, and a kernel compiled into another would stay stale.
+	find $(VENV)/lib/python*/site-packages/crane_stiffness crane_stiffness -name '*.nb[ic]' -delete
+	($(BIN)/python -m compileall -q $(VENV)/lib >/dev/null || true) & \
+	(cd $(VENV) && PYTHONDONTWRITEBYTECODE= bin/python -m crane_stiffness.model.kernel_cache --copy-to $(CURDIR)) \
+		&& wait $$!
 	@touch $(STAMP)
 
 demo: $(STAMP)

@@ -5,13 +5,16 @@
 
 `setup.py install` (what colcon runs) then compiles the model's numba kernels into their cache beside the installed
 modules (crane_stiffness.model.kernel_cache), so the first start of crane_model after a build does not spend ~15 s
-compiling. A staged install (``--root``, as when pip builds a wheel) skips it: the files move afterwards and numba's
-cache is keyed by their modification times; `make install` compiles after `pip install` instead.
-Set CRANE_STIFFNESS_NO_KERNEL_CACHE=1 to skip it.
+compiling. When the interpreter running the build has the same package installed with its kernels compiled (`make
+install`'s .venv, whose colcon builds the demo's and the tests' install trees), that cache is copied instead: numba
+keys it by the source files' contents, not their paths, so the kernels are compiled once for both. A staged install
+(``--root``, as when pip builds a wheel) skips it: a wheel carries no machine code compiled for one CPU; `make install`
+compiles after `pip install` instead. Set CRANE_STIFFNESS_NO_KERNEL_CACHE=1 to skip it.
 """
 import os
 import subprocess
 import sys
+import sysconfig
 from glob import glob
 
 from setuptools import find_packages, setup
@@ -75,9 +78,13 @@ class InstallAndCompileKernels(install):
             return
         env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [self.install_lib,
                                                                          os.environ.get('PYTHONPATH')])))
-        # From the install directory, so the installed package (not this source tree) is the one compiled.
-        result = subprocess.run([sys.executable, '-m', 'crane_stiffness.model.kernel_cache'], env=env,
-                                cwd=self.install_lib)
+        # From the install directory, so the installed package (not this source tree) is the one compiled; seeded
+        # with the cache of this interpreter's own installation of the package if its files are the same (colcon's
+        # prefix_override/sitecustomize.py moves sys.prefix to the install prefix and keeps the real one aside).
+        prefix = getattr(sys, 'real_prefix', sys.prefix)
+        site = sysconfig.get_paths(vars={'base': prefix, 'platbase': prefix})['purelib']
+        result = subprocess.run([sys.executable, '-m', 'crane_stiffness.model.kernel_cache', '--seed-from', site],
+                                env=env, cwd=self.install_lib)
         if result.returncode:
             self.warn('compiling the model kernels failed; crane_model will compile them at its first start')
 
@@ -88,7 +95,7 @@ setup(
     version='0.1.0',
     packages=find_packages(exclude=['test', 'test.*', 'benchmarks']),
     # the live view's page (plain HTML/JS/CSS, served by the live_view node)
-    package_data={PACKAGE + '.view': ['web/*']},
+    package_data={PACKAGE + '.view': ['web/*'], PACKAGE: ['fastdds_discovery.xml']},
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE]),
         ('share/' + PACKAGE, ['package.xml']),

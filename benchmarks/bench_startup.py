@@ -6,7 +6,8 @@ that instant to load_program's state 'running' arriving at an observer in this p
 program only once the rig is ready (the model's prediction, both sensor streams, every reader subscribed), so this
 is the time until a load can be applied.
 
-- cold: the first launch from a fresh `colcon build` (the build compiles the model's kernels into the install tree,
+- cold: the first launch from a fresh `colcon build` (the build puts the model's compiled kernels into the install
+  tree: copied from the cache `make install` compiled in .venv when the files are the same, else compiled,
   crane_stiffness.model.kernel_cache); nothing of the package has run from that tree before;
 - warm: later launches from the same tree;
 - no kernel cache (an install tree as built without the cache): a copy of the fresh tree without the compiled kernels,
@@ -37,6 +38,10 @@ sys.path.insert(0, str(REPO))
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ.setdefault('ROS_DOMAIN_ID', str(random.randint(1, 100)))
 os.environ.setdefault('AMENT_PREFIX_PATH', sys.prefix)
+# The observer below discovers the nodes as quickly as they discover each other (crane_stiffness.discovery).
+from crane_stiffness.discovery import use_quick_discovery  # noqa: E402
+
+use_quick_discovery()
 
 KERNEL_CACHE = ('*.nbi', '*.nbc')
 LOADS: list[float] = []  # load average before each launch, in order: cold, warm..., no cache...

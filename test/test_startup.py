@@ -213,3 +213,41 @@ def test_launch_file_fails_at_once_for_an_unknown_program_or_a_missing_file(tmp_
     assert f'{topics.WRENCH_COMMAND}: crane_model stiffness_estimator' in waits['wait_for_subscribers']
     # The load cell applies the load crane_model has in force, never the raw command.
     assert f'{topics.APPLIED_WRENCH}: load_cell' in waits['wait_for_subscribers']
+
+
+def test_colcon_build_copies_the_kernels_compiled_for_the_same_sources(colcon_install):
+    """The install tree's cache is this interpreter's installation's (make install's .venv), copied when the
+    package's Python files are the same: numba keys it by their contents, so it is loaded there as compiled (the
+    test above)."""
+    import sysconfig
+
+    from crane_stiffness.model import kernel_cache
+    venv = Path(sysconfig.get_paths()['purelib']) / 'crane_stiffness'
+    built = _site(colcon_install) / 'crane_stiffness'
+    venv_cache = venv / 'model' / '__pycache__'
+    if not list(venv_cache.glob('*.nbi')) or kernel_cache._sources(venv) != kernel_cache._sources(built):
+        pytest.skip(f'{venv} is not the package built here, or has no compiled kernels (run make install)')
+    installed = {p.name: p.read_bytes() for p in _cache_files(colcon_install)}
+    assert installed and set(installed) == {p.name for pattern in KERNEL_CACHE for p in venv_cache.glob(pattern)}
+    for name, data in installed.items():
+        assert (venv_cache / name).read_bytes() == data, name
+
+
+def test_kernel_cache_is_copied_only_between_identical_sources(tmp_path):
+    """seed() copies nothing when any Python file of the package differs (a kernel compiled into another would be
+    stale), and everything when all are the same."""
+    from crane_stiffness.model import kernel_cache
+    src, dst = tmp_path / 'a' / 'crane_stiffness', tmp_path / 'b' / 'crane_stiffness'
+    for root in (src, dst):
+        (root / 'model').mkdir(parents=True)
+        (root / 'model' / '_kernels.py').write_text('K = 1\n')
+        (root / 'other.py').write_text('X = 1\n')
+    (src / 'model' / '__pycache__').mkdir()
+    (src / 'model' / '__pycache__' / '_kernels.f-3.py311.nbi').write_bytes(b'index')
+    (src / 'model' / '__pycache__' / '_kernels.f-3.py311.1.nbc').write_bytes(b'code')
+    (dst / 'other.py').write_text('X = 2\n')
+    assert kernel_cache.seed(tmp_path / 'a', tmp_path / 'b') == 0
+    assert not (dst / 'model' / '__pycache__').exists()
+    (dst / 'other.py').write_text('X = 1\n')
+    assert kernel_cache.seed(tmp_path / 'a', tmp_path / 'b') == 2
+    assert (dst / 'model' / '__pycache__' / '_kernels.f-3.py311.1.nbc').read_bytes() == b'code'
