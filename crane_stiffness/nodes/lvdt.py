@@ -120,7 +120,7 @@ class Lvdt(Node):
             return
         first = not self.pose.has_value
         stamp_ns = msg.header.stamp.sec * NS_PER_S + msg.header.stamp.nanosec
-        self.pose.update(pose, stamp_ns, self._arrival_ns(stamp_ns))
+        self.pose.update(pose, stamp_ns, self.schedule.arrival_ns(stamp_ns))
         self.counters.used += 1
         if first and self.settings['zero_on_first_pose']:
             self._zero(pose)
@@ -132,12 +132,6 @@ class Lvdt(Node):
         """Simulated time: every pose up to ``t_ns`` is in: measure and publish the instants up to it."""
         self._measure(self.schedule.due_until(t_ns))
         self.sim.report(t_ns)
-
-    def _arrival_ns(self, stamp_ns: int) -> int:
-        """The node clock's now for a stamped input. On simulated time the watermarks, not the node's clock
-        (updated by /clock on its own schedule), say what is known: a stamp is never "in the future" there."""
-        now = self.get_clock().now().nanoseconds
-        return max(now, stamp_ns) if self.sim.active else now
 
     def _tick(self) -> None:
         self._measure(self.schedule.released(self.pose))

@@ -94,6 +94,13 @@ class SampleSchedule:
         """The sample instants since the previous call (int64 ns, ascending; see SampleClock.due)."""
         return self.clock.due(self._node.get_clock().now().nanoseconds)
 
+    def arrival_ns(self, stamp_ns: int) -> int:
+        """The node clock's now for an input stamped ``stamp_ns`` (StampedHold.update's ``now_ns``). On simulated
+        time the watermarks, not the node's clock (updated by /clock on its own schedule), say what is known: a
+        stamp is never "in the future" there."""
+        now = self._node.get_clock().now().nanoseconds
+        return max(now, stamp_ns) if self.sim_time else now
+
     def due_until(self, t_ns: int):
         """Simulated time: the sample instants since the previous call up to ``t_ns`` (the stage's watermark)."""
         assert self.clock is not None
