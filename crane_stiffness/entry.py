@@ -4,7 +4,7 @@ from the first instant.
 A node's module takes a second or more to import (rclpy, numpy, numba). ``ros2 launch`` starts every node at once
 and Ctrl-C reaches all of them, so a signal often arrives during that import; with Python's default handler it would
 end the node with a KeyboardInterrupt traceback. Here the signal is only noted, the import finishes, and
-:class:`crane_stiffness.nodes.run.ShutdownRequest` takes it over: the node ends at once, cleanly, with status 0.
+:class:`crane_stiffness.rosnode.run.ShutdownRequest` takes it over: the node ends at once, cleanly, with status 0.
 This module imports nothing heavy; each node's executable (``nodes_bin/<node>`` in the source tree) is three lines
 calling one of its entry points, so only the interpreter's own start-up comes before it.
 """
@@ -26,7 +26,7 @@ def _note(signum: int, frame: object = None) -> None:
 
 
 def pending() -> list[int]:
-    """Signals noted before :class:`~crane_stiffness.nodes.run.ShutdownRequest` was installed (then cleared)."""
+    """Signals noted before :class:`~crane_stiffness.rosnode.run.ShutdownRequest` was installed (then cleared)."""
     out = list(_PENDING)
     _PENDING.clear()
     return out

@@ -15,7 +15,7 @@ from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
 from crane_stiffness import entry
-from crane_stiffness.nodes import parameters
+from crane_stiffness.rosnode import parameters
 from crane_stiffness.params.files import params_files_from_args
 
 
