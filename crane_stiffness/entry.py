@@ -11,11 +11,12 @@ calling one of its entry points, so only the interpreter's own start-up comes be
 from __future__ import annotations
 
 import importlib
-import importlib.util
 import os
 import signal
 import sys
 from typing import Callable
+
+from crane_stiffness.nodes import NODES
 
 #: The signals that arrived before the node's own handlers were installed, in order.
 _PENDING: list[int] = []
@@ -45,7 +46,9 @@ def _main(module: str) -> int:
 
 
 def __getattr__(name: str) -> Callable[[], int]:
-    """``from crane_stiffness.entry import crane_model``: the entry point of the node module of that name."""
-    if name.startswith('_') or importlib.util.find_spec(f'crane_stiffness.nodes.{name}') is None:
-        raise AttributeError(f'module {__name__!r} has no attribute {name!r} (no node crane_stiffness.nodes.{name})')
+    """``from crane_stiffness.entry import crane_model``: the entry point of the node of that name (one of
+    :data:`crane_stiffness.nodes.NODES`; any other name is refused)."""
+    if name not in NODES:
+        raise AttributeError(f'module {__name__!r} has no attribute {name!r} (no node {name!r} in '
+                             'crane_stiffness.nodes.NODES)')
     return lambda: _main(name)

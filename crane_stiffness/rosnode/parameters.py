@@ -237,19 +237,13 @@ def started_with(argv: Sequence[str]) -> Iterator[None]:
 
 
 def node_modules() -> dict[str, Any]:
-    """The package's nodes: {name: module} of the modules of crane_stiffness.nodes with ``PARAMS`` and a ``main``
-    (each has its executable nodes_bin/<name>, which setup.py installs; test_parameters pins the two together).
-    Imports them all (~1.4 s): only for a key a ``/**`` section names that is not the geometry's."""
+    """The package's nodes: {name: module} for each of :data:`crane_stiffness.nodes.NODES` (each has ``PARAMS`` and a
+    ``main``, and its executable nodes_bin/<name>, which setup.py installs). Imports them all (~1.4 s): only for a
+    key a ``/**`` section names that is not the geometry's."""
     import importlib
-    import pkgutil
 
-    import crane_stiffness.nodes as package
-    found = {}
-    for info in pkgutil.iter_modules(package.__path__):
-        module = importlib.import_module(f'{package.__name__}.{info.name}')
-        if hasattr(module, 'PARAMS') and hasattr(module, 'main'):
-            found[info.name] = module
-    return found
+    from crane_stiffness.nodes import NODES
+    return {name: importlib.import_module(f'crane_stiffness.nodes.{name}') for name in NODES}
 
 
 def package_parameter_names() -> set[str]:
