@@ -122,8 +122,8 @@ class Params:
         self._apply = apply
         if _start_args is not None:  # started by run(): every key of a --params-file must be known
             check_params_files(params_files_from_args(_start_args), node.get_fully_qualified_name(),
-                               set(self._names) | set(node._parameters))
-        overrides = node._parameter_overrides
+                               set(self._names) | declared_names(node))
+        overrides = node._parameter_overrides  # the values given at start (rclpy has no public read of them)
         written = {s.name: overrides[s.name].value for s in specs if s.name in overrides}
         self._written: dict[str, Any] = {}  # the values of a runtime change as sent, before _pre_set converted them
         values = {}
@@ -244,6 +244,11 @@ def node_modules() -> dict[str, Any]:
 
     from crane_stiffness.nodes import NODES
     return {name: importlib.import_module(f'crane_stiffness.nodes.{name}') for name in NODES}
+
+
+def declared_names(node: Node) -> set[str]:
+    """The names of every parameter ``node`` has declared (its own and rclpy's)."""
+    return set(node.list_parameters([], 0).names)  # no prefix, depth 0: all of them
 
 
 def package_parameter_names() -> set[str]:
