@@ -59,8 +59,8 @@ class CampaignAnalysis:
     files: list[str] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:
-        from crane_stiffness.analysis.results import _json_safe
-        return _json_safe({'campaign': self.campaign, 'rows': [asdict(r) for r in self.rows],
+        from crane_stiffness.analysis.results import json_safe
+        return json_safe({'campaign': self.campaign, 'rows': [asdict(r) for r in self.rows],
                            'missing': self.missing, 'analysed': self.analysed, 'failed': self.failed,
                            'files': self.files})
 
@@ -111,5 +111,5 @@ class Calibration:
         return next(p for p in self.parameters if p.name == name)
 
     def to_dict(self) -> dict[str, Any]:
-        from crane_stiffness.analysis.results import _json_safe
-        return _json_safe(asdict(self))
+        from crane_stiffness.analysis.results import json_safe
+        return json_safe(asdict(self))
