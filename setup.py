@@ -11,6 +11,7 @@ keys it by the source files' contents, not their paths, so the kernels are compi
 (``--root``, as when pip builds a wheel) skips it: a wheel carries no machine code compiled for one CPU; `make install`
 compiles after `pip install` instead. Set CRANE_STIFFNESS_NO_KERNEL_CACHE=1 to skip it.
 """
+import ast
 import os
 import subprocess
 import sys
@@ -29,9 +30,27 @@ PACKAGE = 'crane_stiffness'
 # The node executables: plain scripts in nodes_bin/ (installed to lib/crane_stiffness, see setup.cfg), each three
 # lines into crane_stiffness.entry, which holds SIGINT/SIGTERM while the node's module imports. Not console_scripts:
 # the script setuptools generates for those spends 0.1 s (seconds on a loaded machine) in importlib.metadata before
-# any code of ours runs, and Ctrl-C in that time ended the node with a KeyboardInterrupt traceback. The directory is
-# the one list of the package's nodes: a node is crane_stiffness/nodes/<name>.py and nodes_bin/<name>.
-NODES = tuple(sorted(os.listdir(os.path.join(os.path.dirname(os.path.abspath(__file__)), 'nodes_bin'))))
+# any code of ours runs, and Ctrl-C in that time ended the node with a KeyboardInterrupt traceback. The one list of
+# the package's nodes is crane_stiffness.nodes.NODES (read here without importing the package): a node is
+# crane_stiffness/nodes/<name>.py and nodes_bin/<name>, and a nodes_bin/ that lists other names stops the build.
+HERE = os.path.dirname(os.path.abspath(__file__))
+
+
+def read_nodes():
+    """crane_stiffness.nodes.NODES, read from the source (setup.py imports nothing of the package)."""
+    path = os.path.join(HERE, PACKAGE, 'nodes', '__init__.py')
+    with open(path, encoding='utf-8') as f:
+        tree = ast.parse(f.read(), path)
+    for stmt in tree.body:
+        if isinstance(stmt, ast.Assign) and any(getattr(t, 'id', None) == 'NODES' for t in stmt.targets):
+            return tuple(ast.literal_eval(stmt.value))
+    raise RuntimeError(f'{path}: no NODES')
+
+
+NODES = read_nodes()
+if sorted(os.listdir(os.path.join(HERE, 'nodes_bin'))) != sorted(NODES):
+    raise RuntimeError(f'nodes_bin/ holds {sorted(os.listdir(os.path.join(HERE, "nodes_bin")))}, '
+                       f'crane_stiffness.nodes.NODES names {sorted(NODES)}: they must be the same')
 
 
 # A signal in the first milliseconds of a Python process, while the interpreter itself starts (before any line of

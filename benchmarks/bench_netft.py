@@ -59,8 +59,8 @@ def run(rate: float, publish_rate: float, seconds: float, log_dir: Path, command
 
     from crane_stiffness import topics
     from crane_stiffness.serde import decode_stamped
-    from crane_stiffness.nodes.qos import SENSOR_QOS
-    from crane_stiffness.nodes.run import make_executor
+    from crane_stiffness.rosnode.qos import SENSOR_QOS
+    from crane_stiffness.rosnode.run import make_executor
 
     log_dir.mkdir(parents=True, exist_ok=True)
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:

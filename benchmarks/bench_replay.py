@@ -47,7 +47,7 @@ BASELINE = r'''
 import sys, time
 import rclpy
 from crane_stiffness.bag import BagReader
-from crane_stiffness.nodes.session_qos import message_class, playback_qos
+from crane_stiffness.rosnode.session_qos import message_class, playback_qos
 bag, offset_s, seconds, delay_s = sys.argv[1], float(sys.argv[2]), float(sys.argv[3]), float(sys.argv[4])
 topics = sys.argv[5:]
 rclpy.init()
@@ -119,7 +119,7 @@ class Listener:
 def expected_messages(bag: Path, offset_s: float, seconds: float) -> dict[tuple[str, int], int]:
     """(topic, header stamp) → log time [ns] of the messages played."""
     from crane_stiffness.bag import BagReader
-    from crane_stiffness.nodes.session_qos import message_class
+    from crane_stiffness.rosnode.session_qos import message_class
     from rclpy.serialization import deserialize_message
     out = {}
     with BagReader(bag) as reader:

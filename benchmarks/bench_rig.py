@@ -43,7 +43,7 @@ import numpy as np  # noqa: E402
 
 
 def final_counters(log: str) -> dict:
-    """The FINAL_COUNTERS line a node prints at exit (crane_stiffness.nodes.run.final_counters)."""
+    """The FINAL_COUNTERS line a node prints at exit (crane_stiffness.rosnode.run.final_counters)."""
     for line in reversed(log.splitlines()):
         if line.startswith('FINAL_COUNTERS '):
             return json.loads(line.split(' ', 2)[2])
@@ -88,8 +88,8 @@ def run_rate(rate: float, seconds: float, env: dict, share: Path, log_dir: Path,
 
     from crane_stiffness import topics
     from crane_stiffness.serde import decode_stamped
-    from crane_stiffness.nodes.qos import RELIABLE_QOS, SENSOR_QOS
-    from crane_stiffness.nodes.run import make_executor
+    from crane_stiffness.rosnode.qos import RELIABLE_QOS, SENSOR_QOS
+    from crane_stiffness.rosnode.run import make_executor
     from crane_stiffness.rig_description import rig_nodes
     from crane_stiffness.launcher import rosrun
     from crane_stiffness.testing.lab import emulated_ports

@@ -7,7 +7,8 @@ Layout (where to change what):
 - ``crane_stiffness.estimation``: fitting force against displacement (pure).
 - ``crane_stiffness.sim``: simulated sensor models and load programs (pure).
 - ``crane_stiffness.bag``: MCAP / rosbag2 reading and writing (no ROS needed to read).
-- ``crane_stiffness.nodes``: thin rclpy adapters; topic names live in ``crane_stiffness.topics``.
+- ``crane_stiffness.nodes``: thin rclpy adapters, one executable each (``NODES``); what they share (``run``,
+  parameters, QoS, diagnostics) is ``crane_stiffness.rosnode``; topic names live in ``crane_stiffness.topics``.
 - ``crane_stiffness.cli``: the ``crane-stiffness`` command line.
 """
 

@@ -19,49 +19,17 @@ from typing import Any, Sequence
 import numpy as np
 
 from crane_stiffness.params.errors import ConfigError
-from crane_stiffness.params.files import config_path, load_params
-from crane_stiffness.params.geometry import GEOMETRY_PARAMS, PREFIX, geometry_from_params, geometry_to_params
-from crane_stiffness.errors import CraneStiffnessError
+from crane_stiffness.geometry_args import UsageError, add_geometry, geometry_from_args
 from crane_stiffness.model import (AXES, WIRE_NAMES, ConvergenceError, CraneGeometry, GeometryError,
                                    NoEquilibriumError, axis_stiffness, paper_coefficients,
                                    paper_stiffness, solve_equilibrium, tangent_stiffness)
-from crane_stiffness.model.geometry import lab_model_fields
 
 EXIT_USAGE = 2
 EXIT_NO_EQUILIBRIUM = 3
 EXIT_SOLVER = 4
 
 
-class UsageError(CraneStiffnessError):
-    """Bad command-line input."""
-
-
 # --- argument groups -------------------------------------------------------------------------------------------
-
-#: Short flags kept for geometry parameters (the long form, --com-offset, works too).
-_FLAG_ALIASES = {'com_offset': '--com'}
-
-
-def _add_geometry(p: argparse.ArgumentParser) -> None:
-    """--config, --lab-model, --l0 and one flag per geometry parameter (params.geometry: its description, rule and
-    unit), e.g. ``geometry.wire_stiffness`` is ``--wire-stiffness``."""
-    g = p.add_argument_group('geometry (SI units; flags override --config)')
-    g.add_argument('--config', metavar='FILE', help='ROS parameter YAML with geometry.* parameters '
-                   '(a path, or a name in the installed config/, e.g. crane_lab)')
-    g.add_argument('--node', default=None, help='section of --config to read (default: all sections, /** first)')
-    g.add_argument('--lab-model', action='store_true',
-                   help="the paper's lab model: a = b = 0.1143 m, d = 1.08 mm, E = 206,831 MPa")
-    for spec in GEOMETRY_PARAMS:
-        name = spec.name[len(PREFIX):]
-        flags = ['--' + name.replace('_', '-')] + ([_FLAG_ALIASES[name]] if name in _FLAG_ALIASES else [])
-        rule = spec.rule_text()
-        help_text = spec.description + (f' ({rule})' if rule else '')
-        if isinstance(spec.default, list):
-            g.add_argument(*flags, dest=name, type=float, nargs=len(spec.default), metavar='V', help=help_text)
-        else:
-            g.add_argument(*flags, dest=name, type=float, help=help_text)
-    g.add_argument('--l0', type=float, help='unstretched wire length instead of --height [m]')
-
 
 def _add_load(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group('external load (fixed frame, z down)')
@@ -69,37 +37,6 @@ def _add_load(p: argparse.ArgumentParser) -> None:
                    help='force [N] at the load point')
     g.add_argument('--moment', type=float, nargs=3, default=[0.0, 0.0, 0.0], metavar=('MX', 'MY', 'MZ'),
                    help='moment [N·m]')
-
-
-def geometry_from_args(args: argparse.Namespace) -> CraneGeometry:
-    """The geometry the flags and --config describe, read as geometry parameters (params.geometry: the one reading of
-    ``wire_stiffness`` 0). A flag beats --config; --wire-stiffness beats a diameter and modulus from --config, and
-    --wire-diameter / --youngs-modulus beat a stiffness from it. Raises GeometryError / ConfigError / UsageError
-    naming the bad value."""
-    params: dict[str, Any] = {}
-    if args.config:
-        # every geometry parameter, those the file does not set at their defaults
-        params = geometry_to_params(geometry_from_params(load_params(config_path(args.config), args.node)))
-    if args.lab_model:
-        params.update({PREFIX + k: v for k, v in lab_model_fields().items()})
-        params[PREFIX + 'wire_stiffness'] = 0.0
-    given = {spec.name: getattr(args, spec.name[len(PREFIX):]) for spec in GEOMETRY_PARAMS}
-    given = {k: v for k, v in given.items() if v is not None}
-    if PREFIX + 'wire_stiffness' not in given and (PREFIX + 'wire_diameter' in given or
-                                                   PREFIX + 'youngs_modulus' in given):
-        given[PREFIX + 'wire_stiffness'] = 0.0  # k from the diameter and modulus given
-    params.update(given)
-    if args.l0 is not None:
-        if args.height is not None:
-            raise UsageError('give --height or --l0, not both')
-        params.pop(PREFIX + 'height', None)
-        params[PREFIX + 'l0'] = args.l0
-    for name in ('a', 'b', 'weight'):
-        if PREFIX + name not in params:
-            raise UsageError(f'--{name} is required (or --config FILE / --lab-model)')
-    if PREFIX + 'height' not in params and PREFIX + 'l0' not in params:
-        raise UsageError('--height (or --l0) is required, or --config FILE')
-    return geometry_from_params(params)
 
 
 # --- output ----------------------------------------------------------------------------------------------------
@@ -238,17 +175,17 @@ def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog='crane-stiffness', description=__doc__.split('\n\n')[0])
     sub = parser.add_subparsers(dest='command', required=True, parser_class=_Parser)
     p = sub.add_parser('solve', help='nonlinear equilibrium under weight and an external load')
-    _add_geometry(p)
+    add_geometry(p)
     _add_load(p)
     p.add_argument('--json', action='store_true', help='machine-readable output')
     p.set_defaults(func=cmd_solve)
     p = sub.add_parser('stiffness', help='exact tangent stiffness and the paper eq. (18)')
-    _add_geometry(p)
+    add_geometry(p)
     _add_load(p)
     p.add_argument('--json', action='store_true', help='machine-readable output')
     p.set_defaults(func=cmd_stiffness)
     p = sub.add_parser('sweep', help="the paper's parametric studies (Figs. 5-10, 13) as CSV and PNG")
-    _add_geometry(p)
+    add_geometry(p)
     p.add_argument('--out', default='out/sweep', help='output directory (default out/sweep)')
     p.add_argument('--heights', type=float, nargs='+', default=[0.5, 1.0, 1.5], help='unloaded heights [m]')
     p.add_argument('--weights', type=float, nargs=2, default=[5.0, 100.0], metavar=('MIN', 'MAX'),

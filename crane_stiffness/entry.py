@@ -4,18 +4,19 @@ from the first instant.
 A node's module takes a second or more to import (rclpy, numpy, numba). ``ros2 launch`` starts every node at once
 and Ctrl-C reaches all of them, so a signal often arrives during that import; with Python's default handler it would
 end the node with a KeyboardInterrupt traceback. Here the signal is only noted, the import finishes, and
-:class:`crane_stiffness.nodes.run.ShutdownRequest` takes it over: the node ends at once, cleanly, with status 0.
+:class:`crane_stiffness.rosnode.run.ShutdownRequest` takes it over: the node ends at once, cleanly, with status 0.
 This module imports nothing heavy; each node's executable (``nodes_bin/<node>`` in the source tree) is three lines
 calling one of its entry points, so only the interpreter's own start-up comes before it.
 """
 from __future__ import annotations
 
 import importlib
-import importlib.util
 import os
 import signal
 import sys
 from typing import Callable
+
+from crane_stiffness.nodes import NODES
 
 #: The signals that arrived before the node's own handlers were installed, in order.
 _PENDING: list[int] = []
@@ -26,7 +27,7 @@ def _note(signum: int, frame: object = None) -> None:
 
 
 def pending() -> list[int]:
-    """Signals noted before :class:`~crane_stiffness.nodes.run.ShutdownRequest` was installed (then cleared)."""
+    """Signals noted before :class:`~crane_stiffness.rosnode.run.ShutdownRequest` was installed (then cleared)."""
     out = list(_PENDING)
     _PENDING.clear()
     return out
@@ -45,7 +46,9 @@ def _main(module: str) -> int:
 
 
 def __getattr__(name: str) -> Callable[[], int]:
-    """``from crane_stiffness.entry import crane_model``: the entry point of the node module of that name."""
-    if name.startswith('_') or importlib.util.find_spec(f'crane_stiffness.nodes.{name}') is None:
-        raise AttributeError(f'module {__name__!r} has no attribute {name!r} (no node crane_stiffness.nodes.{name})')
+    """``from crane_stiffness.entry import crane_model``: the entry point of the node of that name (one of
+    :data:`crane_stiffness.nodes.NODES`; any other name is refused)."""
+    if name not in NODES:
+        raise AttributeError(f'module {__name__!r} has no attribute {name!r} (no node {name!r} in '
+                             'crane_stiffness.nodes.NODES)')
     return lambda: _main(name)

@@ -64,7 +64,7 @@ FIT_LINES = '/stiffness/fit_lines'
 # Simulated time (crane_stiffness.sim.lockstep): the clock source publishes the time on /clock
 # (rosgraph_msgs/Clock, as Gazebo does; every node of the simulated rig runs with use_sim_time) and, with it, one
 # watermark per stage on SIM_WATERMARKS; each participant reports its progress on SIM_PROGRESS. Both std_msgs/String
-# holding JSON, reliable, volatile (the fields: crane_stiffness.nodes.sim_time).
+# holding JSON, reliable, volatile (the fields: crane_stiffness.rosnode.sim_time).
 CLOCK = '/clock'
 SIM_WATERMARKS = '/sim/watermarks'
 SIM_PROGRESS = '/sim/progress'
@@ -116,7 +116,7 @@ RELIABLE = QoS('reliable', 'volatile', 1000)
 LATCHED = QoS('reliable', 'transient_local', 1)
 
 #: The QoS of every topic of the contract, the one table the rest is built from: the nodes' rclpy profiles
-#: (crane_stiffness.nodes.run), the recorder's and player's QoS (crane_stiffness.nodes.session_qos) and the
+#: (crane_stiffness.rosnode.run), the recorder's and player's QoS (crane_stiffness.rosnode.session_qos) and the
 #: offered QoS a synthetic session records (crane_stiffness.testing.synthetic).
 TOPIC_QOS: dict[str, QoS] = {
     WRENCH_COMMAND: RELIABLE,

@@ -41,7 +41,7 @@ def _default(default: object) -> str:
 
 def render() -> str:
     """The page's text."""
-    from crane_stiffness.nodes.parameters import node_modules
+    from crane_stiffness.rosnode.parameters import node_modules
 
     lines = ['# Parameters', '',
              'Every parameter of every node, generated from its single declaration '

@@ -30,9 +30,9 @@ from helpers import call_trigger, spin_until
 from crane_stiffness.bag import BagPathError, BagReader, BagWriter, UnsupportedTypeError
 from crane_stiffness.bag.msgdef import interface_prefix
 from crane_stiffness.cli import main as cli_main
-from crane_stiffness.nodes.qos import SENSOR_QOS
+from crane_stiffness.rosnode.qos import SENSOR_QOS
 from crane_stiffness.nodes.session_player import SessionPlayer
-from crane_stiffness.nodes.session_qos import message_class
+from crane_stiffness.rosnode.session_qos import message_class
 from crane_stiffness.launcher import rosrun
 
 NS = 1_000_000_000
@@ -123,7 +123,7 @@ def test_message_types_resolve_only_to_interfaces_listed_in_the_ament_index():
     with pytest.raises(ValueError, match='expected pkg/msg/Type'):
         message_class('std_msgs/srv/String')
     # In a fresh interpreter: refusing the type imports nothing (``import this`` prints the Zen of Python).
-    code = ('import sys\nfrom crane_stiffness.nodes.session_qos import message_class\n'
+    code = ('import sys\nfrom crane_stiffness.rosnode.session_qos import message_class\n'
             'try:\n    message_class("this/msg/Foo")\nexcept ValueError as e:\n    print("refused:", e)\n'
             'print("imported:", "this" in sys.modules)\n')
     out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True, timeout=60)

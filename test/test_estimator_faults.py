@@ -19,7 +19,7 @@ from crane_stiffness import topics
 from crane_stiffness.estimation.live import VALUE_FIELDS, LiveStiffness
 from crane_stiffness.estimation.settings import LiveSettings
 from crane_stiffness.estimation.sync import DISPLACEMENT, FORCE
-from crane_stiffness.nodes.qos import RELIABLE_QOS, SENSOR_QOS
+from crane_stiffness.rosnode.qos import RELIABLE_QOS, SENSOR_QOS
 from crane_stiffness.nodes.stiffness_estimator import StiffnessEstimatorNode
 from crane_stiffness.status import ERROR, OK, STALE, WARN
 from helpers.estimator import (C, K, EstimatorProbe, SyntheticRig, executor_with, identity, isolated_estimator, row,

@@ -18,7 +18,7 @@ from crane_stiffness import topics
 from crane_stiffness.rig_description import rig_nodes
 from crane_stiffness.launcher import rosrun
 from crane_stiffness.launcher.rig import start_node
-from crane_stiffness.nodes.qos import RELIABLE_QOS
+from crane_stiffness.rosnode.qos import RELIABLE_QOS
 
 pytestmark = pytest.mark.ros  # every test here starts ROS (conftest)
 

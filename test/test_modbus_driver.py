@@ -47,7 +47,7 @@ def test_adam_style_int16_counts_scaled_from_input_registers():
 def test_a_device_without_a_value_yet_is_busy_and_waited_for():
     """A source with no value yet (None) answers exception 6, "server device busy": a DeviceBusyError, which a
     driver's first contact waits out like a device still booting, while other exceptions stop it at once."""
-    from crane_stiffness.nodes.device_params import wait_for_device
+    from crane_stiffness.rosnode.device_params import wait_for_device
     value: dict[str, float | None] = {'m': None}
     ch = Channel(register=0)
     with ModbusDevice(lambda: value['m'], channel=ch) as dev:

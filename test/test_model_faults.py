@@ -28,7 +28,7 @@ from helpers.probe import ProbeNode
 from helpers.processes import final_counters, start_node_process, stop_node_process
 from crane_stiffness import topics
 from crane_stiffness.drivers import rdt
-from crane_stiffness.nodes.qos import LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS
+from crane_stiffness.rosnode.qos import LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS
 from crane_stiffness.nodes.crane_model import CraneModel
 from crane_stiffness.nodes.load_cell import LoadCell
 from crane_stiffness.nodes.lvdt import Lvdt

@@ -17,7 +17,7 @@ from helpers import spin_until, stamp_ns
 from helpers.probe import ProbeNode
 from crane_stiffness import topics
 from crane_stiffness.model import lab_model, paper_coefficients, solve_equilibrium
-from crane_stiffness.nodes.qos import LATCHED_QOS, RELIABLE_QOS
+from crane_stiffness.rosnode.qos import LATCHED_QOS, RELIABLE_QOS
 from crane_stiffness.nodes import crane_model
 from crane_stiffness.nodes.crane_model import MODEL_STATUS, CraneModel
 from crane_stiffness.nodes.load_program import LoadProgramNode

@@ -249,7 +249,7 @@ def test_the_shared_config_files_hold_only_keys_some_node_knows():
     import importlib
 
     from crane_stiffness.params.files import share_dir
-    from crane_stiffness.nodes.parameters import RCLPY_PARAMS, check_params_files, node_modules
+    from crane_stiffness.rosnode.parameters import RCLPY_PARAMS, check_params_files, node_modules
     files = sorted(str(p) for p in (share_dir() / 'config').glob('*.yaml'))
     assert files
     for module in node_modules():
@@ -273,7 +273,7 @@ def test_main_exits_2_for_a_missing_params_file_without_traceback(tmp_path, caps
 
 def test_every_node_module_has_its_executable_and_every_executable_its_node():
     """nodes_bin/ (what setup.py installs for `ros2 run`) and the node modules found at run time are one list."""
-    from crane_stiffness.nodes.parameters import node_modules
+    from crane_stiffness.rosnode.parameters import node_modules
     executables = sorted(p.name for p in (REPO / 'nodes_bin').iterdir())
     assert executables == sorted(node_modules())
     assert len(executables) == 13

@@ -28,7 +28,7 @@ from crane_stiffness import topics
 from crane_stiffness.analysis.analyze import analyze_session
 from crane_stiffness.bag import BagReader, BagWriter, dump_qos_profiles, qos_profile
 from crane_stiffness.estimation.live import VALUE_FIELDS
-from crane_stiffness.nodes.qos import LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS
+from crane_stiffness.rosnode.qos import LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS
 from crane_stiffness.nodes.crane_model import CraneModel
 from crane_stiffness.nodes.load_cell import LoadCell
 from crane_stiffness.nodes.load_program import LoadProgramNode

@@ -30,7 +30,7 @@ from helpers.processes import final_counters
 from crane_stiffness import topics
 from crane_stiffness.bag import BagDamageWarning, BagReader
 from crane_stiffness.cli import main as cli_main
-from crane_stiffness.nodes.qos import RELIABLE_QOS
+from crane_stiffness.rosnode.qos import RELIABLE_QOS
 from crane_stiffness.launcher import rosrun
 
 NS = 1_000_000_000

@@ -30,7 +30,7 @@ from crane_stiffness import topics
 from crane_stiffness.launcher import rosrun
 from crane_stiffness.bag import BagDamageWarning, BagReader
 from crane_stiffness.cli import main as cli_main
-from crane_stiffness.nodes.qos import LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS
+from crane_stiffness.rosnode.qos import LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS
 from crane_stiffness.nodes.session_recorder import SESSION_END_METADATA, SessionRecorder
 from crane_stiffness.session_record import read_session
 

@@ -14,7 +14,7 @@ from helpers import spin_until
 from crane_stiffness import topics
 from crane_stiffness.estimation.live import LiveStiffness
 from crane_stiffness.estimation.sync import DISPLACEMENT, FORCE
-from crane_stiffness.nodes.qos import LATCHED_QOS
+from crane_stiffness.rosnode.qos import LATCHED_QOS
 from crane_stiffness.nodes.stiffness_estimator import StiffnessEstimatorNode
 from helpers.estimator import C, K, EstimatorProbe, SyntheticRig, executor_with, identity, isolated_estimator, statuses
 

@@ -181,7 +181,7 @@ def test_a_driver_waits_for_a_device_that_starts_after_it():
     from crane_stiffness.devices.modbus_device import ModbusDevice
     from crane_stiffness.drivers.errors import DeviceAddressError, DeviceResponseError
     from crane_stiffness.drivers.modbus import Channel, ModbusPoller
-    from crane_stiffness.nodes.device_params import wait_for_device
+    from crane_stiffness.rosnode.device_params import wait_for_device
     from crane_stiffness.testing.lab import free_port
 
     port = free_port()

@@ -27,7 +27,7 @@ from crane_stiffness import topics  # noqa: E402
 from crane_stiffness.params.files import load_params  # noqa: E402
 from crane_stiffness.model.rotation import euler_zxy_to_matrix, matrix_to_quaternion  # noqa: E402
 from crane_stiffness.nodes import load_cell, lvdt  # noqa: E402
-from crane_stiffness.nodes.qos import LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS  # noqa: E402
+from crane_stiffness.rosnode.qos import LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS  # noqa: E402
 from std_msgs.msg import Float64  # noqa: E402
 
 pytestmark = pytest.mark.ros  # every test here starts ROS (conftest)
@@ -333,8 +333,8 @@ def test_grid_timer_ticks_fall_on_multiples_of_the_period(rclpy_context):
     Not a timing bound: a free-running timer's phase is uniform over the period (median ~ half of it); on the grid
     it is the dispatch delay, a small fraction even on a loaded machine.
     """
-    from crane_stiffness.nodes.sensor_timing import create_grid_timer
-    from crane_stiffness.nodes.run import make_executor
+    from crane_stiffness.rosnode.sensor_timing import create_grid_timer
+    from crane_stiffness.rosnode.run import make_executor
     node = Node(f'grid_{os.getpid()}_{next(_ids)}', context=rclpy_context)
     period_ns = 20 * MS
     phases: list[int] = []

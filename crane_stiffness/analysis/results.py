@@ -130,7 +130,7 @@ class SessionAnalysis:
     stream_delay: dict[str, str] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
-        return _json_safe(self)
+        return json_safe(self)
 
 
 @dataclass
@@ -142,22 +142,22 @@ class SessionComparison:
     files: list[str] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:
-        return _json_safe({'rows': self.rows, 'files': self.files})
+        return json_safe({'rows': self.rows, 'files': self.files})
 
 
-def _json_safe(value: Any) -> Any:
+def json_safe(value: Any) -> Any:
     if isinstance(value, LineFit):
-        return {name: _json_safe(getattr(value, name)) for name in FIT_JSON_FIELDS}
+        return {name: json_safe(getattr(value, name)) for name in FIT_JSON_FIELDS}
     if is_dataclass(value) and not isinstance(value, type):
-        return {f.name: _json_safe(getattr(value, f.name)) for f in fields(value)}
+        return {f.name: json_safe(getattr(value, f.name)) for f in fields(value)}
     if isinstance(value, dict):
-        return {str(k): _json_safe(v) for k, v in value.items()}
+        return {str(k): json_safe(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
-        return [_json_safe(v) for v in value]
+        return [json_safe(v) for v in value]
     if isinstance(value, (float, np.floating)):
         return _num(value)
     if isinstance(value, np.integer):
         return int(value)
     if isinstance(value, np.ndarray):
-        return _json_safe(value.tolist())
+        return json_safe(value.tolist())
     return value

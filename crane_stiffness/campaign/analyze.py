@@ -17,70 +17,15 @@ from __future__ import annotations
 import csv
 import json
 import math
-from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
 from crane_stiffness import __version__
 from crane_stiffness.campaign.errors import CampaignError
+from crane_stiffness.campaign.rows import CampaignAnalysis, SessionRow
 from crane_stiffness.campaign.runner import RESULT_FILE, read_plan
 
 SOURCE_FILE = 'source.json'
-
-
-@dataclass
-class SessionRow:
-    """One session of a campaign beside the nominal model. Stiffness in the LVDT's reading units along the series'
-    axis (N/m for fy, fz; N·m/rad for mz)."""
-
-    session: str
-    series: str
-    weight: float
-    l0: float
-    height: float
-    repeat: int
-    unit: str
-    status: str
-    reasons: list[str]
-    k: float
-    ci95_low: float
-    ci95_high: float
-    k_holds: float
-    model_tangent: float
-    model_eq18: float
-    model_elastic_w0: float
-    model_single_wire: float
-    relative_error: float
-    n: int
-    analysis: str
-    nominal: dict[str, Any] = field(default_factory=dict)
-    true: dict[str, Any] = field(default_factory=dict)
-
-    @property
-    def ok(self) -> bool:
-        return self.status == 'OK'
-
-
-@dataclass
-class CampaignAnalysis:
-    """What :func:`analyze_campaign` found and wrote."""
-
-    out: Path
-    campaign: str
-    rows: list[SessionRow]
-    missing: list[str]
-    """Sessions planned but not run (yet)."""
-    analysed: list[str]
-    """Sessions analysed now (the others were unchanged since their last analysis)."""
-    failed: dict[str, str]
-    """Sessions whose analysis failed, and why."""
-    files: list[str] = field(default_factory=list)
-
-    def to_dict(self) -> dict[str, Any]:
-        from crane_stiffness.analysis.results import _json_safe
-        return _json_safe({'campaign': self.campaign, 'rows': [asdict(r) for r in self.rows],
-                           'missing': self.missing, 'analysed': self.analysed, 'failed': self.failed,
-                           'files': self.files})
 
 
 def bag_fingerprint(bag: Path) -> dict[str, Any]:

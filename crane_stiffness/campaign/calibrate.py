@@ -31,12 +31,12 @@ apart (the smallest singular value of the column-normalised Jacobian, with the s
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
 from typing import Any, Sequence
 
 import numpy as np
 
 from crane_stiffness.campaign.errors import CalibrationError
+from crane_stiffness.campaign.rows import Calibration, CalibrationSession, Parameter
 
 WEIGHT_MODES = ('none', 'scale', 'per-weight', 'per-session')
 #: Smallest singular value of the normalised Jacobian relative to the largest for the parameters to count as
@@ -48,56 +48,6 @@ MAX_FACTOR_STDERR = 0.05
 MAX_HEIGHT_STDERR_M = 0.01
 #: Relative step of the central differences (parameters are factors near 1, offsets in m).
 STEP = 1e-5
-
-
-@dataclass
-class CalibrationSession:
-    """What the calibration uses of one session: its set-up and its hold means."""
-
-    session: str
-    series: str
-    nominal: dict[str, Any]
-    """geometry.* parameters of the nominal crane of the set-up."""
-    lvdt_scale: float
-    """The LVDT's reading per unit motion along the series' axis (1 for an LVDT along it)."""
-    force: np.ndarray
-    """(n,) mean load of each hold [N or N·m]."""
-    force_se: np.ndarray
-    displacement: np.ndarray
-    """(n,) mean LVDT reading of each hold [m, or rad when converted by a lever arm]."""
-    displacement_se: np.ndarray
-
-
-@dataclass
-class Parameter:
-    name: str
-    value: float
-    stderr: float
-    ci95_low: float
-    ci95_high: float
-    unit: str
-    description: str
-
-
-@dataclass
-class Calibration:
-    """The calibrated parameters and how well the model fits."""
-
-    parameters: list[Parameter]
-    correlation: list[list[float]]
-    chi2: float
-    dof: int
-    sessions: list[dict[str, Any]]
-    """Per session: holds, rms of the normalised residuals, its zero, measured and calibrated slope."""
-    wire: dict[str, float] = field(default_factory=dict)
-    """E·A of the wire and k at each length, nominal and calibrated."""
-
-    def parameter(self, name: str) -> Parameter:
-        return next(p for p in self.parameters if p.name == name)
-
-    def to_dict(self) -> dict[str, Any]:
-        from crane_stiffness.analysis.results import _json_safe
-        return _json_safe(asdict(self))
 
 
 def session_from_analysis(session: str, series: str, nominal: dict[str, Any], analysis: dict[str, Any]

@@ -16,7 +16,7 @@ matplotlib.use('Agg')  # headless
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from crane_stiffness.campaign.analyze import SessionRow  # noqa: E402
+from crane_stiffness.campaign.rows import SessionRow  # noqa: E402
 
 #: Figure names of the series, as the paper numbers them.
 FIGURE = {'fy': 'fig10_side_force_stiffness', 'mz': 'fig13_moment_stiffness', 'fz': 'vertical_force_stiffness'}

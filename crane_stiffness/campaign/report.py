@@ -9,8 +9,7 @@ from typing import TYPE_CHECKING, Sequence
 from crane_stiffness.analysis.report import Block, fmt, write_blocks
 
 if TYPE_CHECKING:
-    from crane_stiffness.campaign.analyze import CampaignAnalysis, SessionRow
-    from crane_stiffness.campaign.calibrate import Calibration
+    from crane_stiffness.campaign.rows import CampaignAnalysis, Calibration, SessionRow
 
 
 def _pct(value: float) -> str:

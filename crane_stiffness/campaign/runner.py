@@ -67,7 +67,7 @@ def session_done(out: Path, plan: SessionPlan) -> bool:
     return (out / 'sessions' / plan.id / RESULT_FILE).is_file()
 
 
-def _prepare(out: Path, campaign: Campaign, plans: list[SessionPlan]) -> None:
+def prepare_campaign(out: Path, campaign: Campaign, plans: list[SessionPlan]) -> None:
     """Write the plan of a new campaign directory, or check that an existing one holds the same plan."""
     fingerprint = plan_fingerprint(plans)
     path = out / PLAN_FILE
@@ -169,7 +169,7 @@ def run_campaign(campaign: Campaign, out: str | os.PathLike, *, hardware: bool =
         raise CampaignError(f'{campaign.path}: true.* describes a simulated crane; with --hardware the crane is the '
                             'real one: set true.wire_stiffness_factor and true.weight_factor to 1')
     plans = plan_sessions(campaign)
-    _prepare(out, campaign, plans)
+    prepare_campaign(out, campaign, plans)
     run = CampaignRun(out=out, planned=len(plans))
     todo = [p for p in plans if not session_done(out, p)]
     run.skipped = [p.id for p in plans if session_done(out, p)]

@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from crane_stiffness.design.errors import DesignInputError
+from crane_stiffness.geometry_args import add_geometry, geometry_from_args
 from crane_stiffness.model import CraneGeometry
 from crane_stiffness.model.geometry import WIRE_NAMES
 
@@ -30,7 +31,6 @@ DEFAULT_WEIGHT = 50.0
 
 
 def _geometry(args: argparse.Namespace) -> CraneGeometry:
-    from crane_stiffness.cli import geometry_from_args
     if not (args.config or args.a is not None):
         args.lab_model = True  # the rest of the geometry defaults to the paper's lab model ...
     if not args.config:  # ... at the lab's test case, h = 0.5 m and W = 50 N
@@ -182,17 +182,16 @@ def cmd_map(args: argparse.Namespace) -> int:
 
 def add_command(sub: Any) -> None:
     """Register ``workspace`` and its three subcommands on the main parser's subparsers."""
-    from crane_stiffness.cli import _add_geometry
     from crane_stiffness.design.margins import CAP
     ws = sub.add_parser('workspace', help='design questions: a pose, slack margins per direction, maps')
     wsub = ws.add_subparsers(dest='workspace_command', required=True, parser_class=type(ws))
     p = wsub.add_parser('pose', help='inverse problem, equilibrium, split stiffness and tensions at a pose')
-    _add_geometry(p)
+    add_geometry(p)
     _add_pose_args(p)
     p.add_argument('--json', action='store_true', help='machine-readable output')
     p.set_defaults(func=cmd_pose)
     p = wsub.add_parser('margins', help='slack margin per force and couple direction at a pose')
-    _add_geometry(p)
+    add_geometry(p)
     _add_pose_args(p)
     p.add_argument('--directions', type=int, default=256, help='force directions on the sphere')
     p.add_argument('--moment-directions', type=int, default=256, help='couple directions on the sphere')
@@ -201,7 +200,7 @@ def add_command(sub: Any) -> None:
     p.add_argument('--out', default='out/workspace', help='output directory (default out/workspace)')
     p.set_defaults(func=cmd_margins)
     p = wsub.add_parser('map', help='two variables on a grid: stiffness, slack margin, tension (resumable)')
-    _add_geometry(p)
+    add_geometry(p)
     p.add_argument('--grid', nargs=4, action='append', default=[], metavar=('NAME', 'LO', 'HI', 'N'),
                    help='a grid variable (x, y, h, W, a, b, com_x, com_y) from LO to HI in N points; twice')
     p.add_argument('--position', type=float, nargs=2, metavar=('X', 'Y'), default=[0.0, 0.0],

@@ -23,9 +23,9 @@ import numpy as np
 from crane_stiffness.design.errors import DesignInputError
 from crane_stiffness.design.margins import CAP, RTOL, XTOL, sphere_directions
 from crane_stiffness.design.pose import centre_height, split_stiffness_batch
-from crane_stiffness.model import _pose_kernels as pk
 from crane_stiffness.model.geometry import CraneGeometry
-from crane_stiffness.model.inverse import _material, rotation_of
+from crane_stiffness.model.inverse import (REACHABLE, SINGULAR, UNREACHABLE, map_points, rotation_of,
+                                          wire_material)
 
 #: The variables a map can run over: name -> (unit, meaning).
 VARIABLES = {
@@ -36,7 +36,7 @@ VARIABLES = {
 }
 #: Largest grid (points): beyond it a map takes hours and its CSV gigabytes.
 MAX_POINTS = 1_000_000
-STATUS_NAMES = {pk.REACHABLE: 'ok', pk.UNREACHABLE: 'unreachable', pk.SINGULAR: 'singular'}
+STATUS_NAMES = {REACHABLE: 'ok', UNREACHABLE: 'unreachable', SINGULAR: 'singular'}
 COLUMNS = ['status', 'force_stiffness_min_N_per_m', 'force_dir_x', 'force_dir_y', 'force_dir_z',
            'moment_stiffness_min_Nm_per_rad', 'moment_axis_x', 'moment_axis_y', 'moment_axis_z', 'tension_min_N',
            'tension_min_wire', 'margin_min_N', 'margin_dir_x', 'margin_dir_y', 'margin_dir_z', 'margin_wire'] + \
@@ -153,7 +153,7 @@ def compute_points(spec: MapSpec, vals: dict[str, np.ndarray]) -> dict[str, np.n
     com = np.ascontiguousarray(np.column_stack([vals['com_x'], vals['com_y'],
                                                 np.full(npts, spec.base.com_offset[2])]))
     q = np.ascontiguousarray(rotation_of(spec.rotation))
-    ae, k = _material(spec.base)
+    ae, k = wire_material(spec.base)
     dirs6 = np.zeros((spec.directions, 6))
     dirs = sphere_directions(spec.directions)
     dirs6[:, :3] = dirs
@@ -163,11 +163,11 @@ def compute_points(spec: MapSpec, vals: dict[str, np.ndarray]) -> dict[str, np.n
     mwire = np.empty((npts, spec.directions), dtype=np.int64)
     mstat = np.empty((npts, spec.directions), dtype=np.int64)
     f = np.ascontiguousarray
-    pk.map_points(f(vals['a']), f(vals['b']), f(vals['h']), f(vals['W']), com, pos, q, ae, k,
+    map_points(f(vals['a']), f(vals['b']), f(vals['h']), f(vals['W']), com, pos, q, ae, k,
                   np.array(spec.base.load_point, dtype=float), dirs6, float(spec.cap), RTOL, XTOL, status, tensions,
                   l0, kmats, margins, mwire, mstat)
     split = split_stiffness_batch(kmats)
-    ok = status == pk.REACHABLE
+    ok = status == REACHABLE
     nominal = np.sqrt(vals['h'] ** 2 + 4.0 * (vals['a'] ** 2 + vals['b'] ** 2 - vals['a'] * vals['b']) / 3.0)
     best = np.argmin(np.where(np.isnan(margins), np.inf, margins), axis=1)
     take = np.arange(npts)

@@ -16,8 +16,8 @@ import numpy as np
 
 from crane_stiffness.design.errors import DesignInputError
 from crane_stiffness.model import Equilibrium
-from crane_stiffness.model import _pose_kernels as pk
-from crane_stiffness.model.equilibrium import _arrays
+from crane_stiffness.model.equilibrium import geometry_arrays
+from crane_stiffness.model.inverse import slack_margin
 from crane_stiffness.model.geometry import CraneGeometry
 
 #: Relative tolerance on a margin and pose tolerance of the corrector [m].
@@ -105,7 +105,7 @@ def slack_margins(geometry: CraneGeometry, equilibrium: Equilibrium, directions,
         raise DesignInputError('equilibrium.load', equilibrium.load.tolist(),
                                'margins start from an equilibrium under the weight alone (load 0)')
     dirs = load_directions(directions, kind)
-    arr = _arrays(geometry)
+    arr = geometry_arrays(geometry)
     s_max = cap * geometry.weight * (1.0 if kind == 'force' else arr.lc)
     u = np.ascontiguousarray(equilibrium.displacement, dtype=float)
     q = np.ascontiguousarray(equilibrium.rotation, dtype=float)
@@ -113,6 +113,6 @@ def slack_margins(geometry: CraneGeometry, equilibrium: Equilibrium, directions,
     margin, wire, status = np.empty(n), np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64)
     l_ref = float(arr.l0.max())
     for c in range(n):
-        margin[c], wire[c], status[c] = pk.slack_margin(*arr.args(), u, q, dirs[c], s_max, rtol, XTOL, arr.lc,
+        margin[c], wire[c], status[c] = slack_margin(*arr.args(), u, q, dirs[c], s_max, rtol, XTOL, arr.lc,
                                                         l_ref)
     return Margins(kind, dirs[:, :3] if kind == 'force' else dirs[:, 3:], margin, wire, status)

@@ -6,15 +6,42 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, fields
-from typing import TYPE_CHECKING
+from typing import Protocol
 
-from crane_stiffness.estimation.sync import DISPLACEMENT, FORCE
+from crane_stiffness.estimation.sync import DISPLACEMENT, FORCE, ApproximateTimeSync, InterpolatingSync
 from crane_stiffness.estimation.branch import BRANCHES, Branch
+from crane_stiffness.estimation.estimator import StiffnessEstimator
+from crane_stiffness.estimation.inputs import InputCounters, StreamHealth
+from crane_stiffness.estimation.lag import LagHistogram
 from crane_stiffness.estimation.quality import fit_problems
+from crane_stiffness.estimation.settings import LiveSettings
+from crane_stiffness.estimation.stream_delay import StreamDelay
 from crane_stiffness.status import ERROR, OK, STALE, WAITING, WAITING_PREFIX, WARN, status_value
 
-if TYPE_CHECKING:
-    from crane_stiffness.estimation.live import LiveStiffness
+
+class LiveStiffness(Protocol):
+    """What these reports read of a :class:`~crane_stiffness.estimation.live.LiveStiffness` (its own state, private
+    ones included: they are its reports)."""
+
+    counters: InputCounters
+    prediction: float
+    lag: LagHistogram
+    health: dict[str, StreamHealth]
+    _settings: LiveSettings
+    _sync: ApproximateTimeSync | InterpolatingSync
+    _estimator: StiffnessEstimator
+    _delay: StreamDelay
+    _last_report: dict[str, tuple[int, ...]]
+    _segment_reason: str
+    _nonlinearity: dict[Branch, float]
+    _scatter: dict[Branch, float]
+    _rows: dict[Branch, list[float]]
+    _current: Branch | None
+    _newest_stamp: float
+    _suspect: dict[Branch, int]
+    _suspect_reason: str
+
+    def input_problems(self, now_s: float = math.nan) -> tuple[int, list[str]]: ...
 
 
 #: Columns of one row of :meth:`~crane_stiffness.estimation.live.LiveStiffness.values` (one row per branch, in the

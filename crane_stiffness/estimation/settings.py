@@ -17,11 +17,12 @@ from crane_stiffness.errors import ParameterError
 from crane_stiffness.estimation.estimator import StiffnessEstimator
 from crane_stiffness.estimation.frames import SensorMount
 from crane_stiffness.estimation.quality import noise_std
-from crane_stiffness.estimation.stream_delay import DELAY_MAX_LAG_S
 from crane_stiffness.estimation.sync import DISPLACEMENT, FORCE, ApproximateTimeSync, InterpolatingSync
 from crane_stiffness.params.spec import ParamSpec, check_spec, declared, specs_of
 
 BRANCH_SOURCES = ('auto', 'force')
+#: Delays searched by the stream-delay estimate: ±this [s] (offset.estimate_delay's max_lag_s).
+DELAY_MAX_LAG_S = 0.05
 #: Pairing rules (``pairing``): 'nearest' pairs samples whose stamps are mutual nearest within ``slop_s``
 #: (sync.ApproximateTimeSync: both sensors on one clock grid, as the simulated rig); 'interpolate_force' pairs
 #: every displacement sample with the force interpolated at its stamp, 'interpolate_displacement' the other way

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -28,13 +27,9 @@ from crane_stiffness.estimation.errors import DataError, ParameterError
 from crane_stiffness.estimation.inputs import Samples
 from crane_stiffness.estimation.offset import DelayEstimate, estimate_delay
 from crane_stiffness.estimation.sync import DISPLACEMENT, FORCE
+from crane_stiffness.estimation.settings import DELAY_MAX_LAG_S, LiveSettings
 from crane_stiffness.status import status_value
 
-if TYPE_CHECKING:
-    from crane_stiffness.estimation.settings import LiveSettings
-
-#: Delays searched by the stream-delay estimate: ±this [s] (offset.estimate_delay's max_lag_s).
-DELAY_MAX_LAG_S = 0.05
 #: Windows of a recording the offline estimate looks at (those where the load moves most).
 DELAY_WINDOWS = 8
 

@@ -24,8 +24,8 @@ from crane_stiffness.params.files import load_params
 from crane_stiffness.analysis.sweep import unit
 from crane_stiffness.model import (axis_stiffness, directional_stiffness, paper_stiffness, rest_pose,
                                    tangent_stiffness)
-from crane_stiffness.nodes.qos import LATCHED_QOS, RELIABLE_QOS
-from crane_stiffness.nodes.sim_time import SIM_QOS
+from crane_stiffness.rosnode.qos import LATCHED_QOS, RELIABLE_QOS
+from crane_stiffness.rosnode.sim_time import SIM_QOS
 from crane_stiffness.rig_description import PACKAGE, NodeStart, rig_nodes
 from crane_stiffness.rig_description import config_files as rig_config_files
 from crane_stiffness.sim.program import LoadProgram, load_program_file

@@ -12,7 +12,8 @@ import numpy as np
 from crane_stiffness.model import _batch_kernels as bk
 from crane_stiffness.model import _kernels as kern
 from crane_stiffness.model.equilibrium import (DEFAULT_MAX_ITER, DEFAULT_XTOL, MIN_LOAD_FRACTION, BatchEquilibrium,
-                                               _arrays, _rest, checked_loads, solve_equilibrium, wrench_jacobian)
+                                               _rest, checked_loads, geometry_arrays, solve_equilibrium,
+                                               wrench_jacobian)
 from crane_stiffness.model.geometry import CraneGeometry
 
 #: Cases per parallel block: large enough that a block's scratch allocation is negligible, small enough that the
@@ -59,7 +60,7 @@ def solve_batch_parallel(geometry: CraneGeometry, loads, *, xtol: float = DEFAUL
     inadmissible case (an upward force above W) and ValueError for a non-finite load.
     """
     loads = checked_loads(geometry, loads)
-    arr = _arrays(geometry)
+    arr = geometry_arrays(geometry)
     u0, q0 = _rest(geometry, xtol)
     c0 = rest_compliance(geometry, xtol)
     n = loads.shape[0]

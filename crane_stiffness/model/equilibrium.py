@@ -147,7 +147,7 @@ class _Arrays:
                 self.ploc)
 
 
-def _arrays(g: CraneGeometry) -> _Arrays:
+def geometry_arrays(g: CraneGeometry) -> _Arrays:
     # Cached on the (immutable) geometry itself: hashing a dataclass on every solve costs more than the solve.
     arr = g._derived.get('arrays')
     if arr is None:
@@ -181,7 +181,7 @@ def net_wrench(geometry: CraneGeometry, displacement, rotation, load=None) -> np
 
     Zero at an equilibrium. This is the residual of eqs. (15)–(16) with the weight included.
     """
-    arr = _arrays(geometry)
+    arr = geometry_arrays(geometry)
     w = np.empty(6)
     kern.assemble(*arr.args(), as_load(load=np.zeros(6) if load is None else load),
                   np.asarray(displacement, dtype=float), np.ascontiguousarray(rotation, dtype=float), w,
@@ -191,7 +191,7 @@ def net_wrench(geometry: CraneGeometry, displacement, rotation, load=None) -> np
 
 def wrench_jacobian(geometry: CraneGeometry, displacement, rotation, load=None) -> tuple[np.ndarray, np.ndarray]:
     """(w, K): net wrench (6,) and K = −∂w/∂[δu, δω] (6, 6), rotations perturbed in the fixed frame."""
-    arr = _arrays(geometry)
+    arr = geometry_arrays(geometry)
     w = np.empty(6)
     kmat = np.empty((6, 6))
     kern.assemble(*arr.args(), as_load(load=np.zeros(6) if load is None else load),
@@ -279,7 +279,7 @@ def _rest(geometry: CraneGeometry, xtol: float) -> tuple[np.ndarray, np.ndarray]
 
 def _solve_rest(geometry: CraneGeometry, xtol: float) -> tuple[np.ndarray, np.ndarray]:
     """The symmetric crane's vertical sag, then a homotopy to the real offsets (centre of mass, wire lengths)."""
-    arr = _arrays(geometry)
+    arr = geometry_arrays(geometry)
     if geometry.weight == 0.0 and not any(geometry.length_offsets):
         return np.zeros(3), np.eye(3)
     zero = np.zeros(6)
@@ -323,7 +323,7 @@ def solve_equilibrium(geometry: CraneGeometry, force=None, moment=None, *, load=
     """
     load = as_load(force, moment, load)
     check_load_admissible(geometry, load)
-    arr = _arrays(geometry)
+    arr = geometry_arrays(geometry)
     if initial is not None:
         u = np.array(initial.displacement, dtype=float)
         q = np.array(initial.rotation, dtype=float)
@@ -374,7 +374,7 @@ def solve_batch(geometry: CraneGeometry, loads, *, xtol: float = DEFAULT_XTOL,
     finished by :func:`solve_equilibrium`. Raises NoEquilibriumError naming the first inadmissible case.
     """
     loads = checked_loads(geometry, loads)
-    arr = _arrays(geometry)
+    arr = geometry_arrays(geometry)
     u0, q0 = _rest(geometry, xtol)
     n = loads.shape[0]
     u = np.empty((n, 3))

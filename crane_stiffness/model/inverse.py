@@ -18,6 +18,10 @@ from crane_stiffness.model.equilibrium import Equilibrium, wrench_jacobian
 from crane_stiffness.model.errors import GeometryError
 from crane_stiffness.model.geometry import CraneGeometry
 from crane_stiffness.model.rotation import euler_zxy_to_matrix, matrix_to_euler_zxy
+# The pose kernels other packages call (crane_stiffness.design: maps over the workspace, slack margins), public here.
+from crane_stiffness.model._pose_kernels import (REACHABLE as REACHABLE, SINGULAR as SINGULAR,
+                                                 UNREACHABLE as UNREACHABLE, map_points as map_points,
+                                                 slack_margin as slack_margin)
 
 
 class UnreachablePoseError(GeometryError):
@@ -39,7 +43,7 @@ class PoseSolution:
     offsets: np.ndarray
 
 
-def _material(geometry: CraneGeometry) -> tuple[float, float]:
+def wire_material(geometry: CraneGeometry) -> tuple[float, float]:
     """(A·E [N], k [N/m]): the kernels' way of saying which wire model the geometry uses."""
     if geometry.wire_stiffness is not None:
         return 0.0, float(geometry.wire_stiffness)
@@ -89,7 +93,7 @@ def inverse_pose(geometry: CraneGeometry, position, rotation=None) -> PoseSoluti
         worst = int(np.argmin(tensions))
         raise UnreachablePoseError('pose', where, f'out of reach: wire_{worst + 1} would need tension '
                                    f'{tensions[worst]:.6g} N, and a wire can only pull (tension > 0)')
-    ae, k = _material(geometry)
+    ae, k = wire_material(geometry)
     l0, kw = np.empty(6), np.empty(6)
     pk.wire_lengths_for(lengths, tensions, ae, k, l0, kw)
     offsets = l0 - geometry.l0

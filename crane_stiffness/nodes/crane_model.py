@@ -49,12 +49,12 @@ from crane_stiffness.params.spec import ParamSpec
 from crane_stiffness.model import (AXES, WIRE_NAMES, CraneGeometry, Equilibrium, ModelError, axis_stiffness,
                                    rest_pose, solve_equilibrium, tangent_stiffness)
 from crane_stiffness.model.rotation import matrix_to_quaternion
-from crane_stiffness.nodes.qos import LATCHED_QOS, RELIABLE_QOS, stream_qos
-from crane_stiffness.nodes.diagnostics import Counters, Diagnostics
-from crane_stiffness.nodes.messages import finite
-from crane_stiffness.nodes.run import run
-from crane_stiffness.nodes.parameters import Params, check
-from crane_stiffness.nodes.sim_time import SimTimeParticipant, drain, uses_sim_time
+from crane_stiffness.rosnode.qos import LATCHED_QOS, RELIABLE_QOS, stream_qos
+from crane_stiffness.rosnode.diagnostics import Counters, Diagnostics
+from crane_stiffness.rosnode.messages import finite
+from crane_stiffness.rosnode.run import run
+from crane_stiffness.rosnode.parameters import Params, check
+from crane_stiffness.rosnode.sim_time import SimTimeParticipant, drain, uses_sim_time
 from crane_stiffness.status import ERROR, OK
 
 MODEL_STATUS = topics.MODEL_STATUS

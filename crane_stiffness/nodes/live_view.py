@@ -38,9 +38,9 @@ from std_srvs.srv import Trigger
 
 from crane_stiffness import topics
 from crane_stiffness.model import CraneGeometry
-from crane_stiffness.nodes.qos import LATCHED_QOS, RELIABLE_QOS, rclpy_qos
-from crane_stiffness.nodes.run import run
-from crane_stiffness.nodes.parameters import Params, check
+from crane_stiffness.rosnode.qos import LATCHED_QOS, RELIABLE_QOS, rclpy_qos
+from crane_stiffness.rosnode.run import run
+from crane_stiffness.rosnode.parameters import Params, check
 from crane_stiffness.params.geometry import GEOMETRY_PARAMS, geometry_from_params
 from crane_stiffness.params.spec import ParamSpec
 from crane_stiffness.view import plot

@@ -32,13 +32,13 @@ from std_srvs.srv import Trigger
 from crane_stiffness import topics
 from crane_stiffness.axes import AXES
 from crane_stiffness.params.spec import ParamSpec
-from crane_stiffness.nodes.qos import RELIABLE_QOS, sensor_qos, stream_qos
-from crane_stiffness.nodes.diagnostics import Diagnostics, SensorCounters
-from crane_stiffness.nodes.sensor_timing import STATE_WAIT_PARAM, SampleSchedule, ZeroEpoch, check_sensor_params
-from crane_stiffness.nodes.sim_time import SimTimeParticipant, drain
-from crane_stiffness.nodes.messages import finite
-from crane_stiffness.nodes.run import run
-from crane_stiffness.nodes.parameters import Params
+from crane_stiffness.rosnode.qos import RELIABLE_QOS, sensor_qos, stream_qos
+from crane_stiffness.rosnode.diagnostics import Diagnostics, SensorCounters
+from crane_stiffness.rosnode.sensor_timing import STATE_WAIT_PARAM, SampleSchedule, ZeroEpoch, check_sensor_params
+from crane_stiffness.rosnode.sim_time import SimTimeParticipant, drain
+from crane_stiffness.rosnode.messages import finite
+from crane_stiffness.rosnode.run import run
+from crane_stiffness.rosnode.parameters import Params
 from crane_stiffness.sim.sampling import NS_PER_S, SampleClock, StampedHold
 from crane_stiffness.sim.sensors import LOAD_CELL_PARAMS, LoadCellModel, load_cell_from_params
 from crane_stiffness.status import ERROR, OK, WARN

@@ -33,11 +33,11 @@ from std_srvs.srv import Trigger
 
 from crane_stiffness import topics
 from crane_stiffness.params.spec import ParamSpec
-from crane_stiffness.nodes.qos import LATCHED_QOS, RELIABLE_QOS, rclpy_qos, stream_qos
-from crane_stiffness.nodes.diagnostics import Counters, Diagnostics
-from crane_stiffness.nodes.run import run
-from crane_stiffness.nodes.parameters import Params, check
-from crane_stiffness.nodes.sim_time import SimTimeParticipant, uses_sim_time
+from crane_stiffness.rosnode.qos import LATCHED_QOS, RELIABLE_QOS, rclpy_qos, stream_qos
+from crane_stiffness.rosnode.diagnostics import Counters, Diagnostics
+from crane_stiffness.rosnode.run import run
+from crane_stiffness.rosnode.parameters import Params, check
+from crane_stiffness.rosnode.sim_time import SimTimeParticipant, uses_sim_time
 from crane_stiffness.rig_description import NODES as RIG_NODES
 from crane_stiffness.rig_description import readiness
 from crane_stiffness.sim.program import PROGRAM_KEYS, PROGRAM_PARAMS, LoadProgram, ProgramState
@@ -102,7 +102,7 @@ class _Readiness:
 
     def __init__(self, node: Node, messages: list[str], subscribers: list[tuple[str, str]],
                  min_subscribers: int, matched: Callable[[], int]) -> None:
-        from crane_stiffness.nodes.session_qos import message_class
+        from crane_stiffness.rosnode.session_qos import message_class
         self.node = node
         self.items: list[tuple[str, Callable[[], bool]]] = []
         self._received: dict[str, bool] = {}
@@ -145,7 +145,7 @@ class _Readiness:
 
     def missing(self) -> list[str]:
         """Descriptions of what is not there yet (and tidies up: a subscription whose message came is dropped)."""
-        from crane_stiffness.nodes.session_qos import message_class
+        from crane_stiffness.rosnode.session_qos import message_class
         for topic in list(self._pending_types):
             types = {t for name, ts in self.node.get_topic_names_and_types() if name == topic for t in ts}
             if len(types) == 1:

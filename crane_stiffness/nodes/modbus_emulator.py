@@ -24,12 +24,12 @@ from crane_stiffness import topics
 from crane_stiffness.params.spec import ParamSpec
 from crane_stiffness.devices.modbus_device import ModbusDevice
 from crane_stiffness.drivers.errors import ParameterError
-from crane_stiffness.nodes.qos import RELIABLE_QOS
-from crane_stiffness.nodes.diagnostics import Diagnostics, InputLag, SensorCounters
-from crane_stiffness.nodes.messages import pose_vector
-from crane_stiffness.nodes.run import run
-from crane_stiffness.nodes.parameters import Params, check, positive
-from crane_stiffness.nodes.device_params import MAX_INPUT_LAG, check_address, check_start_only
+from crane_stiffness.rosnode.qos import RELIABLE_QOS
+from crane_stiffness.rosnode.diagnostics import Diagnostics, InputLag, SensorCounters
+from crane_stiffness.rosnode.messages import pose_vector
+from crane_stiffness.rosnode.run import run
+from crane_stiffness.rosnode.parameters import Params, check, positive
+from crane_stiffness.rosnode.device_params import MAX_INPUT_LAG, check_address, check_start_only
 from crane_stiffness.nodes.modbus_lvdt import CHANNEL_PARAMS, channel_from
 from crane_stiffness.sim.sensors import LVDT_PARAMS, LvdtModel, lvdt_from_params
 from crane_stiffness.status import OK, WARN

@@ -29,12 +29,12 @@ from crane_stiffness import topics
 from crane_stiffness.params.spec import ParamSpec
 from crane_stiffness.drivers.errors import DeviceResponseError, DeviceSilentError, DriverError, ParameterError
 from crane_stiffness.drivers.modbus import DATA_TYPES, MODBUS_TCP_PORT, REGISTER_TYPES, Channel, ModbusPoller
-from crane_stiffness.nodes.qos import SENSOR_QOS
-from crane_stiffness.nodes.diagnostics import Counters, Diagnostics
-from crane_stiffness.nodes.sensor_timing import ZeroEpoch, create_grid_timer
-from crane_stiffness.nodes.run import run
-from crane_stiffness.nodes.parameters import Params, check, positive
-from crane_stiffness.nodes.device_params import check_address, check_start_only, wait_for_device
+from crane_stiffness.rosnode.qos import SENSOR_QOS
+from crane_stiffness.rosnode.diagnostics import Counters, Diagnostics
+from crane_stiffness.rosnode.sensor_timing import ZeroEpoch, create_grid_timer
+from crane_stiffness.rosnode.run import run
+from crane_stiffness.rosnode.parameters import Params, check, positive
+from crane_stiffness.rosnode.device_params import check_address, check_start_only, wait_for_device
 from crane_stiffness.sim.sampling import NS_PER_S
 from crane_stiffness.status import ERROR, OK, WARN
 

@@ -36,12 +36,12 @@ from crane_stiffness.drivers import rdt
 from crane_stiffness.drivers.errors import DriverError
 from crane_stiffness.drivers.rdt_client import RdtReceiver, fetch_netftapi2
 from crane_stiffness.drivers.rdt_pipeline import RdtPipeline
-from crane_stiffness.nodes.qos import SENSOR_QOS
-from crane_stiffness.nodes.diagnostics import Counters, Diagnostics
-from crane_stiffness.nodes.sensor_timing import ZeroEpoch, create_grid_timer
-from crane_stiffness.nodes.run import run
-from crane_stiffness.nodes.parameters import Params, check, positive
-from crane_stiffness.nodes.device_params import check_address, check_start_only, wait_for_device
+from crane_stiffness.rosnode.qos import SENSOR_QOS
+from crane_stiffness.rosnode.diagnostics import Counters, Diagnostics
+from crane_stiffness.rosnode.sensor_timing import ZeroEpoch, create_grid_timer
+from crane_stiffness.rosnode.run import run
+from crane_stiffness.rosnode.parameters import Params, check, positive
+from crane_stiffness.rosnode.device_params import check_address, check_start_only, wait_for_device
 from crane_stiffness.sim.sampling import NS_PER_S
 from crane_stiffness.status import ERROR, OK, WARN
 

@@ -25,12 +25,12 @@ from crane_stiffness import topics
 from crane_stiffness.params.spec import ParamSpec
 from crane_stiffness.devices.rdt_device import RdtDevice
 from crane_stiffness.drivers import rdt
-from crane_stiffness.nodes.qos import RELIABLE_QOS
-from crane_stiffness.nodes.diagnostics import Counters, Diagnostics, InputLag
-from crane_stiffness.nodes.messages import finite
-from crane_stiffness.nodes.run import run
-from crane_stiffness.nodes.parameters import Params, check, positive
-from crane_stiffness.nodes.device_params import MAX_INPUT_LAG, check_address, check_start_only
+from crane_stiffness.rosnode.qos import RELIABLE_QOS
+from crane_stiffness.rosnode.diagnostics import Counters, Diagnostics, InputLag
+from crane_stiffness.rosnode.messages import finite
+from crane_stiffness.rosnode.run import run
+from crane_stiffness.rosnode.parameters import Params, check, positive
+from crane_stiffness.rosnode.device_params import MAX_INPUT_LAG, check_address, check_start_only
 from crane_stiffness.sim.sensors import LOAD_CELL_PARAMS, LoadCellModel, load_cell_from_params
 from crane_stiffness.status import ERROR, OK, WARN
 

@@ -43,10 +43,10 @@ from std_srvs.srv import Trigger
 from crane_stiffness.bag import BagReader
 from crane_stiffness.bag.errors import BagDamageWarning, BagError
 from crane_stiffness.params.spec import ParamSpec
-from crane_stiffness.nodes.diagnostics import Diagnostics
-from crane_stiffness.nodes.run import run
-from crane_stiffness.nodes.parameters import Params, check, positive, valid_topic_name
-from crane_stiffness.nodes.session_qos import message_class, playback_qos
+from crane_stiffness.rosnode.diagnostics import Diagnostics
+from crane_stiffness.rosnode.run import run
+from crane_stiffness.rosnode.parameters import Params, check, positive, valid_topic_name
+from crane_stiffness.rosnode.session_qos import message_class, playback_qos
 from crane_stiffness.status import ERROR, OK, WARN
 
 CLOCK_TOPIC = '/clock'

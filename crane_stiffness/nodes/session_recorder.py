@@ -19,12 +19,12 @@ added on close (stop reason, end time, counts). The offline analysis prefers the
 Recording starts by itself (``autostart``) or with ~/start; ~/stop closes the bag and replies with its path and
 message count (both std_srvs/Trigger). With ``stop_on_program_done`` the recording stops ``stop_delay_s`` after
 /load_program/state reports 'done' following a run, so it covers the whole program. Ctrl-C (SIGINT) and SIGTERM
-close the bag cleanly, also when repeated (they only end the spin loop; see crane_stiffness.nodes.run.run). After
+close the bag cleanly, also when repeated (they only end the spin loop; see crane_stiffness.rosnode.run.run). After
 SIGKILL every chunk written so far is readable (chunks go to the OS as they are finished, at most
 ``flush_interval_s`` apart) and ``crane-stiffness recover BAG`` rewrites the files and metadata.yaml.
 
 It runs all day: every ``TRIM_INTERVAL_S`` it hands the pages its allocator freed back to the system
-(crane_stiffness.nodes.heap), so its resident memory stays flat.
+(crane_stiffness.rosnode.malloc_trim), so its resident memory stays flat.
 
 A write the operating system refuses (disk full, I/O error) stops the recording, not the node: ERROR in the log and
 on /diagnostics with the error, the file cut after its last complete chunk, metadata.yaml written from what is on
@@ -57,16 +57,16 @@ from std_srvs.srv import Trigger
 from crane_stiffness import __version__, topics
 from crane_stiffness.bag import BagWriter, dump_qos_profiles
 from crane_stiffness.bag.errors import BagError, BagWriteFailedError
-from crane_stiffness.nodes.diagnostics import Diagnostics
-from crane_stiffness.nodes.heap import TRIM_INTERVAL_S, release_free_memory, trim_available
-from crane_stiffness.nodes.run import run
-from crane_stiffness.nodes.parameter_reader import NodeParameterReader, plain
-from crane_stiffness.nodes.parameters import Params
-from crane_stiffness.nodes.qos import SIM_STREAM_QOS
-from crane_stiffness.nodes.sim_time import SimTimeParticipant, drain, uses_sim_time
-from crane_stiffness.nodes.session_recorder_params import (OWN_SECTIONS, PARAMS, RECORDING_KEYS, utc_session_name,
+from crane_stiffness.rosnode.diagnostics import Diagnostics
+from crane_stiffness.rosnode.malloc_trim import TRIM_INTERVAL_S, release_free_memory, trim_available
+from crane_stiffness.rosnode.run import run
+from crane_stiffness.rosnode.parameter_reader import NodeParameterReader, plain
+from crane_stiffness.rosnode.parameters import Params
+from crane_stiffness.rosnode.qos import SIM_STREAM_QOS
+from crane_stiffness.rosnode.sim_time import SimTimeParticipant, drain, uses_sim_time
+from crane_stiffness.rosnode.session_recorder_params import (OWN_SECTIONS, PARAMS, RECORDING_KEYS, utc_session_name,
                                                           validate)
-from crane_stiffness.nodes.session_qos import (adapted_qos, contract_qos, has_header, message_class,
+from crane_stiffness.rosnode.session_qos import (adapted_qos, contract_qos, has_header, message_class,
                                                offered_profiles, publisher_types)
 from crane_stiffness.params.files import params_files_from_args, read_params_files
 from crane_stiffness.serde import header_stamp_ns
@@ -145,7 +145,7 @@ class SessionRecorder(Node):
                                       inputs=[t for t in SIM_INPUTS if t in recorded])
         self.discovery_timer = self.create_timer(0.2, self._discover)
         self.flush_timer: Timer | None = None
-        # A recorder runs all day: the pages its allocator freed go back to the system now and then (nodes/heap.py).
+        # A recorder runs all day: the pages its allocator freed go back to the system now and then (malloc_trim).
         self.trim_timer = self.create_timer(TRIM_INTERVAL_S, release_free_memory)
         if not trim_available():
             self.get_logger().info('this C library has no malloc_trim: freed memory stays with the process')

@@ -25,10 +25,10 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 from std_msgs.msg import String
 
 from crane_stiffness import topics
-from crane_stiffness.nodes.diagnostics import Diagnostics
-from crane_stiffness.nodes.parameters import Params, check
-from crane_stiffness.nodes.run import run
-from crane_stiffness.nodes.sim_time import SIM_QOS
+from crane_stiffness.rosnode.diagnostics import Diagnostics
+from crane_stiffness.rosnode.parameters import Params, check
+from crane_stiffness.rosnode.run import run
+from crane_stiffness.rosnode.sim_time import SIM_QOS
 from crane_stiffness.params.spec import ParamSpec
 from crane_stiffness.sim.lockstep import LockstepClock
 from crane_stiffness.status import OK, WARN

@@ -59,12 +59,12 @@ from crane_stiffness.estimation.settings import ESTIMATOR_PARAMS, LiveSettings
 from crane_stiffness.params.spec import ParamSpec
 from crane_stiffness.status import wire_level
 from crane_stiffness.estimation.sync import DISPLACEMENT, FORCE
-from crane_stiffness.nodes.qos import LATCHED_QOS, RELIABLE_QOS, sensor_qos, stream_qos
-from crane_stiffness.nodes.sim_time import SimTimeParticipant, uses_sim_time
-from crane_stiffness.nodes.diagnostics import Diagnostics
-from crane_stiffness.nodes.run import run
-from crane_stiffness.nodes.messages import stamp_to_s
-from crane_stiffness.nodes.parameters import Params
+from crane_stiffness.rosnode.qos import LATCHED_QOS, RELIABLE_QOS, sensor_qos, stream_qos
+from crane_stiffness.rosnode.sim_time import SimTimeParticipant, uses_sim_time
+from crane_stiffness.rosnode.diagnostics import Diagnostics
+from crane_stiffness.rosnode.run import run
+from crane_stiffness.rosnode.messages import stamp_to_s
+from crane_stiffness.rosnode.parameters import Params
 
 __all__ = ['VALUE_FIELDS', 'PARAMS', 'StiffnessEstimatorNode', 'main']
 

@@ -1,7 +1,7 @@
 """One parameter, declared once: name, default (its type is the parameter's type), description with the unit, and
 its rule. No ROS import.
 
-A :class:`ParamSpec` is what a node declares (crane_stiffness.nodes.parameters turns it into the descriptor
+A :class:`ParamSpec` is what a node declares (crane_stiffness.rosnode.parameters turns it into the descriptor
 ``ros2 param describe`` shows and checks values against it), what the offline CLI turns into a flag, and what the
 docs' parameter reference lists. Settings classes of the pure cores (e.g. the live estimator's settings) declare their
 fields with :func:`declared`; :func:`specs_of` gives their specs, and :func:`check_spec` is the one check of a value

@@ -10,7 +10,7 @@ import os
 from pathlib import Path
 from typing import Any
 
-from crane_stiffness.campaign.runner import RESULT_FILE, _prepare, campaign_entry
+from crane_stiffness.campaign.runner import RESULT_FILE, prepare_campaign, campaign_entry
 from crane_stiffness.campaign.spec import Campaign, SessionPlan, plan_sessions, scaled_program_text
 from crane_stiffness.params.files import load_yaml
 from crane_stiffness.params.geometry import geometry_from_params
@@ -58,7 +58,7 @@ def write_synthetic_campaign(out: str | os.PathLike, campaign: Campaign, seed: i
     ``repeats`` times; returns the plan."""
     out = Path(out)
     plans = plan_sessions(campaign)
-    _prepare(out, campaign, plans)
+    prepare_campaign(out, campaign, plans)
     for plan in plans:
         write_synthetic_plan(out, campaign, plan, seed + plan.index, sample_rate_hz, repeats)
     return plans

@@ -21,7 +21,7 @@ from std_msgs.msg import Float64, Float64MultiArray
 
 from crane_stiffness import topics
 from crane_stiffness.estimation.sync import DISPLACEMENT, FORCE
-from crane_stiffness.nodes.qos import LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS
+from crane_stiffness.rosnode.qos import LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS
 from crane_stiffness.nodes.stiffness_estimator import VALUE_FIELDS, StiffnessEstimatorNode
 from crane_stiffness.sim.sampling import SampleClock
 from helpers import NS, spin_until

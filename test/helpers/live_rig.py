@@ -20,7 +20,7 @@ from std_msgs.msg import Float64, Float64MultiArray
 
 from crane_stiffness import topics
 from crane_stiffness.estimation.live import PAIR_FIELDS, VALUE_FIELDS
-from crane_stiffness.nodes.qos import LATCHED_QOS, RELIABLE_QOS
+from crane_stiffness.rosnode.qos import LATCHED_QOS, RELIABLE_QOS
 from crane_stiffness.launcher.ports import free_port
 from crane_stiffness.launcher.rig import start_rig
 from crane_stiffness.launcher.rosrun import Processes

@@ -10,7 +10,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.node import Node
 
 from crane_stiffness import topics
-from crane_stiffness.nodes.messages import stamp_to_s
+from crane_stiffness.rosnode.messages import stamp_to_s
 
 
 @dataclass

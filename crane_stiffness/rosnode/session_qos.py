@@ -20,7 +20,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from crane_stiffness import topics
 from crane_stiffness.bag.errors import UnsupportedTypeError
 from crane_stiffness.bag.msgdef import interface_prefix
-from crane_stiffness.nodes.qos import rclpy_qos
+from crane_stiffness.rosnode.qos import rclpy_qos
 
 
 def contract_qos(topic: str) -> QoSProfile | None:

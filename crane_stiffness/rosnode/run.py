@@ -7,7 +7,7 @@ import os
 import signal
 import sys
 import threading
-from typing import Any, Callable, Sequence, TypeVar
+from typing import Any, Callable, Protocol, Sequence, TypeVar
 
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
@@ -15,7 +15,8 @@ from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
 from crane_stiffness import entry
-from crane_stiffness.nodes import parameters
+from crane_stiffness.rosnode import parameters
+from crane_stiffness.rosnode.sim_time import SimTimeParticipant
 from crane_stiffness.params.files import params_files_from_args
 
 
@@ -111,13 +112,32 @@ class ShutdownRequest:
                 signal.signal(sig, signal.SIG_IGN)
 
 
+class RunnableNode(Protocol):
+    """What :func:`run` reads of the node it runs, beyond rclpy's ``Node``. Every member is optional: a node without
+    it gets the default shown, so a plain ``Node`` runs too (``run`` reads each with ``getattr``)."""
+
+    #: True ends the spin loop as SIGINT would (a node that has finished its work) [False].
+    exit_requested: bool
+    #: The process's exit status, read after :meth:`close` [0].
+    exit_status: int
+    #: The message counters printed once at exit (``FINAL_COUNTERS``, :func:`final_counters`): an object whose
+    #: ``__dict__`` or a mapping, numbers and strings only [None: nothing printed].
+    counters: Any
+    #: The node's part in simulated time: left first, so simulated time waits for it no more [None].
+    sim: SimTimeParticipant | None
+
+    def close(self) -> None:
+        """Close the node's files and devices, after the spin loop and before the node is destroyed [nothing]."""
+
+
 NodeT = TypeVar('NodeT', bound=Node)
 
 
 def run(node_factory: Callable[[], NodeT], args: Sequence[str] | None = None,
         executor: str | Callable[[NodeT], str] = 'events') -> int:
     """The ``main`` of every node: init, build, spin until SIGINT (Ctrl-C), SIGTERM or ``node.exit_requested``,
-    clean up; returns the exit status (``node.exit_status``, default 0).
+    clean up; returns the exit status (``node.exit_status``, default 0). What it reads of the node:
+    :class:`RunnableNode`.
 
     Signals only set a flag (:class:`ShutdownRequest`; rclpy's handlers are not installed), so every exit takes
     the same path: the spin loop ends, ``close()`` (if the node has one) runs, the node's final counters are
@@ -142,7 +162,7 @@ def run(node_factory: Callable[[], NodeT], args: Sequence[str] | None = None,
         with parameters.started_with(argv):
             node = node_factory()
         try:  # a misspelt -p name would be ignored by rclpy: the node would run with the default
-            parameters.check_command_line_params(argv, node.get_name(), set(node._parameters))
+            parameters.check_command_line_params(argv, node.get_name(), parameters.declared_names(node))
         except ValueError:
             node.destroy_node()
             raise
@@ -164,7 +184,8 @@ def run(node_factory: Callable[[], NodeT], args: Sequence[str] | None = None,
         pass
     finally:
         request.detach()  # first: a later signal must not call into the executor being shut down
-        sim = getattr(node, 'sim', None)  # a SimTimeParticipant: simulated time waits for this node no more
+        # What follows reads the optional members of RunnableNode.
+        sim = getattr(node, 'sim', None)  # simulated time waits for this node no more
         if sim is not None:
             sim.leave()
         close = getattr(node, 'close', None)

@@ -8,7 +8,7 @@ from typing import Any, Callable, Mapping, Sequence, TypeVar
 
 from crane_stiffness.params.spec import ParamSpec
 from crane_stiffness.drivers.errors import DeviceAddressError, DeviceBusyError, DeviceSilentError
-from crane_stiffness.nodes.parameters import check
+from crane_stiffness.rosnode.parameters import check
 
 T = TypeVar('T')
 

@@ -8,8 +8,8 @@ from typing import Any
 
 from crane_stiffness import topics
 from crane_stiffness.bag.writer import COMPRESSIONS
-from crane_stiffness.nodes.parameter_reader import plain
-from crane_stiffness.nodes.parameters import check, valid_topic_name
+from crane_stiffness.rosnode.parameter_reader import plain
+from crane_stiffness.rosnode.parameters import check, valid_topic_name
 from crane_stiffness.params.files import NodeSections
 from crane_stiffness.params.geometry import GEOMETRY_PARAMS, geometry_from_params
 from crane_stiffness.params.spec import ParamSpec

@@ -122,8 +122,8 @@ class Params:
         self._apply = apply
         if _start_args is not None:  # started by run(): every key of a --params-file must be known
             check_params_files(params_files_from_args(_start_args), node.get_fully_qualified_name(),
-                               set(self._names) | set(node._parameters))
-        overrides = node._parameter_overrides
+                               set(self._names) | declared_names(node))
+        overrides = node._parameter_overrides  # the values given at start (rclpy has no public read of them)
         written = {s.name: overrides[s.name].value for s in specs if s.name in overrides}
         self._written: dict[str, Any] = {}  # the values of a runtime change as sent, before _pre_set converted them
         values = {}
@@ -237,19 +237,18 @@ def started_with(argv: Sequence[str]) -> Iterator[None]:
 
 
 def node_modules() -> dict[str, Any]:
-    """The package's nodes: {name: module} of the modules of crane_stiffness.nodes with ``PARAMS`` and a ``main``
-    (each has its executable nodes_bin/<name>, which setup.py installs; test_parameters pins the two together).
-    Imports them all (~1.4 s): only for a key a ``/**`` section names that is not the geometry's."""
+    """The package's nodes: {name: module} for each of :data:`crane_stiffness.nodes.NODES` (each has ``PARAMS`` and a
+    ``main``, and its executable nodes_bin/<name>, which setup.py installs). Imports them all (~1.4 s): only for a
+    key a ``/**`` section names that is not the geometry's."""
     import importlib
-    import pkgutil
 
-    import crane_stiffness.nodes as package
-    found = {}
-    for info in pkgutil.iter_modules(package.__path__):
-        module = importlib.import_module(f'{package.__name__}.{info.name}')
-        if hasattr(module, 'PARAMS') and hasattr(module, 'main'):
-            found[info.name] = module
-    return found
+    from crane_stiffness.nodes import NODES
+    return {name: importlib.import_module(f'crane_stiffness.nodes.{name}') for name in NODES}
+
+
+def declared_names(node: Node) -> set[str]:
+    """The names of every parameter ``node`` has declared (its own and rclpy's)."""
+    return set(node.list_parameters([], 0).names)  # no prefix, depth 0: all of them
 
 
 def package_parameter_names() -> set[str]:

@@ -1,11 +1,11 @@
-"""crane_stiffness.nodes.heap: the freed pages of a long-running node go back to the system (glibc's malloc_trim).
-No ROS: blocks malloc'd and freed directly, the resident set read from /proc."""
+"""crane_stiffness.rosnode.malloc_trim: the freed pages of a long-running node go back to the system (glibc's
+malloc_trim). No ROS: blocks malloc'd and freed directly, the resident set read from /proc."""
 from __future__ import annotations
 
 import ctypes
 import ctypes.util
 
-from crane_stiffness.nodes.heap import release_free_memory, trim_available
+from crane_stiffness.rosnode.malloc_trim import release_free_memory, trim_available
 
 
 def _rss_bytes() -> int:

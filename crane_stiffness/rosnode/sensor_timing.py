@@ -8,9 +8,9 @@ from typing import Any, Callable, Mapping
 from rclpy.node import Node
 from std_msgs.msg import Float64
 
-from crane_stiffness.nodes.parameters import check, positive
-from crane_stiffness.nodes.qos import LATCHED_QOS
-from crane_stiffness.nodes.sim_time import uses_sim_time
+from crane_stiffness.rosnode.parameters import check, positive
+from crane_stiffness.rosnode.qos import LATCHED_QOS
+from crane_stiffness.rosnode.sim_time import uses_sim_time
 from crane_stiffness.params.spec import ParamSpec
 from crane_stiffness.sim.sampling import ReleaseGate, SampleClock, StampedHold
 

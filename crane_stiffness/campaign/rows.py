@@ -1,0 +1,115 @@
+"""The campaign's result types: a session's row beside the nominal model and the campaign's analysis
+(:mod:`.analyze` builds them), and the calibration's data and result (:mod:`.calibrate`). The report and the figures
+read them; no workflow here."""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+
+@dataclass
+class SessionRow:
+    """One session of a campaign beside the nominal model. Stiffness in the LVDT's reading units along the series'
+    axis (N/m for fy, fz; N·m/rad for mz)."""
+
+    session: str
+    series: str
+    weight: float
+    l0: float
+    height: float
+    repeat: int
+    unit: str
+    status: str
+    reasons: list[str]
+    k: float
+    ci95_low: float
+    ci95_high: float
+    k_holds: float
+    model_tangent: float
+    model_eq18: float
+    model_elastic_w0: float
+    model_single_wire: float
+    relative_error: float
+    n: int
+    analysis: str
+    nominal: dict[str, Any] = field(default_factory=dict)
+    true: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def ok(self) -> bool:
+        return self.status == 'OK'
+
+
+@dataclass
+class CampaignAnalysis:
+    """What :func:`analyze_campaign` found and wrote."""
+
+    out: Path
+    campaign: str
+    rows: list[SessionRow]
+    missing: list[str]
+    """Sessions planned but not run (yet)."""
+    analysed: list[str]
+    """Sessions analysed now (the others were unchanged since their last analysis)."""
+    failed: dict[str, str]
+    """Sessions whose analysis failed, and why."""
+    files: list[str] = field(default_factory=list)
+
+    def to_dict(self) -> dict[str, Any]:
+        from crane_stiffness.analysis.results import json_safe
+        return json_safe({'campaign': self.campaign, 'rows': [asdict(r) for r in self.rows],
+                           'missing': self.missing, 'analysed': self.analysed, 'failed': self.failed,
+                           'files': self.files})
+
+
+@dataclass
+class CalibrationSession:
+    """What the calibration uses of one session: its set-up and its hold means."""
+
+    session: str
+    series: str
+    nominal: dict[str, Any]
+    """geometry.* parameters of the nominal crane of the set-up."""
+    lvdt_scale: float
+    """The LVDT's reading per unit motion along the series' axis (1 for an LVDT along it)."""
+    force: np.ndarray
+    """(n,) mean load of each hold [N or N·m]."""
+    force_se: np.ndarray
+    displacement: np.ndarray
+    """(n,) mean LVDT reading of each hold [m, or rad when converted by a lever arm]."""
+    displacement_se: np.ndarray
+
+
+@dataclass
+class Parameter:
+    name: str
+    value: float
+    stderr: float
+    ci95_low: float
+    ci95_high: float
+    unit: str
+    description: str
+
+
+@dataclass
+class Calibration:
+    """The calibrated parameters and how well the model fits."""
+
+    parameters: list[Parameter]
+    correlation: list[list[float]]
+    chi2: float
+    dof: int
+    sessions: list[dict[str, Any]]
+    """Per session: holds, rms of the normalised residuals, its zero, measured and calibrated slope."""
+    wire: dict[str, float] = field(default_factory=dict)
+    """E·A of the wire and k at each length, nominal and calibrated."""
+
+    def parameter(self, name: str) -> Parameter:
+        return next(p for p in self.parameters if p.name == name)
+
+    def to_dict(self) -> dict[str, Any]:
+        from crane_stiffness.analysis.results import json_safe
+        return json_safe(asdict(self))
