@@ -41,6 +41,7 @@ from crane_stiffness.model import CraneGeometry
 from crane_stiffness.rosnode.qos import LATCHED_QOS, RELIABLE_QOS, rclpy_qos
 from crane_stiffness.rosnode.run import run
 from crane_stiffness.rosnode.parameters import Params, check
+from crane_stiffness.rosnode.messages import stamp_to_s
 from crane_stiffness.params.geometry import GEOMETRY_PARAMS, geometry_from_params
 from crane_stiffness.params.spec import ParamSpec
 from crane_stiffness.view import plot
@@ -287,7 +288,7 @@ class LiveViewNode(Node):
             (0.0, 0.0, 0.0, 1.0),
             tensions=list(wires.effort),
             force=(wrench.wrench.force.x, wrench.wrench.force.y, wrench.wrench.force.z) if wrench else (0.0,) * 3,
-            stamp_s=wires.header.stamp.sec + wires.header.stamp.nanosec * 1e-9)
+            stamp_s=stamp_to_s(wires.header.stamp))
         scene = scene_update(self.geometry, state, self.settings['deflection_scale'])
         return sent + fox.log_json(PREFIX + 'scene', scene, now)
 

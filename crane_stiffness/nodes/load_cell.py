@@ -39,7 +39,8 @@ from crane_stiffness.rosnode.sim_time import SimTimeParticipant, drain
 from crane_stiffness.rosnode.messages import finite
 from crane_stiffness.rosnode.run import run
 from crane_stiffness.rosnode.parameters import Params
-from crane_stiffness.sim.sampling import NS_PER_S, SampleClock, StampedHold
+from crane_stiffness.serde.stamps import split_ns, stamp_ns
+from crane_stiffness.sim.sampling import SampleClock, StampedHold
 from crane_stiffness.sim.sensors import LOAD_CELL_PARAMS, LoadCellModel, load_cell_from_params
 from crane_stiffness.status import ERROR, OK, WARN
 
@@ -118,8 +119,8 @@ class LoadCell(Node):
             self.get_logger().warning(f'non-finite applied wrench dropped: {list(wrench)}', throttle_duration_sec=2.0)
             return
         first = not self.applied.has_value
-        stamp_ns = msg.header.stamp.sec * NS_PER_S + msg.header.stamp.nanosec
-        self.applied.update(wrench, stamp_ns, self.schedule.arrival_ns(stamp_ns))
+        sent_ns = stamp_ns(msg.header.stamp.sec, msg.header.stamp.nanosec)
+        self.applied.update(wrench, sent_ns, self.schedule.arrival_ns(sent_ns))
         self.counters.used += 1
         if first:
             self.get_logger().info(f'first applied wrench {list(wrench)}: publishing')
@@ -155,7 +156,7 @@ class LoadCell(Node):
         frame = self.settings['frame_id']
         for t_ns, r in zip(times.tolist(), readings.tolist()):
             msg = WrenchStamped()
-            msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(t_ns, NS_PER_S)
+            msg.header.stamp.sec, msg.header.stamp.nanosec = split_ns(t_ns)
             msg.header.frame_id = frame
             f, m = msg.wrench.force, msg.wrench.torque
             f.x, f.y, f.z, m.x, m.y, m.z = r

@@ -34,7 +34,8 @@ from crane_stiffness.rosnode.sim_time import SimTimeParticipant, drain
 from crane_stiffness.rosnode.messages import pose_vector
 from crane_stiffness.rosnode.run import run
 from crane_stiffness.rosnode.parameters import Params
-from crane_stiffness.sim.sampling import NS_PER_S, SampleClock, StampedHold
+from crane_stiffness.serde.stamps import split_ns, stamp_ns
+from crane_stiffness.sim.sampling import SampleClock, StampedHold
 from crane_stiffness.sim.sensors import LVDT_PARAMS, LvdtModel, lvdt_from_params
 from crane_stiffness.status import ERROR, OK, WARN
 
@@ -119,8 +120,8 @@ class Lvdt(Node):
             self.counters.dropped_non_finite += 1
             return
         first = not self.pose.has_value
-        stamp_ns = msg.header.stamp.sec * NS_PER_S + msg.header.stamp.nanosec
-        self.pose.update(pose, stamp_ns, self.schedule.arrival_ns(stamp_ns))
+        sent_ns = stamp_ns(msg.header.stamp.sec, msg.header.stamp.nanosec)
+        self.pose.update(pose, sent_ns, self.schedule.arrival_ns(sent_ns))
         self.counters.used += 1
         if first and self.settings['zero_on_first_pose']:
             self._zero(pose)
@@ -155,7 +156,7 @@ class Lvdt(Node):
         frame = self.settings['frame_id']
         for t_ns, x in zip(times.tolist(), readings.tolist()):
             msg = PointStamped()
-            msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(t_ns, NS_PER_S)
+            msg.header.stamp.sec, msg.header.stamp.nanosec = split_ns(t_ns)
             msg.header.frame_id = frame
             msg.point.x = x
             self.pub.publish(msg)
