@@ -26,10 +26,11 @@ from rclpy.node import Node
 from std_srvs.srv import Trigger
 
 from crane_stiffness import topics
-from crane_stiffness.params.spec import ParamSpec
 from crane_stiffness.rosnode.qos import RELIABLE_QOS, sensor_qos, stream_qos
 from crane_stiffness.rosnode.diagnostics import Diagnostics, SensorCounters
-from crane_stiffness.rosnode.sensor_timing import STATE_WAIT_PARAM, SampleSchedule, ZeroEpoch, check_sensor_params
+from crane_stiffness.rosnode.sensor_timing import (
+    STATE_WAIT_PARAM, SampleSchedule, ZeroEpoch, check_sensor_params, sensor_timing_params,
+)
 from crane_stiffness.rosnode.sim_time import SimTimeParticipant, drain
 from crane_stiffness.rosnode.messages import pose_vector
 from crane_stiffness.rosnode.run import run
@@ -40,12 +41,7 @@ from crane_stiffness.sim.sensors import LVDT_PARAMS, LvdtModel, lvdt_from_params
 from crane_stiffness.status import ERROR, OK, WARN
 
 PARAMS = (
-    ParamSpec('sample_rate_hz', 1000.0, 'sample rate; stamps are 1/sample_rate_hz apart on a grid of the node '
-              'clock [Hz]', above=0.0),
-    ParamSpec('publish_rate_hz', 500.0, 'rate of the timer that publishes the samples taken since its last tick '
-              '(a DAQ buffer); its ticks fall on multiples of its period of the node clock, so sensors at the same '
-              'rate deliver together. Higher: lower latency, more CPU [Hz]', above=0.0),
-    ParamSpec('frame_id', 'lvdt', 'header.frame_id of the published reading [-]'),
+    *sensor_timing_params('lvdt', 'header.frame_id of the published reading [-]'),
     *LVDT_PARAMS,
     STATE_WAIT_PARAM,
 )
