@@ -23,6 +23,7 @@ from typing import Any, Mapping, Sequence
 from crane_stiffness.errors import CraneStiffnessError
 from crane_stiffness.rig_description import PACKAGE, NodeStart, rig_nodes
 from crane_stiffness.sim.program import LoadProgram, load_program_file
+from crane_stiffness.launcher.ports import free_port
 from crane_stiffness.launcher.rig import start_node
 from crane_stiffness.launcher.rosrun import Processes, command
 
@@ -31,18 +32,10 @@ class LabNetworkError(CraneStiffnessError):
     """The namespaces or the veth pair cannot be made here (with the command and its error)."""
 
 
-def free_port(kind: int = socket.SOCK_STREAM, host: str = '127.0.0.1') -> int:
-    """A port nothing uses now on ``host`` (``kind``: SOCK_STREAM or SOCK_DGRAM)."""
-    with socket.socket(socket.AF_INET, kind) as s:
-        s.bind((host, 0))
-        return s.getsockname()[1]
-
-
 def emulated_ports(host: str = '127.0.0.1') -> dict[str, dict[str, Any]]:
     """Per-node parameter overrides: free ports for rdt_emulator (UDP RDT, TCP /netftapi2.xml) and
     modbus_emulator (TCP), the drivers pointed at them; every device on ``host``."""
-    rdt, http, modbus = free_port(socket.SOCK_DGRAM, host), free_port(socket.SOCK_STREAM, host), \
-        free_port(socket.SOCK_STREAM, host)
+    rdt, http, modbus = free_port(host=host, kind=socket.SOCK_DGRAM), free_port(host=host), free_port(host=host)
     return {'rdt_emulator': {'host': host, 'port': rdt, 'http_port': http},
             'netft': {'host': host, 'port': rdt, 'http_port': http},
             'modbus_emulator': {'host': host, 'port': modbus},
