@@ -24,7 +24,7 @@ from crane_stiffness.errors import CraneStiffnessError
 from crane_stiffness.rig_description import PACKAGE, NodeStart, rig_nodes
 from crane_stiffness.sim.program import LoadProgram, load_program_file
 from crane_stiffness.launcher.ports import free_port
-from crane_stiffness.launcher.rig import start_node
+from crane_stiffness.launcher.rig import start_nodes
 from crane_stiffness.launcher.rosrun import Processes, command
 
 
@@ -53,15 +53,7 @@ def start_rig_with(procs: Processes, share: Path, given: Mapping[str, Any], bags
     nodes = rig_nodes(share, given)
     program = next(n for n in nodes if n.runs_program)
     prog = load_program_file(program.parameter_files[0])
-    if bags is not None:
-        bags.mkdir(parents=True, exist_ok=True)
-    for node in nodes:
-        extra: dict[str, Any] = {'output_dir': bags} if node.name == 'session_recorder' and bags is not None else {}
-        if node.runs_program:
-            if not start_program:
-                continue
-            extra = {'exit_on_done': True, 'ready_timeout_s': ready_timeout_s}
-        start_node(procs, node, {**extra, **(overrides or {}).get(node.name, {})})
+    start_nodes(procs, nodes, bags, ready_timeout_s, overrides, start_program)
     return prog, nodes
 
 
