@@ -11,7 +11,7 @@ import pytest
 
 from crane_stiffness.rig_description import NODES, RigError, config_files, rig_nodes
 from crane_stiffness.launcher import rosrun
-from crane_stiffness.testing.lab import emulated_ports, start_rig_with
+from crane_stiffness.testing.lab_network import emulated_ports, start_rig_with
 from crane_stiffness.launcher.rig import Observer, summarize, wait_for_program_start
 
 from helpers import REPO
