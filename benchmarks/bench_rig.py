@@ -92,7 +92,7 @@ def run_rate(rate: float, seconds: float, env: dict, share: Path, log_dir: Path,
     from crane_stiffness.rosnode.run import make_executor
     from crane_stiffness.rig_description import rig_nodes
     from crane_stiffness.launcher import rosrun
-    from crane_stiffness.testing.lab import emulated_ports
+    from crane_stiffness.testing.lab_network import emulated_ports
     from crane_stiffness.launcher.rig import estimate_fields, start_node
 
     fields = estimate_fields()

@@ -24,9 +24,7 @@ from crane_stiffness.model import (AXES, WIRE_NAMES, ConvergenceError, CraneGeom
                                    NoEquilibriumError, axis_stiffness, paper_coefficients,
                                    paper_stiffness, solve_equilibrium, tangent_stiffness)
 
-EXIT_USAGE = 2
-EXIT_NO_EQUILIBRIUM = 3
-EXIT_SOLVER = 4
+from crane_stiffness.exit_codes import EXIT_NO_EQUILIBRIUM, EXIT_SOLVER, EXIT_USAGE, run_to_exit_code
 
 
 # --- argument groups -------------------------------------------------------------------------------------------
@@ -219,17 +217,11 @@ def _add_bag_commands(sub: Any) -> None:
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    try:
-        return int(args.func(args) or 0)
-    except NoEquilibriumError as exc:
-        print(f'crane-stiffness: {exc}', file=sys.stderr)
-        return EXIT_NO_EQUILIBRIUM
-    except ConvergenceError as exc:
-        print(f'crane-stiffness: solver gave up: {exc}', file=sys.stderr)
-        return EXIT_SOLVER
-    except (GeometryError, ConfigError, UsageError, ValueError) as exc:
-        print(f'crane-stiffness: {exc}', file=sys.stderr)
-        return EXIT_USAGE
+    return run_to_exit_code(lambda: int(args.func(args) or 0), [
+        (NoEquilibriumError, EXIT_NO_EQUILIBRIUM, '{exc}'),
+        (ConvergenceError, EXIT_SOLVER, 'solver gave up: {exc}'),
+        ((GeometryError, ConfigError, UsageError, ValueError), EXIT_USAGE, '{exc}'),
+    ])
 
 
 if __name__ == '__main__':

@@ -21,7 +21,7 @@ from crane_stiffness.bag import (
     McapFile, TopicNotFoundError, UnsupportedTypeError, recover_bag,
 )
 from crane_stiffness.bag.msgdef import SEPARATOR, message_definition
-from crane_stiffness.session_record import read_session
+from crane_stiffness.session_metadata import read_session
 
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String

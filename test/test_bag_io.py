@@ -16,7 +16,7 @@ from crane_stiffness.bag import (
     BagDamageWarning, BagReader, BagWriter, McapFile,
 )
 from crane_stiffness.bag.msgdef import SEPARATOR, type_description_hash
-from crane_stiffness.session_record import SESSION_METADATA, read_session
+from crane_stiffness.session_metadata import SESSION_METADATA, read_session
 
 from std_msgs.msg import Float64
 

@@ -15,7 +15,7 @@ import pytest
 from crane_stiffness.bag import BagReader
 from crane_stiffness.campaign.analyze import analyze_campaign
 from crane_stiffness.launcher import rosrun
-from crane_stiffness.session_record import read_node_parameters, read_session
+from crane_stiffness.session_metadata import read_node_parameters, read_session
 
 pytestmark = pytest.mark.ros  # every test here starts the rig's nodes
 

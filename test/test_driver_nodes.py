@@ -30,7 +30,7 @@ from crane_stiffness.drivers import rdt
 from crane_stiffness.drivers.modbus import Channel
 from crane_stiffness.nodes import modbus_emulator, modbus_lvdt, netft, rdt_emulator
 from crane_stiffness.rosnode.qos import LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS
-from crane_stiffness.testing.lab import free_port
+from crane_stiffness.launcher.ports import free_port
 from std_msgs.msg import Float64
 
 pytestmark = pytest.mark.ros  # every test here starts ROS (conftest)
@@ -78,7 +78,7 @@ class Probe(ProbeNode):
 def test_netft_reads_the_rdt_emulator_across_processes(rclpy_context, tmp_path):
     """applied wrench → rdt_emulator (load-cell physics, RDT on 127.0.0.1) → netft → /load_cell/wrench: the
     commanded wrench plus the sensor's bias, 7 kHz averaged to 1 kHz, stamped on the host clock; ~/tare; counters."""
-    port = free_port(socket.SOCK_DGRAM)
+    port = free_port(kind=socket.SOCK_DGRAM)
     emu_name, prefix, emu_args = isolated('rdt_emulator')
     ft_name = f'netft_{os.getpid()}_{next(_ids)}'
     ft_args = [a if not a.startswith('__node:=') else f'__node:={ft_name}' for a in emu_args]
@@ -147,7 +147,7 @@ def test_netft_reads_the_rdt_emulator_across_processes(rclpy_context, tmp_path):
 def test_modbus_lvdt_reads_the_modbus_emulator_across_processes(rclpy_context, tmp_path):
     """platform pose → modbus_emulator (LVDT physics, float32 volts little-endian words on 127.0.0.1) → modbus_lvdt
     → /lvdt/displacement: the displacement from the first pose in metres; ~/zero; jitter on /diagnostics."""
-    port = free_port(socket.SOCK_STREAM)
+    port = free_port(kind=socket.SOCK_STREAM)
     emu_name, prefix, emu_args = isolated('modbus_emulator')
     lv_name = f'modbus_lvdt_{os.getpid()}_{next(_ids)}'
     lv_args = [a if not a.startswith('__node:=') else f'__node:={lv_name}' for a in emu_args]
@@ -331,7 +331,7 @@ def test_netft_parameters_checked_at_start_and_on_change(rclpy_context):
 
 
 def test_driver_mains_exit_2_with_a_clear_reason(capsys):
-    udp = free_port(socket.SOCK_DGRAM)
+    udp = free_port(kind=socket.SOCK_DGRAM)
     assert netft.main(['--ros-args', '-p', 'host:=127.0.0.1', '-p', f'port:={udp}', '-p', 'counts_per_force:=1e6',
                        '-p', 'counts_per_torque:=1e6', '-p', 'wait_for_device_s:=1.0']) == 2
     assert 'port unreachable' in capsys.readouterr().err
@@ -342,7 +342,7 @@ def test_driver_mains_exit_2_with_a_clear_reason(capsys):
     assert 'sent no record within 1.0 s' in capsys.readouterr().err
     assert netft.main(['--ros-args', '-p', 'counts_per_force:=1e6']) == 2
     assert 'set counts_per_force and counts_per_torque together' in capsys.readouterr().err
-    tcp = free_port(socket.SOCK_STREAM)
+    tcp = free_port(kind=socket.SOCK_STREAM)
     assert modbus_lvdt.main(['--ros-args', '-p', 'host:=127.0.0.1', '-p', f'port:={tcp}']) == 2
     assert f'no Modbus TCP device at 127.0.0.1:{tcp}' in capsys.readouterr().err
     assert modbus_lvdt.main(['--ros-args', '-p', 'data_type:=float64']) == 2

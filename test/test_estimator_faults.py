@@ -351,7 +351,7 @@ def test_analyze_agrees_with_the_live_estimator_on_a_bag_with_these_faults(tmp_p
     from crane_stiffness.analysis.analyze import analyze_session
     from crane_stiffness.bag import BagWriter
     from crane_stiffness.serde import encode_float64_multiarray, encode_stamped, stamp_seconds
-    from crane_stiffness.session_record import SESSION_METADATA, session_metadata
+    from crane_stiffness.session_metadata import SESSION_METADATA, session_metadata
     from crane_stiffness.testing.synthetic import offered_qos
 
     rng = np.random.default_rng(7)

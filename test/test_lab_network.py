@@ -17,7 +17,7 @@ import pytest
 import yaml
 
 from crane_stiffness.launcher import rosrun
-from crane_stiffness.testing.lab import LabNetwork, LabNetworkError, NamespacedProcesses, start_rig_with
+from crane_stiffness.testing.lab_network import LabNetwork, LabNetworkError, NamespacedProcesses, start_rig_with
 from crane_stiffness.launcher.rig import decode_values
 from crane_stiffness.params.geometry import geometry_from_params
 from crane_stiffness.params.files import load_params

@@ -37,7 +37,7 @@ from crane_stiffness.nodes.session_player import SessionPlayer
 from crane_stiffness.nodes.session_recorder import SessionRecorder
 from crane_stiffness.nodes.stiffness_estimator import StiffnessEstimatorNode
 from crane_stiffness.serde import decode_float64_multiarray
-from crane_stiffness.session_record import NODE_PARAMETERS_METADATA
+from crane_stiffness.session_metadata import NODE_PARAMETERS_METADATA
 
 pytestmark = pytest.mark.ros  # every test here starts ROS (conftest)
 

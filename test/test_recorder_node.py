@@ -32,7 +32,7 @@ from crane_stiffness.bag import BagDamageWarning, BagReader
 from crane_stiffness.cli import main as cli_main
 from crane_stiffness.rosnode.qos import LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS
 from crane_stiffness.nodes.session_recorder import SESSION_END_METADATA, SessionRecorder
-from crane_stiffness.session_record import read_session
+from crane_stiffness.session_metadata import read_session
 
 pytestmark = pytest.mark.ros  # every test here starts ROS (conftest)
 

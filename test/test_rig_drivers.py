@@ -11,7 +11,7 @@ import pytest
 
 from crane_stiffness.rig_description import NODES, RigError, config_files, rig_nodes
 from crane_stiffness.launcher import rosrun
-from crane_stiffness.testing.lab import emulated_ports, start_rig_with
+from crane_stiffness.testing.lab_network import emulated_ports, start_rig_with
 from crane_stiffness.launcher.rig import Observer, summarize, wait_for_program_start
 
 from helpers import REPO
@@ -182,7 +182,7 @@ def test_a_driver_waits_for_a_device_that_starts_after_it():
     from crane_stiffness.drivers.errors import DeviceAddressError, DeviceResponseError
     from crane_stiffness.drivers.modbus import Channel, ModbusPoller
     from crane_stiffness.rosnode.device_params import wait_for_device
-    from crane_stiffness.testing.lab import free_port
+    from crane_stiffness.launcher.ports import free_port
 
     port = free_port()
     device = ModbusDevice(lambda: 1.5e-3, channel=Channel(gain=0.001), port=port)

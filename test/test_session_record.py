@@ -4,7 +4,7 @@ from __future__ import annotations
 import json
 from types import SimpleNamespace
 
-from crane_stiffness.session_record import (NODE_PARAMETERS_METADATA, SESSION_METADATA, read_node_parameters,
+from crane_stiffness.session_metadata import (NODE_PARAMETERS_METADATA, SESSION_METADATA, read_node_parameters,
                                             read_session, session_record)
 from crane_stiffness.sim.program import LoadProgram
 

@@ -20,7 +20,7 @@ from crane_stiffness.estimation.live import VALUE_FIELDS
 from crane_stiffness.estimation.settings import LiveSettings
 from crane_stiffness.serde.bulk import Columns
 from crane_stiffness.serde import CdrError, decode_diagnostic_array, decode_float64_multiarray, decode_string
-from crane_stiffness.session_record import analysis_geometry_params, read_node_parameters, read_session
+from crane_stiffness.session_metadata import analysis_geometry_params, read_node_parameters, read_session
 from crane_stiffness.sim.program import LoadProgram
 
 REQUIRED_TOPICS = (topics.LOAD_CELL_WRENCH, topics.LVDT_DISPLACEMENT)

@@ -17,13 +17,7 @@ from typing import Any, Callable
 
 from crane_stiffness.axes import AXES
 
-EXIT_OK = 0
-EXIT_USAGE = 2  # crane_stiffness.cli.EXIT_USAGE
-
-
-def _fail(exc: BaseException) -> int:
-    print(f'crane-stiffness: {exc}', file=sys.stderr)
-    return EXIT_USAGE
+from crane_stiffness.exit_codes import EXIT_OK, EXIT_USAGE, run_to_exit_code
 
 
 def _guarded(run: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Namespace], int]:
@@ -32,10 +26,8 @@ def _guarded(run: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Nam
         from crane_stiffness.errors import CraneStiffnessError
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter('always')
-            try:
-                code = run(args)
-            except (CraneStiffnessError, OSError, ValueError, KeyError) as exc:
-                code = _fail(exc)
+            code = run_to_exit_code(lambda: run(args),
+                                    [((CraneStiffnessError, OSError, ValueError, KeyError), EXIT_USAGE, '{exc}')])
         seen = set()
         for w in caught:
             text = str(w.message)

@@ -2,11 +2,13 @@
 
 rosbag2 Jazzy stores a topic's offered profiles as a YAML sequence in metadata.yaml and, as a string, in the MCAP
 channel metadata ``offered_qos_profiles``. Policies are lower-case names; durations are ``{sec, nsec}``. Older
-bags (Humble) use integers for the policies: :func:`normalize_qos_profiles` turns them into names.
+bags (Humble) use integers for the policies: :func:`normalize_qos_profiles` turns them into names (for the bag
+writer, strict), :func:`recorded_qos_profiles` and :func:`policy_name` read them for playback (lenient: what cannot
+be read is left out).
 """
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
 import yaml
@@ -65,12 +67,32 @@ def normalize_qos_profiles(profiles: str | Sequence[Mapping[str, Any]] | None) -
             raise BagWriterError(f'offered QoS profile {raw!r} is not a mapping')
         profile = qos_profile()
         profile.update({k: v for k, v in raw.items() if k in QOS_KEYS})
-        for key, names in QOS_POLICY_NAMES.items():
-            value = profile[key]
-            if isinstance(value, int) and not isinstance(value, bool):
-                profile[key] = names.get(value, 'unknown')
+        for key in QOS_POLICY_NAMES:
+            profile[key] = policy_name(key, profile[key])
         result.append(profile)
     return result
+
+
+def policy_name(key: str, value: Any) -> Any:
+    """A recorded policy (``key``: one of QOS_POLICY_NAMES) by name: rosbag2's names as they are, rmw's integers
+    (older bags) turned into them, ``'unknown'`` for an integer rmw does not define."""
+    if isinstance(value, int) and not isinstance(value, bool):
+        return QOS_POLICY_NAMES[key].get(value, 'unknown')
+    return value
+
+
+def recorded_qos_profiles(offered: str | Iterable[Mapping[str, Any]] | None) -> list[Mapping[str, Any]]:
+    """The offered QoS profiles recorded for a topic (a YAML string, or dicts), as they are: [] for none, invalid
+    YAML or not a sequence; entries that are not mappings left out (playback falls back to the topic contract)."""
+    if offered is None:
+        return []
+    if isinstance(offered, str):
+        try:
+            loaded = yaml.safe_load(offered) if offered.strip() else []
+        except yaml.YAMLError:
+            return []
+        offered = loaded if isinstance(loaded, list) else []
+    return [p for p in offered if isinstance(p, Mapping)]
 
 
 def dump_qos_profiles(profiles: str | Sequence[Mapping[str, Any]] | None) -> str:

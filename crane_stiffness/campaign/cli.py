@@ -12,10 +12,7 @@ import argparse
 import sys
 from typing import Any, Callable
 
-EXIT_OK = 0
-EXIT_FAILED = 1
-EXIT_USAGE = 2
-EXIT_INTERRUPTED = 130
+from crane_stiffness.exit_codes import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE, run_to_exit_code
 
 
 def _guarded(run: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Namespace], int]:
@@ -23,20 +20,12 @@ def _guarded(run: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Nam
         from crane_stiffness.campaign.runner import CampaignInterrupted
         from crane_stiffness.errors import CraneStiffnessError
         from crane_stiffness.launcher.rosrun import RosRunError
-        try:
-            return run(args)
-        except CampaignInterrupted as exc:
-            print(f'crane-stiffness: {exc}', file=sys.stderr)
-            return EXIT_INTERRUPTED
-        except KeyboardInterrupt:
-            print('crane-stiffness: interrupted', file=sys.stderr)
-            return EXIT_INTERRUPTED
-        except RosRunError as exc:
-            print(f'crane-stiffness: a session failed on the rig: {exc}', file=sys.stderr)
-            return EXIT_FAILED
-        except (CraneStiffnessError, OSError, ValueError) as exc:
-            print(f'crane-stiffness: {exc}', file=sys.stderr)
-            return EXIT_USAGE
+        return run_to_exit_code(lambda: run(args), [
+            (CampaignInterrupted, EXIT_INTERRUPTED, '{exc}'),
+            (KeyboardInterrupt, EXIT_INTERRUPTED, 'interrupted'),
+            (RosRunError, EXIT_FAILED, 'a session failed on the rig: {exc}'),
+            ((CraneStiffnessError, OSError, ValueError), EXIT_USAGE, '{exc}'),
+        ])
     wrapper.__name__ = run.__name__
     return wrapper
 

@@ -53,15 +53,15 @@ def map_sessions(func: Callable[..., str], jobs: Sequence[Job], *, workers: int 
 
 def _context(func: Callable[..., str]) -> BaseContext:
     """Worker processes forked from a server that imported ``func``'s module and the analysis once and warmed the
-    model's kernels and matplotlib (crane_stiffness.campaign.warm: seconds per process when each worker does it
-    itself), never from this process (which may hold threads); a clean interpreter ('spawn') where there is no fork
-    server."""
+    model's kernels and matplotlib (crane_stiffness.campaign.worker_preload: seconds per process when each worker
+    does it itself), never from this process (which may hold threads); a clean interpreter ('spawn') where there is
+    no fork server."""
     try:
         context = get_context('forkserver')
     except ValueError:  # no fork server on this platform
         return get_context('spawn')
     context.set_forkserver_preload([func.__module__, 'crane_stiffness.analysis.analyze',
-                                    'crane_stiffness.analysis.figures', 'crane_stiffness.campaign.warm'])
+                                    'crane_stiffness.analysis.figures', 'crane_stiffness.campaign.worker_preload'])
     return context
 
 

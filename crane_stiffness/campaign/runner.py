@@ -5,7 +5,7 @@ Each session is the whole rig started as ``ros2 launch`` starts it (crane_stiffn
 its own process, the session recorder writing its own bag), with its set-up as parameters: the crane_model node
 runs the **true** crane (``geometry.*`` of :attr:`~crane_stiffness.campaign.spec.SessionPlan.true`), the session
 recorder records the **nominal** one as the rig's geometry and the session's place in the campaign as its
-``campaign_entry`` (crane_stiffness.session_record.CAMPAIGN_KEY: ``analysis_geometry: nominal``, the true crane,
+``campaign_entry`` (crane_stiffness.session_metadata.CAMPAIGN_KEY: ``analysis_geometry: nominal``, the true crane,
 what the operator confirmed); the program is the series' file with its levels scaled for the set-up.
 
 The campaign directory ``DIR``::
@@ -114,7 +114,7 @@ def _set_aside(out: Path, plan: SessionPlan) -> None:
 
 def campaign_entry(campaign: Campaign, plan: SessionPlan, hardware: bool, confirmed: Mapping[str, Any] | None
                    ) -> dict[str, Any]:
-    """The session's place in the campaign as the recorder stores it (session_record.CAMPAIGN_KEY)."""
+    """The session's place in the campaign as the recorder stores it (session_metadata.CAMPAIGN_KEY)."""
     entry: dict[str, Any] = {
         'campaign': campaign.name, 'file': str(campaign.path), 'session': plan.id, 'index': plan.index,
         'series': plan.series, 'weight': plan.weight, 'l0': plan.l0, 'height': plan.height, 'repeat': plan.repeat,

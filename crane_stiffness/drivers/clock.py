@@ -28,8 +28,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from crane_stiffness.drivers.errors import ParameterError
+from crane_stiffness.serde.stamps import NS_PER_S
 
-NS_PER_S = 1_000_000_000
 _MOD = 1 << 32
 _HALF = 1 << 31
 

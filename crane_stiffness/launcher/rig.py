@@ -10,7 +10,7 @@ from __future__ import annotations
 import json
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable, Mapping
+from typing import TYPE_CHECKING, Any, Callable, Mapping, Sequence
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
@@ -168,14 +168,24 @@ def start_rig(procs: Processes, share: Path, program: str, session: str, bags: P
     prog = load_program_file(config_files(share, program)['program'])
     nodes = rig_nodes(share, {**(arguments or {}), 'program': program, 'record': record, 'session': session,
                               'live_view': live_view})
-    if record:
+    start_nodes(procs, nodes, bags if record else None, ready_timeout_s, overrides)
+    return prog
+
+
+def start_nodes(procs: Processes, nodes: Sequence[NodeStart], bags: Path | None, ready_timeout_s: float,
+                overrides: Mapping[str, Mapping[str, Any]] | None = None, start_program: bool = True) -> None:
+    """Start ``nodes`` (of rig_nodes) at the same instant, the recorder writing to ``bags`` (made if missing; None:
+    its own default), load_program exiting when the program is done and waiting at most ``ready_timeout_s`` for
+    the rig. ``overrides``: extra parameters by node name. ``start_program`` False leaves load_program out."""
+    if bags is not None:
         bags.mkdir(parents=True, exist_ok=True)
     for node in nodes:
-        extra: dict[str, Any] = {'output_dir': bags} if node.name == 'session_recorder' else {}
+        extra: dict[str, Any] = {'output_dir': bags} if node.name == 'session_recorder' and bags is not None else {}
         if node.runs_program:
+            if not start_program:
+                continue
             extra = {'exit_on_done': True, 'ready_timeout_s': ready_timeout_s}
         start_node(procs, node, {**extra, **(overrides or {}).get(node.name, {})})
-    return prog
 
 
 def wait_for_program_start(observer: Observer, procs: Processes, timeout_s: float) -> None:

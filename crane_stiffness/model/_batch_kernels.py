@@ -19,69 +19,12 @@ import math
 import numpy as np
 
 from crane_stiffness.model import _kernels as kern
-
-try:  # numba is a dependency; without it the loops run as plain Python (slowly), like _kernels.
-    from numba import njit, prange
-except ImportError:  # pragma: no cover - exercised only without numba
-    prange = range  # type: ignore[misc]
-
-    def njit(*args, **kwargs):  # type: ignore[no-redef]
-        if args and callable(args[0]):
-            return args[0]
-        return lambda f: f
+from crane_stiffness.model._kernels import njit, prange, solve6_into
 
 #: Newton iterations of the fast path before a case goes to the robust solver.
 FAST_MAX_ITER = 12
 #: Chord iterations (rest-pose compliance) before a case switches to Newton.
 CHORD_MAX_ITER = 8
-
-
-@njit(cache=True)
-def solve6_into(a, b, x, m, y):
-    """Solve a x = b (6×6) by Gaussian elimination with partial pivoting, into x, using scratch m (6, 6), y (6).
-
-    Returns False when a pivot is numerically zero (the caller then takes another path)."""
-    for i in range(6):
-        y[i] = b[i]
-        for j in range(6):
-            m[i, j] = a[i, j]
-    for c in range(6):
-        p = c
-        best = abs(m[c, c])
-        for i in range(c + 1, 6):
-            if abs(m[i, c]) > best:
-                best = abs(m[i, c])
-                p = i
-        if not best > 1e-300 or not math.isfinite(best):
-            return False
-        if p != c:
-            for j in range(6):
-                tmp = m[c, j]
-                m[c, j] = m[p, j]
-                m[p, j] = tmp
-            tmp = y[c]
-            y[c] = y[p]
-            y[p] = tmp
-        for i in range(c + 1, 6):
-            f = m[i, c] / m[c, c]
-            if f != 0.0:
-                for j in range(c, 6):
-                    m[i, j] -= f * m[c, j]
-                y[i] -= f * y[c]
-    dmax = 0.0
-    dmin = 1e300
-    for i in range(6):
-        d = abs(m[i, i])
-        dmax = max(dmax, d)
-        dmin = min(dmin, d)
-    if not dmin > 1e-14 * dmax:
-        return False
-    for i in range(5, -1, -1):
-        s = y[i]
-        for j in range(i + 1, 6):
-            s -= m[i, j] * x[j]
-        x[i] = s / m[i, i]
-    return True
 
 
 @njit(cache=True)

@@ -17,11 +17,13 @@ import math
 
 import numpy as np
 
+# The one no-numba fallback of the model's kernels (_batch_kernels and _pose_kernels take njit and prange from here).
 try:  # numba is a dependency; the fallback keeps the model usable (slowly) where it cannot be installed.
-    from numba import njit
+    from numba import njit, prange
     HAVE_NUMBA = True
 except ImportError:  # pragma: no cover - exercised only without numba
     HAVE_NUMBA = False
+    prange = range  # type: ignore[misc]
 
     def njit(*args, **kwargs):  # type: ignore[no-redef]
         if args and callable(args[0]):
@@ -161,47 +163,57 @@ def _add_point_force_term(kmat, f0, f1, f2, r):
 
 
 @njit(cache=True)
-def _solve6(a, b, x):
-    """Solve a x = b for 6×6 a by Gaussian elimination with partial pivoting. Returns False if singular."""
-    m = a.copy()
-    y = b.copy()
-    n = 6
-    for c in range(n):
+def solve6_into(a, b, x, m, y):
+    """Solve a x = b (6×6) by Gaussian elimination with partial pivoting, into x, using scratch m (6, 6), y (6).
+
+    Returns False when a pivot is numerically zero (the caller then takes another path)."""
+    for i in range(6):
+        y[i] = b[i]
+        for j in range(6):
+            m[i, j] = a[i, j]
+    for c in range(6):
         p = c
         best = abs(m[c, c])
-        for i in range(c + 1, n):
+        for i in range(c + 1, 6):
             if abs(m[i, c]) > best:
                 best = abs(m[i, c])
                 p = i
-        if best < 1e-300 or not math.isfinite(best):
+        if not best > 1e-300 or not math.isfinite(best):
             return False
         if p != c:
-            for j in range(n):
+            for j in range(6):
                 tmp = m[c, j]
                 m[c, j] = m[p, j]
                 m[p, j] = tmp
             tmp = y[c]
             y[c] = y[p]
             y[p] = tmp
-        for i in range(c + 1, n):
-            fct = m[i, c] / m[c, c]
-            if fct != 0.0:
-                for j in range(c, n):
-                    m[i, j] -= fct * m[c, j]
-                y[i] -= fct * y[c]
-    for i in range(n - 1, -1, -1):
+        for i in range(c + 1, 6):
+            f = m[i, c] / m[c, c]
+            if f != 0.0:
+                for j in range(c, 6):
+                    m[i, j] -= f * m[c, j]
+                y[i] -= f * y[c]
+    dmax = 0.0
+    dmin = 1e300
+    for i in range(6):
+        d = abs(m[i, i])
+        dmax = max(dmax, d)
+        dmin = min(dmin, d)
+    if not dmin > 1e-14 * dmax:
+        return False
+    for i in range(5, -1, -1):
         s = y[i]
-        for j in range(i + 1, n):
+        for j in range(i + 1, 6):
             s -= m[i, j] * x[j]
         x[i] = s / m[i, i]
-    # Reject a numerically singular pivot: the step would be garbage.
-    diag_max = 0.0
-    diag_min = 1e300
-    for i in range(n):
-        d = abs(m[i, i])
-        diag_max = max(diag_max, d)
-        diag_min = min(diag_min, d)
-    return diag_min > 1e-14 * diag_max
+    return True
+
+
+@njit(cache=True)
+def _solve6(a, b, x):
+    """Solve a x = b for 6×6 a (:func:`solve6_into` with its own scratch). Returns False if singular."""
+    return solve6_into(a, b, x, np.empty((6, 6)), np.empty(6))
 
 
 @njit(cache=True)

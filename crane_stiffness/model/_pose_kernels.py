@@ -19,17 +19,8 @@ import math
 import numpy as np
 
 from crane_stiffness.model import _kernels as kern
-from crane_stiffness.model._batch_kernels import newton_plain, solve6_into
-
-try:  # numba is a dependency; without it the loops run as plain Python (slowly), like _kernels.
-    from numba import njit, prange
-except ImportError:  # pragma: no cover - exercised only without numba
-    prange = range  # type: ignore[misc]
-
-    def njit(*args, **kwargs):  # type: ignore[no-redef]
-        if args and callable(args[0]):
-            return args[0]
-        return lambda f: f
+from crane_stiffness.model._batch_kernels import newton_plain
+from crane_stiffness.model._kernels import njit, prange, solve6_into
 
 # slack_margin status codes
 FOUND = 0          # a wire goes slack at the margin returned

@@ -4,15 +4,21 @@ Same contract as :func:`crane_stiffness.model.equilibrium.solve_batch` (each cas
 the weight, cases Newton cannot reach finished by load continuation), several times faster: a linear predictor
 from the tangent at rest, plain Newton without allocation, the cases split over numba's threads (kernels in
 :mod:`._batch_kernels`). Frames and units as in :mod:`.equilibrium` (z down; m, rad, N, N·m).
+
+Why two solvers: ``solve_batch`` runs, case by case and in no threads of its own, the robust damped Newton of
+:func:`~crane_stiffness.model.equilibrium.solve_equilibrium` (``_kernels.solve_step``); calibration uses it, and
+the campaign's analysis workers, which already share the cores, load it ahead. This one trades that path for speed
+on large batches (maps, benchmarks) and hands the cases its fast path cannot take to the robust one. Both share the
+balance and the 6×6 elimination (:mod:`._kernels`), the outputs (:func:`~.equilibrium.batch_outputs`) and the
+finishing of unconverged cases (:func:`~.equilibrium.finish_batch`).
 """
 from __future__ import annotations
 
 import numpy as np
 
 from crane_stiffness.model import _batch_kernels as bk
-from crane_stiffness.model import _kernels as kern
 from crane_stiffness.model.equilibrium import (DEFAULT_MAX_ITER, DEFAULT_XTOL, MIN_LOAD_FRACTION, BatchEquilibrium,
-                                               _rest, checked_loads, geometry_arrays, solve_equilibrium,
+                                               _rest, batch_outputs, checked_loads, finish_batch, geometry_arrays,
                                                wrench_jacobian)
 from crane_stiffness.model.geometry import CraneGeometry
 
@@ -64,21 +70,9 @@ def solve_batch_parallel(geometry: CraneGeometry, loads, *, xtol: float = DEFAUL
     u0, q0 = _rest(geometry, xtol)
     c0 = rest_compliance(geometry, xtol)
     n = loads.shape[0]
-    u = np.empty((n, 3))
-    q = np.empty((n, 3, 3))
-    lengths = np.empty((n, 6))
-    tensions = np.empty((n, 6))
-    w = np.empty((n, 6))
-    status = np.empty(n, dtype=np.int64)
-    iters = np.empty(n, dtype=np.int64)
+    out = batch_outputs(n)
     chunks = max(1, min(-(-n // max(1, int(chunk))), 64 * _threads())) if n else 0
     if n:
         bk.batch_solve_parallel(*arr.args(), loads, u0, q0, c0, xtol, max_iter, arr.lc, arr.max_move,
-                                arr.min_cos_turn, arr.max_shift, MAX_STEPS, MIN_LOAD_FRACTION, chunks, u, q, lengths,
-                                tensions, w, status, iters)
-    for c in np.flatnonzero(status != kern.CONVERGED):  # the path ended: solve_equilibrium says why (or succeeds)
-        eq = solve_equilibrium(geometry, load=loads[c], xtol=xtol, max_iter=max_iter)
-        u[c], q[c], lengths[c], tensions[c], w[c] = (eq.displacement, eq.rotation, eq.wire_lengths,
-                                                     eq.wire_tensions, eq.residual)
-        iters[c] = eq.iterations
-    return BatchEquilibrium(u, q, lengths, tensions, lengths < arr.l0, loads, iters, w)
+                                arr.min_cos_turn, arr.max_shift, MAX_STEPS, MIN_LOAD_FRACTION, chunks, *out)
+    return finish_batch(geometry, loads, out, xtol, max_iter)  # the path ended: solve_equilibrium says why

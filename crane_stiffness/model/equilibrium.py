@@ -376,23 +376,31 @@ def solve_batch(geometry: CraneGeometry, loads, *, xtol: float = DEFAULT_XTOL,
     loads = checked_loads(geometry, loads)
     arr = geometry_arrays(geometry)
     u0, q0 = _rest(geometry, xtol)
-    n = loads.shape[0]
-    u = np.empty((n, 3))
-    q = np.empty((n, 3, 3))
-    lengths = np.empty((n, 6))
-    tensions = np.empty((n, 6))
-    w = np.empty((n, 6))
-    status = np.empty(n, dtype=np.int64)
-    iters = np.empty(n, dtype=np.int64)
+    out = batch_outputs(loads.shape[0])
     kern.batch_solve(*arr.args(), loads, u0, q0, xtol, max_iter, arr.lc, arr.max_move, arr.min_cos_turn,
-                     arr.max_shift, u, q, lengths, tensions, w, status, iters)
-    # Cases Newton could not reach directly, or reached far from the rest pose: load continuation.
+                     arr.max_shift, *out)
+    return finish_batch(geometry, loads, out, xtol, max_iter)
+
+
+def batch_outputs(n: int) -> tuple[np.ndarray, ...]:
+    """What a batch kernel fills for ``n`` cases: u (n, 3), q (n, 3, 3), lengths, tensions, w (n, 6), status and
+    iterations (n,) (int64)."""
+    return (np.empty((n, 3)), np.empty((n, 3, 3)), np.empty((n, 6)), np.empty((n, 6)), np.empty((n, 6)),
+            np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64))
+
+
+def finish_batch(geometry: CraneGeometry, loads: np.ndarray, out: tuple[np.ndarray, ...], xtol: float,
+                 max_iter: int) -> BatchEquilibrium:
+    """The batch's result from a kernel's ``out`` (:func:`batch_outputs`): the cases it did not bring to
+    CONVERGED (Newton could not reach them directly, or reached them far from the rest pose) solved again by
+    :func:`solve_equilibrium`, which finishes them by load continuation or raises the error that says why."""
+    u, q, lengths, tensions, w, status, iters = out
     for c in np.flatnonzero(status != kern.CONVERGED):
         eq = solve_equilibrium(geometry, load=loads[c], xtol=xtol, max_iter=max_iter)
         u[c], q[c], lengths[c], tensions[c], w[c] = (eq.displacement, eq.rotation, eq.wire_lengths,
                                                      eq.wire_tensions, eq.residual)
         iters[c] = eq.iterations
-    return BatchEquilibrium(u, q, lengths, tensions, lengths < arr.l0, loads, iters, w)
+    return BatchEquilibrium(u, q, lengths, tensions, lengths < geometry_arrays(geometry).l0, loads, iters, w)
 
 
 def solve_path(geometry: CraneGeometry, loads, *, xtol: float = DEFAULT_XTOL) -> list[Equilibrium]:

@@ -20,7 +20,6 @@ the addresses are logged at start (``live view: page http://â€¦, Foxglove ws://â
 """
 from __future__ import annotations
 
-import importlib
 import os
 import threading
 from typing import Any, Callable
@@ -40,7 +39,9 @@ from crane_stiffness import topics
 from crane_stiffness.model import CraneGeometry
 from crane_stiffness.rosnode.qos import LATCHED_QOS, RELIABLE_QOS, rclpy_qos
 from crane_stiffness.rosnode.run import run
+from crane_stiffness.rosnode.session_qos import message_class
 from crane_stiffness.rosnode.parameters import Params, check
+from crane_stiffness.rosnode.messages import stamp_to_s
 from crane_stiffness.params.geometry import GEOMETRY_PARAMS, geometry_from_params
 from crane_stiffness.params.spec import ParamSpec
 from crane_stiffness.view import plot
@@ -83,11 +84,6 @@ def _validate(values: dict[str, Any]) -> CraneGeometry:
     for name in values['services']:
         check(name.startswith('/'), 'services', name, 'must be an absolute service name')
     return geometry_from_params(values)  # raises GeometryError (a ValueError) naming the field
-
-
-def _message_class(type_name: str) -> Any:
-    pkg, _, name = type_name.split('/')
-    return getattr(importlib.import_module(f'{pkg}.msg'), name)
 
 
 class LiveViewNode(Node):
@@ -181,7 +177,7 @@ class LiveViewNode(Node):
             if wanted and topic not in self.ros_subs:
                 qos = topics.TOPIC_QOS.get(topic)
                 profile = rclpy_qos(qos) if qos is not None else rclpy_qos(topics.RELIABLE, 100)
-                self.ros_subs[topic] = self.create_subscription(_message_class(_TYPES[topic]), topic,
+                self.ros_subs[topic] = self.create_subscription(message_class(_TYPES[topic]), topic,
                                                                 self._forwarder(topic), profile, raw=True,
                                                                 event_callbacks=_NO_EVENTS)
             elif not wanted and topic in self.ros_subs:
@@ -287,7 +283,7 @@ class LiveViewNode(Node):
             (0.0, 0.0, 0.0, 1.0),
             tensions=list(wires.effort),
             force=(wrench.wrench.force.x, wrench.wrench.force.y, wrench.wrench.force.z) if wrench else (0.0,) * 3,
-            stamp_s=wires.header.stamp.sec + wires.header.stamp.nanosec * 1e-9)
+            stamp_s=stamp_to_s(wires.header.stamp))
         scene = scene_update(self.geometry, state, self.settings['deflection_scale'])
         return sent + fox.log_json(PREFIX + 'scene', scene, now)
 

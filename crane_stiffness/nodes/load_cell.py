@@ -34,22 +34,20 @@ from crane_stiffness.axes import AXES
 from crane_stiffness.params.spec import ParamSpec
 from crane_stiffness.rosnode.qos import RELIABLE_QOS, sensor_qos, stream_qos
 from crane_stiffness.rosnode.diagnostics import Diagnostics, SensorCounters
-from crane_stiffness.rosnode.sensor_timing import STATE_WAIT_PARAM, SampleSchedule, ZeroEpoch, check_sensor_params
+from crane_stiffness.rosnode.sensor_timing import (
+    STATE_WAIT_PARAM, SampleSchedule, ZeroEpoch, check_sensor_params, sensor_timing_params,
+)
 from crane_stiffness.rosnode.sim_time import SimTimeParticipant, drain
 from crane_stiffness.rosnode.messages import finite
 from crane_stiffness.rosnode.run import run
 from crane_stiffness.rosnode.parameters import Params
-from crane_stiffness.sim.sampling import NS_PER_S, SampleClock, StampedHold
+from crane_stiffness.serde.stamps import split_ns, stamp_ns
+from crane_stiffness.sim.sampling import SampleClock, StampedHold
 from crane_stiffness.sim.sensors import LOAD_CELL_PARAMS, LoadCellModel, load_cell_from_params
 from crane_stiffness.status import ERROR, OK, WARN
 
 PARAMS = (
-    ParamSpec('sample_rate_hz', 1000.0, 'sample rate; stamps are 1/sample_rate_hz apart on a grid of the node '
-              'clock [Hz]', above=0.0),
-    ParamSpec('publish_rate_hz', 500.0, 'rate of the timer that publishes the samples taken since its last tick '
-              '(a DAQ buffer); its ticks fall on multiples of its period of the node clock, so sensors at the same '
-              'rate deliver together. Higher: lower latency, more CPU [Hz]', above=0.0),
-    ParamSpec('frame_id', 'load_cell', 'header.frame_id of the published wrench; axes aligned with crane_base [-]'),
+    *sensor_timing_params('load_cell', 'header.frame_id of the published wrench; axes aligned with crane_base [-]'),
     *LOAD_CELL_PARAMS,
     ParamSpec('tare_samples', 100, 'readings averaged by the ~/tare service [samples]', low=1),
     STATE_WAIT_PARAM,
@@ -118,8 +116,8 @@ class LoadCell(Node):
             self.get_logger().warning(f'non-finite applied wrench dropped: {list(wrench)}', throttle_duration_sec=2.0)
             return
         first = not self.applied.has_value
-        stamp_ns = msg.header.stamp.sec * NS_PER_S + msg.header.stamp.nanosec
-        self.applied.update(wrench, stamp_ns, self.schedule.arrival_ns(stamp_ns))
+        sent_ns = stamp_ns(msg.header.stamp.sec, msg.header.stamp.nanosec)
+        self.applied.update(wrench, sent_ns, self.schedule.arrival_ns(sent_ns))
         self.counters.used += 1
         if first:
             self.get_logger().info(f'first applied wrench {list(wrench)}: publishing')
@@ -155,7 +153,7 @@ class LoadCell(Node):
         frame = self.settings['frame_id']
         for t_ns, r in zip(times.tolist(), readings.tolist()):
             msg = WrenchStamped()
-            msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(t_ns, NS_PER_S)
+            msg.header.stamp.sec, msg.header.stamp.nanosec = split_ns(t_ns)
             msg.header.frame_id = frame
             f, m = msg.wrench.force, msg.wrench.torque
             f.x, f.y, f.z, m.x, m.y, m.z = r

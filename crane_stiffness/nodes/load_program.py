@@ -42,6 +42,7 @@ from crane_stiffness.rig_description import NODES as RIG_NODES
 from crane_stiffness.rig_description import readiness
 from crane_stiffness.sim.program import PROGRAM_KEYS, PROGRAM_PARAMS, LoadProgram, ProgramState
 from crane_stiffness.status import OK, WARN
+from crane_stiffness.serde.stamps import split_ns
 
 #: What the program waits for by default: the whole simulated rig with the recorder, as crane_stiffness.rig_description
 #: describes it (the launch file passes the lists for the nodes it starts): a message on the model's latched
@@ -358,7 +359,7 @@ class LoadProgramNode(Node):
         st = self.program.wrench_at(self._program_time(t_ns * 1e-9))
         self.last = st
         cmd = WrenchStamped()
-        cmd.header.stamp.sec, cmd.header.stamp.nanosec = divmod(t_ns, 1_000_000_000)
+        cmd.header.stamp.sec, cmd.header.stamp.nanosec = split_ns(t_ns)
         cmd.header.frame_id = topics.FRAME_BASE
         w = [float(v) for v in st.wrench]
         cmd.wrench.force.x, cmd.wrench.force.y, cmd.wrench.force.z = w[:3]

@@ -26,25 +26,22 @@ from rclpy.node import Node
 from std_srvs.srv import Trigger
 
 from crane_stiffness import topics
-from crane_stiffness.params.spec import ParamSpec
 from crane_stiffness.rosnode.qos import RELIABLE_QOS, sensor_qos, stream_qos
 from crane_stiffness.rosnode.diagnostics import Diagnostics, SensorCounters
-from crane_stiffness.rosnode.sensor_timing import STATE_WAIT_PARAM, SampleSchedule, ZeroEpoch, check_sensor_params
+from crane_stiffness.rosnode.sensor_timing import (
+    STATE_WAIT_PARAM, SampleSchedule, ZeroEpoch, check_sensor_params, sensor_timing_params,
+)
 from crane_stiffness.rosnode.sim_time import SimTimeParticipant, drain
 from crane_stiffness.rosnode.messages import pose_vector
 from crane_stiffness.rosnode.run import run
 from crane_stiffness.rosnode.parameters import Params
-from crane_stiffness.sim.sampling import NS_PER_S, SampleClock, StampedHold
+from crane_stiffness.serde.stamps import split_ns, stamp_ns
+from crane_stiffness.sim.sampling import SampleClock, StampedHold
 from crane_stiffness.sim.sensors import LVDT_PARAMS, LvdtModel, lvdt_from_params
 from crane_stiffness.status import ERROR, OK, WARN
 
 PARAMS = (
-    ParamSpec('sample_rate_hz', 1000.0, 'sample rate; stamps are 1/sample_rate_hz apart on a grid of the node '
-              'clock [Hz]', above=0.0),
-    ParamSpec('publish_rate_hz', 500.0, 'rate of the timer that publishes the samples taken since its last tick '
-              '(a DAQ buffer); its ticks fall on multiples of its period of the node clock, so sensors at the same '
-              'rate deliver together. Higher: lower latency, more CPU [Hz]', above=0.0),
-    ParamSpec('frame_id', 'lvdt', 'header.frame_id of the published reading [-]'),
+    *sensor_timing_params('lvdt', 'header.frame_id of the published reading [-]'),
     *LVDT_PARAMS,
     STATE_WAIT_PARAM,
 )
@@ -119,8 +116,8 @@ class Lvdt(Node):
             self.counters.dropped_non_finite += 1
             return
         first = not self.pose.has_value
-        stamp_ns = msg.header.stamp.sec * NS_PER_S + msg.header.stamp.nanosec
-        self.pose.update(pose, stamp_ns, self.schedule.arrival_ns(stamp_ns))
+        sent_ns = stamp_ns(msg.header.stamp.sec, msg.header.stamp.nanosec)
+        self.pose.update(pose, sent_ns, self.schedule.arrival_ns(sent_ns))
         self.counters.used += 1
         if first and self.settings['zero_on_first_pose']:
             self._zero(pose)
@@ -155,7 +152,7 @@ class Lvdt(Node):
         frame = self.settings['frame_id']
         for t_ns, x in zip(times.tolist(), readings.tolist()):
             msg = PointStamped()
-            msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(t_ns, NS_PER_S)
+            msg.header.stamp.sec, msg.header.stamp.nanosec = split_ns(t_ns)
             msg.header.frame_id = frame
             msg.point.x = x
             self.pub.publish(msg)

@@ -35,7 +35,7 @@ from crane_stiffness.rosnode.sensor_timing import ZeroEpoch, create_grid_timer
 from crane_stiffness.rosnode.run import run
 from crane_stiffness.rosnode.parameters import Params, check, positive
 from crane_stiffness.rosnode.device_params import check_address, check_start_only, wait_for_device
-from crane_stiffness.sim.sampling import NS_PER_S
+from crane_stiffness.serde.stamps import split_ns
 from crane_stiffness.status import ERROR, OK, WARN
 
 #: Parameters of the channel, shared with modbus_emulator so one parameter file describes both sides.
@@ -168,7 +168,7 @@ class ModbusLvdt(Node):
             self.counters.late_polls += 1
         self._recent.append(reading.metres)
         msg = PointStamped()
-        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(reading.stamp_ns, NS_PER_S)
+        msg.header.stamp.sec, msg.header.stamp.nanosec = split_ns(reading.stamp_ns)
         msg.header.frame_id = self.settings['frame_id']
         msg.point.x = reading.metres - self.zero_m
         self.pub.publish(msg)

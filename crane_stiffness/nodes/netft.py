@@ -42,7 +42,7 @@ from crane_stiffness.rosnode.sensor_timing import ZeroEpoch, create_grid_timer
 from crane_stiffness.rosnode.run import run
 from crane_stiffness.rosnode.parameters import Params, check, positive
 from crane_stiffness.rosnode.device_params import check_address, check_start_only, wait_for_device
-from crane_stiffness.sim.sampling import NS_PER_S
+from crane_stiffness.serde.stamps import split_ns
 from crane_stiffness.status import ERROR, OK, WARN
 
 DEVICES = ('ati', 'onrobot')
@@ -184,7 +184,7 @@ class NetFt(Node):
         frame = self.settings['frame_id']
         for t_ns, w in zip(batch.stamps_ns.tolist(), batch.wrench.tolist()):
             msg = WrenchStamped()
-            msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(t_ns, NS_PER_S)
+            msg.header.stamp.sec, msg.header.stamp.nanosec = split_ns(t_ns)
             msg.header.frame_id = frame
             f, m = msg.wrench.force, msg.wrench.torque
             f.x, f.y, f.z, m.x, m.y, m.z = w

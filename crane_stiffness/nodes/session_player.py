@@ -47,6 +47,7 @@ from crane_stiffness.rosnode.diagnostics import Diagnostics
 from crane_stiffness.rosnode.run import run
 from crane_stiffness.rosnode.parameters import Params, check, positive, valid_topic_name
 from crane_stiffness.rosnode.session_qos import message_class, playback_qos
+from crane_stiffness.serde.stamps import split_ns
 from crane_stiffness.status import ERROR, OK, WARN
 
 CLOCK_TOPIC = '/clock'
@@ -140,7 +141,7 @@ class _Playback(threading.Thread):
         """Publish /clock at bag time ``bag_ns`` [ns] (a float when scaled by the rate; truncated to an int)."""
         if self.clock_pub is not None:
             msg = Clock()
-            msg.clock.sec, msg.clock.nanosec = divmod(int(bag_ns), 1_000_000_000)
+            msg.clock.sec, msg.clock.nanosec = split_ns(int(bag_ns))
             self.clock_pub.publish(msg)
 
     def _play(self) -> None:

@@ -70,7 +70,7 @@ from crane_stiffness.rosnode.session_qos import (adapted_qos, contract_qos, has_
                                                offered_profiles, publisher_types)
 from crane_stiffness.params.files import params_files_from_args, read_params_files
 from crane_stiffness.serde import header_stamp_ns
-from crane_stiffness.session_record import (NODE_PARAMETERS_METADATA, SESSION_END_METADATA, SESSION_METADATA,
+from crane_stiffness.session_metadata import (NODE_PARAMETERS_METADATA, SESSION_END_METADATA, SESSION_METADATA,
                                             session_record)
 from crane_stiffness.sim.program import PROGRAM_KEYS
 from crane_stiffness.status import ERROR, OK

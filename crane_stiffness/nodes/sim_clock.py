@@ -32,6 +32,7 @@ from crane_stiffness.rosnode.sim_time import SIM_QOS
 from crane_stiffness.params.spec import ParamSpec
 from crane_stiffness.sim.lockstep import LockstepClock
 from crane_stiffness.status import OK, WARN
+from crane_stiffness.serde.stamps import split_ns
 
 #: The nodes of the simulated rig that follow the clock (crane_stiffness.rig_description passes the ones started).
 DEFAULT_PARTICIPANTS = ('load_program', 'crane_model', 'load_cell', 'lvdt', 'stiffness_estimator', 'session_recorder')
@@ -197,7 +198,7 @@ class SimClock(Node):
     def _publish_clock(self) -> None:
         assert self.lockstep is not None
         msg = ClockMsg()
-        msg.clock.sec, msg.clock.nanosec = divmod(self.lockstep.now_ns, 1_000_000_000)
+        msg.clock.sec, msg.clock.nanosec = split_ns(self.lockstep.now_ns)
         self.pub_clock.publish(msg)
         self._last_clock_pub = time.monotonic()
 

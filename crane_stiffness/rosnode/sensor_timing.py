@@ -23,6 +23,21 @@ STATE_WAIT_PARAM = ParamSpec('state_wait_s', 0.0, 'on wall-clock time, the longe
                              '(late_state_updates on /diagnostics; WARN when this is > 0). Unused on simulated time, '
                              'where the clock waits instead [s]', low=0.0, high=10.0)
 
+
+def sensor_timing_params(frame_id: str, frame_doc: str) -> tuple[ParamSpec, ...]:
+    """The parameters every simulated sensor has, in this order: ``sample_rate_hz``, ``publish_rate_hz`` (the
+    :class:`SampleSchedule`) and ``frame_id`` (default ``frame_id``, described by ``frame_doc``); see
+    :func:`check_sensor_params`."""
+    return (
+        ParamSpec('sample_rate_hz', 1000.0, 'sample rate; stamps are 1/sample_rate_hz apart on a grid of the node '
+                  'clock [Hz]', above=0.0),
+        ParamSpec('publish_rate_hz', 500.0, 'rate of the timer that publishes the samples taken since its last tick '
+                  '(a DAQ buffer); its ticks fall on multiples of its period of the node clock, so sensors at the same '
+                  'rate deliver together. Higher: lower latency, more CPU [Hz]', above=0.0),
+        ParamSpec('frame_id', frame_id, frame_doc),
+    )
+
+
 #: Longest a node waits at start (or on a rate change) to put its timer on the clock grid [s].
 MAX_ALIGN_WAIT_S = 0.05
 

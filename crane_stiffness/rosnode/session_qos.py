@@ -9,10 +9,8 @@
 """
 from __future__ import annotations
 
-from enum import IntEnum
 from typing import Any, Iterable, Mapping, Sequence
 
-import yaml
 from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -20,6 +18,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from crane_stiffness import topics
 from crane_stiffness.bag.errors import UnsupportedTypeError
 from crane_stiffness.bag.msgdef import interface_prefix
+from crane_stiffness.bag.qos import policy_name, recorded_qos_profiles
 from crane_stiffness.rosnode.qos import rclpy_qos
 
 
@@ -77,18 +76,6 @@ def publisher_types(node: Node, topic: str) -> set[str]:
     return {i.topic_type for i in node.get_publishers_info_by_topic(topic)}
 
 
-def _parse_profiles(offered: str | Iterable[Mapping[str, Any]] | None) -> list[Mapping[str, Any]]:
-    if offered is None:
-        return []
-    if isinstance(offered, str):
-        try:
-            loaded = yaml.safe_load(offered) if offered.strip() else []
-        except yaml.YAMLError:
-            return []
-        offered = loaded if isinstance(loaded, list) else []
-    return [p for p in offered if isinstance(p, Mapping)]
-
-
 def playback_qos(topic: str, offered: str | Iterable[Mapping[str, Any]] | None) -> QoSProfile:
     """Publisher QoS for replaying ``topic``, from the offered QoS profiles recorded in the bag.
 
@@ -97,23 +84,12 @@ def playback_qos(topic: str, offered: str | Iterable[Mapping[str, Any]] | None) 
     recording does not know it (DDS does not propagate the history), at least 1. Without recorded profiles the
     topic contract applies, and reliable/volatile outside it.
     """
-    profiles = _parse_profiles(offered)
+    profiles = recorded_qos_profiles(offered)
     contract = contract_qos(topic)
     if not profiles:
         return contract or rclpy_qos(topics.RELIABLE, topics.RECORD_QUEUE_DEPTH)
-
-    def policy(p: Mapping[str, Any], key: str, enum: type[IntEnum]) -> str:
-        """A recorded policy by name: rosbag2's names, or rmw's integers (rclpy's enums name them)."""
-        value = p.get(key)
-        if isinstance(value, int):
-            try:
-                return enum(value).name.lower()
-            except ValueError:
-                pass
-        return str(value)
-
-    reliable = all(policy(p, 'reliability', ReliabilityPolicy) == 'reliable' for p in profiles)
-    latched = all(policy(p, 'durability', DurabilityPolicy) == 'transient_local' for p in profiles)
+    reliable = all(policy_name('reliability', p.get('reliability')) == 'reliable' for p in profiles)
+    latched = all(policy_name('durability', p.get('durability')) == 'transient_local' for p in profiles)
     depths = [int(p['depth']) for p in profiles if isinstance(p.get('depth'), int) and p['depth'] > 0]
     depth = max(depths) if depths else (contract.depth if contract is not None else topics.RECORD_QUEUE_DEPTH)
     return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=max(1, depth),

@@ -20,9 +20,8 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from crane_stiffness.serde.stamps import NS_PER_S
 from crane_stiffness.sim.errors import ParameterError
-
-NS_PER_S = 1_000_000_000
 
 
 class SampleClock:

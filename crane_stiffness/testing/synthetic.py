@@ -25,7 +25,7 @@ from crane_stiffness.estimation.settings import LiveSettings
 from crane_stiffness.model import CraneGeometry
 from crane_stiffness.serde import (encode_float64, encode_float64_multiarray, encode_stamped, encode_string,
                                    stamp_seconds)
-from crane_stiffness.session_record import CAMPAIGN_KEY, SESSION_METADATA, session_metadata
+from crane_stiffness.session_metadata import CAMPAIGN_KEY, SESSION_METADATA, session_metadata
 from crane_stiffness.sim.program import LoadProgram
 
 T0_NS = 1_700_000_000_000_000_000
@@ -106,7 +106,7 @@ def write_synthetic_session(path: str | Path, program: LoadProgram, *, geometry:
             latency); the log times follow.
         recorded_geometry: the crane the session records (the nominal one of a campaign) when it is not the one
             the displacements are made with (``geometry``, the true crane).
-        campaign: a campaign entry to record (crane_stiffness.session_record.CAMPAIGN_KEY).
+        campaign: a campaign entry to record (crane_stiffness.session_metadata.CAMPAIGN_KEY).
     """
     if geometry is None and stiffness is None:
         raise ValueError('give a geometry (nonlinear model) or a stiffness (linear truth)')

@@ -1,4 +1,5 @@
-"""The session record: how a recording of the rig describes itself, in MCAP Metadata records of its bag.
+"""The session's metadata (the session record): how a recording of the rig describes itself, in MCAP Metadata
+records of its bag.
 
 Written by the session recorder (and by the synthetic sessions), read by the offline analysis. Three records:
 

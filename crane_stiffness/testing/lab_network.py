@@ -23,7 +23,8 @@ from typing import Any, Mapping, Sequence
 from crane_stiffness.errors import CraneStiffnessError
 from crane_stiffness.rig_description import PACKAGE, NodeStart, rig_nodes
 from crane_stiffness.sim.program import LoadProgram, load_program_file
-from crane_stiffness.launcher.rig import start_node
+from crane_stiffness.launcher.ports import free_port
+from crane_stiffness.launcher.rig import start_nodes
 from crane_stiffness.launcher.rosrun import Processes, command
 
 
@@ -31,18 +32,10 @@ class LabNetworkError(CraneStiffnessError):
     """The namespaces or the veth pair cannot be made here (with the command and its error)."""
 
 
-def free_port(kind: int = socket.SOCK_STREAM, host: str = '127.0.0.1') -> int:
-    """A port nothing uses now on ``host`` (``kind``: SOCK_STREAM or SOCK_DGRAM)."""
-    with socket.socket(socket.AF_INET, kind) as s:
-        s.bind((host, 0))
-        return s.getsockname()[1]
-
-
 def emulated_ports(host: str = '127.0.0.1') -> dict[str, dict[str, Any]]:
     """Per-node parameter overrides: free ports for rdt_emulator (UDP RDT, TCP /netftapi2.xml) and
     modbus_emulator (TCP), the drivers pointed at them; every device on ``host``."""
-    rdt, http, modbus = free_port(socket.SOCK_DGRAM, host), free_port(socket.SOCK_STREAM, host), \
-        free_port(socket.SOCK_STREAM, host)
+    rdt, http, modbus = free_port(host=host, kind=socket.SOCK_DGRAM), free_port(host=host), free_port(host=host)
     return {'rdt_emulator': {'host': host, 'port': rdt, 'http_port': http},
             'netft': {'host': host, 'port': rdt, 'http_port': http},
             'modbus_emulator': {'host': host, 'port': modbus},
@@ -60,15 +53,7 @@ def start_rig_with(procs: Processes, share: Path, given: Mapping[str, Any], bags
     nodes = rig_nodes(share, given)
     program = next(n for n in nodes if n.runs_program)
     prog = load_program_file(program.parameter_files[0])
-    if bags is not None:
-        bags.mkdir(parents=True, exist_ok=True)
-    for node in nodes:
-        extra: dict[str, Any] = {'output_dir': bags} if node.name == 'session_recorder' and bags is not None else {}
-        if node.runs_program:
-            if not start_program:
-                continue
-            extra = {'exit_on_done': True, 'ready_timeout_s': ready_timeout_s}
-        start_node(procs, node, {**extra, **(overrides or {}).get(node.name, {})})
+    start_nodes(procs, nodes, bags, ready_timeout_s, overrides, start_program)
     return prog, nodes
 
 
