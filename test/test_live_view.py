@@ -19,7 +19,7 @@ from crane_stiffness.nodes.live_view import DEFAULT_SERVICES, DEFAULT_TOPICS, _T
 from crane_stiffness.launcher.rosrun import installed_config
 from crane_stiffness.status import ERROR, NAMES, STALE, WAITING_PREFIX, overall, read_level
 from helpers.foxglove_client import PATIENCE_S, FoxgloveClient
-from helpers.live_rig import live_rig, wait_for_pairs
+from helpers.live_rig import live_rig, wait_for_pairs, watched
 from helpers.processes import UNCLEAN, final_counters
 
 DERIVED = ('xy', 'fit_lines', 'prediction', 'estimate', 'status', 'wires', 'scene')
@@ -46,7 +46,7 @@ def test_protocol_channels_values_and_tare(install_tree, rclpy_context, tmp_path
             client.subscribe(*(f'/live_view/{name}' for name in DERIVED), topics.WIRE_STATES)
             wait_for_pairs(procs, watcher, 3000)
             # the program runs: loading, points growing, until the client has what the checks look at
-            assert client.poll_until(_Enough(client)), {t: len(m) for t, m in client.messages.items()}
+            assert client.poll_until(_Enough(client, watcher)), {t: len(m) for t, m in client.messages.items()}
             procs.check_alive(allow_exit=('load_program',))
             _check_plot(client, watcher)
             _check_crane(client, watcher)
@@ -74,12 +74,12 @@ def test_protocol_channels_values_and_tare(install_tree, rclpy_context, tmp_path
 
 
 class _Enough:
-    """Whether the client holds what the checks below look at: 10 plots, the newest with more than 120 points (more
-    than 100 of them the watcher's), a message of every derived channel, a scene with the applied force drawn, and
-    the raw wire states (each scene read once: they pile up while the test waits)."""
+    """Whether the client holds what the checks below look at: 10 plots, the newest with more than 120 points stamped
+    after the watcher's first pair (so more than 100 it can check), a message of every derived channel, a scene with
+    the applied force drawn, and the raw wire states (each scene read once: they pile up while the test waits)."""
 
-    def __init__(self, client: FoxgloveClient) -> None:
-        self.client, self.scenes_read, self.force_drawn = client, 0, False
+    def __init__(self, client: FoxgloveClient, watcher) -> None:
+        self.client, self.watcher, self.scenes_read, self.force_drawn = client, watcher, 0, False
 
     def __call__(self) -> bool:
         messages = self.client.messages
@@ -91,7 +91,8 @@ class _Enough:
         if not self.force_drawn or len(xy) < 10:
             return False
         last = json.loads(xy[-1])
-        return (len(last['loading']) + len(last['unloading']) > 120 and bool(messages.get(topics.WIRE_STATES))
+        shown = watched(self.watcher, (p['t'] for branch in ('loading', 'unloading') for p in last[branch]))
+        return (len(shown) > 120 and bool(messages.get(topics.WIRE_STATES))
                 and all(messages.get(f'/live_view/{name}') for name in DERIVED))
 
 
@@ -108,26 +109,28 @@ def _check_plot(client: FoxgloveClient, watcher) -> None:
     assert len(xy) >= 10, len(xy)
     last = xy[-1]
     points = [(b, p) for b, branch in enumerate(('loading', 'unloading')) for p in last[branch]]
-    # The watcher's subscription fills its dict from another thread, and may be a moment behind the view: wait until
-    # it holds every pair shown, then read one copy (atomic under the GIL).
-    shown_stamps = {p['t'] for _, p in points}
+    assert len(points) <= 500  # max_points: decimated for display
+    assert last['stride'] >= 1 and last['pairs'] >= len(points)
+    # The pairs shown that the watcher was matched for (it may have matched the estimator after the segment began):
+    # its subscription fills its dict from another thread, and may be a moment behind the view, so wait until it
+    # holds every one of them, then read one copy (atomic under the GIL).
+    shown_stamps = watched(watcher, (p['t'] for _, p in points))
     _wait_for(lambda: shown_stamps <= watcher.pairs.keys())
     fitted_pairs = dict(watcher.pairs)
     missing = shown_stamps - fitted_pairs.keys()
     assert len(missing) <= 0.02 * len(shown_stamps), f'{len(missing)} of {len(shown_stamps)} shown pairs never seen'
-    points = [(b, p) for b, p in points if p['t'] in fitted_pairs]
-    assert len(points) > 100, last['pairs']
-    assert len(points) <= 500  # max_points: decimated for display
+    points = [(b, p) for b, p in points if p['t'] in shown_stamps and p['t'] in fitted_pairs]
+    assert len(points) > 100, (last['pairs'], len(shown_stamps))
     for branch, p in points:  # every point shown is a pair the estimator fitted, exactly
         x, force, fitted_branch, segment = fitted_pairs[p['t']]
         assert (p['x'], p['y'], branch, segment) == (x, force, fitted_branch, last['segment'])
-    assert last['stride'] >= 1 and last['pairs'] >= len(points)
-    # the points of one segment decimated by one stride: one pair in every `stride` of those fitted
+    # the points of one segment decimated by one stride: one pair in every `stride` of those fitted, so consecutive
+    # points shown lie `stride` pairs apart (counted from wherever view and watcher began: the same offset for all)
     fitted = sorted(t for t, v in fitted_pairs.items() if v[3] == last['segment'])
     shown = {p['t'] for _, p in points}
     index = [i for i, t in enumerate(fitted) if t in shown]
     if not missing:  # (a pair the watcher lost would shift the count)
-        assert all(i % last['stride'] == 0 for i in index), last['stride']
+        assert all(b - a == last['stride'] for a, b in zip(index, index[1:])), last['stride']
     # the fit line and its band per branch, the prediction line, and each point carries them at its x
     lines = client.json_messages('/live_view/fit_lines')[-1]
     load = lines['loading']

@@ -10,7 +10,7 @@ import time
 
 from crane_stiffness.launcher.rosrun import installed_config
 from helpers.foxglove_client import PATIENCE_S, FoxgloveClient
-from helpers.live_rig import live_rig, wait_for_pairs
+from helpers.live_rig import live_rig, wait_for_pairs, watched
 from helpers.processes import UNCLEAN, final_counters
 from crane_stiffness.status import OK
 
@@ -45,15 +45,17 @@ def test_garbage_unknown_service_and_many_clients(install_tree, rclpy_context, t
             assert client.poll_until(lambda: len(client.messages.get('/live_view/xy', [])) > seen), \
                 'no plot for the first client after 20 others came and went'
             procs.check_alive(allow_exit=('load_program',))
-            # and its points are still the fitted pairs (the watcher's thread may be a moment behind the view)
+            # and its points are still the fitted pairs: those stamped after the watcher's first (it may have matched
+            # the estimator after the program began), and its thread may be a moment behind the view
             last = client.json_messages('/live_view/xy')[-1]
-            shown = {p['t'] for branch in ('loading', 'unloading') for p in last[branch]}
+            points = {p['t']: (p['x'], p['y']) for branch in ('loading', 'unloading') for p in last[branch]}
+            shown = watched(watcher, points)
+            assert shown, (watcher.first_stamp, sorted(points)[-1])
             deadline = time.monotonic() + PATIENCE_S
             while not shown <= watcher.pairs.keys() and time.monotonic() < deadline:
                 time.sleep(0.05)
-            for branch in ('loading', 'unloading'):
-                for p in last[branch]:
-                    assert watcher.pairs[p['t']][:2] == (p['x'], p['y'])
+            for t in shown:
+                assert watcher.pairs[t][:2] == points[t]
         finally:
             client.close()
         # the program to its end, then the estimator's own numbers

@@ -9,7 +9,7 @@ import contextlib
 import threading
 import time
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any, Iterable, Iterator
 
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.executors import SingleThreadedExecutor
@@ -32,6 +32,10 @@ class RigWatcher(Node):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('live_view_test_watcher', **kwargs)
         self.pairs: dict[float, tuple[float, float, int, int]] = {}  # stamp -> (x, force, branch, segment)
+        # The stamp of the first pair received. DDS discovery between two processes takes up to ~2.5 s (Fast DDS's
+        # endpoint announcements), so the watcher may match the estimator after the program began; from its first
+        # message on the stream is reliable and deep, so every pair stamped from then on is here.
+        self.first_stamp: float | None = None
         self.tensions: set[tuple[float, ...]] = set()
         self.values: dict[float, float] = {}  # sample_stamp -> loading stiffness
         self.loading: dict[str, float] = {}  # the newest loading row (VALUE_FIELDS)
@@ -58,6 +62,8 @@ class RigWatcher(Node):
     def _on_pairs(self, msg: Float64MultiArray) -> None:
         n = len(PAIR_FIELDS)
         data = list(msg.data)
+        if self.first_stamp is None and data:
+            self.first_stamp = data[0]
         for i in range(0, len(data), n):
             stamp, x, f, branch, segment = data[i:i + n]
             self.pairs[stamp] = (x, f, int(branch), int(segment))
@@ -105,6 +111,12 @@ def live_rig(env: dict[str, str], share: Path, out: Path, context: Any, override
             yield procs, watcher, ports
     finally:
         watcher.stop()
+
+
+def watched(watcher: RigWatcher, stamps: Iterable[float]) -> set[float]:
+    """Those of ``stamps`` (pairs the view shows) the watcher was matched for: from its first pair on."""
+    first = watcher.first_stamp
+    return set() if first is None else {t for t in stamps if t >= first}
 
 
 def wait_for_pairs(procs: Processes, watcher: RigWatcher, count: int, timeout_s: float = 120.0) -> None:
