@@ -145,7 +145,13 @@ def _check_plot(client: FoxgloveClient, watcher) -> None:
 
 
 def _check_crane(client: FoxgloveClient, watcher) -> None:
-    scenes = client.json_messages('/live_view/scene')
+    # the scenes of wire states stamped from the watcher's first on (it may have matched the model after the view
+    # did); a scene's stamp is the wire states' (to within the float's rounding, far below their period)
+    first = watcher.first_wires_ns
+    assert first is not None
+    scenes = [s for s in client.json_messages('/live_view/scene')
+              if s['entities'][0]['timestamp']['sec'] * 1_000_000_000 + s['entities'][0]['timestamp']['nsec']
+              >= first - 1000]
     assert scenes
     metas = [{kv['key']: kv['value'] for kv in s['entities'][0]['metadata']} for s in scenes]
     shown = {tuple(float(meta[f'tension.wire_{i}']) for i in range(1, 7)) for meta in metas}

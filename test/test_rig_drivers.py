@@ -162,10 +162,12 @@ def test_side_force_through_the_drivers_gives_the_prediction(install_tree, tmp_p
     # (Pair counts agree only roughly: a force sample the estimator found stale by its arrival time cannot be judged
     # so from the recorder's log time; on a loaded machine 233 were, and the pairs differed by 1.1 %.)
     # Every pair one of them made and the other did not is a sample the estimator judged stale or could not pair
-    # (counted, over the whole run), or one the recorder's best-effort subscription missed.
+    # (counted, over the whole run), or one only one of them received: the recorder's best-effort subscription
+    # missed it, or DDS matched the estimator to a sensor's writer later than the recorder (up to ~2.5 s at start).
     accounted = (est_counters['force_stale'] + est_counters['displacement_stale']
                  + est_counters['displacement_unmatched']
-                 + max(0, live.inputs['bag_force_messages'] - live.inputs['live_force_received']))
+                 + abs(live.inputs['bag_force_messages'] - live.inputs['live_force_received'])
+                 + abs(live.inputs['bag_displacement_messages'] - live.inputs['live_displacement_received']))
     assert abs(live.inputs['offline_pairs'] - live.inputs['live_pairs']) <= \
         max(0.1 * live.inputs['live_pairs'], accounted), (live.inputs, est_counters)
     for branch in ('loading', 'unloading'):

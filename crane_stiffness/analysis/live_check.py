@@ -88,6 +88,11 @@ def live_comparison(data: SessionData, pairs: LivePairs) -> LiveComparison | Non
         offline_pairs = int(((pairs.fit_log > t_a) & (pairs.fit_log <= t_b)).sum())
         comparison.inputs = {'from_s': t_a * 1e-9, 'to_s': t_b * 1e-9, 'live_force_received': received,
                              'bag_force_messages': in_bag, 'live_pairs': paired, 'offline_pairs': offline_pairs}
+        if data.disp is not None and 'displacement_received' in last and 'displacement_received' in first:
+            comparison.inputs['live_displacement_received'] = (int(last['displacement_received'])
+                                                               - int(first['displacement_received']))
+            comparison.inputs['bag_displacement_messages'] = int(((data.disp['log_time_ns'] > t_a)
+                                                                  & (data.disp['log_time_ns'] <= t_b)).sum())
     return comparison
 
 

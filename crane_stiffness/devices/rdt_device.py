@@ -260,12 +260,17 @@ class RdtDevice:
                 payload = self._leftover + payload
                 full = len(payload) // step * step
                 payload, self._leftover = payload[:full], payload[full:]
-            hold_from = len(payload) - self._hold * step if self._hold else len(payload)
             for i in range(0, len(payload), step):
                 packet = payload[i:i + step]
-                if i >= hold_from and hold_from >= 0:  # the last datagrams before the power-down: in flight
+                if self._hold and not self._held_event.is_set():
+                    # The last datagrams before the power-down: in flight (they may span several passes of this
+                    # loop: a quick loop has one datagram at a time). Nothing goes out after them.
                     self.in_flight.append((packet, client[0]))
+                    if len(self.in_flight) >= self._hold:
+                        self._held_event.set()
                     continue
+                if self._held_event.is_set():
+                    break
                 datagrams += 1
                 try:
                     if self.reorder_every and held is None and datagrams % self.reorder_every == 0:
@@ -278,8 +283,6 @@ class RdtDevice:
                 except OSError:
                     pass  # the client went away: a device keeps streaming into the void until told to stop
             self.records_sent += int(keep.sum())
-            if self._hold and len(payload) >= self._hold * step:
-                self._held_event.set()
             if self._remaining == 0:
                 self._client = None
 

@@ -111,6 +111,7 @@ class SessionRecorder(Node):
         # Simulated time: /clock is recorded too, the sensor streams are taken reliably, and the clock waits for
         # this node (stage 3), so nothing published is lost at any load.
         self.sim_time = uses_sim_time(self)
+        self.before_time: list[tuple[_Channel, bytes]] = []  # received on simulated time before it started
         self.writer: BagWriter | None = None
         self.bag_path: Path | None = None
         self.channels: dict[str, _Channel] = {}
@@ -214,6 +215,10 @@ class SessionRecorder(Node):
     def stop(self, reason: str = 'service') -> tuple[Path | None, int]:
         """Close the bag (metadata.yaml written), unsubscribe; returns (bag directory, messages written)."""
         with self._lock:
+            if self.writer is not None and self.before_time:  # time never started: logged at 0 rather than lost
+                held, self.before_time = self.before_time, []
+                for channel, data in held:
+                    self._write(channel, data, self.get_clock().now().nanoseconds)
             writer, self.writer = self.writer, None
             if writer is None:
                 return self.last_bag, self.last_count
@@ -395,6 +400,21 @@ class SessionRecorder(Node):
             self.dropped['not_recording'] += 1  # delivered after the bag was closed
             return
         now_ns = self.get_clock().now().nanoseconds
+        if self.sim_time:
+            if now_ns == 0:  # before simulated time starts (a latched message): logged at its start, in order
+                self.before_time.append((channel, data))
+                return
+            if self.before_time:
+                held, self.before_time = self.before_time, []
+                for held_channel, held_data in held:
+                    self._write(held_channel, held_data, now_ns)
+        self._write(channel, data, now_ns)
+
+    def _write(self, channel: _Channel, data: bytes, now_ns: int) -> None:
+        writer = self.writer
+        if writer is None:
+            self.dropped['not_recording'] += 1  # delivered after the bag was closed
+            return
         try:
             if not channel.added:
                 offered = offered_profiles(self, channel.topic, fallback=channel.qos)

@@ -37,6 +37,7 @@ class RigWatcher(Node):
         # message on the stream is reliable and deep, so every pair stamped from then on is here.
         self.first_stamp: float | None = None
         self.tensions: set[tuple[float, ...]] = set()
+        self.first_wires_ns: int | None = None  # the header stamp of the first wire states received (as first_stamp)
         self.values: dict[float, float] = {}  # sample_stamp -> loading stiffness
         self.loading: dict[str, float] = {}  # the newest loading row (VALUE_FIELDS)
         self.tare_epochs: list[float] = []
@@ -69,6 +70,8 @@ class RigWatcher(Node):
             self.pairs[stamp] = (x, f, int(branch), int(segment))
 
     def _on_wires(self, msg: JointState) -> None:
+        if self.first_wires_ns is None:
+            self.first_wires_ns = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
         self.tensions.add(tuple(msg.effort))
 
     def _on_values(self, msg: Float64MultiArray) -> None:
