@@ -106,9 +106,9 @@ def _coverage(truth: ModelResponses, seeds) -> tuple[np.ndarray, np.ndarray, np.
 def test_the_intervals_cover_the_tangent(designed):
     """Over the 20 seeded runs, 94.6 % of C's 720 intervals and 95.6 % of K's hold the tangent's entry. The least
     covered entries hold it in 15 (C[θ_z, my]) and 16 (K[fx, θ_x]) of 20: with 72 entries at 95 % each, some entry
-    below 18 of 20 is the rule, not the exception (P ≈ 0.996), so entry by entry the check takes more runs: over
-    200 more, every one of the 72 intervals holds its entry in at least 90 % of them (measured: 92.0 % at least;
-    96.0 % of C's, 95.4 % of K's pooled)."""
+    below 18 of 20 is the rule, not the exception (P ≈ 0.996 were they independent), so entry by entry the check
+    takes more runs: over 200 more, every one of the 72 intervals holds its entry in at least 90 % of them
+    (measured: 92.0 % at least; 96.0 % of C's, 95.4 % of K's pooled)."""
     cov_c, cov_k, _, _ = _coverage(designed, SEEDS)
     assert cov_c.mean() >= 0.93 and cov_k.mean() >= 0.93
     assert cov_c.min() >= 0.75 and cov_k.min() >= 0.75

@@ -2,8 +2,15 @@
 K2 sits and its sign, and the deflection of the nonlinear model under a small wrench against C·w."""
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+import textwrap
+
 import numpy as np
 import pytest
+
+from helpers import REPO
 
 from crane_stiffness.full6.deflection import pose_deflection, rotation_vector
 from crane_stiffness.full6.reference import K2_ENTRIES, entry_name, k2_of, reference_at_rest
@@ -58,3 +65,19 @@ def test_the_deflection_under_a_small_wrench_is_the_tangent_compliance_times_the
     cw = ref.compliance @ w
     np.testing.assert_allclose((d_plus - d_minus) / 2.0, cw, rtol=0, atol=1e-8 * np.abs(cw).max())
     assert np.abs(d_plus + d_minus).max() / 2.0 < 1e-4 * np.abs(cw).max()
+
+
+def test_the_package_imports_no_ros():
+    code = textwrap.dedent('''
+        import sys
+        sys.modules["rclpy"] = None  # any import of rclpy now fails
+        for name in ("reference", "deflection", "admissible", "design", "program", "statistics", "identify"):
+            __import__(f"crane_stiffness.full6.{name}")
+        import crane_stiffness.testing.synthetic_full6
+        assert not [m for m in sys.modules if m.split(".")[0] in ("rclpy", "rosidl_runtime_py", "std_msgs")
+                    and sys.modules[m] is not None]
+    ''')
+    env = {k: v for k, v in os.environ.items() if not k.startswith(('AMENT', 'ROS'))}
+    env['PYTHONPATH'] = str(REPO)
+    result = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True, env=env, timeout=120)
+    assert result.returncode == 0, result.stderr
