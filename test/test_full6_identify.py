@@ -153,6 +153,10 @@ def test_errors_in_the_wrench_are_corrected():
 def test_the_status_is_never_ok_on_a_design_that_cannot_determine_c(designed):
     linear = _linear(designed)
     assert ComplianceEstimator().fit().level == WAITING
+    # noise-free pairs: nothing to weigh the fit by
+    s = synthetic_pairs(linear, seed=1, noise=NoiseLevels(np.zeros(6), np.zeros(6), 250.0))
+    fit = identify(s.wrench, s.deflection, s.step)
+    assert fit.level == ERROR and fit.message.startswith('undetermined: the deflections do not scatter within')
     # too few steps
     s = synthetic_pairs(linear, seed=1)
     few = s.step < 6

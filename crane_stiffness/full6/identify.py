@@ -36,7 +36,8 @@ is the mean of its four signed entries, with its interval from the same covarian
 
 - WAITING: no pairs yet.
 - ERROR, *undetermined* — the pairs cannot determine C: fewer than :data:`MIN_STEPS` distinct steps (six compliances
-  and an offset per row need seven, the lack-of-fit test one more); no pure error (a step with one pair each); the
+  and an offset per row need seven, the lack-of-fit test one more); no pure error (one pair a step, or deflections
+  that do not scatter within their steps: noise-free or averaged data); the
   load on an axis that does not spread beyond its noise (M_jj < MIN_RELIABILITY·S_jj, the line fit's rule); or the
   condition number of the wrench design above :data:`MAX_CONDITION`: the ratio of the largest to the smallest
   eigenvalue of M scaled to unit diagonal (M_ij / sqrt(M_ii·M_jj), unit-free, 1 for an orthogonal design; 100 means
@@ -74,6 +75,8 @@ MAX_CONDITION = 100.0
 #: A window whose lack-of-fit test has a smaller p-value is non-linear.
 LACK_OF_FIT_P = 1e-3
 CONFIDENCE = 0.95
+# Residual variance per pair below this share of the deflection's variance over the test is rounding, not noise.
+_NOISE_FLOOR = 1e-20
 
 
 @dataclass(frozen=True)
@@ -228,6 +231,11 @@ def fit_compliance(stats: PairStatistics, *, wrench_noise: ArrayLike | None = No
     proj = np.hstack([-c, np.eye(6)])
     sigma_v = proj @ within @ proj.T / dof
     lof_dof = 6 * (k - 7)
+    spread = np.diag(stats.between())[6:] / n  # the deflections' variance over the test
+    if not (np.all(np.diag(sigma_v) > (_NOISE_FLOOR * spread)) and np.all(np.linalg.eigvalsh(sigma_v) > 0.0)):
+        reason = reason or ('the deflections do not scatter within their steps: no noise to weigh the fit and its '
+                            'intervals by (pairs of raw sensor samples are needed)')
+        lof_dof = 0
     if lof_dof > 0:
         t_stat = float(np.trace(np.linalg.solve(sigma_v, proj @ stats.between() @ proj.T)))
         ratio, p = t_stat / lof_dof, float(special.chdtrc(lof_dof, t_stat))
