@@ -56,7 +56,7 @@ test: $(STAMP)
 	$(BIN)/ruff check crane_stiffness test benchmarks scripts launch setup.py
 	@# Type checks of the package (mypy.ini); its cache (.mypy_cache/) makes a re-run take under a second.
 	$(BIN)/mypy
-	$(BIN)/python -m pytest -q -p no:cacheprovider test
+	$(BIN)/python -m pytest -q -p no:cacheprovider --durations=15 test
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/run_all.py

@@ -114,6 +114,9 @@ SENSOR_DATA = QoS('best_effort', 'volatile', SENSOR_QUEUE_DEPTH)
 RELIABLE = QoS('reliable', 'volatile', 1000)
 #: Latest-value topics a late joiner should still get (program state, predicted stiffness, model status).
 LATCHED = QoS('reliable', 'transient_local', 1)
+#: The estimator's outputs: nothing lost, and a reader that joins late still gets the recent ones (DDS may match a
+#: reader seconds after it starts; a campaign's observer, or a page opened later): 1000, ~50 s of estimates at 20 Hz.
+KEPT = QoS('reliable', 'transient_local', 1000)
 
 #: The QoS of every topic of the contract, the one table the rest is built from: the nodes' rclpy profiles
 #: (crane_stiffness.rosnode.run), the recorder's and player's QoS (crane_stiffness.rosnode.session_qos) and the
@@ -133,9 +136,9 @@ TOPIC_QOS: dict[str, QoS] = {
     LVDT_DISPLACEMENT: SENSOR_DATA,
     LVDT_ZERO: LATCHED,
     LOAD_CELL_TARE: LATCHED,
-    STIFFNESS_ESTIMATE: RELIABLE,
-    STIFFNESS_VALUES: RELIABLE,
-    STIFFNESS: RELIABLE,
+    STIFFNESS_ESTIMATE: KEPT,
+    STIFFNESS_VALUES: KEPT,
+    STIFFNESS: KEPT,
     FITTED_PAIRS: RELIABLE,
     FIT_LINES: RELIABLE,
 }

@@ -65,6 +65,9 @@ def main(argv=None) -> int:
                            help='run the rig on simulated time (the default; docs/simulated_time.md)')
     time_mode.add_argument('--wall-time', dest='sim_time', action='store_false',
                            help='run the rig on the wall clock (samples can be lost on a busy machine)')
+    ap.add_argument('--seed', default='1',
+                    help="the simulated sensors' noise seed (the LVDT takes seed + 1); on simulated time the same seed "
+                         "gives the same numbers on any machine at any load; 'random' draws new noise each run")
     ap.add_argument('--real-time-factor', default='1.0',
                     help="simulated seconds per wall second on simulated time; 'max' = as fast as the rig keeps up")
     args = ap.parse_args(argv)
@@ -74,6 +77,17 @@ def main(argv=None) -> int:
                 raise ValueError
         except ValueError:
             ap.error(f'--real-time-factor {args.real_time_factor!r}: expected a number >= 0 or max')
+
+    if args.seed == 'random':
+        seeds = {}
+    else:
+        try:
+            seed = int(args.seed)
+            if seed < 0:
+                raise ValueError
+        except ValueError:
+            ap.error(f"--seed {args.seed!r}: expected an integer >= 0 or random")
+        seeds = {'load_cell': {'seed': seed}, 'lvdt': {'seed': seed + 1}}
 
     import rclpy
     from tqdm import tqdm
@@ -92,7 +106,7 @@ def main(argv=None) -> int:
     session = f'demo_{args.program}_{datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%SZ")}'
     clock = (f'simulated time at real-time factor {args.real_time_factor}' if args.sim_time else 'wall-clock time')
     print(f'[2/3] starting the rig (ROS_DOMAIN_ID={env["ROS_DOMAIN_ID"]}, loopback only), '
-          f'program {args.program!r} on {clock}, recording bags/{session}', flush=True)
+          f'program {args.program!r} on {clock}, noise seed {args.seed}, recording bags/{session}', flush=True)
     arguments = {'use_sim_time': 'true', 'real_time_factor': args.real_time_factor} if args.sim_time else {}
     rclpy.init()
     observer = Observer()
@@ -100,7 +114,7 @@ def main(argv=None) -> int:
         launched = time.monotonic()
         view = {'port': free_port(8765), 'http_port': free_port(8080)}  # the defaults unless taken
         program = start_rig(procs, share, args.program, session, Path(args.bags), live_view=args.live_view,
-                            overrides={'live_view': view}, arguments=arguments)
+                            overrides={'live_view': view, **seeds}, arguments=arguments)
         print(f'  started {len(procs.procs)} nodes at once; load_program waits for the rig ...', flush=True)
         if args.live_view:
             print(f"  live view: open http://127.0.0.1:{view['http_port']}/ in a browser; Foxglove or Lichtblick: "
@@ -138,6 +152,7 @@ def main(argv=None) -> int:
         print(f'no result: {exc}; logs in {out / "logs"}', file=sys.stderr)
         return 1
     summary['time'] = {'mode': 'simulated' if args.sim_time else 'wall'}
+    summary['seed'] = args.seed
     if args.sim_time:
         counters = next((json.loads(line.split(' ', 2)[2]) for line in reversed(clock_log.splitlines())
                          if line.startswith('FINAL_COUNTERS sim_clock ')), {})

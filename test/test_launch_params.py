@@ -98,7 +98,7 @@ def test_rig_arguments_choose_the_nodes_and_their_files():
     assert rig_nodes(CONFIG, {'crane': 'crane_lab.yaml'})[0].parameter_files[0] == str(CONFIG / 'crane_lab.yaml')
     with pytest.raises(RigError, match=r'crane file \./nowhere\.yaml not found'):
         rig_nodes(CONFIG, {'crane': './nowhere.yaml'})
-    with pytest.raises(RigError, match="unknown program 'nothing'.*force_z, moment_z, side_force"):
+    with pytest.raises(RigError, match="unknown program 'nothing'.*force_z, full6, moment_z, side_force"):
         rig_nodes(CONFIG, {'program': 'nothing'})
 
 

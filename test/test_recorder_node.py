@@ -30,7 +30,7 @@ from crane_stiffness import topics
 from crane_stiffness.launcher import rosrun
 from crane_stiffness.bag import BagDamageWarning, BagReader
 from crane_stiffness.cli import main as cli_main
-from crane_stiffness.rosnode.qos import LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS
+from crane_stiffness.rosnode.qos import KEPT_QOS, LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS
 from crane_stiffness.nodes.session_recorder import SESSION_END_METADATA, SessionRecorder
 from crane_stiffness.session_metadata import read_session
 
@@ -83,7 +83,7 @@ class Publisher:
             topics.PREDICTED_STIFFNESS: n.create_publisher(Float64MultiArray, topics.PREDICTED_STIFFNESS,
                                                            LATCHED_QOS),
             topics.PROGRAM_STATE: n.create_publisher(String, topics.PROGRAM_STATE, LATCHED_QOS),
-            topics.STIFFNESS_ESTIMATE: n.create_publisher(DiagnosticArray, topics.STIFFNESS_ESTIMATE, RELIABLE_QOS),
+            topics.STIFFNESS_ESTIMATE: n.create_publisher(DiagnosticArray, topics.STIFFNESS_ESTIMATE, KEPT_QOS),
         }
 
     def matched(self, count: int = 1) -> bool:

@@ -24,7 +24,7 @@ from crane_stiffness.params.files import load_params
 from crane_stiffness.analysis.sweep import unit
 from crane_stiffness.model import (axis_stiffness, directional_stiffness, paper_stiffness, rest_pose,
                                    tangent_stiffness)
-from crane_stiffness.rosnode.qos import LATCHED_QOS, RELIABLE_QOS
+from crane_stiffness.rosnode.qos import KEPT_QOS, LATCHED_QOS
 from crane_stiffness.rosnode.sim_time import SIM_QOS
 from crane_stiffness.rig_description import PACKAGE, NodeStart, rig_nodes
 from crane_stiffness.rig_description import config_files as rig_config_files
@@ -51,11 +51,11 @@ class Observer(Node):
         self.predicted_at: float | None = None  # ... when the model's prediction first arrived
         self.create_subscription(Float64, topics.PROGRAM_PROGRESS, self._on_progress, LATCHED_QOS)
         self.create_subscription(String, topics.PROGRAM_STATE, self._on_state, LATCHED_QOS)
-        self.create_subscription(Float64MultiArray, topics.STIFFNESS_VALUES, self._on_values, RELIABLE_QOS)
+        self.create_subscription(Float64MultiArray, topics.STIFFNESS_VALUES, self._on_values, KEPT_QOS)
         self.create_subscription(Float64, topics.PREDICTED_AXIS_STIFFNESS, self._on_predicted, LATCHED_QOS)
         #: The estimator's latest statuses: {'loading' | 'unloading' | 'input': (level name, message)}.
         self.statuses: dict[str, tuple[str, str]] = {}
-        self.create_subscription(DiagnosticArray, topics.STIFFNESS_ESTIMATE, self._on_estimate, RELIABLE_QOS)
+        self.create_subscription(DiagnosticArray, topics.STIFFNESS_ESTIMATE, self._on_estimate, KEPT_QOS)
         #: Simulated time (sim_clock's watermarks): where the run ends, and through when every node has published.
         self.sim_end_ns: int | None = None
         self.sim_done_ns = -1

@@ -37,7 +37,7 @@ from std_srvs.srv import Trigger
 
 from crane_stiffness import topics
 from crane_stiffness.model import CraneGeometry
-from crane_stiffness.rosnode.qos import LATCHED_QOS, RELIABLE_QOS, rclpy_qos
+from crane_stiffness.rosnode.qos import KEPT_QOS, LATCHED_QOS, RELIABLE_QOS, rclpy_qos
 from crane_stiffness.rosnode.run import run
 from crane_stiffness.rosnode.session_qos import message_class
 from crane_stiffness.rosnode.parameters import Params, check
@@ -110,7 +110,7 @@ class LiveViewNode(Node):
         self.params = Params(self, PARAMS, _validate, self._apply)
         self.create_subscription(Float64MultiArray, topics.FITTED_PAIRS, self._on_pairs, RELIABLE_QOS)
         self.create_subscription(Float64MultiArray, topics.FIT_LINES, self._on_fit_lines, RELIABLE_QOS)
-        self.create_subscription(DiagnosticArray, topics.STIFFNESS_ESTIMATE, self._on_estimate, RELIABLE_QOS)
+        self.create_subscription(DiagnosticArray, topics.STIFFNESS_ESTIMATE, self._on_estimate, KEPT_QOS)
         self.create_subscription(Float64, topics.PREDICTED_AXIS_STIFFNESS, self._on_prediction, LATCHED_QOS)
         for topic, msg_type in ((topics.STIFFNESS_VALUES, Float64MultiArray), (topics.WIRE_STATES, JointState),
                                 (topics.PLATFORM_POSE, PoseStamped), (topics.APPLIED_WRENCH, WrenchStamped)):

@@ -59,7 +59,7 @@ from crane_stiffness.estimation.settings import ESTIMATOR_PARAMS, LiveSettings
 from crane_stiffness.params.spec import ParamSpec
 from crane_stiffness.status import wire_level
 from crane_stiffness.estimation.sync import DISPLACEMENT, FORCE
-from crane_stiffness.rosnode.qos import LATCHED_QOS, RELIABLE_QOS, sensor_qos, stream_qos
+from crane_stiffness.rosnode.qos import KEPT_QOS, LATCHED_QOS, RELIABLE_QOS, sensor_qos, stream_qos
 from crane_stiffness.rosnode.sim_time import SimTimeParticipant, uses_sim_time
 from crane_stiffness.rosnode.diagnostics import Diagnostics
 from crane_stiffness.rosnode.run import run
@@ -120,11 +120,11 @@ class StiffnessEstimatorNode(Node):
         self.timer: Timer | None = None
         self.last_stiffness = float('nan')
         self.changed = False  # new pairs fitted since the last /stiffness/estimate_values
-        self.pub_values = self.create_publisher(Float64MultiArray, topics.STIFFNESS_VALUES, RELIABLE_QOS,
+        self.pub_values = self.create_publisher(Float64MultiArray, topics.STIFFNESS_VALUES, KEPT_QOS,
                                                 event_callbacks=_NO_EVENTS_PUB)
-        self.pub_stiffness = self.create_publisher(Float64, topics.STIFFNESS, RELIABLE_QOS,
+        self.pub_stiffness = self.create_publisher(Float64, topics.STIFFNESS, KEPT_QOS,
                                                    event_callbacks=_NO_EVENTS_PUB)
-        self.pub_estimate = self.create_publisher(DiagnosticArray, topics.STIFFNESS_ESTIMATE, RELIABLE_QOS,
+        self.pub_estimate = self.create_publisher(DiagnosticArray, topics.STIFFNESS_ESTIMATE, KEPT_QOS,
                                                   event_callbacks=_NO_EVENTS_PUB)
         self.pub_pairs = self.create_publisher(Float64MultiArray, topics.FITTED_PAIRS, RELIABLE_QOS,
                                                event_callbacks=_NO_EVENTS_PUB)

@@ -13,10 +13,11 @@ def rclpy_qos(qos: topics.QoS, depth: int | None = None) -> QoSProfile:
                       durability=DurabilityPolicy[qos.durability.upper()])
 
 
-#: The rig's three QoS classes (crane_stiffness.topics.TOPIC_QOS says which topic has which).
+#: The rig's four QoS classes (crane_stiffness.topics.TOPIC_QOS says which topic has which).
 RELIABLE_QOS = rclpy_qos(topics.RELIABLE)
 SENSOR_QOS = rclpy_qos(topics.SENSOR_DATA)
 LATCHED_QOS = rclpy_qos(topics.LATCHED)
+KEPT_QOS = rclpy_qos(topics.KEPT)
 #: The streams the simulated-time protocol counts (commands, the model's answers, the sensor streams) on simulated
 #: time: reliable, and transient local as deep as the sensor-data class, so a reader that DDS matched only after a
 #: message went out still gets it (time waits for every message counted: none may be missed). A volatile or

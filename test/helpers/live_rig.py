@@ -20,7 +20,7 @@ from std_msgs.msg import Float64, Float64MultiArray
 
 from crane_stiffness import topics
 from crane_stiffness.estimation.live import PAIR_FIELDS, VALUE_FIELDS
-from crane_stiffness.rosnode.qos import LATCHED_QOS, RELIABLE_QOS
+from crane_stiffness.rosnode.qos import KEPT_QOS, LATCHED_QOS, RELIABLE_QOS
 from crane_stiffness.launcher.ports import free_port
 from crane_stiffness.launcher.rig import start_rig
 from crane_stiffness.launcher.rosrun import Processes
@@ -47,9 +47,9 @@ class RigWatcher(Node):
         deep = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
         self.create_subscription(Float64MultiArray, topics.FITTED_PAIRS, self._on_pairs, deep)
         self.create_subscription(JointState, topics.WIRE_STATES, self._on_wires, RELIABLE_QOS)
-        self.create_subscription(Float64MultiArray, topics.STIFFNESS_VALUES, self._on_values, RELIABLE_QOS)
+        self.create_subscription(Float64MultiArray, topics.STIFFNESS_VALUES, self._on_values, KEPT_QOS)
         self.create_subscription(Float64, topics.LOAD_CELL_TARE, self._on_tare, LATCHED_QOS)
-        self.create_subscription(DiagnosticArray, topics.STIFFNESS_ESTIMATE, self._on_estimate, RELIABLE_QOS)
+        self.create_subscription(DiagnosticArray, topics.STIFFNESS_ESTIMATE, self._on_estimate, KEPT_QOS)
         self.executor_ = SingleThreadedExecutor(context=self.context)
         self.executor_.add_node(self)
         self.stopping = False
