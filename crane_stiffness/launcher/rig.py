@@ -8,6 +8,7 @@ is no start order to keep, load_program waits until the rig is ready (crane_stif
 from __future__ import annotations
 
 import json
+import re
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, Mapping, Sequence
@@ -86,7 +87,9 @@ class Observer(Node):
 
     def _on_state(self, msg: String) -> None:
         self.state = json.loads(msg.data)
-        if self.running_at is None and self.state.get('state') == 'running':
+        # (paused or done: the program did start; DDS matched this observer after it had, which on simulated time
+        # flat out can be after the whole program)
+        if self.running_at is None and self.state.get('state') in ('running', 'paused', 'done'):
             self.running_at = time.monotonic()
 
     def _on_values(self, msg: Float64MultiArray) -> None:
@@ -193,6 +196,9 @@ def wait_for_program_start(observer: Observer, procs: Processes, timeout_s: floa
     def started() -> bool:
         program = procs.procs.get('load_program')
         if observer.running_at is None and program is not None and program.poll() is not None:
+            if program.returncode == 0 and re.search(r"program '[^']*' finished", procs.log('load_program')):
+                observer.running_at = time.monotonic()  # it ran to its end before DDS matched the observer
+                return True
             raise RosRunError(f'load_program exited with status {program.returncode} before starting the program:\n'
                               f'{procs.log("load_program")[-3000:]}')
         return observer.running_at is not None
