@@ -215,10 +215,8 @@ class SessionRecorder(Node):
     def stop(self, reason: str = 'service') -> tuple[Path | None, int]:
         """Close the bag (metadata.yaml written), unsubscribe; returns (bag directory, messages written)."""
         with self._lock:
-            if self.writer is not None and self.before_time:  # time never started: logged at 0 rather than lost
-                held, self.before_time = self.before_time, []
-                for channel, data in held:
-                    self._write(channel, data, self.get_clock().now().nanoseconds)
+            if self.writer is not None:  # time never started: what came is logged at 0 rather than lost
+                self._write_before_time(self.get_clock().now().nanoseconds)
             writer, self.writer = self.writer, None
             if writer is None:
                 return self.last_bag, self.last_count
@@ -395,25 +393,26 @@ class SessionRecorder(Node):
     def _on_message(self, channel: _Channel, data: bytes) -> None:
         self.received += 1
         self.sim.received(channel.topic)
-        writer = self.writer
-        if writer is None:
+        if self.writer is None:
             self.dropped['not_recording'] += 1  # delivered after the bag was closed
             return
         now_ns = self.get_clock().now().nanoseconds
-        if self.sim_time:
-            if now_ns == 0:  # before simulated time starts (a latched message): logged at its start, in order
-                self.before_time.append((channel, data))
-                return
-            if self.before_time:
-                held, self.before_time = self.before_time, []
-                for held_channel, held_data in held:
-                    self._write(held_channel, held_data, now_ns)
+        if self.sim_time and now_ns == 0:  # before simulated time starts (a latched message): logged at its start
+            self.before_time.append((channel, data))
+            return
+        self._write_before_time(now_ns)
         self._write(channel, data, now_ns)
+
+    def _write_before_time(self, now_ns: int) -> None:
+        """The messages received before simulated time started, logged at ``now_ns``, in the order received."""
+        held, self.before_time = self.before_time, []
+        for channel, data in held:
+            self._write(channel, data, now_ns)
 
     def _write(self, channel: _Channel, data: bytes, now_ns: int) -> None:
         writer = self.writer
-        if writer is None:
-            self.dropped['not_recording'] += 1  # delivered after the bag was closed
+        if writer is None:  # closed meanwhile (stop() from another thread)
+            self.dropped['not_recording'] += 1
             return
         try:
             if not channel.added:
