@@ -117,3 +117,44 @@ def test_the_same_streams_at_any_speed_and_load(install_tree, tmp_path):
     # Every sample of the program (5.3 s at 1 kHz, after 0.5 s at rest) is there, on its 1 ms grid.
     stamps = [t for t, _ in a['/load_cell/wrench']]
     assert len(stamps) >= 5800 and all(t2 - t1 == MS for t1, t2 in zip(stamps, stamps[1:]))
+
+
+@pytest.mark.ros
+def test_a_join_sent_before_the_clock_listens_still_reaches_it(rclpy_context):
+    """DDS matches the two directions between two nodes separately: a participant may hear the clock's watermark and
+    answer it before the clock's reader of /sim/progress is matched to it. Its answer, sent once, must still reach
+    the clock (else time waits for that node forever): the progress topic keeps it for a reader that comes later."""
+    import json
+
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.parameter import Parameter
+    from std_msgs.msg import String
+
+    from crane_stiffness import topics
+    from crane_stiffness.rosnode.sim_time import SIM_QOS, SimTimeParticipant
+
+    node = rclpy.create_node('late_heard', context=rclpy_context,
+                             parameter_overrides=[Parameter('use_sim_time', value=True)])
+    part = SimTimeParticipant(node, 0, lambda t: None)
+    part.report(1_000 * 10**9, end_ns=1_006 * 10**9)  # the join, and where the run ends, said once
+    part.report(1_000 * 10**9 + 5_000_000)
+    clock_ctx = rclpy.Context()  # the clock: another DDS participant, its reader created after the reports
+    rclpy.init(context=clock_ctx)
+    try:
+        clock = rclpy.create_node('clock_listening_late', context=clock_ctx)
+        heard: list[dict] = []
+        clock.create_subscription(String, topics.SIM_PROGRESS, lambda m: heard.append(json.loads(m.data)), SIM_QOS)
+        executor = SingleThreadedExecutor(context=clock_ctx)
+        executor.add_node(clock)
+        for _ in range(400):  # until both reports are in (a failure waits 40 s at most)
+            if len(heard) >= 2:
+                break
+            executor.spin_once(timeout_sec=0.1)
+        executor.shutdown()
+        clock.destroy_node()
+    finally:
+        rclpy.shutdown(context=clock_ctx)
+        node.destroy_node()
+    assert [(h['name'], h['t'], h.get('end')) for h in heard] == [
+        ('late_heard', 1_000 * 10**9, 1_006 * 10**9), ('late_heard', 1_000 * 10**9 + 5_000_000, 1_006 * 10**9)]

@@ -29,9 +29,13 @@ from std_msgs.msg import String
 from crane_stiffness import topics
 from crane_stiffness.sim.lockstep import LEFT_NS
 
-#: The progress and watermark topics: reliable, volatile, deep enough for a reader starved of CPU for a while.
+#: The progress and watermark topics: reliable, deep enough for a reader starved of CPU for a while, and transient
+#: local: DDS matches the two directions between two nodes separately, often seconds apart, so a node's report that
+#: it joined (sent once, on the first watermark it hears) can go out before the clock's reader is matched to it; a
+#: volatile writer would drop it for that reader and time would wait for the node forever (seen in about 1 session in
+#: 20 on a loaded machine). Kept by the writer, it reaches the reader when they match.
 SIM_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000, reliability=ReliabilityPolicy.RELIABLE,
-                     durability=DurabilityPolicy.VOLATILE)
+                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
 #: While a watermark waits for input messages the stages below published, the node says which this often (wall
 #: time, ERROR in its log) [s]. It keeps waiting: simulated time holds rather than a reading being guessed.
 WAIT_REPORT_S = 5.0
@@ -90,6 +94,7 @@ class SimTimeParticipant:
         self._pending_since = 0.0
         self._said_at = 0.0
         self._resolved: dict[str, str] = {}
+        self._end_ns: int | None = None  # where the run ends, once this node said so (repeated in every report)
         self._on_watermark = on_watermark
         self._drain = drain
         self._name = node.get_fully_qualified_name().lstrip('/')
@@ -183,7 +188,9 @@ class SimTimeParticipant:
 
     def _publish(self, progress_ns: int, end_ns: int | None = None) -> None:
         assert self._pub is not None
-        report: dict[str, Any] = {'name': self._name, 'stage': self.stage, 't': progress_ns, 'sent': self.sent}
         if end_ns is not None:
-            report['end'] = end_ns
+            self._end_ns = end_ns
+        report: dict[str, Any] = {'name': self._name, 'stage': self.stage, 't': progress_ns, 'sent': self.sent}
+        if self._end_ns is not None:
+            report['end'] = self._end_ns
         self._pub.publish(String(data=json.dumps(report)))
