@@ -50,6 +50,20 @@ def ros_domain(monkeypatch):
 
 
 @pytest.fixture
+def ros_domains(monkeypatch, ros_domain):
+    """``take(n)``: ROS_DOMAIN_ID set to the first of ``n`` consecutive domains of the band, the others taken from the
+    cycle too (for a campaign running sessions side by side in ROS_DOMAIN_ID, ROS_DOMAIN_ID + 1, ...)."""
+    def take(n: int) -> list[int]:
+        domains = [int(ros_domain)]
+        while len(domains) < n:
+            following = next(_DOMAINS)
+            domains = domains + [following] if following == domains[-1] + 1 else [following]
+        monkeypatch.setenv('ROS_DOMAIN_ID', str(domains[0]))
+        return domains
+    return take
+
+
+@pytest.fixture
 def rclpy_context(ros_domain):
     """A fresh rclpy context for one test; create nodes with ``context=rclpy_context``."""
     import rclpy

@@ -5,6 +5,7 @@ true one the crane_model ran; the measured stiffness is the true crane's; with -
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 import time
@@ -42,14 +43,15 @@ def test_an_interrupted_campaign_resumes_where_it_stopped_and_records_true_and_n
     spec = campaign_file(tmp_path, '[50.0, 100.0]', factor=0.92)
     out = tmp_path / 'campaign'
     log = tmp_path / 'first.log'
-    first = rosrun.start_installed('crane-stiffness', ['campaign', 'run', str(spec), '--out', str(out)], log)
+    first = rosrun.start_installed('crane-stiffness', ['campaign', 'run', str(spec), '--out', str(out),
+                                                      '--jobs', '1'], log)
     done = out / 'sessions' / 'fy_W50_l0.5_r1' / 'result.json'
     wait_for(done.is_file, 240, 'the first session', first, log)
     time.sleep(3.0)  # the second session's nodes starting: Ctrl-C in the middle of it
     assert rosrun.interrupt(first, timeout_s=60) == 130, log.read_text()[-3000:]
     assert 'run the same command again to resume' in log.read_text()
     assert done.is_file() and not (out / 'sessions' / 'fy_W100_l0.5_r1' / 'result.json').exists()
-    again = subprocess.run([str(CLI), 'campaign', 'run', str(spec), '--out', str(out), '--quiet'],
+    again = subprocess.run([str(CLI), 'campaign', 'run', str(spec), '--out', str(out), '--quiet', '--jobs', '1'],
                            capture_output=True, text=True, timeout=400)
     assert again.returncode == 0, again.stderr[-3000:]
     assert '1 session(s) run, 1 done before, 2 planned' in again.stdout
@@ -70,6 +72,52 @@ def test_an_interrupted_campaign_resumes_where_it_stopped_and_records_true_and_n
     assert [r.session for r in result.rows] == ['fy_W50_l0.5_r1', 'fy_W100_l0.5_r1']
     for row in result.rows:  # measured: the true crane; modelled: the nominal one, 8 % stiffer
         assert row.relative_error == pytest.approx(-0.08, abs=0.02 * 0.92), (row.session, row.relative_error)
+
+
+def loading_estimates(out: Path) -> dict[str, float]:
+    return {path.parent.name: json.loads(path.read_text())['estimate']['loading']['stiffness']
+            for path in sorted((out / 'sessions').glob('*/result.json'))}
+
+
+def test_sessions_side_by_side_each_in_its_own_domain_give_the_numbers_of_one_at_a_time(tmp_path, ros_domains):
+    """Two sessions at once on simulated time, each rig in a DDS domain of its own, Ctrl-C in the middle of both and
+    resumed: every number equal to the same campaign run one session at a time (the seeds are the campaign's)."""
+    domains = ros_domains(2)
+    spec = campaign_file(tmp_path, '[50.0, 100.0]')
+    side = tmp_path / 'side_by_side'
+    log = tmp_path / 'first.log'
+    first = rosrun.start_installed('crane-stiffness', ['campaign', 'run', str(spec), '--out', str(side),
+                                                      '--jobs', '2'], log)
+    running = [side / 'sessions' / s / 'logs' / 'load_program.log' for s in ('fy_W50_l0.5_r1', 'fy_W100_l0.5_r1')]
+    wait_for(lambda: all(p.is_file() and 'rig ready' in p.read_text() for p in running), 240,
+             'both sessions ready', first, log)
+    assert rosrun.interrupt(first, timeout_s=60) == 130, log.read_text()[-3000:]
+    assert 'run the same command again to resume' in log.read_text()
+    again = subprocess.run([str(CLI), 'campaign', 'run', str(spec), '--out', str(side), '--quiet', '--jobs', '2'],
+                           capture_output=True, text=True, timeout=400)
+    assert again.returncode == 0, again.stderr[-3000:]
+    resumed = re.search(r'(\d) session\(s\) run, (\d) done before, 2 planned', again.stdout)
+    assert resumed and int(resumed[1]) + int(resumed[2]) == 2 and int(resumed[1]) >= 1, again.stdout
+    stopped = sorted((side / 'interrupted').glob('*/sessions/logs'))  # each session stopped, set aside whole
+    assert len(stopped) == int(resumed[1]), stopped
+    for logs in stopped:  # the nodes stopped by Ctrl-C ended cleanly
+        assert (logs.parent.parent / 'bags').is_dir()
+        for node_log in logs.glob('*.log'):
+            assert 'FINAL_COUNTERS' in node_log.read_text(), node_log
+    results = {p.parent.name: json.loads(p.read_text()) for p in (side / 'sessions').glob('*/result.json')}
+    assert {r['status']['loading']['level'] for r in results.values()} == {'OK'}
+    assert {r['ros_domain_id'] for r in results.values()} <= set(domains)
+    one = tmp_path / 'one_at_a_time'
+    proc = subprocess.run([str(CLI), 'campaign', 'run', str(spec), '--out', str(one), '--quiet', '--jobs', '1'],
+                          capture_output=True, text=True, timeout=400)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert {json.loads(p.read_text())['ros_domain_id'] for p in (one / 'sessions').glob('*/result.json')} == {
+        domains[0]}
+    a, b = loading_estimates(side), loading_estimates(one)
+    assert list(a) == list(b) == ['fy_W100_l0.5_r1', 'fy_W50_l0.5_r1']
+    for session in a:  # simulated time, the same seeds: the same samples, so the same fit, to rounding
+        assert a[session] == pytest.approx(b[session], rel=1e-9), session
+    assert a['fy_W50_l0.5_r1'] != pytest.approx(a['fy_W100_l0.5_r1'], rel=1e-3)  # the set-ups do differ
 
 
 def test_hardware_waits_for_the_operator_at_the_terminal_and_stops_on_q(tmp_path):

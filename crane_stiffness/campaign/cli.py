@@ -46,7 +46,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     campaign = load_campaign(args.campaign)
     confirm = service_confirm() if args.confirm == 'service' else terminal_confirm
     run = run_campaign(campaign, args.out, hardware=args.hardware, confirm=confirm,
-                       arguments=_rig_arguments(args.rig_arg), progress=not args.quiet)
+                       arguments=_rig_arguments(args.rig_arg), progress=not args.quiet, jobs=args.jobs)
     print(f'campaign {campaign.name}: {len(run.ran)} session(s) run, {len(run.skipped)} done before, '
           f'{run.planned} planned -> {run.out}')
     return EXIT_OK
@@ -111,6 +111,10 @@ def add_commands(subparsers: Any) -> None:
                         '(std_srvs/srv/Trigger) from any machine of the lab (default terminal)')
     r.add_argument('--rig-arg', action='append', default=[], metavar='NAME:=VALUE',
                    help='a rig.launch.py argument for every session (e.g. transport:=drivers); repeatable')
+    r.add_argument('--jobs', type=int, default=None, metavar='N',
+                   help='sessions run side by side on simulated time, each rig in a ROS domain of its own '
+                        '(ROS_DOMAIN_ID, ROS_DOMAIN_ID + 1, ...); default: on simulated time one more than the '
+                        'cores (at most 4), else 1')
     r.add_argument('--quiet', action='store_true', help='no progress bar')
     r.set_defaults(func=_guarded(cmd_run))
     a = sub.add_parser('analyze', help='analyse every session of a campaign directory: Figs. 10 and 13 with the '

@@ -100,15 +100,17 @@ def read_plan(out: str | os.PathLike) -> dict[str, Any]:
 
 
 def _set_aside(out: Path, plan: SessionPlan) -> None:
-    """A session started before and not finished: its partial bag and logs moved to interrupted/."""
-    for part in (out / 'bags' / plan.id, out / 'sessions' / plan.id):
-        if not part.exists():
-            continue
-        n = 1
-        while (out / 'interrupted' / f'{plan.id}-{n}').exists():
-            n += 1
-        target = out / 'interrupted' / f'{plan.id}-{n}'
-        target.mkdir(parents=True)
+    """A session started before and not finished: its partial bag and logs moved together to interrupted/<id>-N/
+    (bags/ and sessions/ in it, N counting the attempts set aside)."""
+    parts = [part for part in (out / 'bags' / plan.id, out / 'sessions' / plan.id) if part.exists()]
+    if not parts:
+        return
+    n = 1
+    while (out / 'interrupted' / f'{plan.id}-{n}').exists():
+        n += 1
+    target = out / 'interrupted' / f'{plan.id}-{n}'
+    target.mkdir(parents=True)
+    for part in parts:
         shutil.move(str(part), str(target / part.parent.name))
 
 
@@ -119,6 +121,7 @@ def campaign_entry(campaign: Campaign, plan: SessionPlan, hardware: bool, confir
         'campaign': campaign.name, 'file': str(campaign.path), 'session': plan.id, 'index': plan.index,
         'series': plan.series, 'weight': plan.weight, 'l0': plan.l0, 'height': plan.height, 'repeat': plan.repeat,
         'program_scale': plan.program_scale, 'rig': 'hardware' if hardware else 'simulated',
+        'seeds': None if hardware else plan.seeds,
         'analysis_geometry': 'nominal'}
     if not hardware:
         entry['true_geometry'] = dict(plan.true)
@@ -139,9 +142,30 @@ def sim_time_arguments(arguments: Mapping[str, str] | None, hardware: bool) -> d
     return out
 
 
+def session_domains(env: Mapping[str, str], jobs: int) -> list[int]:
+    """The ROS domain of each of ``jobs`` sessions run side by side: ROS_DOMAIN_ID (0 if unset) and the next ones
+    (simulated time keeps one ``/clock`` per domain, so two rigs never share one)."""
+    base = int(env.get('ROS_DOMAIN_ID', '0') or 0)
+    domains = [base + k for k in range(jobs)]
+    if domains[-1] > 232:
+        raise CampaignError(f'--jobs {jobs} with ROS_DOMAIN_ID={base} needs domains up to {domains[-1]}; DDS has '
+                            '0..232: choose a lower ROS_DOMAIN_ID or fewer jobs')
+    return domains
+
+
+def default_jobs(arguments: Mapping[str, str], hardware: bool) -> int:
+    """Sessions run side by side by default: on simulated time one more than the machine has cores (each session's
+    numbers do not depend on the machine's load, and a session spends much of its wall time starting its processes
+    and waiting for DDS to match them), at most 4; else one."""
+    if hardware or str(arguments.get('use_sim_time', 'false')).lower() != 'true':
+        return 1
+    from crane_stiffness.campaign.parallel import default_workers
+    return min(4, default_workers() + 1)
+
+
 def run_campaign(campaign: Campaign, out: str | os.PathLike, *, hardware: bool = False,
                  confirm: Confirm | None = None, arguments: Mapping[str, str] | None = None,
-                 progress: bool = True, ready_timeout_s: float = 120.0,
+                 progress: bool = True, ready_timeout_s: float = 120.0, jobs: int | None = None,
                  on_session: Callable[[SessionPlan], None] | None = None) -> CampaignRun:
     """Run every session of ``campaign`` not done yet in ``out`` (see the module docstring).
 
@@ -152,15 +176,17 @@ def run_campaign(campaign: Campaign, out: str | os.PathLike, *, hardware: bool =
             rig runs on simulated time as fast as it keeps up (use_sim_time:=true, real_time_factor:=max) unless
             they say otherwise: the same results at any load, and faster than real time on a quiet machine.
         progress: a progress bar over the whole campaign on stderr.
+        jobs: sessions run side by side, each rig in a ROS domain of its own (:func:`session_domains`); default
+            :func:`default_jobs` (cores + 1, at most 4, on simulated time). Only simulated time gives the same
+            numbers at any load, so more than one job needs it; hardware runs one session at a time.
         on_session: called before each session is started (tests use it to interrupt a campaign).
 
     Raises:
-        CampaignError: ``out`` holds another campaign; a true crane with --hardware.
+        CampaignError: ``out`` holds another campaign; a true crane with --hardware; jobs without simulated time.
         CampaignInterrupted: Ctrl-C or the operator stopped it (the finished sessions are kept).
         RosRunError: a node failed (its log tail in the message).
     """
     from crane_stiffness.launcher import rosrun
-    from crane_stiffness.launcher.rig import decode_values, run_rig
     from crane_stiffness.params.files import share_dir
 
     out = Path(out)
@@ -168,15 +194,23 @@ def run_campaign(campaign: Campaign, out: str | os.PathLike, *, hardware: bool =
     if hardware and campaign.true_differs:
         raise CampaignError(f'{campaign.path}: true.* describes a simulated crane; with --hardware the crane is the '
                             'real one: set true.wire_stiffness_factor and true.weight_factor to 1')
+    jobs = default_jobs(arguments, hardware) if jobs is None else int(jobs)
+    if jobs < 1:
+        raise CampaignError(f'--jobs {jobs}: must be at least 1')
+    if jobs > 1 and default_jobs(arguments, hardware) == 1:
+        raise CampaignError(f'--jobs {jobs}: sessions side by side need the simulated rig on simulated time (on the '
+                            'wall clock they would take each other\'s cores and lose samples); use --jobs 1')
     plans = plan_sessions(campaign)
     prepare_campaign(out, campaign, plans)
     run = CampaignRun(out=out, planned=len(plans))
     todo = [p for p in plans if not session_done(out, p)]
     run.skipped = [p.id for p in plans if session_done(out, p)]
-    share = share_dir() / 'config'
-    executables = rosrun.node_executables()
     env = dict(os.environ)
     env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    jobs = max(1, min(jobs, len(todo)))
+    domains = session_domains(env, jobs)
+    session = _SessionRunner(campaign, out, hardware, arguments, env, share_dir() / 'config',
+                             rosrun.node_executables(), ready_timeout_s)
     bar = None
     if progress:
         from tqdm import tqdm
@@ -185,52 +219,35 @@ def run_campaign(campaign: Campaign, out: str | os.PathLike, *, hardware: bool =
                    file=sys.stderr, bar_format='{l_bar}{bar}| {n:.1f}/{total} sessions [{elapsed}<{remaining}] '
                    '{postfix}')
     done_before = len(run.skipped)
-    try:
-        for plan in todo:
-            if on_session is not None:
-                on_session(plan)
-            confirmed = None
-            if hardware:
-                text = instructions(plan, len(plans))
-                confirmed = (confirm or terminal_confirm)(plan, text)
-            _set_aside(out, plan)
-            folder = out / 'sessions' / plan.id
-            folder.mkdir(parents=True)
-            program = folder / 'program.yaml'
-            program.write_text(scaled_program_text(Path(plan.program), plan.program_scale))
-            entry = campaign_entry(campaign, plan, hardware, confirmed)
-            model = plan.nominal if hardware else plan.true
-            overrides = {'crane_model': dict(model),
-                         'session_recorder': {**plan.nominal, 'campaign_entry': _yaml_string(json.dumps(entry)),
-                                              'notes': f'campaign {campaign.name}, session {plan.id}'}}
-            if bar is not None:
-                bar.set_postfix_str(plan.id)
-            base = done_before + len(run.ran)
+    fractions: dict[str, float] = {}  # sessions under way: the program's progress (0 .. 1)
 
-            def follow(fraction: float, base: int = base) -> None:
-                value = round(base + min(max(fraction, 0.0), 1.0) * 0.99, 2)
-                if bar is not None and value != bar.n:
-                    bar.n = value
-                    bar.refresh()
-            started = time.time()
-            summary, observer, startup_s, _ = run_rig(
-                share, env, folder, str(program), session=plan.id, ready_timeout_s=ready_timeout_s,
-                overrides=overrides, executables=executables, bags=out / 'bags', progress=follow,
-                arguments=arguments)
-            result = {'session': plan.id, 'plan': plan.to_dict(), 'campaign_entry': entry,
-                      'time': 'simulated' if arguments.get('use_sim_time') == 'true' else 'wall',
-                      'wall_s': round(time.time() - started, 3),
-                      'bag': str(out / 'bags' / plan.id), 'started_utc': _utc(started), 'finished_utc': _utc(),
-                      'startup_s': startup_s, 'estimate': decode_values(observer.values) if observer.values else None,
-                      'status': summary['status'], 'node_exit_codes': summary['node_exit_codes']}
-            tmp = folder / (RESULT_FILE + '.tmp')
-            tmp.write_text(json.dumps(result, indent=1, allow_nan=True))
-            os.replace(tmp, folder / RESULT_FILE)
-            run.ran.append(plan.id)
-            run.results[plan.id] = result
-            if bar is not None:
-                bar.n = done_before + len(run.ran)
-                bar.refresh()
+    def show() -> None:
+        if bar is None:
+            return
+        value = round(done_before + len(run.ran) + 0.99 * sum(fractions.values()), 2)
+        if value != bar.n:
+            bar.n = value
+            bar.set_postfix_str(', '.join(fractions) or '', refresh=False)
+            bar.refresh()
+
+    def finished(plan: SessionPlan, result: dict[str, Any]) -> None:
+        fractions.pop(plan.id, None)
+        run.ran.append(plan.id)
+        run.results[plan.id] = result
+        show()
+
+    try:
+        if jobs == 1:
+            for plan in todo:
+                if on_session is not None:
+                    on_session(plan)
+                confirmed = None
+                if hardware:
+                    confirmed = (confirm or terminal_confirm)(plan, instructions(plan, len(plans)))
+                fractions[plan.id] = 0.0
+                finished(plan, session.run(plan, confirmed, domains[0], _tracker(fractions, plan.id, show)))
+        else:
+            _run_side_by_side(session, todo, domains, on_session, fractions, show, finished)
     except KeyboardInterrupt:
         raise CampaignInterrupted(f'interrupted: {done_before + len(run.ran)} of {len(plans)} sessions done in '
                                   f'{out}; run the same command again to resume') from None
@@ -238,6 +255,106 @@ def run_campaign(campaign: Campaign, out: str | os.PathLike, *, hardware: bool =
         if bar is not None:
             bar.close()
     return run
+
+
+def _tracker(fractions: dict[str, float], session: str, show: Callable[[], None] | None = None
+             ) -> Callable[[float], None]:
+    """A progress callback that keeps ``session``'s program progress (0 .. 1) in ``fractions`` (then ``show()``)."""
+    def follow(fraction: float) -> None:
+        fractions[session] = min(max(fraction, 0.0), 1.0)
+        if show is not None:
+            show()
+    return follow
+
+
+def _run_side_by_side(session: '_SessionRunner', todo: list[SessionPlan], domains: list[int],
+                      on_session: Callable[[SessionPlan], None] | None, fractions: dict[str, float],
+                      show: Callable[[], None], finished: Callable[[SessionPlan, dict[str, Any]], None]) -> None:
+    """The sessions of ``todo`` in worker threads, one per domain, in plan order as workers come free. Ctrl-C (in
+    this, the main thread) stops every session under way, its nodes ended as at the end of a session; the sessions
+    finished are kept. The first session that fails stops the others and its error is raised."""
+    import threading
+    from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, wait
+
+    stop = threading.Event()
+    free = list(domains)
+    pending = list(todo)
+    running: dict[Future, tuple[SessionPlan, int]] = {}
+    with ThreadPoolExecutor(max_workers=len(domains), thread_name_prefix='session') as pool:
+        try:
+            while pending or running:
+                while pending and free:
+                    plan = pending.pop(0)
+                    if on_session is not None:
+                        on_session(plan)
+                    domain = free.pop(0)
+                    fractions[plan.id] = 0.0
+                    # (the progress bar is drawn by this thread only, so the workers just keep their fraction)
+                    future = pool.submit(session.run, plan, None, domain, _tracker(fractions, plan.id), stop.is_set)
+                    running[future] = (plan, domain)
+                done, _ = wait(running, timeout=0.5, return_when=FIRST_COMPLETED)
+                show()
+                for future in done:
+                    plan, domain = running.pop(future)
+                    free.append(domain)
+                    finished(plan, future.result())  # a failed session raises here: the others are stopped below
+        except BaseException:
+            stop.set()  # every session under way stops its nodes; wait for them (the pool's exit) before leaving
+            raise
+
+
+class _SessionRunner:
+    """One session of a campaign on the rig: its folder, program and parameters, the rig run, its result.json."""
+
+    def __init__(self, campaign: Campaign, out: Path, hardware: bool, arguments: Mapping[str, str],
+                 env: Mapping[str, str], share: Path, executables: Path | None, ready_timeout_s: float) -> None:
+        self.campaign, self.out, self.hardware, self.arguments = campaign, out, hardware, dict(arguments)
+        self.env, self.share, self.executables, self.ready_timeout_s = dict(env), share, executables, ready_timeout_s
+
+    def run(self, plan: SessionPlan, confirmed: Mapping[str, Any] | None, domain: int,
+            progress: Callable[[float], None], should_stop: Callable[[], bool] | None = None,
+            attempts: int = 2) -> dict[str, Any]:
+        """Run ``plan`` in ROS domain ``domain`` and write its result.json; the result. A rig that did not start
+        its program (RigStartError: nothing measured) is started again, ``attempts`` times in all."""
+        from crane_stiffness.launcher.rig import decode_values, run_rig
+        from crane_stiffness.launcher.rosrun import RigStartError
+
+        out = self.out
+        for attempt in range(1, attempts + 1):
+            _set_aside(out, plan)
+            folder = out / 'sessions' / plan.id
+            folder.mkdir(parents=True)
+            program = folder / 'program.yaml'
+            program.write_text(scaled_program_text(Path(plan.program), plan.program_scale))
+            entry = campaign_entry(self.campaign, plan, self.hardware, confirmed)
+            model = plan.nominal if self.hardware else plan.true
+            seeds = {} if self.hardware or plan.seeds is None else plan.seeds
+            overrides = {**{node: {'seed': seed} for node, seed in seeds.items()}, 'crane_model': dict(model),
+                         'session_recorder': {**plan.nominal, 'campaign_entry': _yaml_string(json.dumps(entry)),
+                                              'notes': f'campaign {self.campaign.name}, session {plan.id}'}}
+            started = time.time()
+            try:
+                summary, observer, startup_s, _ = run_rig(
+                    self.share, self.env, folder, str(program), session=plan.id, ready_timeout_s=self.ready_timeout_s,
+                    overrides=overrides, executables=self.executables, bags=out / 'bags', progress=progress,
+                    arguments=self.arguments, domain_id=domain, should_stop=should_stop)
+            except RigStartError as exc:
+                if attempt == attempts:
+                    raise
+                print(f'\nsession {plan.id}: the rig did not start ({exc}); starting it again (attempt {attempt + 1} '
+                      f'of {attempts}; the first is kept in {out / "interrupted"})', file=sys.stderr, flush=True)
+                continue
+            break
+        result = {'session': plan.id, 'plan': plan.to_dict(), 'campaign_entry': entry,
+                  'time': 'simulated' if self.arguments.get('use_sim_time') == 'true' else 'wall',
+                  'wall_s': round(time.time() - started, 3), 'ros_domain_id': domain, 'attempts': attempt,
+                  'bag': str(out / 'bags' / plan.id), 'started_utc': _utc(started), 'finished_utc': _utc(),
+                  'startup_s': startup_s, 'estimate': decode_values(observer.values) if observer.values else None,
+                  'status': summary['status'], 'node_exit_codes': summary['node_exit_codes']}
+        tmp = folder / (RESULT_FILE + '.tmp')
+        tmp.write_text(json.dumps(result, indent=1, allow_nan=True))
+        os.replace(tmp, folder / RESULT_FILE)
+        return result
 
 
 def _yaml_string(text: str) -> str:

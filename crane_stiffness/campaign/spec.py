@@ -62,6 +62,9 @@ CAMPAIGN_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec('load_fraction', 0.5, "peak of a side-force or moment program as a fraction of the load at which the "
               "nominal crane's first wire goes slack (the program's levels scaled to it); 0 = the levels as "
               'written [-]', low=0.0, high=0.95),
+    ParamSpec('seed', 1, "simulated sensors only: the noise seed of the campaign; session i's load cell takes "
+              'seed + 2·i and its LVDT seed + 2·i + 1, so the campaign gives the same numbers in every run on '
+              'simulated time; -1 = fresh noise in every session [-]', low=-1),
     ParamSpec('true.wire_stiffness_factor', 1.0, "simulated rig only: the true crane's wire stiffness k (E·A) over "
               'the nominal one [-]', above=0.0),
     ParamSpec('true.weight_factor', 1.0, "simulated rig only: the true crane's weight over the nominal W [-]",
@@ -86,6 +89,8 @@ class Campaign:
     """h of each set-up; empty when the file gives lengths."""
     repeats: int
     load_fraction: float
+    seed: int
+    """The simulated sensors' noise seed of the campaign (-1: fresh noise)."""
     true_wire_stiffness_factor: float
     true_weight_factor: float
 
@@ -114,6 +119,8 @@ class SessionPlan:
     """Every geometry.* parameter of the nominal crane of this set-up (the model the analysis uses)."""
     true: dict[str, Any]
     """Every geometry.* parameter of the crane the simulated rig runs (= nominal unless the campaign sets true.*)."""
+    seeds: dict[str, int] | None = None
+    """The simulated sensors' noise seeds by node (load_cell, lvdt); None: fresh noise."""
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -225,6 +232,7 @@ def load_campaign(path: str | os.PathLike) -> Campaign:
     return Campaign(path=path, name=values['name'], crane=crane_path, series=tuple(series),
                     programs=tuple(program_paths), weights=weights, lengths=lengths, heights=heights,
                     repeats=int(values['repeats']), load_fraction=float(values['load_fraction']),
+                    seed=int(values['seed']),
                     true_wire_stiffness_factor=float(values['true.wire_stiffness_factor']),
                     true_weight_factor=float(values['true.weight_factor']))
 
@@ -275,10 +283,13 @@ def plan_sessions(campaign: Campaign) -> list[SessionPlan]:
                 g = geometry_from_params(nominal)
                 scale = program_scale(campaign, series, program, nominal)
                 for repeat in range(1, campaign.repeats + 1):
+                    index = len(plans)
+                    seeds = (None if campaign.seed < 0 else
+                             {'load_cell': campaign.seed + 2 * index, 'lvdt': campaign.seed + 2 * index + 1})
                     plans.append(SessionPlan(
-                        index=len(plans), id=session_id(series, weight, size, repeat, bool(campaign.lengths)),
+                        index=index, id=session_id(series, weight, size, repeat, bool(campaign.lengths)),
                         series=series, program=str(program), program_scale=scale, weight=weight, l0=g.l0,
-                        height=g.height, repeat=repeat, nominal=nominal, true=true))
+                        height=g.height, repeat=repeat, nominal=nominal, true=true, seeds=seeds))
     return plans
 
 

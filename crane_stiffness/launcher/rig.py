@@ -30,7 +30,7 @@ from crane_stiffness.rosnode.sim_time import SIM_QOS
 from crane_stiffness.rig_description import PACKAGE, NodeStart, rig_nodes
 from crane_stiffness.rig_description import config_files as rig_config_files
 from crane_stiffness.sim.program import LoadProgram, load_program_file
-from crane_stiffness.launcher.rosrun import Processes, RosRunError
+from crane_stiffness.launcher.rosrun import Processes, RigInterrupted, RigStartError, RosRunError
 
 if TYPE_CHECKING:
     from rclpy.executors import SingleThreadedExecutor
@@ -41,8 +41,8 @@ class Observer(Node):
 
     _executor: SingleThreadedExecutor | None  # created by the first spin_once
 
-    def __init__(self, **kwargs: Any) -> None:
-        super().__init__('rig_observer', **kwargs)
+    def __init__(self, name: str = 'rig_observer', **kwargs: Any) -> None:
+        super().__init__(name, **kwargs)
         self.progress = 0.0
         self.state: dict = {}
         self.values: Float64MultiArray | None = None
@@ -61,6 +61,8 @@ class Observer(Node):
         self.sim_end_ns: int | None = None
         self.sim_done_ns = -1
         self.create_subscription(String, topics.SIM_WATERMARKS, self._on_marks, SIM_QOS)
+        #: Asked between spins: True stops the run (RigInterrupted), e.g. Ctrl-C in a campaign's main thread.
+        self.should_stop: Callable[[], bool] | None = None
 
     def _on_marks(self, msg: String) -> None:
         marks = json.loads(msg.data)
@@ -111,7 +113,9 @@ class Observer(Node):
         return self.state.get('state') == 'done'
 
     def spin_once(self, timeout_sec: float = 0.05) -> None:
-        """One spin in the node's own context (the default one or a test's)."""
+        """One spin in the node's own context (the default one or a test's); RigInterrupted if asked to stop."""
+        if self.should_stop is not None and self.should_stop():
+            raise RigInterrupted('the run was interrupted')
         executor = getattr(self, '_executor', None)
         if executor is None:
             from rclpy.executors import SingleThreadedExecutor
@@ -119,11 +123,12 @@ class Observer(Node):
             executor.add_node(self)
         executor.spin_once(timeout_sec=timeout_sec)
 
-    def spin_until(self, predicate, timeout_s: float, what: str, procs: Processes | None = None) -> None:
+    def spin_until(self, predicate, timeout_s: float, what: str, procs: Processes | None = None,
+                   error: type[RosRunError] = RosRunError) -> None:
         deadline = time.monotonic() + timeout_s
         while not predicate():
             if time.monotonic() > deadline:
-                raise RosRunError(f'timed out after {timeout_s:.0f} s waiting for {what}')
+                raise error(f'timed out after {timeout_s:.0f} s waiting for {what}')
             if procs is not None:
                 procs.check_alive()
             self.spin_once(0.05)
@@ -192,7 +197,8 @@ def start_nodes(procs: Processes, nodes: Sequence[NodeStart], bags: Path | None,
 
 
 def wait_for_program_start(observer: Observer, procs: Processes, timeout_s: float) -> None:
-    """Spin ``observer`` until load_program reports 'running'; RosRunError with its log if it exits first."""
+    """Spin ``observer`` until load_program reports 'running'; RosRunError with its log if it exits first,
+    RigStartError after ``timeout_s``."""
     def started() -> bool:
         program = procs.procs.get('load_program')
         if observer.running_at is None and program is not None and program.poll() is not None:
@@ -202,7 +208,12 @@ def wait_for_program_start(observer: Observer, procs: Processes, timeout_s: floa
             raise RosRunError(f'load_program exited with status {program.returncode} before starting the program:\n'
                               f'{procs.log("load_program")[-3000:]}')
         return observer.running_at is not None
-    observer.spin_until(started, timeout_s, 'the program to start', procs=None)
+    try:
+        observer.spin_until(started, timeout_s, 'the program to start', procs=None, error=RigStartError)
+    except RigStartError as exc:
+        log = procs.log('sim_clock') if 'sim_clock' in procs.procs else ''
+        waiting = re.findall(r'waiting for [^\n]* to join', log)
+        raise RigStartError(f'{exc}' + (f' (sim_clock: {waiting[-1]})' if waiting else '')) from None
 
 
 def estimate_fields() -> tuple[str, ...]:
@@ -255,17 +266,24 @@ def summarize(share: Path, program: str, session: str, bags: Path, observer: Obs
 def run_rig(share: Path, env: Mapping[str, str], out: Path, program: str, session: str = 'rig', record: bool = True,
             ready_timeout_s: float = 120.0, overrides: Mapping[str, Mapping[str, Any]] | None = None,
             executables: Path | None = None, bags: Path | None = None,
-            progress: Callable[[float], None] | None = None, arguments: Mapping[str, str] | None = None
+            progress: Callable[[float], None] | None = None, arguments: Mapping[str, str] | None = None,
+            domain_id: int | None = None, should_stop: Callable[[], bool] | None = None
             ) -> tuple[dict[str, Any], Observer, float, dict[str, str]]:
     """Every node of the rig started at once (:func:`start_rig`) in a DDS context of its own, the program played to
     its end: (summary, observer, launch-to-program-start [s], each node's log). Logs in ``out/logs``, bags in
     ``bags`` (default ``out/bags``). ``executables``: see :class:`~crane_stiffness.launcher.rosrun.Processes`;
-    ``progress`` is called with the program's progress (0 .. 1) as it is reported."""
+    ``progress`` is called with the program's progress (0 .. 1) as it is reported. ``domain_id``: the ROS domain of
+    the nodes and the observer (default: ROS_DOMAIN_ID of ``env``); ``should_stop``: asked between spins, True stops
+    the nodes and raises RigInterrupted."""
     import rclpy
     bags = out / 'bags' if bags is None else bags
+    if domain_id is not None:
+        env = {**env, 'ROS_DOMAIN_ID': str(domain_id)}
     ctx = rclpy.Context()
-    rclpy.init(context=ctx)
-    observer = Observer(context=ctx)
+    rclpy.init(context=ctx, domain_id=int(env.get('ROS_DOMAIN_ID', 0) or 0))
+    # (rigs side by side in one process: one observer each, named apart, as rcl's logging keys its publisher by name)
+    observer = Observer(f'rig_observer_{domain_id}' if domain_id is not None else 'rig_observer', context=ctx)
+    observer.should_stop = should_stop
     try:
         with Processes(env, out / 'logs', executables=executables) as procs:
             launched = time.monotonic()

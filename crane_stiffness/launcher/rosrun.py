@@ -27,6 +27,15 @@ class RosRunError(CraneStiffnessError):
     """A package or executable that ``ros2 run`` would not find either."""
 
 
+class RigStartError(RosRunError):
+    """The rig did not start its program within the start-up timeout (a node DDS never matched, say): nothing was
+    measured, so the session may simply be run again."""
+
+
+class RigInterrupted(RosRunError):
+    """The run was asked to stop (Ctrl-C in a campaign running sessions side by side) before its end."""
+
+
 def package_prefix(package: str, ament_prefix_path: str | None = None) -> Path:
     """The first prefix of AMENT_PREFIX_PATH that registers ``package`` in its ament index."""
     paths = ament_prefix_path if ament_prefix_path is not None else os.environ.get('AMENT_PREFIX_PATH', '')
