@@ -47,6 +47,17 @@ LVDT_DISPLACEMENT = '/lvdt/displacement'
 # estimator still works, it only cannot see a re-zero (a restart it sees by the sequence numbers).
 LVDT_ZERO = '/lvdt/zero'
 LOAD_CELL_TARE = '/load_cell/tare'
+# Pose sensor (a motion-capture system such as mocap4r2 or vrpn_mocap publishes the same), geometry_msgs/PoseStamped:
+# the platform centre's position [m] and orientation (quaternion, body -> frame) in frame_id (crane_base), sensor-data
+# QoS. What the 6x6 identification measures deflections with (crane_stiffness.full6).
+POSE_SENSOR_POSE = '/pose_sensor/pose'
+# The 6x6 identification (crane_stiffness.full6, node stiffness6_estimator), std_msgs/Float64MultiArray laid out as
+# dims ('quantity', 3: value, ci95_low, ci95_high) x ('row', 6) x ('column', 6), row-major; rows and columns in the
+# order fx fy fz mx my mz (loads) and ux uy uz thx thy thz (deflections): STIFFNESS6 K [N/m, N/rad, N·m/m, N·m/rad],
+# COMPLIANCE6 C = K^-1. STIFFNESS6_STATUS: diagnostic_msgs/DiagnosticArray (level, message, the numbers behind it).
+STIFFNESS6 = '/stiffness6/stiffness'
+COMPLIANCE6 = '/stiffness6/compliance'
+STIFFNESS6_STATUS = '/stiffness6/status'
 # Estimates: diagnostic_msgs/DiagnosticArray for people, std_msgs/Float64MultiArray for plots (see
 # crane_stiffness.nodes.stiffness_estimator.VALUE_FIELDS), std_msgs/Float64 for the headline number.
 STIFFNESS_ESTIMATE = '/stiffness/estimate'
@@ -90,6 +101,10 @@ RIG_TOPICS: dict[str, str] = {
     STIFFNESS_ESTIMATE: 'diagnostic_msgs/msg/DiagnosticArray',
     STIFFNESS_VALUES: 'std_msgs/msg/Float64MultiArray',
     STIFFNESS: 'std_msgs/msg/Float64',
+    POSE_SENSOR_POSE: 'geometry_msgs/msg/PoseStamped',
+    STIFFNESS6: 'std_msgs/msg/Float64MultiArray',
+    COMPLIANCE6: 'std_msgs/msg/Float64MultiArray',
+    STIFFNESS6_STATUS: 'diagnostic_msgs/msg/DiagnosticArray',
 }
 
 
@@ -139,6 +154,10 @@ TOPIC_QOS: dict[str, QoS] = {
     STIFFNESS_ESTIMATE: KEPT,
     STIFFNESS_VALUES: KEPT,
     STIFFNESS: KEPT,
+    POSE_SENSOR_POSE: SENSOR_DATA,
+    STIFFNESS6: KEPT,
+    COMPLIANCE6: KEPT,
+    STIFFNESS6_STATUS: KEPT,
     FITTED_PAIRS: RELIABLE,
     FIT_LINES: RELIABLE,
 }
