@@ -22,5 +22,6 @@ NODES = (
     'session_player',
     'session_recorder',
     'sim_clock',
+    'stiffness6_estimator',
     'stiffness_estimator',
 )

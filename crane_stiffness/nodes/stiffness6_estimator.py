@@ -1,0 +1,244 @@
+"""stiffness6_estimator: the whole 6×6 stiffness live, from the load cell's wrench and a pose sensor (a thin adapter
+around crane_stiffness.full6: pairs.Full6Pairing, identify.ComplianceEstimator).
+
+Subscribes /crane/wrench_command (the load steps), /load_cell/wrench (WrenchStamped, moved to the platform centre in
+crane_base by ``sensor_rotation``, ``sensor_position``, ``sensor_reaction`` as in the 1-D estimator) and
+/pose_sensor/pose (PoseStamped: a motion-capture tracker, or the simulated pose_sensor). Every pose sample is paired
+with the wrench interpolated at its stamp and labelled by the step in force once it has settled (``settle_s``);
+the fit uses every labelled pair since the start (or the last ~/reset).
+
+Publishes, at ``publish_rate_hz`` (node clock), /stiffness6/stiffness and /stiffness6/compliance
+(Float64MultiArray: dims quantity (value, ci95_low, ci95_high) × row × column, row-major) and /stiffness6/status
+(DiagnosticArray: the fit's status, with the numbers behind it: pairs, steps, condition number, lack of fit, K2 and
+its interval, the diagonal of K). The status is never OK on a design that cannot determine C (crane_stiffness.full6
+.identify: fewer than 8 steps, no pure error, condition number > 100) or on a non-linear window (lack of fit), and
+it is STALE when a stream that was flowing stopped: no pose or wrench sample stamped within ``stale_after_s`` of the
+node clock's now (checked every ``1 / publish_rate_hz``). Stale samples are never paired (the pairing's
+``max_age_s``). On simulated time the inputs are taken in stamp order at each watermark, so the same run gives the
+same pairs; offline, crane-stiffness analyze reproduces the fit from the bag.
+"""
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import PoseStamped, WrenchStamped
+from rclpy.node import Node
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+from std_srvs.srv import Trigger
+
+from crane_stiffness import topics
+from crane_stiffness.estimation.frames import SensorMount
+from crane_stiffness.full6.identify import ComplianceEstimator, ComplianceFit
+from crane_stiffness.full6.pairs import DEFAULT_MAX_AGE_S, DEFAULT_MAX_GAP_S, Full6Pairing
+from crane_stiffness.params.spec import ParamSpec
+from crane_stiffness.rosnode.parameters import Params
+from crane_stiffness.rosnode.qos import KEPT_QOS, RELIABLE_QOS, sensor_qos, stream_qos
+from crane_stiffness.rosnode.run import run
+from crane_stiffness.rosnode.sim_time import SimTimeParticipant, uses_sim_time
+from crane_stiffness.serde.cdr import CdrError, decode_stamped
+from crane_stiffness.serde.stamps import stamp_seconds
+from crane_stiffness.status import NAMES, STALE, WAITING, WAITING_PREFIX, wire_level
+
+__all__ = ['PARAMS', 'Stiffness6EstimatorNode', 'main', 'matrix_message']
+
+PARAMS = (
+    ParamSpec('settle_s', 0.5, 'time after each load step before its pairs are fitted (the platform settles) [s]',
+              low=0.0),
+    ParamSpec('max_gap_s', DEFAULT_MAX_GAP_S, 'widest gap of the wrench stream a pose sample is paired across [s]',
+              above=0.0),
+    ParamSpec('max_age_s', DEFAULT_MAX_AGE_S, 'a pose sample further behind the newest wrench is stale, not '
+              'paired [s]', above=0.0),
+    ParamSpec('stale_after_s', 0.5, 'a stream with no sample stamped within this of now is stale: status STALE [s]',
+              above=0.0),
+    ParamSpec('publish_rate_hz', 2.0, 'rate of the fit and of /stiffness6/* [Hz]', above=0.0, high=50.0),
+    ParamSpec('sensor_rotation', [0.0, 0.0, 0.0, 1.0], 'the F/T sensor frame in crane_base: quaternion [x, y, z, w] '
+              'or 9 numbers row-major [-]'),
+    ParamSpec('sensor_position', [0.0, 0.0, 0.0], 'origin of the F/T sensor frame from the platform centre, '
+              'crane_base [m]'),
+    ParamSpec('sensor_reaction', False, 'the sensor measures the reaction of the load: negate the wrench [-]'),
+)
+QUANTITIES = ('value', 'ci95_low', 'ci95_high')
+_KIND_ORDER = {'command': 0, 'wrench': 1, 'pose': 2}  # at one stamp: the command first (it is in force at t)
+
+
+def _validate(values: dict[str, Any]) -> SensorMount:
+    return SensorMount.from_params(values)  # ParameterError (a ValueError) naming sensor_rotation / _position
+
+
+def matrix_message(value: np.ndarray, low: np.ndarray, high: np.ndarray) -> Float64MultiArray:
+    """A 6×6 matrix with its interval as one Float64MultiArray (dims quantity × row × column, row-major)."""
+    msg = Float64MultiArray()
+    msg.layout.dim = [MultiArrayDimension(label='quantity', size=3, stride=108),
+                      MultiArrayDimension(label='row', size=6, stride=36),
+                      MultiArrayDimension(label='column', size=6, stride=6)]
+    msg.data = np.concatenate([np.ravel(value), np.ravel(low), np.ravel(high)]).astype(float).tolist()
+    return msg
+
+
+class Stiffness6EstimatorNode(Node):
+    """Feeds the three streams to Full6Pairing and the pairs to ComplianceEstimator; publishes the fit."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__('stiffness6_estimator', **kwargs)
+        self.mount: SensorMount | None = None
+        self.pairing: Full6Pairing | None = None
+        self.estimator = ComplianceEstimator()
+        self.timer: Any = None
+        self.counters = {'commands': 0, 'wrenches': 0, 'poses': 0, 'malformed': 0, 'pairs': 0, 'fits': 0}
+        self.newest = {'wrench': -math.inf, 'pose': -math.inf}  # newest stamp per sensor stream [s]
+        self.fit: ComplianceFit | None = None
+        self.sim_time = uses_sim_time(self)
+        self.held: list[tuple[float, int, int, str, Any]] = []  # simulated time: (stamp, kind order, seq, kind, data)
+        self._seq = 0
+        self.pub_k = self.create_publisher(Float64MultiArray, topics.STIFFNESS6, KEPT_QOS)
+        self.pub_c = self.create_publisher(Float64MultiArray, topics.COMPLIANCE6, KEPT_QOS)
+        self.pub_status = self.create_publisher(DiagnosticArray, topics.STIFFNESS6_STATUS, KEPT_QOS)
+        self.params = Params(self, PARAMS, _validate, self._apply)
+        self.create_subscription(WrenchStamped, topics.WRENCH_COMMAND, self._on_command,
+                                 stream_qos(RELIABLE_QOS, self.sim_time))
+        self.create_subscription(WrenchStamped, topics.LOAD_CELL_WRENCH, self._on_wrench, sensor_qos(self.sim_time),
+                                 raw=True)
+        self.create_subscription(PoseStamped, topics.POSE_SENSOR_POSE, self._on_pose, sensor_qos(self.sim_time),
+                                 raw=True)
+        self.create_service(Trigger, '~/reset', self._srv_reset)
+        self.sim = SimTimeParticipant(self, 3, self._on_watermark,
+                                      inputs=[topics.WRENCH_COMMAND, topics.LOAD_CELL_WRENCH, topics.POSE_SENSOR_POSE])
+
+    def _apply(self, mount: SensorMount, values: dict[str, Any]) -> None:
+        self.mount = mount
+        pairing = (values['settle_s'], values['max_gap_s'], values['max_age_s'])
+        if self.pairing is None or self.pairing.settings != pairing:
+            if self.pairing is not None:
+                self.get_logger().info('pairing settings changed: the fit starts again')
+            self.pairing = Full6Pairing(settle_s=pairing[0], max_gap_s=pairing[1], max_age_s=pairing[2])
+            self.estimator.reset()
+        if self.timer is not None:
+            self.destroy_timer(self.timer)
+        self.timer = self.create_timer(1.0 / values['publish_rate_hz'], self._publish)
+
+    # --- inputs: on the wall clock handled as they come; on simulated time held until the watermark ---
+    def _on_command(self, msg: WrenchStamped) -> None:
+        self.sim.received(topics.WRENCH_COMMAND)
+        f, m = msg.wrench.force, msg.wrench.torque
+        stamp = stamp_seconds(msg.header.stamp.sec, msg.header.stamp.nanosec)
+        self._take(stamp, 'command', (f.x, f.y, f.z, m.x, m.y, m.z))
+
+    def _on_wrench(self, data: bytes) -> None:
+        self.sim.received(topics.LOAD_CELL_WRENCH)
+        self._decoded(data, 6, 'wrench')
+
+    def _on_pose(self, data: bytes) -> None:
+        self.sim.received(topics.POSE_SENSOR_POSE)
+        self._decoded(data, 7, 'pose')
+
+    def _decoded(self, data: bytes, count: int, kind: str) -> None:
+        try:
+            sec, nanosec, values = decode_stamped(data, count)
+        except CdrError:
+            self.counters['malformed'] += 1
+            return
+        if not all(math.isfinite(v) for v in values):
+            self.counters['malformed'] += 1
+            return
+        self._take(stamp_seconds(sec, nanosec), kind, values)
+
+    def _take(self, stamp: float, kind: str, values: tuple[float, ...]) -> None:
+        if self.sim_time:
+            self._seq += 1
+            self.held.append((stamp, _KIND_ORDER[kind], self._seq, kind, values))
+        else:
+            self._handle(stamp, kind, values)
+
+    def _on_watermark(self, t_ns: int) -> None:
+        """Simulated time: every input stamped up to ``t_ns`` is in; handled in stamp order (the same in every run)."""
+        mark = t_ns * 1e-9
+        now = sorted(h for h in self.held if h[0] <= mark)
+        self.held = [h for h in self.held if h[0] > mark]
+        for stamp, _, _, kind, values in now:
+            self._handle(stamp, kind, values)
+        self.sim.report(t_ns)
+
+    def _handle(self, stamp: float, kind: str, values: tuple[float, ...]) -> None:
+        assert self.pairing is not None and self.mount is not None
+        if kind == 'command':
+            self.counters['commands'] += 1
+            pairs = self.pairing.command(stamp, values)
+        elif kind == 'wrench':
+            self.counters['wrenches'] += 1
+            self.newest['wrench'] = max(self.newest['wrench'], stamp)
+            pairs = self.pairing.wrench(stamp, self.mount.apply(values))
+        else:
+            self.counters['poses'] += 1
+            self.newest['pose'] = max(self.newest['pose'], stamp)
+            pairs = self.pairing.pose(stamp, values[:3], values[3:])
+        for _, w, d, step in pairs:
+            self.estimator.add(w, d, step)
+        self.counters['pairs'] += len(pairs)
+
+    # --- outputs ---
+    def _stale(self) -> str:
+        """Which flowing stream stopped (no sample within stale_after_s of now), or ''."""
+        now = self.get_clock().now().nanoseconds * 1e-9
+        limit = self.params['stale_after_s']
+        return ', '.join(f'{topics.LOAD_CELL_WRENCH if k == "wrench" else topics.POSE_SENSOR_POSE} (newest sample '
+                         f'{now - t:.2f} s old)' for k, t in self.newest.items()
+                         if math.isfinite(t) and now - t > limit)
+
+    def _publish(self) -> None:
+        fit = self.fit = self.estimator.fit() if self.estimator.n else None
+        self.counters['fits'] += 1
+        stale = self._stale()
+        if fit is None:
+            level, message = WAITING, f'{WAITING_PREFIX}no labelled pairs yet (a pose sensor on ' \
+                                      f'{topics.POSE_SENSOR_POSE} and load steps)'
+        else:
+            level, message = fit.level, fit.message
+            self.pub_k.publish(matrix_message(fit.stiffness, fit.stiffness_low, fit.stiffness_high))
+            self.pub_c.publish(matrix_message(fit.compliance, fit.compliance_low, fit.compliance_high))
+        if stale:
+            level, message = STALE, f'stale: {stale}; the fit holds the pairs before it'
+        status = DiagnosticStatus(name=f'{self.get_name()}: 6x6', hardware_id='crane', level=bytes([wire_level(level)]),
+                                  message=message)
+        status.values = [KeyValue(key=k, value=v) for k, v in self._values(fit, level)]
+        out = DiagnosticArray()
+        out.header.stamp = self.get_clock().now().to_msg()
+        out.status = [status]
+        self.pub_status.publish(out)
+
+    def _values(self, fit: ComplianceFit | None, level: int) -> list[tuple[str, str]]:
+        pairs = [('level', NAMES.get(level, str(level))), ('pairs', str(self.counters['pairs'])),
+                 ('unlabelled_pairs', str(self.pairing.unlabelled if self.pairing else 0))]
+        if fit is not None:
+            pairs += [('steps', str(fit.n_steps)), ('condition', f'{fit.condition:.4g}'),
+                      ('lack_of_fit', f'{fit.lack_of_fit:.4g}'), ('k2', f'{fit.k2:.8g}'),
+                      ('k2_ci95', f'{fit.k2_low:.8g} .. {fit.k2_high:.8g}')]
+            pairs += [(f'k_{i + 1}{i + 1}', f'{fit.stiffness[i, i]:.8g}') for i in range(6)]
+        return pairs
+
+    def _srv_reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        assert self.pairing is not None
+        n = self.estimator.n
+        self.estimator.reset()
+        self.pairing.reset()
+        response.success, response.message = True, f'forgot {n} pairs; the next pose is the new rest'
+        return response
+
+    def close(self) -> None:
+        """At exit: the last fit of everything received (what crane-stiffness analyze reproduces)."""
+        self._publish()  # (on simulated time what is held past the last watermark is left: it may be partial)
+        fit = self.fit
+        if fit is not None:
+            self.get_logger().info(f'final 6x6 fit: {NAMES.get(fit.level, fit.level)} {fit.message}; K2 = '
+                                   f'{fit.k2:.6g} [{fit.k2_low:.6g}, {fit.k2_high:.6g}] N/rad, diagonal of K '
+                                   f'{np.array2string(np.diag(fit.stiffness), precision=6)}')
+
+
+def main(args=None) -> int:
+    return run(Stiffness6EstimatorNode, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
