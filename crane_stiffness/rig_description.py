@@ -82,6 +82,9 @@ ARGUMENTS: tuple[Argument, ...] = (
     Argument('view_http_port', '8080', "the live view's page port"),
     Argument('use_sim_time', 'false', 'simulated time: sim_clock publishes /clock and every node follows it; time '
              'slows down when the machine is busy instead of samples being lost (transport:=sim only)'),
+    Argument('six_axis', 'auto', "the whole 6x6 stiffness: a pose sensor (the simulated pose_sensor, or a tracker "
+             "remapped onto /pose_sensor/pose) and stiffness6_estimator; 'auto': when the program file has a "
+             "stiffness6_estimator section (program:=full6)"),
     Argument('real_time_factor', '1.0', "with use_sim_time: simulated seconds per wall second (0 or 'max': as fast "
              'as the rig keeps up)'),
 )
@@ -139,6 +142,8 @@ NODES: tuple[RigNode, ...] = (
             sim_stage=2),
     RigNode('lvdt', ('sensors', 'program'), condition='sim_sensors', when=_SIM, reads=(topics.PLATFORM_POSE,),
             sim_stage=2),
+    RigNode('pose_sensor', ('sensors', 'program'), condition='six_axis', when=(*_SIM, ('sim_sensors', 'true')),
+            reads=(topics.PLATFORM_POSE,), sim_stage=2),
     # transport:=drivers: the simulated physics served as devices (only with sim_sensors), read by the drivers.
     RigNode('rdt_emulator', ('drivers',), condition='sim_sensors', when=_DRIVERS,
             reads=(topics.APPLIED_WRENCH,)),
@@ -152,6 +157,10 @@ NODES: tuple[RigNode, ...] = (
     # (a 1 kHz F/T sensor and a 100 Hz DAQ: pairing interpolate_force), and a lab's file may set its lever arm.
     RigNode('stiffness_estimator', ('crane', 'sensors', 'program', 'drivers'), reads=(topics.WRENCH_COMMAND, *_STREAMS),
             machine='analysis', sim_stage=3),
+    # The 6x6 fit of a program whose file says so (program:=full6, six_axis): the load cell and a pose sensor.
+    RigNode('stiffness6_estimator', ('sensors', 'program'), condition='six_axis',
+            reads=(topics.WRENCH_COMMAND, topics.LOAD_CELL_WRENCH, topics.POSE_SENSOR_POSE), machine='analysis',
+            sim_stage=3),
     RigNode('session_recorder', ('crane', 'sensors', 'program'), arguments={'session': 'session'},
             condition='record', reads=(topics.WRENCH_COMMAND, topics.APPLIED_WRENCH, topics.REJECTED_COMMAND,
                                         topics.PLATFORM_POSE, *_STREAMS), machine='analysis', sim_stage=3),
@@ -256,6 +265,8 @@ def readiness(started: list[RigNode]) -> dict[str, list[str]]:
         # losses from its first sample on; once it missed the first 1.5 s of the loading ramp). Its first estimate
         # values mean it is pairing both streams.
         messages.append(topics.STIFFNESS_VALUES)
+    if any(node.name == 'stiffness6_estimator' for node in started):
+        messages.append(topics.POSE_SENSOR_POSE)  # the pose sensor, simulated or a tracker, publishing
     return {'wait_for_messages': messages,
             'wait_for_subscribers': [f'{topic}: {" ".join(names)}' for topic, names in readers.items()] or ['']}
 
@@ -277,6 +288,21 @@ def _argument(node: RigNode, param: str, arg: str, value: Any) -> str | int | fl
         raise RigError(f'{arg}:={value}: expected an integer') from None
 
 
+#: A program file with this section is a six-axis test (six_axis:=auto starts the 6x6 measurement for it).
+SIX_AXIS_SECTION = 'stiffness6_estimator'
+
+
+def _sections(path: str) -> set[str]:
+    """The top-level keys (node sections) of a parameter file; none if it cannot be read (the node says why)."""
+    import yaml
+    try:
+        with open(path) as f:
+            data = yaml.safe_load(f)
+    except (OSError, yaml.YAMLError):
+        return set()
+    return set(data) if isinstance(data, dict) else set()
+
+
 def rig_nodes(config_dir: str | os.PathLike, given: Mapping[str, str | bool] | None = None) -> list[NodeStart]:
     """The nodes the rig starts for the arguments ``given`` (the rest at their defaults), in start order."""
     values = argument_values(config_dir, given)
@@ -285,6 +311,8 @@ def rig_nodes(config_dir: str | os.PathLike, given: Mapping[str, str | bool] | N
     if values['machine'] not in ('all', *MACHINES):
         raise RigError(f"machine {values['machine']!r}: expected one of all, {', '.join(MACHINES)}")
     files = config_files(config_dir, values)
+    if str(values['six_axis']).strip().lower() == 'auto':
+        values['six_axis'] = 'true' if SIX_AXIS_SECTION in _sections(files['program']) else 'false'
     sim_time = flag(values['use_sim_time'])
     if sim_time and values['transport'] != 'sim':
         raise RigError('use_sim_time:=true runs the simulated sensors only (transport:=sim): the drivers and their '

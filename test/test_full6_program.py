@@ -64,6 +64,7 @@ def test_the_program_file_text_reads_back_as_the_program(design):
     params = data['load_program']['ros__parameters']
     assert LoadProgram.from_params(params).to_params() == design_program(design).to_params()
     assert text.startswith('# a title\n# how it was made\n')
+    assert data['stiffness6_estimator']['ros__parameters'] == {'settle_s': design.settle_s}  # the 6x6 fit comes along
     naive = naive_design(LAB, PEAKS)
     assert '#     3    0.0000    3.3000    0.0000    0.0000    0.0000    0.0000    2.0034  wire_4 (CE)' in \
         program_yaml(naive)

@@ -98,6 +98,23 @@ def test_rig_arguments_choose_the_nodes_and_their_files():
     assert rig_nodes(CONFIG, {'crane': 'crane_lab.yaml'})[0].parameter_files[0] == str(CONFIG / 'crane_lab.yaml')
     with pytest.raises(RigError, match=r'crane file \./nowhere\.yaml not found'):
         rig_nodes(CONFIG, {'crane': './nowhere.yaml'})
+
+
+def test_a_six_axis_program_starts_the_pose_sensor_and_the_6x6_fit():
+    """program:=full6: its file has a stiffness6_estimator section, so six_axis:=auto starts the pose sensor and the
+    6x6 fit beside the 1-D rig; the program waits for the pose stream too."""
+    names = [n.name for n in rig_nodes(CONFIG, {'program': 'full6'})]
+    assert names == ['crane_model', 'load_cell', 'lvdt', 'pose_sensor', 'stiffness_estimator', 'stiffness6_estimator',
+                     'session_recorder', 'load_program']
+    nodes = {n.name: n for n in rig_nodes(CONFIG, {'program': 'full6', 'use_sim_time': 'true'})}
+    assert str(CONFIG / 'program_full6.yaml') in nodes['stiffness6_estimator'].parameter_files
+    assert {'pose_sensor', 'stiffness6_estimator'} <= set(nodes['sim_clock'].parameters['participants'])
+    assert '/pose_sensor/pose' in nodes['load_program'].parameters['wait_for_messages']
+    assert not {'pose_sensor', 'stiffness6_estimator'} & {n.name for n in rig_nodes(CONFIG, {})}
+    assert {n.name for n in rig_nodes(CONFIG, {'six_axis': 'true'})} >= {'pose_sensor', 'stiffness6_estimator'}
+    # a real tracker instead of the simulated pose sensor: the fit, no simulated sensor
+    real = [n.name for n in rig_nodes(CONFIG, {'program': 'full6', 'sim_sensors': 'false'})]
+    assert 'stiffness6_estimator' in real and 'pose_sensor' not in real
     with pytest.raises(RigError, match="unknown program 'nothing'.*force_z, full6, moment_z, side_force"):
         rig_nodes(CONFIG, {'program': 'nothing'})
 

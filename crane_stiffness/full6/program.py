@@ -81,7 +81,8 @@ def program_yaml(design: LoadDesign, *, name: str = 'full6', rate_hz: float = 10
                  how: str = '') -> str:
     """The text of a program parameter file (``load_program: ros__parameters:`` as config/program_*.yaml) for
     ``design``: a header (``title``, then how it was made, ``how``) with the table of its steps, then the program,
-    one held wrench a line (the baseline's hold on its own first line)."""
+    one held wrench a line (the baseline's hold on its own first line); then the ``stiffness6_estimator`` section
+    (its ``settle_s``), which makes the rig start the 6x6 measurement for the program."""
     program = design_program(design, name, rate_hz)
     params = program.to_params()
     steps = np.round(design.steps, FILE_DECIMALS) + 0.0
@@ -107,6 +108,8 @@ def program_yaml(design: LoadDesign, *, name: str = 'full6', rate_hz: float = 10
         body = _flow(items[1:], indent, 6)[1:]
         label = f'    {key}:'
         out.append(f'{label:<{indent - 1}}[{items[0].strip()},\n' + ' ' * indent + body)
+    # The measuring arrangement: the 6x6 fit (and with it the pose sensor) for this program (rig six_axis:=auto).
+    out += ['stiffness6_estimator:', '  ros__parameters:', f'    settle_s: {design.settle_s!r}']
     return '\n'.join(out) + '\n'
 
 

@@ -100,7 +100,7 @@ class _Channel:
 #: What the stages below the recorder publish (crane_stiffness.sim.lockstep): on simulated time the recorder waits
 #: until it has every message of them up to the stage's watermark.
 SIM_INPUTS = (topics.WRENCH_COMMAND, topics.APPLIED_WRENCH, topics.REJECTED_COMMAND, topics.PLATFORM_POSE,
-              topics.WIRE_STATES, topics.LOAD_CELL_WRENCH, topics.LVDT_DISPLACEMENT)
+              topics.WIRE_STATES, topics.LOAD_CELL_WRENCH, topics.LVDT_DISPLACEMENT, topics.POSE_SENSOR_POSE)
 
 
 class SessionRecorder(Node):
