@@ -88,12 +88,14 @@ def run(env: dict, share: Path, ws: Path, page: bool) -> dict:
             wait_for_program_start(observer, procs, 90)
             rig_pids = [p.pid for p in procs.procs.values()]
             t0, rig0 = time.monotonic(), tree_cpu_s(rig_pids)
+            nodes0 = {name: tree_cpu_s([p.pid]) for name, p in procs.procs.items()}
             page0 = tree_cpu_s([browser.pid]) if browser else 0.0
             end = time.monotonic() + program.duration_s + 60
             while not observer.done and procs.procs['load_program'].poll() is None and time.monotonic() < end:
                 observer.spin_once(0.1)
             wall = time.monotonic() - t0
             rig = (tree_cpu_s(rig_pids) - rig0) / wall
+            per_node = {name: round((tree_cpu_s([p.pid]) - nodes0[name]) / wall, 3) for name, p in procs.procs.items()}
             page_cpu = (tree_cpu_s([browser.pid]) - page0) / wall if browser else 0.0
             procs.stop()
     finally:
@@ -104,7 +106,7 @@ def run(env: dict, share: Path, ws: Path, page: bool) -> dict:
         observer.destroy_node()
         rclpy.shutdown()
     return {'page': page, 'wall_s': round(wall, 2), 'rig_cores': round(rig, 3), 'chromium_cores': round(page_cpu, 3),
-            'nodes': len(rig_pids)}
+            'nodes': len(rig_pids), 'per_node_cores': per_node}
 
 
 def main(argv=None) -> int:
@@ -120,6 +122,8 @@ def main(argv=None) -> int:
         print(f"--- {'page open' if r['page'] else 'baseline '}: the rig's {r['nodes']} processes "
               f"{100 * r['rig_cores']:.0f} % of a core, Chromium {100 * r['chromium_cores']:.1f} % "
               f"(over the program's {r['wall_s']:.1f} s)")
+        print('    ' + ', '.join(f'{name} {100 * c:.0f} %' for name, c in
+                              sorted(r['per_node_cores'].items(), key=lambda kv: -kv[1])))
     ratio = watched['rig_cores'] / base['rig_cores'] if base['rig_cores'] else float('nan')
     rig = max(base['rig_cores'], watched['rig_cores'])
     met = rig <= RIG_LIMIT and watched['chromium_cores'] <= PAGE_LIMIT

@@ -45,6 +45,13 @@ def test_page_shows_the_estimators_estimate_and_points(install_tree, rclpy_conte
                                      " return [k.dataset.value, k.dataset.sampleStamp, k.textContent,"
                                      " document.getElementById('status-level').dataset.level,"
                                      " Object.keys(state.data).join(' ')]; })()")
+            # the wires' table: one row per wire under its header, each tension as the last wires message gave it
+            # (the page rewrites the rows' cells, it does not rebuild the table)
+            browser.wait_for("document.getElementById('wires').rows.length === 7")
+            table = browser.evaluate("(() => { const w = state.data.wires.wires, t = document.getElementById('wires');"
+                                     " return w.map((x, i) => [x.name, x.slack, x.tension,"
+                                     " t.rows[i + 1].cells[0].textContent, t.rows[i + 1].cells[1].dataset.value,"
+                                     " t.rows[i + 1].cells[1].textContent]); })()")
             # the whole page: where the crane is depends on the fonts and on what the page shows (the side column
             # can wrap under the plot, the crane then lies below the window)
             png = browser.screenshot(tmp_path / 'page.png', full_page=True).read_bytes()
@@ -57,6 +64,10 @@ def test_page_shows_the_estimators_estimate_and_points(install_tree, rclpy_conte
         while shown[1] and float(shown[1]) not in watcher.values and time.monotonic() < deadline:
             time.sleep(0.05)
     value, stamp, text, level, channels = shown
+    assert [row[0] for row in table] == [f'wire_{i}' for i in range(1, 7)]
+    for name, slack, tension, shown_name, shown_value, shown_text in table:  # the cells of the same message, or
+        assert shown_name == name  # of one 0.1 s later (the page draws at most 10 times a second)
+        assert shown_text == 'slack' if slack else shown_text.endswith(' N') and float(shown_value) > 0.0
     # the page's estimate is one the estimator published (the same number, for the same newest pair)
     assert watcher.values[float(stamp)] == float(value), (value, stamp)
     assert text.endswith(' N/m') and level is not None, (text, level, channels)

@@ -3,7 +3,12 @@
 // u32 subscription id, u64 log time, payload).
 'use strict';
 const CHANNELS = ['xy', 'fit_lines', 'prediction', 'estimate', 'status', 'wires', 'scene'];
-const state = { messages: 0, lastCount: 0, data: {} };
+const state = { messages: 0, lastCount: 0, data: {}, dirty: new Set(), drawnAt: 0 };
+// What each channel changes on the page: only that part is drawn again (the rest keeps its pixels and DOM).
+const PART = { xy: 'plot', fit_lines: 'plot', prediction: 'plot', estimate: 'text', status: 'text', wires: 'wires',
+  scene: 'scene' };
+// At most this often [ms]: messages come at 70-80/s; a person reads the page at a few updates a second.
+const DRAW_PERIOD_MS = 100;
 // Status levels (crane_stiffness.status), each a CSS class level-<n>: -1 WAITING (not begun), 0 OK, 1 WARN, 2 ERROR,
 // 3 STALE (data that was flowing stopped). The status channel names them (level_name).
 
@@ -39,7 +44,7 @@ function connect(config) {
     if (!name) return;
     state.data[name] = JSON.parse(new TextDecoder().decode(new Uint8Array(event.data, 13)));
     state.messages++;
-    state.dirty = true;
+    state.dirty.add(PART[name]);
   };
 }
 
@@ -76,18 +81,31 @@ function updateText() {
     document.getElementById('status').textContent =
       st.statuses.map((s) => `${s.name.split(': ').pop()}: ${s.level_name} ${s.message}`).join('\n');
   }
-  const wires = state.data.wires;
-  if (wires) {
-    const table = document.getElementById('wires');
-    table.innerHTML = '<tr><th>wire</th><th>tension</th><th>length</th></tr>' + wires.wires.map((w) =>
-      `<tr class="${w.slack ? 'slack' : ''}"><td>${w.name}</td><td data-value="${w.tension}">` +
-      `${w.slack ? 'slack' : fmt(w.tension, 5) + ' N'}</td><td>${fmt(w.length * 1000, 6)} mm</td></tr>`).join('');
-  }
   const xy = state.data.xy;
   if (xy) {
     document.getElementById('segment').textContent =
       `segment ${xy.segment}, ${xy.pairs} pairs fitted, every ${xy.stride}. shown`;
   }
+}
+
+function updateWires() {
+  // The rows are made once and their cells rewritten: no new DOM (and layout) for every message.
+  const wires = state.data.wires;
+  if (!wires) return;
+  const table = document.getElementById('wires');
+  if (table.rows.length !== wires.wires.length + 1) {
+    table.innerHTML = '<tr><th>wire</th><th>tension</th><th>length</th></tr>' +
+      wires.wires.map(() => '<tr><td></td><td></td><td></td></tr>').join('');
+  }
+  wires.wires.forEach((w, i) => {
+    const row = table.rows[i + 1], cells = row.cells;
+    const cls = w.slack ? 'slack' : '';
+    if (row.className !== cls) row.className = cls;
+    cells[0].textContent = w.name;
+    cells[1].dataset.value = w.tension;
+    cells[1].textContent = w.slack ? 'slack' : fmt(w.tension, 5) + ' N';
+    cells[2].textContent = `${fmt(w.length * 1000, 6)} mm`;
+  });
 }
 
 function drawPlot() {
@@ -194,12 +212,15 @@ function drawScene() {
   if (scale) document.getElementById('scale').textContent = `deflection shown ×${Number(scale.value)}`;
 }
 
-function frame() {
-  if (state.dirty) {
-    state.dirty = false;
-    updateText();
-    drawPlot();
-    drawScene();
+function frame(now) {
+  if (state.dirty.size && now - state.drawnAt >= DRAW_PERIOD_MS) {
+    state.drawnAt = now;
+    const parts = state.dirty;
+    state.dirty = new Set();
+    if (parts.has('text') || parts.has('plot')) updateText();  // the plot's caption is text too
+    if (parts.has('wires')) updateWires();
+    if (parts.has('plot')) drawPlot();
+    if (parts.has('scene')) drawScene();
   }
   requestAnimationFrame(frame);
 }
