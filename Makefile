@@ -4,7 +4,7 @@ PYTHON ?= python3.11
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.crane_stiffness-installed
-SOURCES := $(shell find crane_stiffness config launch nodes_bin foxglove rosdep -type f \( -name '*.py' -o -name '*.yaml' -o -path 'nodes_bin/*' -o -path '*/web/*' -o -name '*.json' \) 2>/dev/null) \
+SOURCES := $(shell find crane_stiffness config launch nodes_bin foxglove rosdep -type f \( -name '*.py' -o -name '*.yaml' -o -path 'nodes_bin/*' -o -path '*/web/*' -o -name '*.json' -o -name '*.xml' \) 2>/dev/null) \
            setup.py setup.cfg package.xml resource/crane_stiffness
 
 # DDS stays on this machine: loopback discovery only, and a domain id of its own for every run.

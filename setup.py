@@ -114,7 +114,7 @@ setup(
     version='0.1.0',
     packages=find_packages(exclude=['test', 'test.*', 'benchmarks']),
     # the live view's page (plain HTML/JS/CSS, served by the live_view node)
-    package_data={PACKAGE + '.view': ['web/*']},
+    package_data={PACKAGE + '.view': ['web/*'], PACKAGE: ['fastdds_discovery.xml']},
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE]),
         ('share/' + PACKAGE, ['package.xml']),

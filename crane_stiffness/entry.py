@@ -36,6 +36,8 @@ def pending() -> list[int]:
 def _main(module: str) -> int:
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, _note)
+    from crane_stiffness.discovery import use_quick_discovery
+    use_quick_discovery()  # before rclpy makes the participant
     status = importlib.import_module(f'crane_stiffness.nodes.{module}').main()
     # The node has closed its files, printed its counters, destroyed itself and shut rclpy down: what is left is
     # the interpreter's finalization, which with numpy, numba and rclpy loaded can take seconds on a busy machine

@@ -189,6 +189,8 @@ def run_campaign(campaign: Campaign, out: str | os.PathLike, *, hardware: bool =
     from crane_stiffness.launcher import rosrun
     from crane_stiffness.params.files import share_dir
 
+    from crane_stiffness.discovery import use_quick_discovery
+    use_quick_discovery()  # the observers find the nodes as quickly as the nodes find each other
     out = Path(out)
     arguments = sim_time_arguments(arguments, hardware)
     if hardware and campaign.true_differs:
