@@ -20,6 +20,7 @@ same pairs; offline, crane-stiffness analyze reproduces the fit from the bag.
 from __future__ import annotations
 
 import math
+from collections import deque
 from typing import Any
 
 import numpy as np
@@ -93,6 +94,9 @@ class Stiffness6EstimatorNode(Node):
         self.sim_time = uses_sim_time(self)
         self.held: list[tuple[float, int, int, str, Any]] = []  # simulated time: (stamp, kind order, seq, kind, data)
         self._seq = 0
+        # How far behind the pose stream the fit is: node clock at handling − the pose's stamp, last samples [s]
+        # (the benchmark compares it with the transport's own lag; on simulated time it means nothing).
+        self.lags: deque[float] = deque(maxlen=5000)
         self.pub_k = self.create_publisher(Float64MultiArray, topics.STIFFNESS6, KEPT_QOS)
         self.pub_c = self.create_publisher(Float64MultiArray, topics.COMPLIANCE6, KEPT_QOS)
         self.pub_status = self.create_publisher(DiagnosticArray, topics.STIFFNESS6_STATUS, KEPT_QOS)
@@ -173,6 +177,8 @@ class Stiffness6EstimatorNode(Node):
         else:
             self.counters['poses'] += 1
             self.newest['pose'] = max(self.newest['pose'], stamp)
+            if not self.sim_time:
+                self.lags.append(self.get_clock().now().nanoseconds * 1e-9 - stamp)
             pairs = self.pairing.pose(stamp, values[:3], values[3:])
         for _, w, d, step in pairs:
             self.estimator.add(w, d, step)
@@ -216,6 +222,10 @@ class Stiffness6EstimatorNode(Node):
                       ('lack_of_fit', f'{fit.lack_of_fit:.4g}'), ('k2', f'{fit.k2:.8g}'),
                       ('k2_ci95', f'{fit.k2_low:.8g} .. {fit.k2_high:.8g}')]
             pairs += [(f'k_{i + 1}{i + 1}', f'{fit.stiffness[i, i]:.8g}') for i in range(6)]
+        if self.lags:
+            p50, p99 = np.percentile(np.fromiter(self.lags, float), [50, 99]) * 1e3
+            pairs += [('pose_lag_p50_ms', f'{p50:.3f}'), ('pose_lag_p99_ms', f'{p99:.3f}'),
+                      ('pose_lag_n', str(len(self.lags)))]
         return pairs
 
     def _srv_reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
