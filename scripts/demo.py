@@ -91,7 +91,7 @@ def main(argv=None) -> int:
                 raise ValueError
         except ValueError:
             ap.error(f"--seed {args.seed!r}: expected an integer >= 0 or random")
-        seeds = {'load_cell': {'seed': seed}, 'lvdt': {'seed': seed + 1}}
+        seeds = {'load_cell': {'seed': seed}, 'lvdt': {'seed': seed + 1}, 'pose_sensor': {'seed': seed + 2}}
 
     import rclpy
     from tqdm import tqdm
@@ -119,6 +119,7 @@ def main(argv=None) -> int:
         view = {'port': free_port(8765), 'http_port': free_port(8080)}  # the defaults unless taken
         program = start_rig(procs, share, args.program, session, Path(args.bags), live_view=args.live_view,
                             overrides={'live_view': view, **seeds}, arguments=arguments)
+        six_axis = 'stiffness6_estimator' in procs.procs  # a six-axis program (program:=full6): the 6x6 result
         print(f'  started {len(procs.procs)} nodes at once; load_program waits for the rig ...', flush=True)
         if args.live_view:
             print(f"  live view: open http://127.0.0.1:{view['http_port']}/ in a browser; Foxglove or Lichtblick: "
@@ -150,6 +151,8 @@ def main(argv=None) -> int:
     observer.destroy_node()
     rclpy.shutdown()
     print('[3/3] result', flush=True)
+    if six_axis:
+        return report6(share, args, session, observer, codes, out)
     try:
         summary = summarize(share, args.program, session, Path(args.bags), observer, codes)
     except rosrun.RosRunError as exc:
@@ -192,6 +195,37 @@ def main(argv=None) -> int:
     why = verdict(summary, args.tolerance)
     if why:
         print(f'the estimate cannot be signed: {why}', file=sys.stderr)
+        return 1
+    return 0
+
+
+def report6(share: Path, args: argparse.Namespace, session: str, observer, codes: dict, out: Path) -> int:
+    """The six-axis result: the 6x6 K against the exact tangent, K2, the status; 0 when it can be signed."""
+    import numpy as np
+
+    from crane_stiffness.launcher.rig import config_files
+    from crane_stiffness.launcher.summary6 import summarize6, verdict6
+    summary = summarize6(config_files(share, args.program)['crane'], observer.stiffness6, observer.status6)
+    summary.update(program=args.program, seed=args.seed, node_exit_codes=codes,
+                   bag=str(Path(args.bags) / session))
+    (out / 'summary.json').write_text(json.dumps(summary, indent=1))
+    status = summary['status'] or {'level': 'NONE', 'message': 'no status received'}
+    if summary['stiffness'] is not None:
+        units = ('N/m', 'N/m', 'N/m', 'N·m/rad', 'N·m/rad', 'N·m/rad')
+        print('  the 6x6 stiffness K, diagonal (measured, 95 % CI, exact tangent at rest):')
+        for (axis, d), unit, low, high in zip(summary['diagonal'].items(), units, np.diag(summary['ci95_low']),
+                                              np.diag(summary['ci95_high'])):
+            print(f"    K[{axis},{axis}] {d['measured']:14.6g} [{low:.6g}, {high:.6g}] {unit:8s} tangent "
+                  f"{d['tangent']:.6g} ({100 * d['relative_error']:+.2f} %{'' if d['covers'] else ', NOT covered'})")
+        k2 = summary['k2']
+        print(f"  coupling K2 (side force with tilt) {k2['measured']:.6g} N/rad, tangent {k2['tangent']:.6g} "
+              f"({100 * k2['relative_error']:+.2f} %, sign {'right' if k2['same_sign'] else 'WRONG'}); "
+              f"{summary['covered']} of 36 intervals cover the tangent's entry")
+    print(f"  6x6 status {status['level']}: {status['message']}")
+    print(f"  summary -> {out / 'summary.json'}; session recorded: {summary['bag']}")
+    why = verdict6(summary)
+    if why:
+        print(f'the 6x6 result cannot be signed: {why}', file=sys.stderr)
         return 1
     return 0
 

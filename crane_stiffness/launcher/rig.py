@@ -61,6 +61,11 @@ class Observer(Node):
         self.sim_end_ns: int | None = None
         self.sim_done_ns = -1
         self.create_subscription(String, topics.SIM_WATERMARKS, self._on_marks, SIM_QOS)
+        #: The six-axis fit (stiffness6_estimator), when the rig runs it: the last K data and the last status.
+        self.stiffness6: Any = None
+        self.status6: tuple[str, str, dict[str, str]] | None = None
+        self.create_subscription(Float64MultiArray, topics.STIFFNESS6, self._on_stiffness6, KEPT_QOS)
+        self.create_subscription(DiagnosticArray, topics.STIFFNESS6_STATUS, self._on_status6, KEPT_QOS)
         #: Asked between spins: True stops the run (RigInterrupted), e.g. Ctrl-C in a campaign's main thread.
         self.should_stop: Callable[[], bool] | None = None
 
@@ -102,6 +107,14 @@ class Observer(Node):
         for st in msg.status:  # a part that has not begun reads WAITING (published as OK, 'waiting: ...')
             level = read_level(st.level[0], st.message)
             self.statuses[st.name.rpartition(': ')[2]] = (LEVEL_NAMES.get(level, str(level)), st.message)
+
+    def _on_stiffness6(self, msg: Float64MultiArray) -> None:
+        self.stiffness6 = list(msg.data)
+
+    def _on_status6(self, msg: DiagnosticArray) -> None:
+        for st in msg.status:
+            level = read_level(st.level[0], st.message)
+            self.status6 = (LEVEL_NAMES.get(level, str(level)), st.message, {kv.key: kv.value for kv in st.values})
 
     def _on_predicted(self, msg: Float64) -> None:
         self.predicted = msg.data
