@@ -27,6 +27,7 @@ BENCHMARKS = [
     ('bench_startup.py', [], 'bench_startup.json'),
     ('bench_sim_time.py', [], 'bench_sim_time.json'),   # the simulated rig flat out, idle and beside busy processes
     ('bench_cpu.py', [], 'bench_cpu.json'),             # make demo's rig and its page in Chromium: CPU budget
+    ('bench_full6.py', [], 'bench_full6.json'),         # the live 6x6 fit beside a 1 kHz load cell, 250 Hz pose
     ('bench_soak.py', [], 'bench_soak.json'),   # 10 minutes of the whole rig: every node's memory growth
 ]
 
