@@ -28,7 +28,7 @@ from crane_stiffness.full6.pairs import DEFAULT_MAX_AGE_S, DEFAULT_MAX_GAP_S, fu
 from crane_stiffness.model import lab_model
 from crane_stiffness.model.rotation import euler_zxy_to_matrix
 from crane_stiffness.session_metadata import read_session
-from crane_stiffness.sim.program import load_program_file
+from crane_stiffness.sim.program import LoadProgram, Segment, load_program_file
 from crane_stiffness.testing.synthetic_full6_bag import write_full6_session
 
 SETTLE_S = 0.6
@@ -166,3 +166,20 @@ def test_settings_from_the_recorded_parameters():
     assert s.mount.position.tolist() == [0.0, 0.0, 0.1] and not s.mount.reaction  # its own mount first
     s = read_settings({'stiffness_estimator': {'sensor_reaction': True}}, problems)
     assert s.mount.reaction and 'stiffness_estimator' in s.mount_source
+
+
+def test_a_session_the_fit_cannot_determine_is_reported_not_drawn(tmp_path, capsys):
+    """Four side-force steps and a baseline: five steps, eight needed. Status ERROR with the reason, no figures,
+    the JSON's numbers null."""
+    segments = [Segment('hold', 'fx', 0.0, 1.0)] + [Segment('step', 'fy', v, 1.5) for v in (1.0, -1.0, 2.0, -2.0)]
+    bag = write_full6_session(tmp_path / 'short', LoadProgram(segments, name='short', rate_hz=100.0),
+                              lab_model(0.5, 50.0)).path
+    assert cli_main(['analyze', str(bag), '--out', str(tmp_path / 'out')]) == 0
+    out = capsys.readouterr().out
+    assert 'status ERROR undetermined: 5 distinct steps, at least 8 needed' in out
+    assert 'K2: – (no numbers from the fit)' in out and 'no figures' in out
+    js = json.loads((tmp_path / 'out' / 'full6.json').read_text())
+    assert js['status']['level'] == 'ERROR' and js['k2']['value'] is None
+    assert js['stiffness']['value'][0][0] is None and js['diagonal'][0]['covers'] is None
+    assert js['settings']['source'].startswith('defaults') and js['settings']['settle_s'] == DEFAULT_SETTLE_S
+    assert sorted(p.name for p in (tmp_path / 'out').iterdir()) == ['full6.json', 'full6_report.md']

@@ -20,6 +20,7 @@ Matrices are lists of rows: K row i the load [fx, fy, fz, mx, my, mz] (N, N·m),
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any, Sequence
@@ -130,7 +131,10 @@ def _k2(fit: ComplianceFit, ref: Reference | None) -> dict[str, Any]:
         'entries': {entry_name(i, j): {'sign': s, 'measured': float(fit.stiffness[i, j]),
                                        'tangent': None if ref is None else float(ref.tangent[i, j])}
                     for i, j, s in K2_ENTRIES}}
-    if ref is not None:
+    if ref is not None and not math.isfinite(fit.k2):
+        out.update(tangent=ref.k2, relative_error_tangent=None, covers_tangent=None, sign_as_tangent=None,
+                   paper=None if ref.paper is None else k2_of(ref.paper), relative_error_paper=None)
+    elif ref is not None:
         out.update(tangent=ref.k2, relative_error_tangent=fit.k2 / ref.k2 - 1.0,
                    covers_tangent=bool(fit.k2_low <= ref.k2 <= fit.k2_high),
                    sign_as_tangent=bool(np.sign(fit.k2) == np.sign(ref.k2)),
@@ -161,13 +165,15 @@ def _comparison(fit: ComplianceFit, ref: Reference) -> dict[str, Any]:
 def _diagonal(fit: ComplianceFit, ref: Reference | None) -> list[dict[str, Any]]:
     out = []
     for i in range(6):
-        tangent = None if ref is None else float(ref.tangent[i, i])
-        out.append({'entry': entry_name(i, i), 'unit': stiffness_unit(i, i), 'measured': float(fit.stiffness[i, i]),
-                    'low': float(fit.stiffness_low[i, i]), 'high': float(fit.stiffness_high[i, i]),
-                    'tangent': tangent,
-                    'relative_error': None if tangent is None else float(fit.stiffness[i, i]) / tangent - 1.0,
-                    'covers': None if tangent is None else bool(fit.stiffness_low[i, i] <= tangent
-                                                                <= fit.stiffness_high[i, i])})
+        k, low, high = (float(m[i, i]) for m in (fit.stiffness, fit.stiffness_low, fit.stiffness_high))
+        row: dict[str, Any] = {'entry': entry_name(i, i), 'unit': stiffness_unit(i, i), 'measured': k, 'low': low,
+                               'high': high, 'tangent': None, 'relative_error': None, 'covers': None}
+        if ref is not None:
+            tangent = float(ref.tangent[i, i])
+            row['tangent'] = tangent
+            if math.isfinite(k):
+                row.update(relative_error=k / tangent - 1.0, covers=bool(low <= tangent <= high))
+        out.append(row)
     return out
 
 

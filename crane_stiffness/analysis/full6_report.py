@@ -5,8 +5,11 @@ shows as '–'.
 """
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Sequence
+
+import numpy as np
 
 from crane_stiffness.analysis.report import Block, fmt, write_blocks
 from crane_stiffness.axes import AXES
@@ -17,7 +20,7 @@ if TYPE_CHECKING:
 
 
 def _pct(value: Any) -> str:
-    return '–' if value is None else f'{100.0 * value:+.3f} %'
+    return '–' if value is None or not math.isfinite(value) else f'{100.0 * value:+.3f} %'
 
 
 def _yes(value: Any) -> str:
@@ -43,6 +46,8 @@ def settings_line(a: Full6Analysis) -> str:
 def k2_line(a: Full6Analysis) -> str:
     """K2 with its sign and interval, against the tangent and eq. (18)."""
     k = a.k2
+    if not math.isfinite(k['value']):
+        return 'K2: – (no numbers from the fit)'
     line = (f'K2 = {k["value"]:+.6g} N/rad (95 % CI {fmt(k["low"])} … {fmt(k["high"])}), sign {k["sign"]}')
     if 'tangent' in k:
         line += (f' ({"as" if k["sign_as_tangent"] else "NOT as"} the tangent\'s); tangent {fmt(k["tangent"])} '
@@ -55,7 +60,9 @@ def k2_line(a: Full6Analysis) -> str:
 def fit_line(a: Full6Analysis) -> str:
     """Coverage, condition number and lack of fit."""
     parts = []
-    if a.comparison is not None:
+    if a.fit is not None and not np.all(np.isfinite(a.fit.stiffness)):
+        parts.append('no numbers to compare with the model')
+    elif a.comparison is not None:
         c = a.comparison['covered']
         parts.append(f'{c["stiffness"]} of 36 intervals of K hold the tangent\'s entry (C: {c["compliance"]} of 36)')
     parts.append(f'condition number {fmt(a.condition, 4)}, lack of fit {fmt(a.lack_of_fit, 4)} '
