@@ -1,7 +1,8 @@
 """``crane-stiffness``: the offline command line, a thin layer over crane_stiffness.model and .analysis.
 
 Subcommands: solve, stiffness, sweep, workspace (design maps: crane_stiffness.design.cli) and, with the bag
-module, analyze, compare, recover; campaign run / analyze and calibrate (crane_stiffness.campaign.cli). Geometry
+module, analyze, compare, recover; campaign run / analyze and calibrate (crane_stiffness.campaign.cli); full6 design
+(the multi-axis load program of the 6×6 test: crane_stiffness.full6.cli). Geometry
 comes from
 ``--config FILE`` (a ROS parameter YAML, the same file the nodes read) and/or flags, flags winning; SI units.
 Exit codes: 0 ok, 2 bad input (named on stderr), 3 no equilibrium for the load, 4 solver gave up.
@@ -197,7 +198,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_sweep)
     _add_workspace_command(sub)
     _add_bag_commands(sub)
+    _add_full6_commands(sub)
     return parser
+
+
+def _add_full6_commands(sub: Any) -> None:
+    """full6 design (crane_stiffness.full6.cli)."""
+    from crane_stiffness.full6 import cli as full6_cli
+    full6_cli.add_commands(sub)
 
 
 def _add_workspace_command(sub: Any) -> None:

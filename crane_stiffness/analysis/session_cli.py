@@ -1,6 +1,7 @@
 """``crane-stiffness analyze | compare | recover``: thin command-line layers over crane_stiffness.analysis.analyze,
 crane_stiffness.analysis.compare and crane_stiffness.bag.recover_bag (added to the parser of crane_stiffness.cli by
-:func:`add_commands`).
+:func:`add_commands`). ``analyze`` of a six-axis session (a bag holding /pose_sensor/pose) runs the 6×6 analysis
+(crane_stiffness.analysis.full6) and prints its table; the 1-D analysis too when the bag also holds the LVDT.
 
 Exit codes as crane_stiffness.cli: 0 ok, 2 bad input (a missing or unreadable bag, a missing sensor topic, nothing to
 fit; the reason on stderr). Damage the reader works around (a truncated or corrupt part of a bag) is reported on
@@ -74,8 +75,45 @@ def _print_summary(a: Any) -> None:
         print(f'  ! {problem}')
 
 
+def _analyze_full6(args: argparse.Namespace) -> int:
+    """A six-axis session (the bag holds /pose_sensor/pose): the 6×6 analysis; the 1-D one too when the bag also
+    holds the LVDT, into the same folder (its files are named apart)."""
+    from crane_stiffness import topics
+    from crane_stiffness.analysis.full6 import analyze_full6
+    from crane_stiffness.analysis.full6_report import summary_lines
+    from crane_stiffness.bag import BagReader
+    with BagReader(args.bag) as reader:
+        info = reader.topics.get(topics.LVDT_DISPLACEMENT)
+        one_axis = info is not None and info.count > 0
+    result = analyze_full6(args.bag, args.out, formats=(args.format,), reports=(args.report,))
+    one = None
+    if one_axis:
+        from crane_stiffness.analysis.analyze import analyze_session
+        one = analyze_session(args.bag, args.out, formats=(args.format,), reports=(args.report,),
+                              write_json=args.json, axis=args.axis, settle_fraction=args.settle,
+                              progress=not args.quiet and not args.json)
+    if args.json:
+        json.dump({'full6': result.to_dict(), 'one_axis': None if one is None else one.to_dict()}, sys.stdout,
+                  indent=1, allow_nan=False)
+        print()
+        return EXIT_OK
+    print('\n'.join(summary_lines(result)))
+    if one is not None:
+        print('\nthe 1-D analysis of the LVDT:')
+        _print_summary(one)
+    else:
+        print('(no /lvdt/displacement in the bag: no 1-D analysis)')
+    print('wrote:')
+    for path in result.files + (one.files if one is not None else []):
+        print(f'  {path}')
+    return EXIT_OK
+
+
 def cmd_analyze(args: argparse.Namespace) -> int:
     from crane_stiffness.analysis.analyze import analyze_session
+    from crane_stiffness.analysis.full6_load import is_full6_bag
+    if is_full6_bag(args.bag):
+        return _analyze_full6(args)
     analysis = analyze_session(args.bag, args.out, formats=(args.format,), reports=(args.report,),
                                write_json=args.json, axis=args.axis, settle_fraction=args.settle,
                                progress=not args.quiet and not args.json)
@@ -133,7 +171,8 @@ def _add_output_options(p: argparse.ArgumentParser, default_out: str) -> None:
 def add_commands(subparsers: Any) -> None:
     """Add ``analyze``, ``compare`` and ``recover`` to the ``crane-stiffness`` subparsers."""
     p = subparsers.add_parser('analyze', help='stiffness, test steps, model curves, figures and report of a '
-                              'recorded session (bag)')
+                              'recorded session (bag); of a six-axis session (with /pose_sensor/pose) the 6x6 '
+                              'stiffness and compliance with intervals, against the exact tangent and eq. (18)')
     p.add_argument('bag', metavar='BAG', help='bag directory (or .mcap file) written by session_recorder')
     _add_output_options(p, 'out/analysis/<bag name>')
     p.add_argument('--settle', type=float, default=0.3, metavar='FRACTION',
