@@ -53,7 +53,7 @@ PARAMS = GEOMETRY_PARAMS + PROGRAM_PARAMS + (
               "under 'campaign' (series, W, l0, the true crane of a simulated rig, what the operator confirmed; "
               "crane_stiffness.campaign); '' = not part of a campaign [-]", rule="'' or a JSON object"),
     ParamSpec('record_node_parameters', ['/crane_model', '/load_program', '/load_cell', '/lvdt',
-                                         '/stiffness_estimator'],
+                                         '/stiffness_estimator', '/pose_sensor', '/stiffness6_estimator'],
               'nodes whose parameters are read over ROS (get_parameters) once they appear and stored with the '
               "session; [''] = none [-]"),
 )
