@@ -143,7 +143,7 @@ class Observer(Node):
             if time.monotonic() > deadline:
                 raise error(f'timed out after {timeout_s:.0f} s waiting for {what}')
             if procs is not None:
-                procs.check_alive()
+                procs.check_alive(allow_exit=('load_program',))  # it ends with its program (exit_on_done)
             self.spin_once(0.05)
 
     def destroy_node(self) -> None:
