@@ -4,6 +4,8 @@ compliance C and the stiffness K = C⁻¹ from (wrench, pose deflection) pairs. 
 - :mod:`.reference` — what a result is compared with: the exact tangent at the rest pose, the paper's eq. (18),
   where K2 sits.
 - :mod:`.deflection` — a pose (position, rotation) as the deflection 6-vector the fit takes.
+- :mod:`.lvdt_array` — the deflection 6-vector from n >= 6 LVDTs touching the platform, with its covariance, and
+  the refusal of an arrangement that cannot determine it.
 - :mod:`.admissible` — the loads a program may hold: the slack factor of a wrench, the safety-factor rule and the
   refusal that names the step, the direction and the wire; the admissible polytope of a fold-over design.
 - :mod:`.design` — the D-optimal program and the naive one-axis-at-a-time program, with their predicted precision.

@@ -12,6 +12,25 @@ class Full6InputError(Full6Error, FieldError):
     """A bad value for a design or an identification: names the field, the value and the rule it breaks."""
 
 
+class ArrangementError(Full6Error):
+    """An arrangement of displacement sensors (crane_stiffness.full6.lvdt_array) that cannot determine the pose.
+
+    Attributes:
+        name: the arrangement's name.
+        rank: how many independent motions it sees (6 determines the pose).
+        condition: the condition number of its scaled, noise-weighted Jacobian (inf when rank < 6).
+        unseen: the motion it sees least, as a unit 6-vector [u_x, u_y, u_z, L·θ_x, L·θ_y, L·θ_z] (L the
+            arrangement's radius) [-]; None when there are fewer than six sensors.
+    """
+
+    def __init__(self, message: str, *, name: str, rank: int, condition: float, unseen=None) -> None:
+        super().__init__(message)
+        self.name = name
+        self.rank = rank
+        self.condition = condition
+        self.unseen = unseen
+
+
 class SlackDesignError(Full6Error):
     """A load program that would slacken a wire, or come closer to slack than its safety factor allows.
 
@@ -41,4 +60,4 @@ class SlackDesignError(Full6Error):
         self.transition = transition
 
 
-__all__ = ['Full6Error', 'Full6InputError', 'SlackDesignError']
+__all__ = ['ArrangementError', 'Full6Error', 'Full6InputError', 'SlackDesignError']

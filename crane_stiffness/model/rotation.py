@@ -72,3 +72,29 @@ def quaternion_to_matrix(quat: np.ndarray) -> np.ndarray:
     return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
                      [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
                      [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+
+
+def rotvec_to_quaternion(w: np.ndarray) -> np.ndarray:
+    """Unit quaternions [x, y, z, w] (…, 4) of rotation vectors w (…, 3) [rad]: exp of half the vector.
+
+    Vectorised, precise to rounding at any angle (below 1e-4 rad sin(a/2)/a is its series, so a zero vector gives
+    [0, 0, 0, 1] exactly)."""
+    w = np.asarray(w, dtype=float)
+    angle = np.linalg.norm(w, axis=-1)
+    small = angle < 1e-4
+    safe = np.where(small, 1.0, angle)
+    half_sinc = np.where(small, 0.5 - angle * angle / 48.0, np.sin(0.5 * safe) / safe)  # sin(a/2)/a
+    return np.concatenate([w * half_sinc[..., None], np.cos(0.5 * angle)[..., None]], axis=-1)
+
+
+def quaternion_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton products a·b (…, 4) of quaternions [x, y, z, w] (broadcast): the rotation b, then a; as matrices
+    R(a·b) = R(a)·R(b). Not normalised."""
+    a = np.asarray(a, dtype=float)
+    b = np.asarray(b, dtype=float)
+    ax, ay, az, aw = a[..., 0], a[..., 1], a[..., 2], a[..., 3]
+    bx, by, bz, bw = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
+    return np.stack([aw * bx + ax * bw + ay * bz - az * by,
+                     aw * by - ax * bz + ay * bw + az * bx,
+                     aw * bz + ax * by - ay * bx + az * bw,
+                     aw * bw - ax * bx - ay * by - az * bz], axis=-1)

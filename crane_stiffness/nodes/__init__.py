@@ -18,6 +18,7 @@ NODES = (
     'modbus_emulator',
     'modbus_lvdt',
     'netft',
+    'pose_sensor',
     'rdt_emulator',
     'session_player',
     'session_recorder',

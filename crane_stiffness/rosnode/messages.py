@@ -27,3 +27,13 @@ def pose_vector(msg: PoseStamped) -> np.ndarray | None:
     if not finite(values) or math.hypot(o.x, o.y, o.z, o.w) < 1e-9:
         return None
     return np.concatenate([values[:3], quaternion_to_matrix(np.array(values[3:])).ravel()])
+
+
+def pose_position_quaternion(msg: PoseStamped) -> np.ndarray | None:
+    """[position (3), quaternion x y z w (4)] of a pose message as it is (not normalised), or None for NaN/Inf or a
+    zero quaternion."""
+    p, o = msg.pose.position, msg.pose.orientation
+    values = (p.x, p.y, p.z, o.x, o.y, o.z, o.w)
+    if not finite(values) or math.hypot(o.x, o.y, o.z, o.w) < 1e-9:
+        return None
+    return np.array(values)

@@ -1,15 +1,17 @@
 """Simulation of the rig's sensors and load programs: pure Python/numpy, no ROS.
 
 - :mod:`.sensors` — six-axis load cell and LVDT models with noise, drift, cross-talk, quantization and saturation.
+- :mod:`.pose_sensor` — a motion-capture pose sensor with position and orientation noise and bias.
 - :mod:`.program` — load programs (ramps, holds, steps) from ROS-parameter-style parallel arrays or YAML files.
 - :mod:`.errors` — the package's exceptions.
 """
 from crane_stiffness.sim.errors import ParameterError, ProgramFileError, SimError
 from crane_stiffness.sim.program import (AXES, KINDS, PARAM_NAMES, HoldInterval, LoadProgram, Phase, ProgramState,
                                          Segment, load_program_file)
+from crane_stiffness.sim.pose_sensor import PoseSensorModel
 from crane_stiffness.sim.sensors import LoadCellModel, LvdtModel
 
 __all__ = [
     'AXES', 'KINDS', 'PARAM_NAMES', 'HoldInterval', 'LoadCellModel', 'LoadProgram', 'LvdtModel', 'ParameterError',
-    'Phase', 'ProgramFileError', 'ProgramState', 'Segment', 'SimError', 'load_program_file',
+    'Phase', 'PoseSensorModel', 'ProgramFileError', 'ProgramState', 'Segment', 'SimError', 'load_program_file',
 ]
