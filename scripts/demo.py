@@ -203,6 +203,8 @@ def report6(share: Path, args: argparse.Namespace, session: str, observer, codes
     """The six-axis result: the 6x6 K against the exact tangent, K2, the status; 0 when it can be signed."""
     import numpy as np
 
+    from crane_stiffness.axes import AXES
+    from crane_stiffness.full6.reference import DISPLACEMENTS
     from crane_stiffness.launcher.rig import config_files
     from crane_stiffness.launcher.summary6 import summarize6, verdict6
     summary = summarize6(config_files(share, args.program)['crane'], observer.stiffness6, observer.status6)
@@ -215,13 +217,15 @@ def report6(share: Path, args: argparse.Namespace, session: str, observer, codes
         print('  the 6x6 stiffness K, diagonal (measured, 95 % CI, exact tangent at rest):')
         for (axis, d), unit, low, high in zip(summary['diagonal'].items(), units, np.diag(summary['ci95_low']),
                                               np.diag(summary['ci95_high'])):
-            print(f"    K[{axis},{axis}] {d['measured']:14.6g} [{low:.6g}, {high:.6g}] {unit:8s} tangent "
+            print(f"    K[{axis}, {DISPLACEMENTS[AXES.index(axis)]}] {d['measured']:12.6g} [{low:.6g}, {high:.6g}] "
+                  f"{unit:8s} tangent "
                   f"{d['tangent']:.6g} ({100 * d['relative_error']:+.2f} %{'' if d['covers'] else ', NOT covered'})")
         k2 = summary['k2']
         print(f"  coupling K2 (side force with tilt) {k2['measured']:.6g} N/rad, tangent {k2['tangent']:.6g} "
               f"({100 * k2['relative_error']:+.2f} %, sign {'right' if k2['same_sign'] else 'WRONG'}); "
               f"{summary['covered']} of 36 intervals cover the tangent's entry")
-    print(f"  6x6 status {status['level']}: {status['message']}")
+    message = status['message']
+    print(f"  6x6 status {message if message.startswith(status['level']) else status['level'] + ': ' + message}")
     print(f"  summary -> {out / 'summary.json'}; session recorded: {summary['bag']}")
     why = verdict6(summary)
     if why:
