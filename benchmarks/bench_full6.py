@@ -10,7 +10,8 @@ program (``--steps`` steps held ``--hold`` s, designed here for the lab model). 
   arrival), p50 and p99;
 - what the pose sensor published against what the estimator took, and the fit's status at the end.
 
-Target (as the 1-D fit): the estimator's p99 within 5 ms of the transport's p99, nothing lost. Exits 1 when missed.
+Target (as the 1-D fit): the estimator's p99 within 5 ms of the transport's p99, and no pose sample that reached the
+observer missing at the estimator. Exits 1 when missed.
 
 Run: .venv/bin/python benchmarks/bench_full6.py [--steps 12] [--hold 2.0] [--json out.json]
 """
@@ -66,6 +67,8 @@ def run(env: dict, share: Path, ws: Path, program: Path) -> dict:
         with rosrun.Processes(env, ws / 'logs') as procs:
             prog = start_rig(procs, share, str(program), 'bench_full6', ws / 'bags', record=False)
             wait_for_program_start(observer, procs, 120)
+            assert observer.running_at is not None
+            started = time.time() - (time.monotonic() - observer.running_at)  # the program's start, system clock
             end = time.monotonic() + prog.duration_s + 60
             while not observer.done and procs.procs['load_program'].poll() is None and time.monotonic() < end:
                 observer.spin_once(0.05)
@@ -79,6 +82,7 @@ def run(env: dict, share: Path, ws: Path, program: Path) -> dict:
         observer.destroy_node()
         rclpy.shutdown()
     lag = np.array([a - s for s, a in raw]) * 1e3
+    in_program = sum(1 for stamp, _ in raw if stamp >= started)
     values = status[2] if status else {}
     sensor = final_counters(logs.get('pose_sensor', ''))
     estimator = final_counters(logs.get('stiffness6_estimator', ''))
@@ -89,6 +93,7 @@ def run(env: dict, share: Path, ws: Path, program: Path) -> dict:
             'estimator_lag_ms': {'p50': float(values.get('pose_lag_p50_ms', 'nan')),
                                  'p99': float(values.get('pose_lag_p99_ms', 'nan')),
                                  'n': int(values.get('pose_lag_n', 0))},
+            'poses_in_program_at_observer': in_program,
             'pose_published': sensor.get('published'), 'poses_taken': estimator.get('poses'),
             'wrenches_taken': estimator.get('wrenches'), 'pairs': estimator.get('pairs'),
             'status': None if status is None else f'{status[0]}: {status[1]}'}
@@ -113,10 +118,13 @@ def main(argv=None) -> int:
           f"(n = {e['n']})")
     print(f"  baseline, raw pose messages stamp to arrival here: p50 {t['p50']:.2f} ms, p99 {t['p99']:.2f} ms "
           f"(n = {t['n']})")
-    lost = (res['pose_published'] or 0) - (res['poses_taken'] or 0)
+    # DDS may match the estimator a moment after this observer, at rest before the program: what must not be missing
+    # is the program's samples (a lower bound of the estimator's losses: it may have missed some at rest instead).
+    lost = max(0, res['poses_in_program_at_observer'] - (res['poses_taken'] or 0))
     met = e['p99'] <= t['p99'] + LAG_MARGIN_MS and lost == 0
-    print(f"estimator p99 {e['p99'] - t['p99']:+.2f} ms against the transport's (target <= {LAG_MARGIN_MS:g} ms), "
-          f"{lost} pose samples not taken: {'met' if met else 'MISSED'}")
+    print(f"estimator p99 {e['p99'] - t['p99']:+.2f} ms against the transport's (target <= {LAG_MARGIN_MS:g} ms); "
+          f"{res['poses_in_program_at_observer']} pose samples of the program reached this observer, the estimator "
+          f"took {res['poses_taken']} in all: {'met' if met else 'MISSED'}")
     if args.json:
         Path(args.json).write_text(json.dumps({**res, 'met': met}, indent=1))
     return 0 if met else 1
