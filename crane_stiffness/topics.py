@@ -129,8 +129,9 @@ SENSOR_DATA = QoS('best_effort', 'volatile', SENSOR_QUEUE_DEPTH)
 RELIABLE = QoS('reliable', 'volatile', 1000)
 #: Latest-value topics a late joiner should still get (program state, predicted stiffness, model status).
 LATCHED = QoS('reliable', 'transient_local', 1)
-#: The estimator's outputs: nothing lost, and a reader that joins late still gets the recent ones (DDS may match a
-#: reader seconds after it starts; a campaign's observer, or a page opened later): 1000, ~50 s of estimates at 20 Hz.
+#: The estimator's values for tools: nothing lost, and a reader that joins late still gets the recent ones (DDS may
+#: match a reader seconds after it starts; a campaign's observer, or a page opened later): 1000, ~50 s at 20 Hz. What
+#: people read (the status, the headline number, the 6x6 fit) is LATCHED: a late reader gets the latest only.
 KEPT = QoS('reliable', 'transient_local', 1000)
 
 #: The QoS of every topic of the contract, the one table the rest is built from: the nodes' rclpy profiles
@@ -151,13 +152,13 @@ TOPIC_QOS: dict[str, QoS] = {
     LVDT_DISPLACEMENT: SENSOR_DATA,
     LVDT_ZERO: LATCHED,
     LOAD_CELL_TARE: LATCHED,
-    STIFFNESS_ESTIMATE: KEPT,
-    STIFFNESS_VALUES: KEPT,
-    STIFFNESS: KEPT,
+    STIFFNESS_ESTIMATE: LATCHED,  # for people: a late reader (`ros2 topic echo --once`) gets the latest
+    STIFFNESS_VALUES: KEPT,  # for tools: a reader matched late still gets the run's estimates (up to 1000)
+    STIFFNESS: LATCHED,
     POSE_SENSOR_POSE: SENSOR_DATA,
-    STIFFNESS6: KEPT,
-    COMPLIANCE6: KEPT,
-    STIFFNESS6_STATUS: KEPT,
+    STIFFNESS6: LATCHED,  # the latest fit is what a late reader (`ros2 topic echo --once`) wants
+    COMPLIANCE6: LATCHED,
+    STIFFNESS6_STATUS: LATCHED,
     FITTED_PAIRS: RELIABLE,
     FIT_LINES: RELIABLE,
 }

@@ -36,7 +36,7 @@ from crane_stiffness.full6.identify import ComplianceEstimator, ComplianceFit
 from crane_stiffness.full6.pairs import DEFAULT_MAX_AGE_S, DEFAULT_MAX_GAP_S, Full6Pairing
 from crane_stiffness.params.spec import ParamSpec
 from crane_stiffness.rosnode.parameters import Params
-from crane_stiffness.rosnode.qos import KEPT_QOS, RELIABLE_QOS, sensor_qos, stream_qos
+from crane_stiffness.rosnode.qos import LATCHED_QOS, RELIABLE_QOS, sensor_qos, stream_qos
 from crane_stiffness.rosnode.run import run
 from crane_stiffness.rosnode.sim_time import SimTimeParticipant, uses_sim_time
 from crane_stiffness.serde.cdr import CdrError, decode_stamped
@@ -97,9 +97,9 @@ class Stiffness6EstimatorNode(Node):
         # How far behind the pose stream the fit is: node clock at handling − the pose's stamp, last samples [s]
         # (the benchmark compares it with the transport's own lag; on simulated time it means nothing).
         self.lags: deque[float] = deque(maxlen=5000)
-        self.pub_k = self.create_publisher(Float64MultiArray, topics.STIFFNESS6, KEPT_QOS)
-        self.pub_c = self.create_publisher(Float64MultiArray, topics.COMPLIANCE6, KEPT_QOS)
-        self.pub_status = self.create_publisher(DiagnosticArray, topics.STIFFNESS6_STATUS, KEPT_QOS)
+        self.pub_k = self.create_publisher(Float64MultiArray, topics.STIFFNESS6, LATCHED_QOS)
+        self.pub_c = self.create_publisher(Float64MultiArray, topics.COMPLIANCE6, LATCHED_QOS)
+        self.pub_status = self.create_publisher(DiagnosticArray, topics.STIFFNESS6_STATUS, LATCHED_QOS)
         self.params = Params(self, PARAMS, _validate, self._apply)
         self.create_subscription(WrenchStamped, topics.WRENCH_COMMAND, self._on_command,
                                  stream_qos(RELIABLE_QOS, self.sim_time))

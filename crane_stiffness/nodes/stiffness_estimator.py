@@ -122,9 +122,9 @@ class StiffnessEstimatorNode(Node):
         self.changed = False  # new pairs fitted since the last /stiffness/estimate_values
         self.pub_values = self.create_publisher(Float64MultiArray, topics.STIFFNESS_VALUES, KEPT_QOS,
                                                 event_callbacks=_NO_EVENTS_PUB)
-        self.pub_stiffness = self.create_publisher(Float64, topics.STIFFNESS, KEPT_QOS,
+        self.pub_stiffness = self.create_publisher(Float64, topics.STIFFNESS, LATCHED_QOS,
                                                    event_callbacks=_NO_EVENTS_PUB)
-        self.pub_estimate = self.create_publisher(DiagnosticArray, topics.STIFFNESS_ESTIMATE, KEPT_QOS,
+        self.pub_estimate = self.create_publisher(DiagnosticArray, topics.STIFFNESS_ESTIMATE, LATCHED_QOS,
                                                   event_callbacks=_NO_EVENTS_PUB)
         self.pub_pairs = self.create_publisher(Float64MultiArray, topics.FITTED_PAIRS, RELIABLE_QOS,
                                                event_callbacks=_NO_EVENTS_PUB)
