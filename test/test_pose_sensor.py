@@ -103,6 +103,12 @@ def test_same_seed_same_stream_however_batched():
     assert (whole[0] == singles[0]).all() and (whole[1] == singles[1]).all()
     other = PoseSensorModel(rng=12).measure(u, q)
     assert not (other[0] == whole[0]).any()
+    # A new set-up of the sensor (another parameter changed, the node builds a new model) continues the stream.
+    first, renewed = PoseSensorModel(rng=11), PoseSensorModel(rng=11)
+    first.measure(u[:9], q[:9])
+    renewed.continue_noise_of(first)
+    rest = renewed.measure(u[9:], q[9:])
+    assert (rest[0] == whole[0][9:]).all() and (rest[1] == whole[1][9:]).all()
     # seed -1: random, a fresh stream each time
     random = pose_sensor_from_params(params | {'seed': -1}).measure(u, q)
     assert not (random[0] == whole[0]).any()
@@ -313,6 +319,7 @@ def test_bad_parameters_are_refused_naming_the_value_and_the_old_one_kept(rclpy_
     model = node.model
     assert node.set_parameters([Parameter('angle_noise_std', value=1e-5)])[0].successful
     assert node.model is not model and node.model.angle_noise_std == 1e-5
+    assert node.model._rng is model._rng  # the same seed: the noise stream goes on
     node.destroy_node()
     with pytest.raises(ValueError, match='angle_noise_std = -1'):
         pose_sensor.PoseSensor(context=rclpy_context, cli_args=_isolated('pose_sensor')[2],

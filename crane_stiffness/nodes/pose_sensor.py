@@ -4,10 +4,11 @@ sim.pose_sensor.PoseSensorModel).
 Subscribes /crane/platform_pose (PoseStamped, frame crane_base), held from its header stamp on. Publishes
 /pose_sensor/pose (PoseStamped, sensor QoS, frame ``frame_id``): the platform centre's position [m] and orientation
 (unit quaternion [x, y, z, w], body -> crane_base) with white noise and a constant bias, as a motion-capture driver
-(mocap4r2, vrpn_mocap) publishes a rigid body's pose; a real tracker takes this node's place by remapping its topic
-onto /pose_sensor/pose. Samples at ``sample_rate_hz`` on the grid k/sample_rate_hz of the node clock, with the
-simulated LVDT's semantics: a reading stamped t is the pose in force at t (the last pose stamped at or before it)
-plus the noise. Nothing is published before the first pose.
+publishes a rigid body's pose: vrpn_mocap's /vrpn_mocap/<tracker>/pose takes this node's place by remapping alone
+(mocap4r2's drivers publish mocap4r2_msgs/RigidBodies, which a one-body relay turns into PoseStamped). Samples at
+``sample_rate_hz`` on the grid k/sample_rate_hz of the node clock, with the simulated LVDT's semantics: a reading
+stamped t is the pose in force at t (the last pose stamped at or before it) plus the noise. Nothing is published
+before the first pose.
 
 On wall-clock time the samples go out at the ticks of ``publish_rate_hz`` (on the grid k/publish_rate_hz), each no
 earlier than ``latency_s`` after its stamp (a tracker's processing delay) and, with ``state_wait_s``, once the pose at

@@ -1,4 +1,5 @@
-"""Simulated pose sensor of the rig: a motion-capture tracker (mocap4r2, vrpn_mocap) watching the platform.
+"""Simulated pose sensor of the rig: a motion-capture tracker (VICON, OptiTrack through vrpn_mocap) watching the
+platform.
 
 It reports the platform centre's position [m] and orientation (unit quaternion [x, y, z, w], body -> frame) in its
 frame (``crane_base``: the paper's fixed frame, origin at the unloaded platform centre, z down), as
