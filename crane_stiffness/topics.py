@@ -47,7 +47,7 @@ LVDT_DISPLACEMENT = '/lvdt/displacement'
 # estimator still works, it only cannot see a re-zero (a restart it sees by the sequence numbers).
 LVDT_ZERO = '/lvdt/zero'
 LOAD_CELL_TARE = '/load_cell/tare'
-# Pose sensor (a motion-capture system such as mocap4r2 or vrpn_mocap publishes the same), geometry_msgs/PoseStamped:
+# Pose sensor (vrpn_mocap publishes the same; mocap4r2's RigidBodies need a relay), geometry_msgs/PoseStamped:
 # the platform centre's position [m] and orientation (quaternion, body -> frame) in frame_id (crane_base), sensor-data
 # QoS. What the 6x6 identification measures deflections with (crane_stiffness.full6).
 POSE_SENSOR_POSE = '/pose_sensor/pose'
