@@ -172,3 +172,17 @@ def test_the_live_6x6_fit_equals_the_offline_one_and_a_stopped_pose_stream_is_st
         executor.shutdown()
         feeder.destroy_node()
         node.destroy_node()
+
+
+def test_a_design_that_cannot_determine_c_yet_is_waiting_while_the_program_runs():
+    from crane_stiffness.nodes.stiffness6_estimator import shown_status
+    from crane_stiffness.status import ERROR, WAITING
+    rng = np.random.default_rng(0)
+    w = np.repeat(rng.normal(size=(3, 6)), 50, axis=0) + rng.normal(0, 0.01, (150, 6))
+    fit = identify(w, w * 1e-5 + rng.normal(0, 1e-8, (150, 6)), np.repeat([0, 1, 2], 50))
+    assert fit.level == ERROR and fit.message.startswith('undetermined')  # 3 steps: fewer than 8
+    level, message = shown_status(fit, 'running')
+    assert level == WAITING and message.startswith('waiting: 3 steps so far') and 'undetermined' in message
+    assert shown_status(fit, 'paused')[0] == WAITING
+    for over in ('done', ''):  # the program ended (or none is known): the design is what it is
+        assert shown_status(fit, over) == (ERROR, fit.message)

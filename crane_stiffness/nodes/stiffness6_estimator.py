@@ -12,13 +12,15 @@ Publishes, at ``publish_rate_hz`` (node clock), /stiffness6/stiffness and /stiff
 (DiagnosticArray: the fit's status, with the numbers behind it: pairs, steps, condition number, lack of fit, K2 and
 its interval, the diagonal of K). The status is never OK on a design that cannot determine C (crane_stiffness.full6
 .identify: fewer than 8 steps, no pure error, condition number > 100) or on a non-linear window (lack of fit), and
-it is STALE when a stream that was flowing stopped: no pose or wrench sample stamped within ``stale_after_s`` of the
-node clock's now (checked every ``1 / publish_rate_hz``). Stale samples are never paired (the pairing's
-``max_age_s``). On simulated time the inputs are taken in stamp order at each watermark, so the same run gives the
-same pairs; offline, crane-stiffness analyze reproduces the fit from the bag.
+it is STALE when a stream that was flowing stopped: no pose or wrench sample stamped within ``stale_after_s`` of
+the node clock's now (checked every ``1 / publish_rate_hz``). Stale samples are never paired (the pairing's
+``max_age_s``). While the load program runs (/load_program/state), a design that cannot determine C *yet* is
+WAITING for its steps, not ERROR. On simulated time the inputs are taken in stamp order at each watermark, so the
+same run gives the same pairs; offline, crane-stiffness analyze reproduces the fit from the bag.
 """
 from __future__ import annotations
 
+import json
 import math
 from collections import deque
 from typing import Any
@@ -27,7 +29,7 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped, WrenchStamped
 from rclpy.node import Node
-from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension, String
 from std_srvs.srv import Trigger
 
 from crane_stiffness import topics
@@ -41,9 +43,9 @@ from crane_stiffness.rosnode.run import run
 from crane_stiffness.rosnode.sim_time import SimTimeParticipant, uses_sim_time
 from crane_stiffness.serde.cdr import CdrError, decode_stamped
 from crane_stiffness.serde.stamps import stamp_seconds
-from crane_stiffness.status import NAMES, STALE, WAITING, WAITING_PREFIX, wire_level
+from crane_stiffness.status import ERROR, NAMES, STALE, WAITING, WAITING_PREFIX, wire_level
 
-__all__ = ['PARAMS', 'Stiffness6EstimatorNode', 'main', 'matrix_message']
+__all__ = ['PARAMS', 'Stiffness6EstimatorNode', 'main', 'matrix_message', 'shown_status']
 
 PARAMS = (
     ParamSpec('settle_s', 0.5, 'time after each load step before its pairs are fitted (the platform settles) [s]',
@@ -79,6 +81,14 @@ def matrix_message(value: np.ndarray, low: np.ndarray, high: np.ndarray) -> Floa
     return msg
 
 
+def shown_status(fit: ComplianceFit, program_state: str) -> tuple[int, str]:
+    """The level and message published for ``fit``: its own, except that a design that cannot determine C yet is
+    WAITING while the load program is running or paused (``program_state``, /load_program/state): more steps come."""
+    if fit.level == ERROR and fit.message.startswith('undetermined') and program_state in ('running', 'paused'):
+        return WAITING, f'{WAITING_PREFIX}{fit.n_steps} steps so far, the program goes on: {fit.message}'
+    return fit.level, fit.message
+
+
 class Stiffness6EstimatorNode(Node):
     """Feeds the three streams to Full6Pairing and the pairs to ComplianceEstimator; publishes the fit."""
 
@@ -107,6 +117,9 @@ class Stiffness6EstimatorNode(Node):
                                  raw=True)
         self.create_subscription(PoseStamped, topics.POSE_SENSOR_POSE, self._on_pose, sensor_qos(self.sim_time),
                                  raw=True)
+        # While the load program runs, a design that cannot determine C yet is waiting for its steps, not an error.
+        self.program_state = ''
+        self.create_subscription(String, topics.PROGRAM_STATE, self._on_program_state, LATCHED_QOS)
         self.create_service(Trigger, '~/reset', self._srv_reset)
         self.sim = SimTimeParticipant(self, 3, self._on_watermark,
                                       inputs=[topics.WRENCH_COMMAND, topics.LOAD_CELL_WRENCH, topics.POSE_SENSOR_POSE])
@@ -184,6 +197,12 @@ class Stiffness6EstimatorNode(Node):
             self.estimator.add(w, d, step)
         self.counters['pairs'] += len(pairs)
 
+    def _on_program_state(self, msg: String) -> None:
+        try:
+            self.program_state = str(json.loads(msg.data).get('state', ''))
+        except (ValueError, AttributeError):
+            self.program_state = ''
+
     # --- outputs ---
     def _stale(self) -> str:
         """Which flowing stream stopped (no sample within stale_after_s of now), or ''."""
@@ -201,7 +220,7 @@ class Stiffness6EstimatorNode(Node):
             level, message = WAITING, f'{WAITING_PREFIX}no labelled pairs yet (a pose sensor on ' \
                                       f'{topics.POSE_SENSOR_POSE} and load steps)'
         else:
-            level, message = fit.level, fit.message
+            level, message = shown_status(fit, self.program_state)
             self.pub_k.publish(matrix_message(fit.stiffness, fit.stiffness_low, fit.stiffness_high))
             self.pub_c.publish(matrix_message(fit.compliance, fit.compliance_low, fit.compliance_high))
         if stale:
