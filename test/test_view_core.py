@@ -129,11 +129,12 @@ def _conforms(value, schema, path='') -> list[str]:
 def test_every_derived_channel_has_a_schema_foxglove_apps_parse_and_its_messages_follow_it():
     from crane_stiffness.estimation.live_status import VALUE_FIELDS
     from crane_stiffness.view.jsonschema import foxglove_parsable
+    from crane_stiffness.view import stiffness6
     from crane_stiffness.view.scene import SCENE_SCHEMA
     # The rule that refused three channels in Lichtblick ("Player alert schema"): an array without items.
     assert foxglove_parsable({'type': 'object', 'properties': {'wires': {'type': 'array'}}}) == [
         'wires: an array needs "items"']
-    schemas = {**plot.SCHEMAS, 'scene': SCENE_SCHEMA}
+    schemas = {**plot.SCHEMAS, 'scene': SCENE_SCHEMA, 'stiffness6': stiffness6.SCHEMA}
     for name, schema in schemas.items():
         assert foxglove_parsable(schema) == [], name
     est = StiffnessEstimator(hysteresis=0.1, window=200)
@@ -154,7 +155,10 @@ def test_every_derived_channel_has_a_schema_foxglove_apps_parse_and_its_messages
                 'estimate': plot.estimate_message(values),
                 'status': plot.status_message([('loading', 0, 'OK k = 50000'), ('input', 1, 'late')]),
                 'wires': plot.wires_message(['wire_1', 'wire_2'], [0.5, 0.5], [8.6, 0.0], 1e-6),
-                'scene': scene_update(geometry, state, 200.0)}
+                'scene': scene_update(geometry, state, 200.0, np.diag([1.9e-5, 1.9e-5, 4.9e-7])),
+                'stiffness6': stiffness6.stiffness6_message(
+                    np.r_[np.eye(6).ravel() * 2.0, np.eye(6).ravel(), np.eye(6).ravel() * 3.0], np.eye(6),
+                    (1, 'condition 1e4', {'k2_ci95': '-1 .. 1'}))}
     assert set(messages) == set(schemas)
     for name, message in messages.items():
         decoded = json.loads(json.dumps(message, allow_nan=False))

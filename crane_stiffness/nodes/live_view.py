@@ -7,14 +7,17 @@ Serves, on ``host`` (127.0.0.1 by default; 0.0.0.0 opens it to the lab network):
   the derived channels under /live_view/ (JSON, at ``rate_hz`` while a client listens): ``xy`` (the current fit
   segment's fitted pairs, force vs displacement, decimated to at most ``max_points`` for display), ``fit_lines``
   (each branch's line and 95 % band), ``prediction`` (the model's stiffness as a line), ``estimate``, ``status``
-  (the estimator's, as text and level), ``wires`` and ``scene`` (``foxglove.SceneUpdate``: the crane with its
-  deflection × ``deflection_scale``); and the Trigger services ``services`` (tare, estimator reset, recording
+  (the estimator's, as text and level), ``wires``, ``scene`` (``foxglove.SceneUpdate``: the crane with its
+  deflection × ``deflection_scale``, and the measured compliance ellipsoid when there is a 6×6 fit) and
+  ``stiffness6`` (the six-axis estimator's K against the model's tangent, K2 and the status: sent only once that
+  estimator has published); and the Trigger services ``services`` (tare, estimator reset, recording
   start/stop), forwarded to the ROS services of the same name;
 - the page (crane_stiffness/view/web) on ``http_port``, which talks to the same WebSocket server.
 
 Reads /stiffness/fitted_pairs and /stiffness/fit_lines (the estimator's pairs and fit lines: nothing is refitted
 here), /stiffness/estimate_values, /stiffness/estimate, /crane/predicted_axis_stiffness, /crane/wire_states,
-/crane/platform_pose and /crane/applied_wrench; the geometry from the geometry.* parameters (the crane file).
+/crane/platform_pose and /crane/applied_wrench, /stiffness6/stiffness, /stiffness6/compliance and
+/stiffness6/status (latched); the geometry from the geometry.* parameters (the crane file).
 The high-rate inputs are taken serialized and only the newest is decoded, at ``rate_hz``. Port 0 takes a free port;
 the addresses are logged at start (``live view: page http://…, Foxglove ws://…``).
 """
@@ -23,6 +26,8 @@ from __future__ import annotations
 import os
 import threading
 from typing import Any, Callable
+
+import numpy as np
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, WrenchStamped
@@ -44,7 +49,8 @@ from crane_stiffness.rosnode.parameters import Params, check
 from crane_stiffness.rosnode.messages import stamp_to_s
 from crane_stiffness.params.geometry import GEOMETRY_PARAMS, geometry_from_params
 from crane_stiffness.params.spec import ParamSpec
-from crane_stiffness.view import plot
+from crane_stiffness.full6.reference import reference_at_rest
+from crane_stiffness.view import plot, stiffness6
 from crane_stiffness.view.msgdefs import definition
 from crane_stiffness.view.scene import SCENE_SCHEMA, SLACK_TENSION_N, CraneState, scene_update
 from crane_stiffness.view.server import FoxgloveServer, PageServer
@@ -104,6 +110,11 @@ class LiveViewNode(Node):
         self.fit_lines: list[float] | None = None
         self.prediction = float('nan')
         self.statuses: list[tuple[str, int, str]] = []
+        # the six-axis estimator's newest K and C data, and status (level, message, key-values); None: not yet
+        self.k6: list[float] | None = None
+        self.c6: list[float] | None = None
+        self.status6: tuple[int, str, dict[str, str]] | None = None
+        self.tangent6: Any = None  # the model's K at rest for self.geometry, computed at the first 6x6 message
         self.dirty: set[str] = set()
         self.resent_ns = 0  # when every derived channel was last sent (a client that joined since gets them all)
         self.trigger_clients = {name: self.create_client(Trigger, name) for name in DEFAULT_SERVICES}
@@ -112,6 +123,9 @@ class LiveViewNode(Node):
         self.create_subscription(Float64MultiArray, topics.FIT_LINES, self._on_fit_lines, RELIABLE_QOS)
         self.create_subscription(DiagnosticArray, topics.STIFFNESS_ESTIMATE, self._on_estimate, KEPT_QOS)
         self.create_subscription(Float64, topics.PREDICTED_AXIS_STIFFNESS, self._on_prediction, LATCHED_QOS)
+        self.create_subscription(Float64MultiArray, topics.STIFFNESS6, self._on_k6, LATCHED_QOS)
+        self.create_subscription(Float64MultiArray, topics.COMPLIANCE6, self._on_c6, LATCHED_QOS)
+        self.create_subscription(DiagnosticArray, topics.STIFFNESS6_STATUS, self._on_status6, LATCHED_QOS)
         for topic, msg_type in ((topics.STIFFNESS_VALUES, Float64MultiArray), (topics.WIRE_STATES, JointState),
                                 (topics.PLATFORM_POSE, PoseStamped), (topics.APPLIED_WRENCH, WrenchStamped)):
             self.create_subscription(msg_type, topic, self._keeper(topic, msg_type), RELIABLE_QOS, raw=True,
@@ -120,6 +134,7 @@ class LiveViewNode(Node):
     # --- parameters, servers ---
     def _apply(self, geometry: CraneGeometry, values: dict[str, Any]) -> None:
         self.geometry = geometry
+        self.tangent6 = None  # the tangent of this geometry: computed again when next needed
         if self.points is None or values['max_points'] != self.settings.get('max_points'):
             self.points = plot.PointBuffer(values['max_points'])
         if values['rate_hz'] != self.settings.get('rate_hz'):
@@ -133,7 +148,7 @@ class LiveViewNode(Node):
             self._start_servers(values)
         elif any(values[k] != self.settings[k] for k in ('host', 'port', 'http_port', 'topics', 'services')):
             self.get_logger().warn('host, ports, topics and services take effect at the next start')
-        self.dirty.update(('xy', 'scene'))
+        self.dirty.update(('xy', 'scene', 'stiffness6'))
         self.settings = values
 
     def _start_servers(self, values: dict[str, Any]) -> None:
@@ -141,6 +156,7 @@ class LiveViewNode(Node):
         ros = {topic: (_TYPES[topic], definition(_TYPES[topic], prefixes)) for topic in values['topics']}
         derived = {PREFIX + name: (schema['title'], schema) for name, schema in plot.SCHEMAS.items()}
         derived[PREFIX + 'scene'] = ('foxglove.SceneUpdate', SCENE_SCHEMA)
+        derived[PREFIX + 'stiffness6'] = (stiffness6.SCHEMA['title'], stiffness6.SCHEMA)
         services = {name: self._caller(name) for name in values['services']}
         logger = self.get_logger()
         self.foxglove = FoxgloveServer(values['host'], values['port'], ros, derived, services, self._want,
@@ -227,6 +243,20 @@ class LiveViewNode(Node):
                          for s in msg.status]
         self.dirty.add('status')
 
+    def _on_k6(self, msg: Float64MultiArray) -> None:
+        self.k6 = list(msg.data)
+        self.dirty.update(('stiffness6', 'scene'))
+
+    def _on_c6(self, msg: Float64MultiArray) -> None:
+        self.c6 = list(msg.data)
+        self.dirty.add('scene')
+
+    def _on_status6(self, msg: DiagnosticArray) -> None:
+        for s in msg.status[:1]:  # one status: 'stiffness6_estimator: 6x6'
+            level = s.level[0] if isinstance(s.level, bytes) else int(s.level)
+            self.status6 = (level, s.message, {kv.key: kv.value for kv in s.values})
+            self.dirty.add('stiffness6')
+
     # --- outputs ---
     def _tick(self) -> None:
         self._update_subscriptions()
@@ -234,7 +264,7 @@ class LiveViewNode(Node):
         now = self.get_clock().now().nanoseconds
         if now - self.resent_ns >= RESEND_NS:  # the slow channels too, for clients that joined since
             self.resent_ns = now
-            self.dirty.update(('status', 'fit_lines', 'scene', *self.latest))
+            self.dirty.update(('status', 'fit_lines', 'scene', 'stiffness6', *self.latest))
         if fox is None or not self.dirty:
             return
         dirty, self.dirty = self.dirty, set()
@@ -247,6 +277,7 @@ class LiveViewNode(Node):
                 values = self._newest(topics.STIFFNESS_VALUES)
                 sent += fox.log_json(PREFIX + 'estimate', plot.estimate_message(values.data), now)
             sent += self._send_crane(fox, dirty, now)
+            sent += self._send_stiffness6(fox, dirty, now)
         except ValueError as exc:  # a message of the wrong shape (a foreign publisher): said, not fatal
             self.get_logger().warn(f'live view: cannot show an input: {exc}', throttle_duration_sec=5.0)
         self.counters['derived_sent'] += sent
@@ -284,8 +315,29 @@ class LiveViewNode(Node):
             tensions=list(wires.effort),
             force=(wrench.wrench.force.x, wrench.wrench.force.y, wrench.wrench.force.z) if wrench else (0.0,) * 3,
             stamp_s=stamp_to_s(wires.header.stamp))
-        scene = scene_update(self.geometry, state, self.settings['deflection_scale'])
+        scene = scene_update(self.geometry, state, self.settings['deflection_scale'], self._compliance())
         return sent + fox.log_json(PREFIX + 'scene', scene, now)
+
+    def _compliance(self) -> Any:
+        """The measured translational compliance (3, 3) [m/N] of the newest 6x6 fit (its K inverted when no C came
+        yet), or None without a fit."""
+        if self.k6 is None:
+            return None
+        if self.c6 is not None:
+            return stiffness6.decode(self.c6)[0, :3, :3]
+        k = stiffness6.decode(self.k6)[0]
+        return np.linalg.inv(k)[:3, :3] if np.all(np.isfinite(k)) and np.linalg.cond(k) < 1e12 else None
+
+    def _send_stiffness6(self, fox: FoxgloveServer, dirty: set[str], now: int) -> int:
+        """The 6x6 channel, once the six-axis estimator published something (never on a rig without it)."""
+        if 'stiffness6' not in dirty or (self.k6 is None and self.status6 is None):
+            return 0
+        if not fox.wanted(PREFIX + 'stiffness6'):
+            return 0
+        if self.tangent6 is None:
+            self.tangent6 = reference_at_rest(self.geometry).tangent
+        message = stiffness6.stiffness6_message(self.k6, self.tangent6, self.status6)
+        return int(fox.log_json(PREFIX + 'stiffness6', message, now))
 
     # --- services through the bridge ---
     def _caller(self, name: str) -> Callable[[], tuple[bool, str]]:

@@ -1,5 +1,6 @@
 """The crane as a ``foxglove.SceneUpdate`` (JSON encoding): overhead triangle, platform at its live pose with the
-deflection exaggerated, the six wires coloured by tension (slack ones grey and dashed), the applied force as an arrow.
+deflection exaggerated, the six wires coloured by tension (slack ones grey and dashed), the applied force as an arrow,
+and, given a measured 6×6 compliance, the translational compliance ellipsoid at the platform.
 
 Frame ``crane_view``: the paper's ``crane_base`` turned 180° about x (x, −y, −z), so z points up as 3D viewers
 expect; the platform's rest centre is the origin and the overhead triangle is at z = h. The drawn platform is at
@@ -25,6 +26,13 @@ _FLIP = np.diag([1.0, -1.0, -1.0])
 SLACK_TENSION_N = 1e-6
 #: Arrow length per newton of applied force [m/N].
 ARROW_M_PER_N = 0.02
+#: The compliance ellipsoid is the platform centre's displacement under a force of this size in every direction,
+#: drawn at the deflection scale: its radii are the translational compliance's principal values [m/N] times
+#: ``COMPLIANCE_FORCE_N × deflection_scale`` (the scene's metadata ``compliance_scale``) [N].
+COMPLIANCE_FORCE_N = 25.0
+#: Points of each principal section of the ellipsoid (a LINE_LOOP).
+ELLIPSE_POINTS = 48
+ELLIPSOID_COLOR = {'r': 0.75, 'g': 0.1, 'b': 0.75, 'a': 1.0}
 
 _Color = dict[str, float]
 
@@ -86,9 +94,35 @@ def _dashes(a: np.ndarray, b: np.ndarray, count: int = 12) -> list[dict[str, flo
     return out
 
 
-def scene_update(geometry: CraneGeometry, state: CraneState, scale: float) -> dict[str, Any]:
+def compliance_ellipsoid(compliance: Any, centre: Any, scale: float) -> list[dict[str, Any]]:
+    """The compliance ellipsoid {C·f : |f| = 1} × ``scale`` around ``centre`` (crane_view, m) as three LINE_LOOPs,
+    its principal sections (each in the plane of two principal axes). ``compliance``: the (3, 3) translational block
+    of C = K⁻¹ in crane_base [m/N] (its symmetric part is drawn); no lines when it is not finite and positive
+    definite (a fit too poor to have an ellipsoid)."""
+    c = np.asarray(compliance, dtype=float)
+    if c.shape != (3, 3) or not np.all(np.isfinite(c)):
+        return []
+    values, axes = np.linalg.eigh(_FLIP @ (0.5 * (c + c.T)) @ _FLIP.T)  # crane_view
+    if not values[0] > 0.0:
+        return []
+    radii = values * scale
+    t = np.linspace(0.0, 2.0 * math.pi, ELLIPSE_POINTS, endpoint=False)
+    origin = np.asarray(centre, dtype=float)
+    loops = []
+    for i, j in ((0, 1), (1, 2), (2, 0)):
+        points = origin + np.outer(np.cos(t), radii[i] * axes[:, i]) + np.outer(np.sin(t), radii[j] * axes[:, j])
+        loops.append({'type': 1, 'pose': _pose(), 'thickness': 2.0, 'scale_invariant': True,
+                      'points': [_vec(p) for p in points], 'color': dict(ELLIPSOID_COLOR), 'colors': [],
+                      'indices': []})
+    return loops
+
+
+def scene_update(geometry: CraneGeometry, state: CraneState, scale: float,
+                 compliance: Any = None) -> dict[str, Any]:
     """The ``foxglove.SceneUpdate`` of ``state`` (a dict for JSON); one entity ``crane`` whose metadata holds each
-    wire's tension as published (``tension.wire_i``, repr of the float) and the scale."""
+    wire's tension as published (``tension.wire_i``, repr of the float) and the scale. ``compliance``: the measured
+    translational compliance (3, 3) [m/N], crane_base, or None: its ellipsoid (:func:`compliance_ellipsoid`) at
+    the drawn platform centre, ``COMPLIANCE_FORCE_N × scale`` (metadata ``compliance_scale``), after the wires."""
     top = geometry.top_points @ _FLIP.T  # (6, 3) crane_view
     centre, rot = _exaggerated(state, scale)
     platform = (centre + geometry.platform_points @ rot.T) @ _FLIP.T
@@ -128,6 +162,16 @@ def scene_update(geometry: CraneGeometry, state: CraneState, scale: float) -> di
                   'scale_invariant': True, 'color': _color(0.1, 0.1, 0.1),
                   'text': f'deflection shown x{scale:g}'})
     metadata = [{'key': 'deflection_scale', 'value': repr(float(scale))}]
+    if compliance is not None:
+        ellipsoid_scale = COMPLIANCE_FORCE_N * scale
+        loops = compliance_ellipsoid(compliance, platform_centre, ellipsoid_scale)
+        if loops:
+            lines += loops
+            metadata += [{'key': 'compliance_scale', 'value': repr(float(ellipsoid_scale))},
+                         {'key': 'compliance_force_n', 'value': repr(COMPLIANCE_FORCE_N)}]
+            texts.append({'pose': _pose(platform_centre + np.array([0.0, 0.0, -0.04])), 'billboard': True,
+                          'font_size': 12.0, 'scale_invariant': True, 'color': dict(ELLIPSOID_COLOR),
+                          'text': f'compliance: {COMPLIANCE_FORCE_N:g} N x{scale:g}'})
     metadata += [{'key': f'tension.{name}', 'value': repr(tensions[i]) if i < len(tensions) else 'nan'}
                  for i, name in enumerate(WIRE_NAMES)]
     entity = {'timestamp': stamp, 'frame_id': FRAME, 'id': 'crane', 'lifetime': {'sec': 0, 'nsec': 0},

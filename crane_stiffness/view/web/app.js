@@ -2,17 +2,30 @@
 // the live_view node on plain canvases. No library: JSON channels, binary messageData frames (opcode 1:
 // u32 subscription id, u64 log time, payload).
 'use strict';
-const CHANNELS = ['xy', 'fit_lines', 'prediction', 'estimate', 'status', 'wires', 'scene'];
+const CHANNELS = ['xy', 'fit_lines', 'prediction', 'estimate', 'status', 'wires', 'scene', 'stiffness6'];
 const state = { messages: 0, lastCount: 0, data: {}, dirty: new Set(), drawnAt: 0 };
 // What each channel changes on the page: only that part is drawn again (the rest keeps its pixels and DOM).
 const PART = { xy: 'plot', fit_lines: 'plot', prediction: 'plot', estimate: 'text', status: 'text', wires: 'wires',
-  scene: 'scene' };
+  scene: 'scene', stiffness6: 'stiffness6' };
 // At most this often [ms]: messages come at 70-80/s; a person reads the page at a few updates a second.
 const DRAW_PERIOD_MS = 100;
 // Status levels (crane_stiffness.status), each a CSS class level-<n>: -1 WAITING (not begun), 0 OK, 1 WARN, 2 ERROR,
 // 3 STALE (data that was flowing stopped). The status channel names them (level_name).
 
 function fmt(v, digits) { return v === null || v === undefined ? '–' : Number(v).toPrecision(digits); }
+// 4 significant digits, compact: 7.169e4, -1.790e4, 0.000
+function compact(v) {
+  if (v === null || v === undefined) return '–';
+  const a = Math.abs(v);
+  return (a !== 0 && (a >= 1e4 || a < 1e-2) ? Number(v).toExponential(3).replace('e+', 'e') : Number(v).toPrecision(4));
+}
+// measured / tangent - 1 as a colour: blue (−2 % and below), white (0), red (+2 % and above)
+const SATURATION = 0.02;
+function diverging(rel) {
+  const t = Math.max(-1, Math.min(1, rel / SATURATION));
+  const fade = Math.round(255 * (1 - Math.abs(t)));
+  return t >= 0 ? `rgb(255,${fade},${fade})` : `rgb(${fade},${fade},255)`;
+}
 
 function connect(config) {
   const ws = new WebSocket(`ws://${location.hostname}:${config.ws_port}`, [config.subprotocol]);
@@ -106,6 +119,38 @@ function updateWires() {
     cells[1].textContent = w.slack ? 'slack' : fmt(w.tension, 5) + ' N';
     cells[2].textContent = `${fmt(w.length * 1000, 6)} mm`;
   });
+}
+
+function updateStiffness6() {
+  // The 6×6 panel: hidden until the channel arrives; the table made once (header and 36 cells), its cells rewritten.
+  const k6 = state.data.stiffness6;
+  if (!k6) return;
+  document.getElementById('stiffness6-panel').hidden = false;
+  const table = document.getElementById('stiffness6');
+  if (table.rows.length !== 7) {
+    table.innerHTML = '<tr><th></th>' + k6.rows[0].cells.map((c) => `<th>${c.displacement}</th>`).join('') + '</tr>' +
+      k6.rows.map((r) => `<tr><th>${r.load}</th>` + r.cells.map(() => '<td class="k6"></td>').join('') + '</tr>')
+        .join('');
+  }
+  k6.rows.forEach((row, i) => row.cells.forEach((c, j) => {
+    const td = table.rows[i + 1].cells[j + 1];
+    td.textContent = compact(c.measured);
+    td.dataset.value = c.measured === null ? '' : String(c.measured);
+    td.dataset.relative = c.relative_error === null ? '' : String(c.relative_error);
+    td.title = `${row.load}/${c.displacement}: ${c.measured === null ? '–' : c.measured} ` +
+      `[${c.ci95_low === null ? '–' : c.ci95_low}, ${c.ci95_high === null ? '–' : c.ci95_high}], tangent ${c.tangent}`;
+    const cls = c.model_zero ? 'k6 model-zero' : 'k6';
+    if (td.className !== cls) td.className = cls;
+    td.style.background = c.model_zero || c.relative_error === null ? '' : diverging(c.relative_error);
+  }));
+  const badge = document.getElementById('stiffness6-level');
+  badge.className = `level-${k6.level}`;
+  badge.textContent = k6.level_name;
+  badge.dataset.level = k6.level;
+  const k2 = k6.k2;
+  document.getElementById('stiffness6-k2').textContent = `K2 = ${compact(k2.measured)} ` +
+    `[${compact(k2.ci95_low)}, ${compact(k2.ci95_high)}] N/rad, tangent ${compact(k2.tangent)}`;
+  document.getElementById('stiffness6-message').textContent = k6.message;
 }
 
 function drawPlot() {
@@ -209,7 +254,12 @@ function drawScene() {
     ctx.fillStyle = rgba(t.color); ctx.fillText(t.text, u + 3, v);
   }
   const scale = e.metadata.find((kv) => kv.key === 'deflection_scale');
-  if (scale) document.getElementById('scale').textContent = `deflection shown ×${Number(scale.value)}`;
+  const ellipsoid = e.metadata.find((kv) => kv.key === 'compliance_force_n');
+  canvas.dataset.ellipsoid = ellipsoid ? 'drawn' : '';
+  if (scale) {
+    document.getElementById('scale').textContent = `deflection shown ×${Number(scale.value)}` +
+      (ellipsoid ? `; compliance ellipsoid (magenta): displacement under ${Number(ellipsoid.value)} N` : '');
+  }
 }
 
 function frame(now) {
@@ -221,6 +271,7 @@ function frame(now) {
     if (parts.has('wires')) updateWires();
     if (parts.has('plot')) drawPlot();
     if (parts.has('scene')) drawScene();
+    if (parts.has('stiffness6')) updateStiffness6();
   }
   requestAnimationFrame(frame);
 }

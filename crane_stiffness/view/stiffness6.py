@@ -1,0 +1,93 @@
+"""The 6×6 stiffness as the live view shows it (``/live_view/stiffness6``): the latest K the six-axis estimator
+published (/stiffness6/stiffness, with its 95 % interval) entry by entry against the model's exact tangent at rest
+for the view's geometry (crane_stiffness.full6.reference), the coupling K2 measured, with its interval, and the
+tangent's, and the estimator's status (/stiffness6/status). Pure numpy, no ROS.
+
+Rows are the loads fx fy fz mx my mz, columns the displacements u_x u_y u_z θ_x θ_y θ_z (crane_stiffness.axes,
+crane_stiffness.full6.reference.DISPLACEMENTS); units as there (N/m, N/rad, N·m/rad). An entry the model has at zero
+(the tangent's rounding noise, below :data:`MODEL_ZERO` of the geometric mean of its row's and column's diagonal
+entries) has no relative error: ``model_zero`` says so.
+"""
+from __future__ import annotations
+
+import math
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from crane_stiffness.axes import AXES
+from crane_stiffness.full6.reference import DISPLACEMENTS, k2_of
+from crane_stiffness.status import NAMES, read_level
+from crane_stiffness.view import jsonschema as js
+from crane_stiffness.view.errors import ViewError
+
+#: A tangent entry at most this fraction of sqrt(|K_ii K_jj|) is zero in the model (unit-consistent across blocks).
+MODEL_ZERO = 1e-9
+
+
+def _num(value: float) -> float | None:
+    return float(value) if math.isfinite(value) else None
+
+
+def decode(data: Sequence[float]) -> np.ndarray:
+    """(3, 6, 6): value, ci95_low, ci95_high of a /stiffness6/* Float64MultiArray's data (ViewError otherwise)."""
+    cube = np.asarray(data, dtype=float)
+    if cube.size != 108:
+        raise ViewError(f'{cube.size} values: a /stiffness6 matrix has 3 x 6 x 6 = 108')
+    return cube.reshape(3, 6, 6)
+
+
+def model_zero(tangent: np.ndarray) -> np.ndarray:
+    """(6, 6) bool: the entries of ``tangent`` that are zero in the model (see :data:`MODEL_ZERO`)."""
+    d = np.abs(np.diag(tangent))
+    return np.abs(tangent) <= MODEL_ZERO * np.sqrt(np.outer(d, d))
+
+
+def _k2_interval(values: Mapping[str, str]) -> tuple[float, float]:
+    low, _, high = values.get('k2_ci95', '').partition(' .. ')
+    try:
+        return float(low), float(high)
+    except ValueError:
+        return math.nan, math.nan
+
+
+def stiffness6_message(stiffness: Sequence[float] | None, tangent: np.ndarray,
+                       status: tuple[int, str, Mapping[str, str]] | None) -> dict[str, Any]:
+    """The channel's message. ``stiffness``: the newest /stiffness6/stiffness data (None: no fit yet); ``tangent``:
+    the model's K (6, 6); ``status``: (published level, message, key-values) of the newest /stiffness6/status (None:
+    none yet). ``fit`` says whether a measured K is there; K2 measured is read from it
+    (:func:`~crane_stiffness.full6.reference.k2_of`, what the estimator fits), its interval from the status."""
+    tangent = np.asarray(tangent, dtype=float)
+    zero = model_zero(tangent)
+    cube = decode(stiffness) if stiffness is not None else np.full((3, 6, 6), np.nan)
+    k, low, high = cube
+    with np.errstate(divide='ignore', invalid='ignore'):
+        relative = np.where(zero, np.nan, k / tangent - 1.0)
+    rows = [{'load': AXES[i], 'cells': [
+        {'displacement': DISPLACEMENTS[j], 'measured': _num(k[i, j]), 'ci95_low': _num(low[i, j]),
+         'ci95_high': _num(high[i, j]), 'tangent': float(tangent[i, j]), 'relative_error': _num(relative[i, j]),
+         'model_zero': bool(zero[i, j])} for j in range(6)]} for i in range(6)]
+    k2_low, k2_high = _k2_interval(status[2]) if status is not None else (math.nan, math.nan)
+    k2_measured, k2_tangent = k2_of(k), k2_of(tangent)
+    if status is None:
+        level, level_name, message = -1, NAMES[-1], ''
+    else:
+        level = read_level(status[0], status[1])
+        level_name, message = NAMES.get(level, str(level)), status[1]
+    return {'fit': stiffness is not None, 'level': level, 'level_name': level_name, 'message': message,
+            'k2': {'measured': _num(k2_measured), 'ci95_low': _num(k2_low), 'ci95_high': _num(k2_high),
+                   'tangent': _num(k2_tangent),
+                   'relative_error': _num(k2_measured / k2_tangent - 1.0) if k2_tangent else None},
+            'rows': rows}
+
+
+#: The channel's JSON schema (every field typed: see crane_stiffness.view.jsonschema).
+SCHEMA = js.obj({
+    'fit': js.BOOLEAN, 'level': js.INTEGER, 'level_name': js.STRING, 'message': js.STRING,
+    'k2': js.obj({k: js.NUMBER for k in ('measured', 'ci95_low', 'ci95_high', 'tangent', 'relative_error')}),
+    'rows': js.array(js.obj({'load': js.STRING, 'cells': js.array(js.obj({
+        'displacement': js.STRING, 'measured': js.NUMBER, 'ci95_low': js.NUMBER, 'ci95_high': js.NUMBER,
+        'tangent': js.NUMBER, 'relative_error': js.NUMBER, 'model_zero': js.BOOLEAN}))}))},
+    'crane_stiffness.Stiffness6')
+
+__all__ = ['MODEL_ZERO', 'SCHEMA', 'decode', 'model_zero', 'stiffness6_message']
