@@ -48,8 +48,8 @@ def test_transport_argument_chooses_the_nodes():
                                              'drivers': str(CONFIG / 'drivers_ati_labjack.yaml')})]
     assert hw == ['crane_model', 'netft', 'modbus_lvdt', 'stiffness_estimator', 'session_recorder', 'load_program']
     # Where each node belongs in the lab (the network test splits the rig by it), and one launch per PC.
-    assert {n.name for n in NODES if n.machine == 'analysis'} == {'stiffness_estimator', 'session_recorder',
-                                                                 'live_view'}
+    assert {n.name for n in NODES if n.machine == 'analysis'} == {'stiffness_estimator', 'stiffness6_estimator',
+                                                                 'session_recorder', 'live_view'}
     daq = {n.name: n for n in rig_nodes(CONFIG, {'transport': 'drivers', 'machine': 'daq'})}
     analysis = [n.name for n in rig_nodes(CONFIG, {'transport': 'drivers', 'machine': 'analysis'})]
     assert analysis == ['stiffness_estimator', 'session_recorder']
