@@ -31,7 +31,7 @@ from crane_stiffness.axes import AXES  # noqa: E402
 from crane_stiffness.full6.reference import DISPLACEMENTS, K2_ENTRIES  # noqa: E402
 
 if TYPE_CHECKING:
-    from crane_stiffness.analysis.full6 import Full6Analysis
+    from crane_stiffness.analysis.full6_result import Full6Analysis
 
 #: Smallest half-range of the error colour scale [%]: errors well inside it look pale, as they should.
 MIN_ERROR_SCALE_PCT = 1.0

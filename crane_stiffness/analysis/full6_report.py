@@ -16,7 +16,7 @@ from crane_stiffness.axes import AXES
 from crane_stiffness.full6.reference import DISPLACEMENTS
 
 if TYPE_CHECKING:
-    from crane_stiffness.analysis.full6 import Full6Analysis
+    from crane_stiffness.analysis.full6_result import Full6Analysis
 
 
 def _pct(value: Any) -> str:
