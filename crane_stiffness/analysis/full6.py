@@ -33,12 +33,10 @@ from crane_stiffness.analysis.full6_load import FULL6_TOPICS, Full6Data, load_fu
 from crane_stiffness.analysis.full6_result import Full6Analysis
 from crane_stiffness.full6.identify import ComplianceFit, identify
 from crane_stiffness.full6.pairs import LabelledPairs, full6_pairs
-from crane_stiffness.full6.reference import K2_ENTRIES, Reference, entry_name, k2_of, reference_at_rest
+from crane_stiffness.full6.reference import (K2_ENTRIES, ZERO_COUPLING, Reference, entry_name, k2_of,
+                                            reference_at_rest, relative_error, structural_zeros)
 from crane_stiffness.status import NAMES
 
-#: A tangent entry smaller than this share of sqrt(|K_ii·K_jj|) is a zero of the model (a coupling the symmetry
-#: removes): no relative error, only whether the interval holds it.
-ZERO_COUPLING = 1e-6
 #: Units of K's entries (row a load, column a displacement); C's are their reciprocals.
 FORCE_UNITS = ('N/m', 'N/rad')
 MOMENT_UNITS = ('N·m/m', 'N·m/rad')
@@ -47,18 +45,6 @@ MOMENT_UNITS = ('N·m/m', 'N·m/rad')
 def stiffness_unit(row: int, column: int) -> str:
     """The unit of K[row, column]: N/m, N/rad, N·m/m or N·m/rad."""
     return (FORCE_UNITS if row < 3 else MOMENT_UNITS)[0 if column < 3 else 1]
-
-
-def structural_zeros(tangent: NDArray[np.float64]) -> NDArray[np.bool_]:
-    """(6, 6) True where the tangent's entry is a zero of the model (:data:`ZERO_COUPLING`)."""
-    d = np.sqrt(np.abs(np.outer(np.diag(tangent), np.diag(tangent))))
-    return np.abs(tangent) <= ZERO_COUPLING * d
-
-
-def relative_error(measured: NDArray[np.float64], reference: NDArray[np.float64]) -> NDArray[np.float64]:
-    """measured / reference − 1 (6, 6), NaN at the reference's zeros (:func:`structural_zeros`)."""
-    zero = structural_zeros(reference)
-    return np.where(zero, np.nan, measured / np.where(zero, 1.0, reference) - 1.0)
 
 
 def _matrices(value: NDArray[np.float64], low: NDArray[np.float64], high: NDArray[np.float64],

@@ -94,5 +94,25 @@ def reference_at_rest(geometry: CraneGeometry) -> Reference:
                      paper_coefficients(geometry) if applies else None)
 
 
-__all__ = ['DISPLACEMENTS', 'K2_ENTRIES', 'Reference', 'entry_name', 'k2_of', 'k2_weights', 'paper_applies',
-           'reference_at_rest']
+#: A tangent entry smaller than this share of sqrt(|K_ii·K_jj|) is a zero of the model (a coupling the symmetry
+#: removes; the computed tangent holds rounding noise there, ~1e-13 of it): no relative error, only whether an
+#: interval holds it. Used by the offline analysis and the live view alike.
+ZERO_COUPLING = 1e-6
+
+
+def structural_zeros(tangent: ArrayLike) -> NDArray[np.bool_]:
+    """(6, 6) True where the tangent's entry is a zero of the model (:data:`ZERO_COUPLING`)."""
+    t = np.asarray(tangent, dtype=float)
+    d = np.sqrt(np.abs(np.outer(np.diag(t), np.diag(t))))
+    return np.abs(t) <= ZERO_COUPLING * d
+
+
+def relative_error(measured: ArrayLike, reference: ArrayLike) -> NDArray[np.float64]:
+    """measured / reference − 1 (6, 6), NaN at the reference's zeros (:func:`structural_zeros`)."""
+    ref = np.asarray(reference, dtype=float)
+    zero = structural_zeros(ref)
+    return np.where(zero, np.nan, np.asarray(measured, dtype=float) / np.where(zero, 1.0, ref) - 1.0)
+
+
+__all__ = ['DISPLACEMENTS', 'K2_ENTRIES', 'ZERO_COUPLING', 'Reference', 'entry_name', 'k2_of', 'k2_weights',
+           'paper_applies', 'reference_at_rest', 'relative_error', 'structural_zeros']

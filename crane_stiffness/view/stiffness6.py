@@ -5,8 +5,8 @@ tangent's, and the estimator's status (/stiffness6/status). Pure numpy, no ROS.
 
 Rows are the loads fx fy fz mx my mz, columns the displacements u_x u_y u_z θ_x θ_y θ_z (crane_stiffness.axes,
 crane_stiffness.full6.reference.DISPLACEMENTS); units as there (N/m, N/rad, N·m/rad). An entry the model has at zero
-(the tangent's rounding noise, below :data:`MODEL_ZERO` of the geometric mean of its row's and column's diagonal
-entries) has no relative error: ``model_zero`` says so.
+(crane_stiffness.full6.reference.structural_zeros, the rule the offline analysis uses) has no relative error:
+``model_zero`` says so.
 """
 from __future__ import annotations
 
@@ -16,13 +16,11 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from crane_stiffness.axes import AXES
-from crane_stiffness.full6.reference import DISPLACEMENTS, k2_of
+from crane_stiffness.full6.reference import DISPLACEMENTS, k2_of, relative_error, structural_zeros
 from crane_stiffness.status import NAMES, read_level
 from crane_stiffness.view import jsonschema as js
 from crane_stiffness.view.errors import ViewError
 
-#: A tangent entry at most this fraction of sqrt(|K_ii K_jj|) is zero in the model (unit-consistent across blocks).
-MODEL_ZERO = 1e-9
 
 
 def _num(value: float) -> float | None:
@@ -35,12 +33,6 @@ def decode(data: Sequence[float]) -> np.ndarray:
     if cube.size != 108:
         raise ViewError(f'{cube.size} values: a /stiffness6 matrix has 3 x 6 x 6 = 108')
     return cube.reshape(3, 6, 6)
-
-
-def model_zero(tangent: np.ndarray) -> np.ndarray:
-    """(6, 6) bool: the entries of ``tangent`` that are zero in the model (see :data:`MODEL_ZERO`)."""
-    d = np.abs(np.diag(tangent))
-    return np.abs(tangent) <= MODEL_ZERO * np.sqrt(np.outer(d, d))
 
 
 def _k2_interval(values: Mapping[str, str]) -> tuple[float, float]:
@@ -58,11 +50,10 @@ def stiffness6_message(stiffness: Sequence[float] | None, tangent: np.ndarray,
     none yet). ``fit`` says whether a measured K is there; K2 measured is read from it
     (:func:`~crane_stiffness.full6.reference.k2_of`, what the estimator fits), its interval from the status."""
     tangent = np.asarray(tangent, dtype=float)
-    zero = model_zero(tangent)
+    zero = structural_zeros(tangent)
     cube = decode(stiffness) if stiffness is not None else np.full((3, 6, 6), np.nan)
     k, low, high = cube
-    with np.errstate(divide='ignore', invalid='ignore'):
-        relative = np.where(zero, np.nan, k / tangent - 1.0)
+    relative = relative_error(k, tangent)  # (NaN where the fit is missing: k is NaN then)
     rows = [{'load': AXES[i], 'cells': [
         {'displacement': DISPLACEMENTS[j], 'measured': _num(k[i, j]), 'ci95_low': _num(low[i, j]),
          'ci95_high': _num(high[i, j]), 'tangent': float(tangent[i, j]), 'relative_error': _num(relative[i, j]),
@@ -90,4 +81,4 @@ SCHEMA = js.obj({
         'tangent': js.NUMBER, 'relative_error': js.NUMBER, 'model_zero': js.BOOLEAN}))}))},
     'crane_stiffness.Stiffness6')
 
-__all__ = ['MODEL_ZERO', 'SCHEMA', 'decode', 'model_zero', 'stiffness6_message']
+__all__ = ['SCHEMA', 'decode', 'stiffness6_message']
