@@ -163,3 +163,13 @@ def bag(tmp_path_factory, messages):
     """A bag of ``messages`` written by our writer, small chunks."""
     from helpers.bags import write_bag
     return write_bag(tmp_path_factory.mktemp('bags') / 'session', messages, chunk_size=16 * 1024)
+
+
+@pytest.fixture(scope='session')
+def chromium_path() -> str:
+    """Debian's ``chromium`` for the page tests (helpers.browser); its absence fails them, never skips them."""
+    from helpers.browser import chromium
+    try:
+        return chromium()
+    except RuntimeError as exc:  # the check cannot be made without it: a failure, never a skip
+        pytest.fail(f'headless Chromium is needed for the page test: {exc}')

@@ -8,24 +8,17 @@ import shutil
 import time
 
 import numpy as np
-import pytest
 from matplotlib import image
 
 from crane_stiffness.launcher.rosrun import installed_config
 from helpers import REPO
-from helpers.browser import PATIENCE_S, Browser, chromium, crop
+from helpers.browser import PATIENCE_S, Browser, crop
 from helpers.live_rig import live_rig, wait_for_pairs
 
 SHOTS = REPO / 'out' / 'live_view'
 LOADING_BLUE = np.array([0x1f, 0x77, 0xb4]) / 255.0  # the page's colour of the loading points (style.css)
 
 
-@pytest.fixture(scope='module')
-def chromium_path() -> str:
-    try:
-        return chromium()
-    except RuntimeError as exc:  # the check cannot be made without it: a failure, never a skip
-        pytest.fail(f'headless Chromium is needed for the page test: {exc}')
 
 
 def test_page_shows_the_estimators_estimate_and_points(install_tree, rclpy_context, tmp_path, chromium_path):

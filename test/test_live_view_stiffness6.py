@@ -28,7 +28,7 @@ from crane_stiffness.rosnode.qos import LATCHED_QOS, RELIABLE_QOS
 from crane_stiffness.status import WARN
 from crane_stiffness.view.scene import COMPLIANCE_FORCE_N
 from helpers import REPO
-from helpers.browser import Browser, chromium
+from helpers.browser import Browser
 from helpers.foxglove_client import FoxgloveClient
 
 pytestmark = pytest.mark.ros
@@ -167,12 +167,6 @@ def test_the_view_sends_the_6x6_only_once_published_and_draws_the_compliance_ell
             client.close()
 
 
-@pytest.fixture(scope='module')
-def chromium_path() -> str:
-    try:
-        return chromium()
-    except RuntimeError as exc:  # the check cannot be made without it: a failure, never a skip
-        pytest.fail(f'headless Chromium is needed for the page test: {exc}')
 
 
 def test_the_page_shows_the_6x6_panel_with_the_published_values(rclpy_context, tmp_path, chromium_path):
