@@ -54,7 +54,8 @@ POSE_SENSOR_POSE = '/pose_sensor/pose'
 # The 6x6 identification (crane_stiffness.full6, node stiffness6_estimator), std_msgs/Float64MultiArray laid out as
 # dims ('quantity', 3: value, ci95_low, ci95_high) x ('row', 6) x ('column', 6), row-major; rows and columns in the
 # order fx fy fz mx my mz (loads) and ux uy uz thx thy thz (deflections): STIFFNESS6 K [N/m, N/rad, N·m/m, N·m/rad],
-# COMPLIANCE6 C = K^-1. STIFFNESS6_STATUS: diagnostic_msgs/DiagnosticArray (level, message, the numbers behind it).
+# COMPLIANCE6 C = K^-1. Both written and read only through crane_stiffness.stiffness6_layout (labels, strides, the
+# (3, 6, 6) array). STIFFNESS6_STATUS: diagnostic_msgs/DiagnosticArray (level, message, the numbers behind it).
 STIFFNESS6 = '/stiffness6/stiffness'
 COMPLIANCE6 = '/stiffness6/compliance'
 STIFFNESS6_STATUS = '/stiffness6/status'

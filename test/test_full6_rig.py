@@ -10,7 +10,8 @@ import pytest
 from crane_stiffness.analysis.full6 import analyze_full6
 from crane_stiffness.launcher import rosrun
 from crane_stiffness.launcher.rig import config_files, run_rig
-from crane_stiffness.launcher.summary6 import decode_matrix, summarize6, verdict6
+from crane_stiffness import stiffness6_layout
+from crane_stiffness.launcher.summary6 import summarize6, verdict6
 
 pytestmark = pytest.mark.ros
 SEEDS = {'load_cell': {'seed': 21}, 'lvdt': {'seed': 22}, 'pose_sensor': {'seed': 23}}
@@ -29,7 +30,7 @@ def test_program_full6_measures_the_whole_matrix_live_and_the_bag_gives_it_again
     assert summary['k2']['same_sign'] and abs(summary['k2']['relative_error']) < 0.03
     # the same fit from the bag: the pairs the live estimator fitted, to rounding
     offline = analyze_full6(tmp_path / 'bags' / 's6', tmp_path / 'analysis')
-    live_k, live_low, live_high = decode_matrix(observer.stiffness6)
+    live_k, live_low, live_high = stiffness6_layout.decode(observer.stiffness6)
     off = offline.stiffness
     np.testing.assert_allclose(np.array(off['value']), live_k, rtol=1e-9, atol=1e-9 * np.abs(live_k).max())
     np.testing.assert_allclose(np.array(off['low']), live_low, rtol=1e-9, atol=1e-9 * np.abs(live_k).max())

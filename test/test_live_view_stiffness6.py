@@ -18,12 +18,12 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
 
-from crane_stiffness import topics
+from crane_stiffness import stiffness6_layout, topics
 from crane_stiffness.full6.reference import k2_of, reference_at_rest
 from crane_stiffness.model.geometry import WIRE_NAMES
 from crane_stiffness.nodes.live_view import LiveViewNode
-from crane_stiffness.nodes.stiffness6_estimator import matrix_message
 from crane_stiffness.rosnode.qos import LATCHED_QOS, RELIABLE_QOS
 from crane_stiffness.status import WARN
 from crane_stiffness.view.scene import COMPLIANCE_FORCE_N
@@ -44,10 +44,8 @@ class _Rig:
         self.view = LiveViewNode(context=ctx, parameter_overrides=[
             Parameter('port', value=0), Parameter('http_port', value=0), Parameter('rate_hz', value=20.0)])
         self.pub = Node('stiffness6_test_publisher', context=ctx)
-        self.k = self.pub.create_publisher(type(matrix_message(*np.zeros((3, 6, 6)))), topics.STIFFNESS6,
-                                           LATCHED_QOS)
-        self.c = self.pub.create_publisher(type(matrix_message(*np.zeros((3, 6, 6)))), topics.COMPLIANCE6,
-                                           LATCHED_QOS)
+        self.k = self.pub.create_publisher(Float64MultiArray, topics.STIFFNESS6, LATCHED_QOS)
+        self.c = self.pub.create_publisher(Float64MultiArray, topics.COMPLIANCE6, LATCHED_QOS)
         self.status = self.pub.create_publisher(DiagnosticArray, topics.STIFFNESS6_STATUS, LATCHED_QOS)
         self.wires = self.pub.create_publisher(JointState, topics.WIRE_STATES, RELIABLE_QOS)
         self.executor = SingleThreadedExecutor(context=ctx)
@@ -68,8 +66,8 @@ class _Rig:
 
     def publish_fit(self, k: np.ndarray, k2_interval: tuple[float, float]) -> None:
         c = np.linalg.inv(k)
-        self.k.publish(matrix_message(k, k - 50.0, k + 75.0))
-        self.c.publish(matrix_message(c, c * 0.99, c * 1.01))
+        self.k.publish(stiffness6_layout.to_message(k, k - 50.0, k + 75.0))
+        self.c.publish(stiffness6_layout.to_message(c, c * 0.99, c * 1.01))
         status = DiagnosticStatus(name='stiffness6_estimator: 6x6', hardware_id='crane', level=bytes([WARN]),
                                   message='condition 2.1e4 above 1e4')
         status.values = [KeyValue(key='k2', value=f'{k2_of(k):.8g}'),

@@ -9,6 +9,7 @@ import time
 import numpy as np
 import pytest
 
+from crane_stiffness import stiffness6_layout
 from crane_stiffness.full6.design import d_optimal_design
 from crane_stiffness.full6.identify import identify
 from crane_stiffness.full6.pairs import full6_pairs
@@ -127,14 +128,15 @@ def test_the_live_6x6_fit_equals_the_offline_one_and_a_stopped_pose_stream_is_st
         tangent = reference_at_rest(LAB).tangent
         # (a 17 s program, a sixth of config/program_full6.yaml: its diagonal within 2 %, the full one's within 1 %)
         assert np.all(np.abs(np.diag(fit.stiffness) / np.diag(tangent) - 1) < 0.02)
-        # what the node published: the fit, laid out quantity x row x column
+        # what the node published: the fit, laid out quantity x row x column (crane_stiffness.stiffness6_layout)
         deadline = time.monotonic() + 30
-        while not got['k'] or not np.allclose(np.reshape(got['k'][-1].data, (3, 6, 6))[0], fit.stiffness, rtol=1e-12):
+        while not got['k'] or not np.allclose(stiffness6_layout.decode(got['k'][-1].data)[0], fit.stiffness,
+                                              rtol=1e-12):
             assert time.monotonic() < deadline, 'no /stiffness6/stiffness with the fit'
             executor.spin_once(timeout_sec=0.05)
         message = got['k'][-1]
-        assert [(d.label, d.size) for d in message.layout.dim] == [('quantity', 3), ('row', 6), ('column', 6)]
-        cube = np.reshape(message.data, (3, 6, 6))
+        assert stiffness6_layout.dims_of(message) == (('quantity', 3, 108), ('row', 6, 36), ('column', 6, 6))
+        cube = stiffness6_layout.decode_message(message)
         np.testing.assert_array_equal(cube[1], fit.stiffness_low)
         np.testing.assert_array_equal(cube[2], fit.stiffness_high)
         # the pose sensor stops; the load cell and the program go on, stamped now: STALE naming the pose stream

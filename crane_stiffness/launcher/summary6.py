@@ -7,6 +7,7 @@ from typing import Any
 
 import numpy as np
 
+from crane_stiffness import stiffness6_layout
 from crane_stiffness.axes import AXES
 from crane_stiffness.full6.reference import k2_of, reference_at_rest
 from crane_stiffness.params.files import load_params
@@ -18,16 +19,11 @@ DIAGONAL_TOLERANCE = 0.01
 K2_TOLERANCE = 0.03
 
 
-def decode_matrix(data: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(value, ci95_low, ci95_high), each (6, 6), of a /stiffness6/* Float64MultiArray's data."""
-    cube = np.asarray(data, dtype=float).reshape(3, 6, 6)
-    return cube[0], cube[1], cube[2]
-
-
 def summarize6(crane_file: str | Path, stiffness: Any, status: tuple[str, str, dict[str, str]] | None
                ) -> dict[str, Any]:
-    """The summary of a six-axis run: ``stiffness`` the last /stiffness6/stiffness data (None: none published),
-    ``status`` (level name, message, values) of the last /stiffness6/status."""
+    """The summary of a six-axis run: ``stiffness`` the last /stiffness6/stiffness data (None: none published; laid
+    out as crane_stiffness.stiffness6_layout says), ``status`` (level name, message, values) of the last
+    /stiffness6/status."""
     g = geometry_from_params(load_params(crane_file))
     ref = reference_at_rest(g)
     out: dict[str, Any] = {'status': None if status is None else {'level': status[0], 'message': status[1],
@@ -36,7 +32,7 @@ def summarize6(crane_file: str | Path, stiffness: Any, status: tuple[str, str, d
                            'eq18': None if ref.paper is None else ref.paper.tolist()}
     if stiffness is None:
         return {**out, 'stiffness': None}
-    k, low, high = decode_matrix(stiffness)
+    k, low, high = stiffness6_layout.decode(stiffness)
     diag = np.diag(k) / np.diag(ref.tangent) - 1.0
     k2 = k2_of(k)
     out.update(stiffness=k.tolist(), ci95_low=low.tolist(), ci95_high=high.tolist(),
@@ -69,4 +65,4 @@ def verdict6(summary: dict[str, Any]) -> str:
     return ''
 
 
-__all__ = ['DIAGONAL_TOLERANCE', 'K2_TOLERANCE', 'decode_matrix', 'summarize6', 'verdict6']
+__all__ = ['DIAGONAL_TOLERANCE', 'K2_TOLERANCE', 'summarize6', 'verdict6']

@@ -40,7 +40,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, Float64MultiArray
 from std_srvs.srv import Trigger
 
-from crane_stiffness import topics
+from crane_stiffness import stiffness6_layout, topics
 from crane_stiffness.model import CraneGeometry
 from crane_stiffness.rosnode.qos import KEPT_QOS, LATCHED_QOS, RELIABLE_QOS, rclpy_qos
 from crane_stiffness.rosnode.run import run
@@ -324,8 +324,8 @@ class LiveViewNode(Node):
         if self.k6 is None:
             return None
         if self.c6 is not None:
-            return stiffness6.decode(self.c6)[0, :3, :3]
-        k = stiffness6.decode(self.k6)[0]
+            return stiffness6_layout.decode(self.c6)[0, :3, :3]
+        k = stiffness6_layout.decode(self.k6)[0]
         return np.linalg.inv(k)[:3, :3] if np.all(np.isfinite(k)) and np.linalg.cond(k) < 1e12 else None
 
     def _send_stiffness6(self, fox: FoxgloveServer, dirty: set[str], now: int) -> int:

@@ -8,7 +8,8 @@ with the wrench interpolated at its stamp and labelled by the step in force once
 the fit uses every labelled pair since the start (or the last ~/reset).
 
 Publishes, at ``publish_rate_hz`` (node clock), /stiffness6/stiffness and /stiffness6/compliance
-(Float64MultiArray: dims quantity (value, ci95_low, ci95_high) × row × column, row-major) and /stiffness6/status
+(Float64MultiArray: dims quantity (value, ci95_low, ci95_high) × row × column, row-major; the layout in
+crane_stiffness.stiffness6_layout) and /stiffness6/status
 (DiagnosticArray: the fit's status, with the numbers behind it: pairs, steps, condition number, lack of fit, K2 and
 its interval, the diagonal of K). The status is never OK on a design that cannot determine C (crane_stiffness.full6
 .identify: fewer than 8 steps, no pure error, condition number > 100) or on a non-linear window (lack of fit), and
@@ -29,10 +30,10 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped, WrenchStamped
 from rclpy.node import Node
-from std_msgs.msg import Float64MultiArray, MultiArrayDimension, String
+from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import Trigger
 
-from crane_stiffness import topics
+from crane_stiffness import stiffness6_layout, topics
 from crane_stiffness.estimation.frames import SensorMount
 from crane_stiffness.full6.identify import ComplianceEstimator, ComplianceFit
 from crane_stiffness.full6.pairs import DEFAULT_MAX_AGE_S, DEFAULT_MAX_GAP_S, Full6Pairing
@@ -45,7 +46,7 @@ from crane_stiffness.serde.cdr import CdrError, decode_stamped
 from crane_stiffness.serde.stamps import stamp_seconds
 from crane_stiffness.status import ERROR, NAMES, STALE, WAITING, WAITING_PREFIX, wire_level
 
-__all__ = ['PARAMS', 'Stiffness6EstimatorNode', 'main', 'matrix_message', 'shown_status']
+__all__ = ['PARAMS', 'Stiffness6EstimatorNode', 'main', 'shown_status']
 
 PARAMS = (
     ParamSpec('settle_s', 0.5, 'time after each load step before its pairs are fitted (the platform settles) [s]',
@@ -63,22 +64,11 @@ PARAMS = (
               'crane_base [m]'),
     ParamSpec('sensor_reaction', False, 'the sensor measures the reaction of the load: negate the wrench [-]'),
 )
-QUANTITIES = ('value', 'ci95_low', 'ci95_high')
 _KIND_ORDER = {'command': 0, 'wrench': 1, 'pose': 2}  # at one stamp: the command first (it is in force at t)
 
 
 def _validate(values: dict[str, Any]) -> SensorMount:
     return SensorMount.from_params(values)  # ParameterError (a ValueError) naming sensor_rotation / _position
-
-
-def matrix_message(value: np.ndarray, low: np.ndarray, high: np.ndarray) -> Float64MultiArray:
-    """A 6×6 matrix with its interval as one Float64MultiArray (dims quantity × row × column, row-major)."""
-    msg = Float64MultiArray()
-    msg.layout.dim = [MultiArrayDimension(label='quantity', size=3, stride=108),
-                      MultiArrayDimension(label='row', size=6, stride=36),
-                      MultiArrayDimension(label='column', size=6, stride=6)]
-    msg.data = np.concatenate([np.ravel(value), np.ravel(low), np.ravel(high)]).astype(float).tolist()
-    return msg
 
 
 def shown_status(fit: ComplianceFit, program_state: str) -> tuple[int, str]:
@@ -221,8 +211,8 @@ class Stiffness6EstimatorNode(Node):
                                       f'{topics.POSE_SENSOR_POSE} and load steps)'
         else:
             level, message = shown_status(fit, self.program_state)
-            self.pub_k.publish(matrix_message(fit.stiffness, fit.stiffness_low, fit.stiffness_high))
-            self.pub_c.publish(matrix_message(fit.compliance, fit.compliance_low, fit.compliance_high))
+            self.pub_k.publish(stiffness6_layout.to_message(fit.stiffness, fit.stiffness_low, fit.stiffness_high))
+            self.pub_c.publish(stiffness6_layout.to_message(fit.compliance, fit.compliance_low, fit.compliance_high))
         if stale:
             level, message = STALE, f'stale: {stale}; the fit holds the pairs before it'
         status = DiagnosticStatus(name=f'{self.get_name()}: 6x6', hardware_id='crane', level=bytes([wire_level(level)]),

@@ -15,6 +15,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from crane_stiffness import stiffness6_layout
 from crane_stiffness.axes import AXES
 from crane_stiffness.full6.reference import DISPLACEMENTS, k2_of, relative_error, structural_zeros
 from crane_stiffness.status import NAMES, read_level
@@ -22,17 +23,8 @@ from crane_stiffness.view import jsonschema as js
 from crane_stiffness.view.errors import ViewError
 
 
-
 def _num(value: float) -> float | None:
     return float(value) if math.isfinite(value) else None
-
-
-def decode(data: Sequence[float]) -> np.ndarray:
-    """(3, 6, 6): value, ci95_low, ci95_high of a /stiffness6/* Float64MultiArray's data (ViewError otherwise)."""
-    cube = np.asarray(data, dtype=float)
-    if cube.size != 108:
-        raise ViewError(f'{cube.size} values: a /stiffness6 matrix has 3 x 6 x 6 = 108')
-    return cube.reshape(3, 6, 6)
 
 
 def _k2_interval(values: Mapping[str, str]) -> tuple[float, float]:
@@ -45,13 +37,17 @@ def _k2_interval(values: Mapping[str, str]) -> tuple[float, float]:
 
 def stiffness6_message(stiffness: Sequence[float] | None, tangent: np.ndarray,
                        status: tuple[int, str, Mapping[str, str]] | None) -> dict[str, Any]:
-    """The channel's message. ``stiffness``: the newest /stiffness6/stiffness data (None: no fit yet); ``tangent``:
-    the model's K (6, 6); ``status``: (published level, message, key-values) of the newest /stiffness6/status (None:
-    none yet). ``fit`` says whether a measured K is there; K2 measured is read from it
-    (:func:`~crane_stiffness.full6.reference.k2_of`, what the estimator fits), its interval from the status."""
+    """The channel's message. ``stiffness``: the newest /stiffness6/stiffness data (None: no fit yet; laid out as
+    crane_stiffness.stiffness6_layout says, ViewError otherwise); ``tangent``: the model's K (6, 6); ``status``:
+    (published level, message, key-values) of the newest /stiffness6/status (None: none yet). ``fit`` says whether a
+    measured K is there; K2 measured is read from it (:func:`~crane_stiffness.full6.reference.k2_of`, what the
+    estimator fits), its interval from the status."""
     tangent = np.asarray(tangent, dtype=float)
     zero = structural_zeros(tangent)
-    cube = decode(stiffness) if stiffness is not None else np.full((3, 6, 6), np.nan)
+    try:
+        cube = stiffness6_layout.decode(stiffness) if stiffness is not None else np.full((3, 6, 6), np.nan)
+    except stiffness6_layout.LayoutError as exc:
+        raise ViewError(str(exc)) from exc
     k, low, high = cube
     relative = relative_error(k, tangent)  # (NaN where the fit is missing: k is NaN then)
     rows = [{'load': AXES[i], 'cells': [
@@ -81,4 +77,4 @@ SCHEMA = js.obj({
         'tangent': js.NUMBER, 'relative_error': js.NUMBER, 'model_zero': js.BOOLEAN}))}))},
     'crane_stiffness.Stiffness6')
 
-__all__ = ['SCHEMA', 'decode', 'stiffness6_message']
+__all__ = ['SCHEMA', 'stiffness6_message']
