@@ -62,6 +62,13 @@ DEFAULT_SERVICES = ['/load_cell/tare', '/stiffness_estimator/reset', '/session_r
                     '/session_recorder/stop']
 _TYPES = {**topics.RIG_TOPICS, **topics.VIEW_TOPICS, topics.MODEL_STATUS: 'std_msgs/msg/String',
           topics.DIAGNOSTICS: 'diagnostic_msgs/msg/DiagnosticArray'}
+#: The derived channels the Foxglove server offers: channel -> (schema name, JSON schema). What the shipped layouts
+#: (foxglove/*.json) may read besides ``topics``.
+DERIVED_CHANNELS: dict[str, tuple[str, dict[str, Any]]] = {
+    **{PREFIX + name: (schema['title'], schema) for name, schema in plot.SCHEMAS.items()},
+    PREFIX + 'scene': ('foxglove.SceneUpdate', SCENE_SCHEMA),
+    PREFIX + 'stiffness6': (stiffness6.SCHEMA['title'], stiffness6.SCHEMA),
+}
 _NO_EVENTS = SubscriptionEventCallbacks(use_default_callbacks=False)
 #: Every derived channel is sent at least this often (ns), changed or not.
 RESEND_NS = 1_000_000_000
@@ -154,9 +161,7 @@ class LiveViewNode(Node):
     def _start_servers(self, values: dict[str, Any]) -> None:
         prefixes = [p for p in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep) if p]
         ros = {topic: (_TYPES[topic], definition(_TYPES[topic], prefixes)) for topic in values['topics']}
-        derived = {PREFIX + name: (schema['title'], schema) for name, schema in plot.SCHEMAS.items()}
-        derived[PREFIX + 'scene'] = ('foxglove.SceneUpdate', SCENE_SCHEMA)
-        derived[PREFIX + 'stiffness6'] = (stiffness6.SCHEMA['title'], stiffness6.SCHEMA)
+        derived = dict(DERIVED_CHANNELS)
         services = {name: self._caller(name) for name in values['services']}
         logger = self.get_logger()
         self.foxglove = FoxgloveServer(values['host'], values['port'], ros, derived, services, self._want,
