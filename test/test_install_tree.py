@@ -42,7 +42,7 @@ def test_install_tree_has_index_marker_executables_config_and_launch(install_tre
         assert (prefix / 'share/crane_stiffness/config' / name).is_file(), name
     assert (prefix / 'share/crane_stiffness/launch/rig.launch.py').is_file()
     assert (prefix / 'share/crane_stiffness/rosdep/crane_stiffness.yaml').is_file()  # the rosdep keys it ships
-    for name in ('stiffness_test.json', 'sensors.json'):  # the Foxglove layouts, read back as JSON
+    for name in ('stiffness_test.json', 'sensors.json', 'stiffness6.json'):  # the Foxglove layouts, read back
         layout = json.loads((prefix / 'share/crane_stiffness/foxglove' / name).read_text())
         assert layout['configById'] and layout['layout']
     site = next(prefix.glob('lib/python3*/site-packages/crane_stiffness/view/web'))
