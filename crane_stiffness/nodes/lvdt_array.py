@@ -16,7 +16,9 @@ still missing a reading is dropped (counted ``groups_incomplete``, never publish
 ``max_wait_s`` after it arrives (an LVDT that went silent). A reading stamped at or before the last completed
 instant (+ tolerance) is late and dropped (``late_readings``), a second reading of one LVDT for one instant too
 (``duplicate_readings``), and a non-finite one (``dropped_non_finite``): each leaves its group incomplete. No pose
-is ever made of readings of different instants or of fewer than every LVDT.
+is ever made of readings of different instants or of fewer than every LVDT. At start, until every LVDT delivers
+(each starts sampling at its first pose, and DDS matches each stream in its own time), the instants only some have
+read are dropped so: a WARN on /diagnostics for a report or two.
 
 The complete groups are solved together at ``publish_rate_hz`` (LvdtArray.solve of a batch: exact rigid motion by
 Gauss-Newton, ~25 times cheaper per group than one at a time) and published as
