@@ -51,6 +51,10 @@ LOAD_CELL_TARE = '/load_cell/tare'
 # the platform centre's position [m] and orientation (quaternion, body -> frame) in frame_id (crane_base), sensor-data
 # QoS. What the 6x6 identification measures deflections with (crane_stiffness.full6).
 POSE_SENSOR_POSE = '/pose_sensor/pose'
+# The pose an LVDT array solves (node lvdt_array, which publishes it on POSE_SENSOR_POSE too),
+# geometry_msgs/PoseWithCovarianceStamped: the same pose and stamp, with the covariance the LVDTs' noise propagates
+# to, 6x6 row-major in the order x y z, rotation about the fixed x y z [m², m·rad, rad²], sensor-data QoS.
+LVDT_ARRAY_POSE = '/lvdt_array/pose'
 # The 6x6 identification (crane_stiffness.full6, node stiffness6_estimator), std_msgs/Float64MultiArray laid out as
 # dims ('quantity', 3: value, ci95_low, ci95_high) x ('row', 6) x ('column', 6), row-major; rows and columns in the
 # order fx fy fz mx my mz (loads) and ux uy uz thx thy thz (deflections): STIFFNESS6 K [N/m, N/rad, N·m/m, N·m/rad],
@@ -157,6 +161,7 @@ TOPIC_QOS: dict[str, QoS] = {
     STIFFNESS_VALUES: KEPT,  # for tools: a reader matched late still gets the run's estimates (up to 1000)
     STIFFNESS: LATCHED,
     POSE_SENSOR_POSE: SENSOR_DATA,
+    LVDT_ARRAY_POSE: SENSOR_DATA,
     STIFFNESS6: LATCHED,  # the latest fit is what a late reader (`ros2 topic echo --once`) wants
     COMPLIANCE6: LATCHED,
     STIFFNESS6_STATUS: LATCHED,

@@ -276,6 +276,6 @@ def test_every_node_module_has_its_executable_and_every_executable_its_node():
     from crane_stiffness.rosnode.parameters import node_modules
     executables = sorted(p.name for p in (REPO / 'nodes_bin').iterdir())
     assert executables == sorted(node_modules())
-    assert len(executables) == 15
+    assert len(executables) == 16
     for name in executables:
         assert f'from crane_stiffness.entry import {name}' in (REPO / 'nodes_bin' / name).read_text()

@@ -15,6 +15,7 @@ NODES = (
     'load_cell',
     'load_program',
     'lvdt',
+    'lvdt_array',
     'modbus_emulator',
     'modbus_lvdt',
     'netft',
