@@ -23,6 +23,7 @@ from crane_stiffness.axes import AXES
 from crane_stiffness.exit_codes import EXIT_OK, EXIT_USAGE
 from crane_stiffness.full6.admissible import DEFAULT_SAFETY_FACTOR, axis_peaks, check_steps, wire_label
 from crane_stiffness.full6.errors import SlackDesignError
+from crane_stiffness.full6.linearity import MAX_LACK_OF_FIT, load_cell_full_scale
 from crane_stiffness.full6.reference import entry_name
 from crane_stiffness.geometry_args import add_geometry, geometry_from_args
 
@@ -42,7 +43,8 @@ def _refuse(what: str, exc: SlackDesignError, limits: np.ndarray) -> int:
 
 
 def cmd_design(args: argparse.Namespace) -> int:
-    from crane_stiffness.full6.design import d_optimal_design, naive_design
+    from crane_stiffness.full6.design import naive_design
+    from crane_stiffness.full6.linearity import linear_design
     from crane_stiffness.full6.precision import compare_designs
     from crane_stiffness.full6.program import program_yaml
     g = geometry_from_args(args)
@@ -56,24 +58,33 @@ def cmd_design(args: argparse.Namespace) -> int:
         return _refuse('the peak loads (each axis alone, + then −, fx … mz)', exc, limits)
     timing = {'n_steps': args.steps, 'hold_s': args.hold, 'settle_s': args.settle, 'baseline_s': args.baseline,
               'safety_factor': sf}
+    full_scale = None if args.full_scale_fraction == 0 else args.full_scale_fraction * np.asarray(
+        args.full_scale if args.full_scale else load_cell_full_scale(), dtype=float)
     try:
-        design = d_optimal_design(g, peaks, seed=args.seed, **timing)
+        made = linear_design(g, peaks, full_scale=full_scale, max_lack_of_fit=args.max_lack_of_fit, seed=args.seed,
+                             **timing)
     except SlackDesignError as exc:
         return _refuse('the D-optimal program', exc, limits)
+    design = made.design
     how = (f'Made by crane-stiffness full6 design: geometry a = {g.a:g} m, b = {g.b:g} m, h = {g.height:g} m, '
-           f'W = {g.weight:g} N, k = {g.k:.6g} N/m;\npeaks ' + ', '.join(f'{v:.4g}' for v in peaks)
-           + f', seed {args.seed}; D-efficiency {design.efficiency:.3f}.')
+           f'W = {g.weight:g} N, k = {g.k:.6g} N/m;\npeaks ' + ', '.join(f'{v:.4g}' for v in design.peaks)
+           + f' (scaled by {made.scale:.4g}: predicted lack of fit {made.lack_of_fit:.3f}), seed {args.seed}; '
+           f'D-efficiency {design.efficiency:.3f}.')
     Path(args.out).write_text(program_yaml(design, name=args.name, title=args.title, how=how), encoding='utf-8')
     weakest = int(np.argmin(design.slack.factor))
     print(f'D-optimal program: {design.n_steps} steps held {design.hold_s:g} s ({design.settle_s:g} s settling), '
           f'baselines {design.baseline_s:g} s: {design.duration_s:g} s; D-efficiency {design.efficiency:.3f}; '
           f'smallest slack factor {design.slack.factor[weakest]:.4f} (step {weakest + 1}, '
           f'{wire_label(int(design.slack.wire[weakest]))}), safety factor {sf:g}')
-    print('peaks: ' + ', '.join(f'{a} {v:.4g} {_units(i)}' for i, (a, v) in enumerate(zip(AXES, peaks))))
+    print('peaks: ' + ', '.join(f'{a} {v:.4g} {_units(i)}' for i, (a, v) in enumerate(zip(AXES, design.peaks))))
+    if made.scale < 1.0 or full_scale is not None and np.any(peaks > full_scale):
+        print('  (the slack rule allowed ' + ', '.join(f'{v:.4g}' for v in peaks) + '; capped at the load cell\'s '
+              f'full scale x {args.full_scale_fraction:g} and scaled by {made.scale:.4g} so that the lack of fit '
+              f'the model predicts is {made.lack_of_fit:.3f} <= {args.max_lack_of_fit:g})')
     if args.steps % 12:
         print(f'(no naive comparison: its {args.steps} steps are not a multiple of 12, each axis + and −)')
     else:
-        _print_comparison(compare_designs(design, naive_design(g, peaks, **timing)))
+        _print_comparison(compare_designs(design, naive_design(g, design.peaks, **timing)))
     print(f'wrote {args.out}')
     return EXIT_OK
 
@@ -114,6 +125,13 @@ def add_commands(subparsers: Any) -> None:
                        help='peaks = this x each axis\' largest admissible load alone (default 0.98)')
     group.add_argument('--peaks', type=float, nargs=6, metavar=('FX', 'FY', 'FZ', 'MX', 'MY', 'MZ'),
                        help='peak load per axis [N, N·m] instead')
+    p.add_argument('--full-scale', type=float, nargs=6, metavar=('FX', 'FY', 'FZ', 'MX', 'MY', 'MZ'),
+                   help="the load cell's full scale [N, N·m] (default: load_cell.full_scale of config/sensors.yaml)")
+    p.add_argument('--full-scale-fraction', type=float, default=0.9,
+                   help='peaks at most this x the full scale (default 0.9; 0: no cap)')
+    p.add_argument('--max-lack-of-fit', type=float, default=MAX_LACK_OF_FIT,
+                   help='scale the design down until the lack-of-fit statistic the nonlinear model predicts is at '
+                        f'most this (1: linear; default {MAX_LACK_OF_FIT:g}; the 6x6 status turns WARN near 1.4)')
     p.add_argument('--seed', type=int, default=0, help='seed of the exchange\'s random starts (default 0)')
     p.add_argument('--name', default='full6', help='program name (default full6)')
     p.add_argument('--title', default='', help='first lines of the file\'s header comment')
