@@ -152,6 +152,7 @@ def analyze_full6(bag_path: str | Path, out_dir: str | Path | None = None, *, fo
         compliance=_matrices(fit.compliance, fit.compliance_low, fit.compliance_high, fit.compliance_stderr),
         offset=fit.offset.tolist(), k2=_k2(fit, ref), reference=None if ref is None else _reference(ref),
         comparison=None if ref is None else _comparison(fit, ref), diagonal=_diagonal(fit, ref), problems=problems,
+        compliance_covariance=fit.compliance_cov.tolist() if np.all(np.isfinite(fit.compliance_cov)) else None,
         fit=fit, model=ref)
     if write_files:
         out = Path(out_dir) if out_dir is not None else Path('out') / 'analysis' / path.name

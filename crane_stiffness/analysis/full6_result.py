@@ -31,6 +31,8 @@ class Full6Analysis:
         comparison: per entry of K and C: relative_error vs the tangent (None at its zeros), covers (the interval
             holds the tangent's entry); None without a geometry.
         diagonal: K's diagonal, one dict per axis: entry, unit, measured, low, high, tangent, relative_error, covers.
+        compliance_covariance: the covariance of row-major vec C (36, 36) [SI²] (the calibration weighs a
+            session's C with it: crane_stiffness.campaign.calibrate); None when the fit gave none.
         problems: what the reader should know; files: what was written.
         fit, model: the :class:`~crane_stiffness.full6.identify.ComplianceFit` and
             :class:`~crane_stiffness.full6.reference.Reference` themselves (not in the JSON).
@@ -61,6 +63,7 @@ class Full6Analysis:
     diagonal: list[dict[str, Any]]
     problems: list[str]
     files: list[str] = field(default_factory=list)
+    compliance_covariance: list[list[float]] | None = None
     fit: ComplianceFit | None = field(default=None, repr=False)
     model: Reference | None = field(default=None, repr=False)
 

@@ -18,6 +18,13 @@ closed form at every θ: variable projection). Residual: (d_i − model) / σ_i,
 K_i)², K_i the model's exact tangent along the axis (crane_stiffness.model.tangent_stiffness): the noise of the
 force counted in displacement units, both noises in the weight.
 
+**Sessions of the series full** (:class:`~crane_stiffness.campaign.rows.MatrixSession`) add their measured 6×6
+compliance C (the offline fit of the bag, crane_stiffness.analysis.full6) against the model's, C(θ) = K(θ)⁻¹ with
+K(θ) the exact tangent at the rest pose of the session's crane under θ: residual Σ^(−1/2)·(vec C − vec C(θ)), Σ the
+36×36 covariance of the measured vec C, so its 36 entries count with their own precision and correlations (no zero:
+a compliance has none). One designed test determines E·A on its own, and with W and the height the set-ups tell
+apart what no single series can (the vertical and the tilt compliances depend on k, the side ones on W and h).
+
 **Fit and intervals.** scipy's trust-region least squares; the covariance (Jᵀ J)⁻¹ at the optimum (central
 differences) scaled by χ²/dof, the noise's scale estimated from the fit (the holds' standard errors give only the
 relative weights: a model error or correlated noise then widens the intervals rather than hiding); 95 % intervals
@@ -36,7 +43,9 @@ from typing import Any, Sequence
 import numpy as np
 
 from crane_stiffness.campaign.errors import CalibrationError
-from crane_stiffness.campaign.rows import Calibration, CalibrationSession, Parameter
+from crane_stiffness.campaign.rows import Calibration, CalibrationSession, MatrixSession, Parameter
+
+Session = CalibrationSession | MatrixSession
 
 WEIGHT_MODES = ('none', 'scale', 'per-weight', 'per-session')
 #: Smallest singular value of the normalised Jacobian relative to the largest for the parameters to count as
@@ -69,10 +78,32 @@ def session_from_analysis(session: str, series: str, nominal: dict[str, Any], an
         displacement_se=np.array([s['displacement_std'] for s in steps], dtype=float) / np.sqrt(n))
 
 
-class _Model:
-    """The parameters' layout and the model's LVDT readings for a vector of them."""
+def matrix_session(session: str, nominal: dict[str, Any], analysis: dict[str, Any]) -> MatrixSession | None:
+    """A :class:`MatrixSession` from a session's full6.json (compliance value and covariance); None when the fit
+    gave no numbers."""
+    cov = analysis.get('compliance_covariance')
+    value = (analysis.get('compliance') or {}).get('value')
+    if cov is None or value is None:
+        return None
+    c = np.asarray(value, dtype=float).reshape(36)
+    cov = np.asarray(cov, dtype=float)
+    if not (np.all(np.isfinite(c)) and np.all(np.isfinite(cov))):
+        return None
+    vals, vecs = np.linalg.eigh(0.5 * (cov + cov.T))
+    if not vals.min() > 0.0:
+        return None
+    return MatrixSession(session=session, nominal=dict(nominal), compliance=c,
+                         whiten=(vecs / np.sqrt(vals)) @ vecs.T)
 
-    def __init__(self, sessions: Sequence[CalibrationSession], weight: str, height: bool) -> None:
+
+def _points(s: Session) -> int:
+    return len(s.compliance) if isinstance(s, MatrixSession) else len(s.force)
+
+
+class _Model:
+    """The parameters' layout and the model's LVDT readings (or compliances) for a vector of them."""
+
+    def __init__(self, sessions: Sequence[Session], weight: str, height: bool) -> None:
         if weight not in WEIGHT_MODES:
             raise CalibrationError(f'weight = {weight!r}: must be one of {", ".join(WEIGHT_MODES)}')
         self.sessions = list(sessions)
@@ -136,20 +167,39 @@ class _Model:
         batch = solve_batch(g, s.force[:, None] * unit(s.series)[None, :], xtol=1e-13)
         return s.lvdt_scale * np.array([displacement_along(s.series, batch[j], rest) for j in range(len(batch))])
 
+    def compliance(self, i: int, theta: np.ndarray) -> np.ndarray:
+        """The model's vec C (36,) of session ``i``: the exact tangent's inverse at its rest pose."""
+        from crane_stiffness.full6.reference import reference_at_rest
+        from crane_stiffness.params.geometry import geometry_from_params
+        return reference_at_rest(geometry_from_params(self.params(i, theta))).compliance.reshape(36)
+
+    @property
+    def zeros(self) -> int:
+        """The sessions with a zero of their own (the one-axis ones: their LVDT's zero)."""
+        return sum(1 for s in self.sessions if not isinstance(s, MatrixSession))
+
     def tangents(self, theta: np.ndarray) -> list[float]:
+        """Each session's model stiffness along its series' axis (NaN for a session of the series full)."""
         from crane_stiffness.model import axis_stiffness, rest_pose, tangent_stiffness
         from crane_stiffness.params.geometry import geometry_from_params
         out = []
         for i, s in enumerate(self.sessions):
+            if isinstance(s, MatrixSession):
+                out.append(math.nan)
+                continue
             g = geometry_from_params(self.params(i, theta))
             out.append(axis_stiffness(tangent_stiffness(g, rest_pose(g)), s.series) / s.lvdt_scale)
         return out
 
 
 def _weights(model: _Model) -> list[np.ndarray]:
-    """1/σ of every hold: the displacement's and the force's standard errors (the force's through the tangent)."""
+    """1/σ of every hold: the displacement's and the force's standard errors (the force's through the tangent);
+    a session of the series full: its whitening matrix."""
     out = []
     for s, k in zip(model.sessions, model.tangents(model.start)):
+        if isinstance(s, MatrixSession):
+            out.append(s.whiten)
+            continue
         sigma = np.sqrt(s.displacement_se ** 2 + (s.force_se / k) ** 2)
         floor = max(float(np.median(sigma[sigma > 0])) if (sigma > 0).any() else 1e-12, 1e-15)
         out.append(1.0 / np.maximum(sigma, floor * 1e-3))
@@ -160,6 +210,9 @@ def _residuals(model: _Model, weights: list[np.ndarray], theta: np.ndarray) -> n
     """Normalised residuals with each session's zero solved in closed form (weighted mean of its misfit)."""
     parts = []
     for i, (s, w) in enumerate(zip(model.sessions, weights)):
+        if isinstance(s, MatrixSession):
+            parts.append(w @ (s.compliance - model.compliance(i, theta)))
+            continue
         misfit = s.displacement - model.readings(i, theta)
         zero = float(np.sum(w ** 2 * misfit) / np.sum(w ** 2))
         parts.append(w * (misfit - zero))
@@ -183,7 +236,7 @@ def _amount(value: float, unit: str) -> str:
 def check_determined(model: _Model, jac: np.ndarray, n_points: int) -> None:
     """CalibrationError naming the parameter(s) the data cannot determine."""
     n_params = len(model.names)
-    dof = n_points - n_params - len(model.sessions)
+    dof = n_points - n_params - model.zeros
     if dof < 1:
         raise CalibrationError(f'the data cannot determine {n_params} parameter(s) ({", ".join(model.names)}): '
                                f'{n_points} hold(s) in {len(model.sessions)} session(s) leave {dof} degree(s) of '
@@ -211,16 +264,16 @@ def check_determined(model: _Model, jac: np.ndarray, n_points: int) -> None:
             'would tell them apart)')
 
 
-def calibrate(sessions: Sequence[CalibrationSession], *, weight: str = 'none', height: bool = False
+def calibrate(sessions: Sequence[Session], *, weight: str = 'none', height: bool = False
               ) -> Calibration:
     """Fit the campaign's model parameters (see the module docstring). Raises CalibrationError."""
     from scipy.optimize import least_squares
     from scipy.stats import t as student_t
     if not sessions:
-        raise CalibrationError('no session with at least 3 holds to calibrate on')
+        raise CalibrationError('no session with at least 3 holds (or a 6x6 compliance) to calibrate on')
     model = _Model(sessions, weight, height)
     weights = _weights(model)
-    n_points = sum(len(s.force) for s in sessions)
+    n_points = sum(_points(s) for s in sessions)
     check_determined(model, _jacobian(model, weights, model.start), n_points)
     # Factors kept within 0.2 .. 5 of the nominal (the model has no equilibrium far outside), offsets within 10 %.
     lower = np.where(np.array(model.units) == 'm', -0.1, 0.2)
@@ -231,7 +284,7 @@ def calibrate(sessions: Sequence[CalibrationSession], *, weight: str = 'none', h
     theta = fit.x
     jac = _jacobian(model, weights, theta)
     res = _residuals(model, weights, theta)
-    dof = n_points - len(theta) - len(sessions)
+    dof = n_points - len(theta) - model.zeros
     chi2 = float(res @ res)
     try:
         cov = np.linalg.inv(jac.T @ jac) * (chi2 / dof)
@@ -248,10 +301,11 @@ def calibrate(sessions: Sequence[CalibrationSession], *, weight: str = 'none', h
     calibrated = model.tangents(theta)
     nominal = model.tangents(model.start)
     for i, s in enumerate(sessions):
-        r = res[offset:offset + len(s.force)]
-        offset += len(s.force)
-        slope = float(np.polyfit(s.displacement, s.force, 1)[0]) if len(s.force) > 1 else math.nan
-        per_session.append({'session': s.session, 'series': s.series, 'holds': len(s.force),
+        r = res[offset:offset + _points(s)]
+        offset += _points(s)
+        slope = (math.nan if isinstance(s, MatrixSession) or len(s.force) < 2 else
+                 float(np.polyfit(s.displacement, s.force, 1)[0]))
+        per_session.append({'session': s.session, 'series': s.series, 'holds': _points(s),
                             'rms_normalised_residual': float(np.sqrt(np.mean(r ** 2))),
                             'measured_hold_slope': slope, 'nominal_tangent': nominal[i],
                             'calibrated_tangent': calibrated[i]})
@@ -259,7 +313,7 @@ def calibrate(sessions: Sequence[CalibrationSession], *, weight: str = 'none', h
                        wire=_wire(sessions, model, theta))
 
 
-def _wire(sessions: Sequence[CalibrationSession], model: _Model, theta: np.ndarray) -> dict[str, float]:
+def _wire(sessions: Sequence[Session], model: _Model, theta: np.ndarray) -> dict[str, float]:
     """E·A [N] and k at each length [N/m], nominal and calibrated."""
     from crane_stiffness.params.geometry import geometry_from_params
     out: dict[str, float] = {}
@@ -282,22 +336,27 @@ def calibrate_campaign(out: Any, *, weight: str = 'none', height: bool = False, 
     import json
     from pathlib import Path
 
-    from crane_stiffness.campaign import figures
-    from crane_stiffness.campaign.analyze import campaign_rows
+    from crane_stiffness.campaign import figures, full_figures
+    from crane_stiffness.campaign.analyze import ANALYSIS_FILES, campaign_rows, full_rows
     from crane_stiffness.analysis.report import write_blocks
     from crane_stiffness.campaign.report import calibration_blocks
     out = Path(out)
     _, rows, missing = campaign_rows(out)
-    used = [r for r in rows if r.ok or not only_ok]
-    sessions = []
-    for r in used:
+    full = full_rows(out)
+    sessions: list[Session] = []
+    for r in rows:
         s = session_from_analysis(r.session, r.series, r.nominal,
-                                  json.loads((Path(r.analysis) / 'analysis.json').read_text()))
-        if s is not None:
+                                  json.loads((Path(r.analysis) / ANALYSIS_FILES['one_axis']).read_text()))
+        if s is not None and (r.ok or not only_ok):
             sessions.append(s)
+    for f in full:
+        m = matrix_session(f.session, f.nominal, json.loads((Path(f.analysis) / ANALYSIS_FILES['full']).read_text()))
+        if m is not None and (f.ok or not only_ok):
+            sessions.append(m)
     if not sessions:
-        raise CalibrationError(f'{out}: no analysed session with holds to calibrate on (run `crane-stiffness campaign '
-                               'analyze` first)' + (f'; missing: {", ".join(missing)}' if missing else ''))
+        raise CalibrationError(f'{out}: no analysed session with holds or a 6x6 compliance to calibrate on (run '
+                               '`crane-stiffness campaign analyze` first)'
+                               + (f'; missing: {", ".join(missing)}' if missing else ''))
     result = calibrate(sessions, weight=weight, height=height)
     target = out / 'calibration'
     target.mkdir(parents=True, exist_ok=True)
@@ -312,14 +371,19 @@ def calibrate_campaign(out: Any, *, weight: str = 'none', height: bool = False, 
         p['geometry.weight'] = p['geometry.weight'] * factors.get('W', 1.0)
         p['geometry.height'] = p['geometry.height'] + factors.get(f'height {p["geometry.height"]:.4g} m', 0.0)
         return p
-    files = figures.write_campaign_figures([r for r in rows if r.session in index], target, formats,
-                                           calibrated=calibrated, suffix='_calibrated')
+    files = []
+    if any(r.session in index for r in rows):
+        files += figures.write_campaign_figures([r for r in rows if r.session in index], target, formats,
+                                                calibrated=calibrated, suffix='_calibrated')
+    if any(f.session in index for f in full):
+        files += full_figures.write_full_figures([f for f in full if f.session in index], target, formats,
+                                                 calibrated=calibrated, suffix='_calibrated')
     (target / 'calibration.json').write_text(json.dumps(
         {**result.to_dict(), 'sessions_used': [s.session for s in sessions],
-         'sessions_left_out': [r.session for r in rows if r.session not in index], 'weight_mode': weight,
+         'sessions_left_out': [r.session for r in [*rows, *full] if r.session not in index], 'weight_mode': weight,
          'height': height}, indent=1, allow_nan=False))
     files.append(str(target / 'calibration.json'))
-    files += write_blocks(calibration_blocks(result, [r for r in rows if r.session not in index],
+    files += write_blocks(calibration_blocks(result, [r for r in [*rows, *full] if r.session not in index],
                                              [Path(f).name for f in files if f.endswith(tuple(formats))]),
                           target, 'report', reports, 'calibration')
     return result, files

@@ -62,12 +62,23 @@ def cmd_analyze(args: argparse.Namespace) -> int:
             print(f'  analysed {len(done)}: {bag}', file=sys.stderr, flush=True)
     result = analyze_campaign(args.dir, workers=args.workers, scheduler=args.scheduler, formats=(args.format,),
                               progress=note)
-    print(f'campaign {result.campaign}: {len(result.rows)} session(s) ({len(result.analysed)} analysed now, '
-          f'{len(result.rows) - len(result.analysed)} unchanged)')
-    print(f'{"session":<20} {"k":>12} {"95 % interval":>27} {"model":>12} {"error":>9}  status')
+    count = len(result.rows) + len(result.full)
+    print(f'campaign {result.campaign}: {count} session(s) ({len(result.analysed)} analysed now, '
+          f'{count - len(result.analysed)} unchanged)')
+    if result.rows:
+        print(f'{"session":<20} {"k":>12} {"95 % interval":>27} {"model":>12} {"error":>9}  status')
     for r in result.rows:
         print(f'{r.session:<20} {r.k:>12.6g} [{r.ci95_low:>12.6g}, {r.ci95_high:>12.6g}] {r.model_tangent:>12.6g} '
               f'{100 * r.relative_error:>+8.3f}%  {r.status}')
+    if result.full:
+        from crane_stiffness.axes import AXES
+        print('the whole 6x6 K against the tangent (measured / tangent - 1; * interval misses the tangent):')
+        print(f'{"session":<20} ' + ' '.join(f'{a:>8}' for a in AXES) + f' {"K2":>8} {"sign":>5} {"cover":>6}  status')
+    for r in result.full:
+        diag = ' '.join(f'{100 * d["relative_error"]:>+7.2f}' + (' ' if d['covers'] else '*')
+                        if d['relative_error'] is not None else f'{"-":>8}' for d in r.diagonal)
+        sign = 'ok' if r.k2 * r.k2_tangent > 0 else 'WRONG'
+        print(f'{r.session:<20} {diag} {100 * r.k2_relative_error:>+7.2f}% {sign:>5} {r.covered:>3}/36  {r.status}')
     for name in result.missing:
         print(f'  missing: {name}')
     for name, why in result.failed.items():
@@ -118,7 +129,8 @@ def add_commands(subparsers: Any) -> None:
     r.add_argument('--quiet', action='store_true', help='no progress bar')
     r.set_defaults(func=_guarded(cmd_run))
     a = sub.add_parser('analyze', help='analyse every session of a campaign directory: Figs. 10 and 13 with the '
-                       'measured points, force-displacement overlays, table, report, CSV and JSON')
+                       'measured points, force-displacement overlays, the 6x6 K of the series full against W, '
+                       'table, report, CSV and JSON')
     a.add_argument('dir', metavar='DIR', help='campaign directory (campaign run --out)')
     a.add_argument('--workers', type=int, default=None, help='local worker processes (default: every core)')
     a.add_argument('--scheduler', metavar='ADDRESS', default=None,

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Sequence
 from crane_stiffness.analysis.report import Block, fmt, write_blocks
 
 if TYPE_CHECKING:
-    from crane_stiffness.campaign.rows import CampaignAnalysis, Calibration, SessionRow
+    from crane_stiffness.campaign.rows import CampaignAnalysis, Calibration, Full6Row, SessionRow
 
 
 def _pct(value: float) -> str:
@@ -25,19 +25,50 @@ def session_table(rows: Sequence[SessionRow]) -> Block:
     return ('table', headers, body)
 
 
+def _interval(value: float, low: float, high: float) -> str:
+    return f'{fmt(value)} [{fmt(low)} … {fmt(high)}]'
+
+
+def full_table(rows: Sequence[Full6Row]) -> Block:
+    """The series full: K's diagonal against the tangent (relative error, * where the interval misses it), K2 with
+    its interval against the tangent and eq. (18), the intervals covering the tangent, the status."""
+    from crane_stiffness.axes import AXES
+    headers = ['session', 'W [N]', 'l0 [m]', *(f'K {a} vs tangent' for a in AXES), 'K2 [N/rad] (95 %)',
+               'K2 tangent', 'K2 eq. (18)', 'K2 vs tangent', 'intervals covering', 'status']
+    body = []
+    for r in rows:
+        diag = [_pct(d['relative_error'] if d['relative_error'] is not None else math.nan)
+                + ('' if d.get('covers') in (True, None) else ' *') for d in r.diagonal]
+        body.append([r.session, fmt(r.weight, 4), fmt(r.l0, 4), *diag, _interval(r.k2, r.k2_low, r.k2_high),
+                     fmt(r.k2_tangent), fmt(r.k2_eq18), _pct(r.k2_relative_error), f'{r.covered}/36', r.status])
+    return ('table', headers, body)
+
+
 def campaign_blocks(result: CampaignAnalysis, images: Sequence[str]) -> list[Block]:
     rows = result.rows
     worst = max((abs(r.relative_error) for r in rows if math.isfinite(r.relative_error)), default=math.nan)
-    blocks: list[Block] = [
-        ('h1', f'Campaign {result.campaign}: {len(rows)} session(s)'),
-        ('p', 'Measured stiffness: the loading branch fitted over all its pairs (as the live estimator fits), in the '
-              "LVDT's reading units (N/m for fy and fz, N·m/rad for mz), with its 95 % interval; the models are the "
-              "nominal crane's (the recorded geometry) at each session's W and l0. Largest |measured − tangent| / "
-              f'tangent: {_pct(worst)}.'),
-        session_table(rows)]
+    blocks: list[Block] = [('h1', f'Campaign {result.campaign}: {len(rows) + len(result.full)} session(s)')]
+    if rows:
+        blocks += [
+            ('p', 'Measured stiffness: the loading branch fitted over all its pairs (as the live estimator fits), in '
+                  "the LVDT's reading units (N/m for fy and fz, N·m/rad for mz), with its 95 % interval; the models "
+                  "are the nominal crane's (the recorded geometry) at each session's W and l0. Largest |measured − "
+                  f'tangent| / tangent: {_pct(worst)}.'),
+            session_table(rows)]
+    if result.full:
+        worst6 = max((r.worst_diagonal_error for r in result.full if math.isfinite(r.worst_diagonal_error)),
+                     default=math.nan)
+        blocks += [
+            ('h2', 'The whole 6x6 stiffness (series full)'),
+            ('p', "Each session's 6x6 K from its designed multi-axis test (errors in both variables, the bag's "
+                  "offline fit, equal to the live one), against the nominal crane's exact tangent at its W and l0: "
+                  "K's diagonal as measured / tangent − 1 (* where the 95 % interval misses the tangent), the "
+                  'side–tilt coupling K2 with its interval and sign. Largest |diagonal error|: '
+                  f'{_pct(worst6)}. Per session: full6 report and figures in its analysis folder.'),
+            full_table(result.full)]
     for image in images:
         blocks.append(('img', image, Path(image).stem.replace('_', ' ')))
-    bad = [f'{r.session}: ' + '; '.join(r.reasons) for r in rows if not r.ok]
+    bad = [f'{r.session}: ' + '; '.join(r.reasons) for r in [*rows, *result.full] if not r.ok]
     blocks += [('h2', 'Sessions not OK (drawn hollow)'), ('ul', bad or ['none'])]
     if result.missing:
         blocks += [('h2', 'Sessions planned but not run or not analysed'), ('ul', result.missing)]

@@ -44,12 +44,60 @@ class SessionRow:
 
 
 @dataclass
+class Full6Row:
+    """One session of the series full: the 6×6 K measured (offline, from the bag: crane_stiffness.analysis.full6)
+    beside the nominal model's exact tangent and eq. (18) at the session's W and l0. K row i the load [fx, fy, fz,
+    mx, my, mz] (N, N·m), column j the displacement [u_x, u_y, u_z, θ_x, θ_y, θ_z] (m, rad)."""
+
+    session: str
+    weight: float
+    l0: float
+    height: float
+    repeat: int
+    status: str
+    """OK, or NOT OK with the reasons."""
+    reasons: list[str]
+    diagonal: list[dict[str, Any]]
+    """K's diagonal, one dict per axis: entry, unit, measured, low, high (95 %), tangent, relative_error, covers."""
+    k2: float
+    k2_low: float
+    k2_high: float
+    k2_tangent: float
+    k2_eq18: float
+    covered: int
+    """How many of K's 36 intervals hold the tangent's entry."""
+    live_difference: float
+    """Largest |live K − offline K| over K's largest entry; NaN when the live fit published none."""
+    pairs: int
+    analysis: str
+    nominal: dict[str, Any] = field(default_factory=dict)
+    true: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def ok(self) -> bool:
+        return self.status == 'OK'
+
+    @property
+    def k2_relative_error(self) -> float:
+        return self.k2 / self.k2_tangent - 1.0 if self.k2_tangent else float('nan')
+
+    @property
+    def worst_diagonal_error(self) -> float:
+        """Largest |measured / tangent − 1| over K's diagonal (NaN without numbers)."""
+        errors = [abs(d['relative_error']) for d in self.diagonal if d.get('relative_error') is not None]
+        return max(errors) if len(errors) == 6 else float('nan')
+
+
+@dataclass
 class CampaignAnalysis:
     """What :func:`analyze_campaign` found and wrote."""
 
     out: Path
     campaign: str
     rows: list[SessionRow]
+    """The one-axis sessions (series fy, fz, mz)."""
+    full: list[Full6Row]
+    """The sessions of the series full (the 6×6 stiffness)."""
     missing: list[str]
     """Sessions planned but not run (yet)."""
     analysed: list[str]
@@ -61,7 +109,7 @@ class CampaignAnalysis:
     def to_dict(self) -> dict[str, Any]:
         from crane_stiffness.analysis.results import json_safe
         return json_safe({'campaign': self.campaign, 'rows': [asdict(r) for r in self.rows],
-                           'missing': self.missing, 'analysed': self.analysed, 'failed': self.failed,
+                           'full': [asdict(r) for r in self.full], 'missing': self.missing, 'analysed': self.analysed, 'failed': self.failed,
                            'files': self.files})
 
 
@@ -81,6 +129,20 @@ class CalibrationSession:
     displacement: np.ndarray
     """(n,) mean LVDT reading of each hold [m, or rad when converted by a lever arm]."""
     displacement_se: np.ndarray
+
+
+@dataclass
+class MatrixSession:
+    """What the calibration uses of a session of the series full: its set-up and its measured 6×6 compliance."""
+
+    session: str
+    nominal: dict[str, Any]
+    """geometry.* parameters of the nominal crane of the set-up."""
+    compliance: np.ndarray
+    """(36,) row-major vec C measured [m/N, m/(N·m), rad/N, rad/(N·m)] (crane_stiffness.analysis.full6)."""
+    whiten: np.ndarray
+    """(36, 36) Σ^(-1/2) of vec C's covariance: whiten @ (C − model) has unit covariance."""
+    series: str = 'full'
 
 
 @dataclass

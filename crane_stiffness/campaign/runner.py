@@ -60,7 +60,9 @@ def instructions(plan: SessionPlan, total: int) -> str:
     """What the operator sets up before a session on hardware, in words."""
     return (f'session {plan.index + 1}/{total} {plan.id}: {SERIES[plan.series]} series ({plan.series}); hang '
             f'W = {plan.weight:g} N, set the wires to l0 = {plan.l0:.4g} m (unloaded height {plan.height:.4g} m); '
-            f'program {Path(plan.program).name} scaled by {plan.program_scale:.4g}')
+            + ('program designed for this set-up (D-optimal, all six axes; the pose sensor measures)'
+               if plan.program_text is not None else
+               f'program {Path(plan.program).name} scaled by {plan.program_scale:.4g}'))
 
 
 def session_done(out: Path, plan: SessionPlan) -> bool:
@@ -327,7 +329,8 @@ class _SessionRunner:
             folder = out / 'sessions' / plan.id
             folder.mkdir(parents=True)
             program = folder / 'program.yaml'
-            program.write_text(scaled_program_text(Path(plan.program), plan.program_scale))
+            program.write_text(plan.program_text if plan.program_text is not None else
+                               scaled_program_text(Path(plan.program), plan.program_scale))
             entry = campaign_entry(self.campaign, plan, self.hardware, confirmed)
             model = plan.nominal if self.hardware else plan.true
             seeds = {} if self.hardware or plan.seeds is None else plan.seeds
@@ -352,7 +355,11 @@ class _SessionRunner:
                   'wall_s': round(time.time() - started, 3), 'ros_domain_id': domain, 'attempts': attempt,
                   'bag': str(out / 'bags' / plan.id), 'started_utc': _utc(started), 'finished_utc': _utc(),
                   'startup_s': startup_s, 'estimate': decode_values(observer.values) if observer.values else None,
-                  'status': summary['status'], 'node_exit_codes': summary['node_exit_codes']}
+                  'status': summary['status'], 'node_exit_codes': summary['node_exit_codes'],
+                  # The six-axis fit's last K (quantity × row × column, /stiffness6/stiffness) and status, if it ran.
+                  'stiffness6': observer.stiffness6,
+                  'status6': None if observer.status6 is None else
+                  {'level': observer.status6[0], 'message': observer.status6[1], 'values': observer.status6[2]}}
         tmp = folder / (RESULT_FILE + '.tmp')
         tmp.write_text(json.dumps(result, indent=1, allow_nan=True))
         os.replace(tmp, folder / RESULT_FILE)

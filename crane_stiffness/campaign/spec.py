@@ -6,14 +6,18 @@ The file is a ROS 2 parameter YAML with one section, ``campaign`` (see config/ca
       ros__parameters:
         name: paper
         crane: crane_lab.yaml                 # the nominal crane (geometry file)
-        series: [fy, fz, mz]                  # side force, vertical force, moment about z
-        programs: [campaign_side_force, campaign_force_z, campaign_moment_z]   # one per series
+        series: [fy, fz, mz]                  # side force, vertical force, moment about z (full: the 6×6)
+        programs: [campaign_side_force, campaign_force_z, campaign_moment_z]   # one per series (full: design)
         weights: [25.0, 50.0, 100.0]          # W [N]
         lengths: [0.5, 1.5]                   # l0 [m] (or heights: h [m])
         repeats: 1
         load_fraction: 0.5                    # side-force/moment peak: this fraction of the first-slack load
         true.wire_stiffness_factor: 1.0       # simulated rig only: the true crane against the nominal
         true.weight_factor: 1.0
+
+The series ``full`` measures the whole 6×6 stiffness of every set-up in one designed multi-axis test
+(crane_stiffness.campaign.full_series): its program is ``design`` (the D-optimal program of each set-up, made from
+the ``design.*`` keys) or a six-axis program file, checked against every set-up's slack margins.
 
 Every key is declared once in :data:`CAMPAIGN_PARAMS` (default, unit, rule). :func:`load_campaign` raises
 :class:`~crane_stiffness.campaign.errors.CampaignFileError` naming the file and the key for an unknown key, a
@@ -33,6 +37,7 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from crane_stiffness.campaign.errors import CampaignFileError
+from crane_stiffness.campaign.full_series import DESIGN, FULL, DesignSettings, full_program, is_six_axis_program
 from crane_stiffness.errors import ParameterError
 from crane_stiffness.params.errors import ConfigError
 from crane_stiffness.params.files import ParamFile, config_path, load_params, load_yaml, share_dir
@@ -42,7 +47,7 @@ from crane_stiffness.sim.program import load_program_file
 
 SECTION = 'campaign'
 #: The series a campaign can run, by loaded axis, and their names in the paper.
-SERIES = {'fy': 'side force', 'fz': 'vertical force', 'mz': 'moment about z'}
+SERIES = {'fy': 'side force', 'fz': 'vertical force', 'mz': 'moment about z', 'full': 'whole 6x6 stiffness'}
 
 #: The keys of a campaign file, declared once (default, description with unit, rule).
 CAMPAIGN_PARAMS: tuple[ParamSpec, ...] = (
@@ -50,9 +55,11 @@ CAMPAIGN_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec('crane', 'crane_lab.yaml', 'the nominal crane: a geometry parameter file, a name in the installed '
               'config/ or a path (relative to the campaign file) [-]'),
     ParamSpec('series', ['fy'], 'the test series by loaded axis: fy (side force), fz (vertical force), mz (moment '
-              'about z) [-]', rule='each one of fy, fz, mz, no repeats'),
+              'about z), or full (the whole 6x6 stiffness from one multi-axis test) [-]',
+              rule='each one of fy, fz, mz, full, no repeats'),
     ParamSpec('programs', ['side_force'], 'the program of each series: program_<name>.yaml in the installed config/, '
-              'or a path to a program file (relative to the campaign file) [-]', rule='one per series'),
+              'or a path to a program file (relative to the campaign file); for full: design (each set-up\'s '
+              'D-optimal program, design.*) or a six-axis program [-]', rule='one per series'),
     ParamSpec('weights', [50.0], 'suspended weights W [N]', rule='at least one; each >= 0'),
     ParamSpec('lengths', [0.0], "unstretched wire lengths l0; [0.0] = use 'heights' [m]",
               rule="each > 0; exactly one of lengths and heights given"),
@@ -63,8 +70,27 @@ CAMPAIGN_PARAMS: tuple[ParamSpec, ...] = (
               "nominal crane's first wire goes slack (the program's levels scaled to it); 0 = the levels as "
               'written [-]', low=0.0, high=0.95),
     ParamSpec('seed', 1, "simulated sensors only: the noise seed of the campaign; session i's load cell takes "
-              'seed + 2·i and its LVDT seed + 2·i + 1, so the campaign gives the same numbers in every run on '
-              'simulated time; -1 = fresh noise in every session [-]', low=-1),
+              'seed + 2·i, its LVDT seed + 2·i + 1 and (series full) its pose sensor seed + 2·n + i of n sessions, so '
+              'the campaign gives the same numbers in every run on simulated time; -1 = fresh noise in every '
+              'session [-]', low=-1),
+    ParamSpec('design.steps', 24, "series full, program design: held steps of each set-up's D-optimal program "
+              '(even; at least 8 fold-over pairs: six pairs alone fit C exactly from their differences and leave '
+              "the lack-of-fit test blind to the response's odd-order bend) [-]", low=16),
+    ParamSpec('design.hold_s', 4.0, 'series full, program design: time each step is held [s]', above=0.0),
+    ParamSpec('design.settle_s', 0.5, 'series full, program design: first part of each hold left out of the 6x6 '
+              'fit [s]', low=0.0),
+    ParamSpec('design.baseline_s', 2.0, 'series full, program design: zero-load baseline at each end [s]',
+              above=0.0),
+    ParamSpec('design.safety_factor', 2.0, 'series full: every held wrench (and the path between two) could grow '
+              'this many times before a wire goes slack, on every set-up [-]', low=1.0),
+    ParamSpec('design.peak_fraction', 0.98, "series full, program design: each axis' peak as this fraction of its "
+              'largest admissible load alone at the set-up [-]', above=0.0, high=1.0),
+    ParamSpec('design.seed', 0, "series full, program design: seed of the design's random starts [-]", low=0),
+    ParamSpec('design.full_scale_fraction', 0.9, "series full, program design: each axis' peak at most this fraction "
+              "of the load cell's full scale (config/sensors.yaml, load_cell.full_scale) [-]", above=0.0, high=1.0),
+    ParamSpec('design.max_lack_of_fit', 1.2, 'series full, program design: the design scaled down until the lack-of-'
+              'fit statistic the nonlinear model predicts for it is at most this (1 = a linear response; the 6x6 '
+              'status turns WARN near 1.4) [-]', above=1.0),
     ParamSpec('true.wire_stiffness_factor', 1.0, "simulated rig only: the true crane's wire stiffness k (E·A) over "
               'the nominal one [-]', above=0.0),
     ParamSpec('true.weight_factor', 1.0, "simulated rig only: the true crane's weight over the nominal W [-]",
@@ -91,6 +117,8 @@ class Campaign:
     load_fraction: float
     seed: int
     """The simulated sensors' noise seed of the campaign (-1: fresh noise)."""
+    design: DesignSettings
+    """Series full with program design: the program designed for each set-up."""
     true_wire_stiffness_factor: float
     true_weight_factor: float
 
@@ -108,7 +136,8 @@ class SessionPlan:
     id: str
     series: str
     program: str
-    """The program file as the campaign gives it (the runner writes its scaled copy beside the session)."""
+    """The program file as the campaign gives it, or 'design' (the runner writes its scaled or designed copy beside
+    the session)."""
     program_scale: float
     """Factor on the program's levels (and the estimator's hysteresis) for this set-up; 1 = as written."""
     weight: float
@@ -120,7 +149,10 @@ class SessionPlan:
     true: dict[str, Any]
     """Every geometry.* parameter of the crane the simulated rig runs (= nominal unless the campaign sets true.*)."""
     seeds: dict[str, int] | None = None
-    """The simulated sensors' noise seeds by node (load_cell, lvdt); None: fresh noise."""
+    """The simulated sensors' noise seeds by node (load_cell, lvdt, and pose_sensor in series full); None: fresh
+    noise."""
+    program_text: str | None = None
+    """Series full with program design: the program file designed for this set-up (YAML text)."""
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -187,7 +219,7 @@ def load_campaign(path: str | os.PathLike) -> Campaign:
         raise _fail(path, 'series', series, 'must be a non-empty list of fy, fz, mz')
     for i, s in enumerate(series):
         if s not in SERIES:
-            raise _fail(path, f'series[{i}]', s, 'must be one of fy, fz, mz')
+            raise _fail(path, f'series[{i}]', s, 'must be one of fy, fz, mz, full')
     if len(set(series)) != len(series):
         raise _fail(path, 'series', series, 'must not name a series twice')
     programs = values['programs']
@@ -197,6 +229,9 @@ def load_campaign(path: str | os.PathLike) -> Campaign:
     for i, (axis, name) in enumerate(zip(series, programs)):
         if not isinstance(name, str) or not name:
             raise _fail(path, f'programs[{i}]', name, 'must be a program name or file')
+        if axis == FULL and name == DESIGN:
+            program_paths.append(Path(DESIGN))
+            continue
         program = _program_path(path, name)
         if not program.is_file():
             raise _fail(path, f'programs[{i}]', name, f'no program file {program}')
@@ -205,7 +240,11 @@ def load_campaign(path: str | os.PathLike) -> Campaign:
         except (ValueError, CampaignFileError, ConfigError) as exc:
             raise _fail(path, f'programs[{i}]', name, f'not a valid program: {exc}') from None
         axes = {s.axis for s in loaded.segments if s.target != 0.0}
-        if axes != {axis}:
+        if axis == FULL:
+            if not is_six_axis_program(program):
+                raise _fail(path, f'programs[{i}]', name, 'is not a six-axis program (no stiffness6_estimator '
+                            'section): give design, or a program made by crane-stiffness full6 design')
+        elif axes != {axis}:
             raise _fail(path, f'programs[{i}]', name, f'loads {", ".join(sorted(axes)) or "nothing"}, not the '
                         f'series {axis}')
         program_paths.append(program)
@@ -232,9 +271,24 @@ def load_campaign(path: str | os.PathLike) -> Campaign:
     return Campaign(path=path, name=values['name'], crane=crane_path, series=tuple(series),
                     programs=tuple(program_paths), weights=weights, lengths=lengths, heights=heights,
                     repeats=int(values['repeats']), load_fraction=float(values['load_fraction']),
-                    seed=int(values['seed']),
+                    seed=int(values['seed']), design=_design_settings(path, values),
                     true_wire_stiffness_factor=float(values['true.wire_stiffness_factor']),
                     true_weight_factor=float(values['true.weight_factor']))
+
+
+def _design_settings(path: Path, values: Mapping[str, Any]) -> DesignSettings:
+    steps = int(values['design.steps'])
+    if steps % 2:
+        raise _fail(path, 'design.steps', steps, 'must be even (fold-over pairs +v, -v)')
+    if not float(values['design.settle_s']) < float(values['design.hold_s']):
+        raise _fail(path, 'design.settle_s', values['design.settle_s'],
+                    f"must be shorter than design.hold_s = {values['design.hold_s']} s")
+    return DesignSettings(steps=steps, hold_s=float(values['design.hold_s']),
+                          settle_s=float(values['design.settle_s']), baseline_s=float(values['design.baseline_s']),
+                          safety_factor=float(values['design.safety_factor']),
+                          peak_fraction=float(values['design.peak_fraction']), seed=int(values['design.seed']),
+                          full_scale_fraction=float(values['design.full_scale_fraction']),
+                          max_lack_of_fit=float(values['design.max_lack_of_fit']))
 
 
 def _set_up(campaign: Campaign, weight: float, size: float) -> tuple[dict[str, Any], dict[str, Any]]:
@@ -255,8 +309,9 @@ def _set_up(campaign: Campaign, weight: float, size: float) -> tuple[dict[str, A
 
 def program_scale(campaign: Campaign, series: str, program: Path, nominal: Mapping[str, Any]) -> float:
     """Factor on a program's levels so that its peak is ``load_fraction`` of the load at which the nominal crane's
-    first wire goes slack (side force, moment); 1 for the vertical force (no wire goes slack) or load_fraction 0."""
-    if campaign.load_fraction == 0.0 or series == 'fz':
+    first wire goes slack (side force, moment); 1 for the vertical force (no wire goes slack), load_fraction 0 or the
+    series full (its program is designed, or checked, for each set-up)."""
+    if campaign.load_fraction == 0.0 or series in ('fz', FULL):
         return 1.0
     from crane_stiffness.analysis.sweep import slack_threshold
     peak = float(abs(load_program_file(program, 'load_program').levels(series)).max())
@@ -273,23 +328,32 @@ def session_id(series: str, weight: float, size: float, repeat: int, by_length: 
 
 def plan_sessions(campaign: Campaign) -> list[SessionPlan]:
     """The campaign's sessions in run order: by series, then length, then weight (hang the weights in turn at one
-    wire length), then repeat."""
+    wire length), then repeat. Series full: each set-up's program designed (or checked) here, so that a set-up
+    whose program would slacken a wire is refused before any session runs (CampaignFileError naming it).
+
+    Seeds (simulated sensors): session i of n takes load cell seed + 2·i, LVDT seed + 2·i + 1 and, in series full,
+    pose sensor seed + 2·n + i: every sensor of the campaign its own seed."""
     plans: list[SessionPlan] = []
     sizes = campaign.lengths or campaign.heights
+    total = len(campaign.series) * len(sizes) * len(campaign.weights) * campaign.repeats
     for series, program in zip(campaign.series, campaign.programs):
         for size in sizes:
             for weight in campaign.weights:
                 nominal, true = _set_up(campaign, weight, size)
                 g = geometry_from_params(nominal)
                 scale = program_scale(campaign, series, program, nominal)
+                text = (full_program(str(program), nominal, campaign.design, weight, size, bool(campaign.lengths))
+                        if series == FULL else None)
                 for repeat in range(1, campaign.repeats + 1):
                     index = len(plans)
                     seeds = (None if campaign.seed < 0 else
                              {'load_cell': campaign.seed + 2 * index, 'lvdt': campaign.seed + 2 * index + 1})
+                    if seeds is not None and series == FULL:
+                        seeds['pose_sensor'] = campaign.seed + 2 * total + index
                     plans.append(SessionPlan(
                         index=index, id=session_id(series, weight, size, repeat, bool(campaign.lengths)),
                         series=series, program=str(program), program_scale=scale, weight=weight, l0=g.l0,
-                        height=g.height, repeat=repeat, nominal=nominal, true=true, seeds=seeds))
+                        height=g.height, repeat=repeat, nominal=nominal, true=true, seeds=seeds, program_text=text))
     return plans
 
 

@@ -1,5 +1,6 @@
 """A synthetic campaign directory, as ``crane-stiffness campaign run`` leaves it, without ROS: every planned session a
-synthetic bag (crane_stiffness.testing.synthetic) made with the campaign's true crane and recording the nominal one,
+synthetic bag (crane_stiffness.testing.synthetic; six-axis for the series full:
+crane_stiffness.testing.synthetic_full6_bag) made with the campaign's true crane and recording the nominal one,
 its result.json saying the run's statuses were OK. For the campaign tests (analysis, calibration statistics, Dask)
 and the campaign benchmark.
 """
@@ -10,6 +11,7 @@ import os
 from pathlib import Path
 from typing import Any
 
+from crane_stiffness.campaign.full_series import FULL
 from crane_stiffness.campaign.runner import RESULT_FILE, prepare_campaign, campaign_entry
 from crane_stiffness.campaign.spec import Campaign, SessionPlan, plan_sessions, scaled_program_text
 from crane_stiffness.params.files import load_yaml
@@ -30,9 +32,44 @@ def session_program(plan: SessionPlan, repeats: int = 1) -> tuple[LoadProgram, d
     return program, estimator
 
 
+def _write_result(out: Path, plan: SessionPlan, result: dict[str, Any]) -> None:
+    folder = out / 'sessions' / plan.id
+    folder.mkdir(parents=True, exist_ok=True)
+    tmp = folder / (RESULT_FILE + '.tmp')
+    tmp.write_text(json.dumps(result))
+    os.replace(tmp, folder / RESULT_FILE)
+
+
+def write_synthetic_full(out: Path, campaign: Campaign, plan: SessionPlan, seed: int) -> None:
+    """One session of the series full (crane_stiffness.testing.synthetic_full6_bag): the pose deflected by the true
+    crane's tangent compliance, the nominal crane recorded; its result.json holds the K the live estimator would
+    have published last (the offline fit of the same samples, which the live one equals: test_stiffness6_node)
+    and status OK."""
+    from crane_stiffness.analysis.full6 import analyze_full6
+    from crane_stiffness.stiffness6_layout import encode
+    from crane_stiffness.testing.synthetic_full6_bag import write_full6_session
+    data = load_yaml(plan.program_text or Path(plan.program).read_text())
+    program = LoadProgram.from_params(data['load_program']['ros__parameters'])
+    estimator6 = dict((data.get('stiffness6_estimator') or {}).get('ros__parameters') or {})
+    bag = out / 'bags' / plan.id
+    write_full6_session(bag, program, geometry_from_params(plan.true), seed=seed, estimator6=estimator6,
+                        recorded_geometry=geometry_from_params(plan.nominal), notes=f'synthetic session {plan.id}')
+    fit = analyze_full6(bag, write_files=False).fit
+    assert fit is not None
+    live = encode(fit.stiffness, fit.stiffness_low, fit.stiffness_high)
+    ok = {'level': 'OK', 'message': 'synthetic'}
+    _write_result(out, plan, {'session': plan.id, 'plan': plan.to_dict(),
+                              'campaign_entry': campaign_entry(campaign, plan, hardware=False, confirmed=None),
+                              'status': {part: ok for part in ('loading', 'unloading', 'input')},
+                              'status6': {**ok, 'values': {}}, 'stiffness6': live, 'bag': str(bag)})
+
+
 def write_synthetic_plan(out: Path, campaign: Campaign, plan: SessionPlan, seed: int,
                          sample_rate_hz: float = 1000.0, repeats: int = 1) -> None:
     """One session of a synthetic campaign: its bag and its result.json."""
+    if plan.series == FULL:
+        write_synthetic_full(out, campaign, plan, seed)
+        return
     program, estimator = session_program(plan, repeats)
     # A moment series' LVDT reads the rotation itself here (no lever arm): no LVDT arrangement recorded.
     estimator.pop('lever_arm_m', None)
@@ -42,14 +79,9 @@ def write_synthetic_plan(out: Path, campaign: Campaign, plan: SessionPlan, seed:
                             estimator=estimator, seed=seed, sample_rate_hz=sample_rate_hz,
                             force_noise=FORCE_NOISE, displacement_noise=DISPLACEMENT_NOISE,
                             campaign=entry, notes=f'synthetic session {plan.id}')
-    folder = out / 'sessions' / plan.id
-    folder.mkdir(parents=True, exist_ok=True)
     status = {part: {'level': 'OK', 'message': 'synthetic'} for part in ('loading', 'unloading', 'input')}
-    result = {'session': plan.id, 'plan': plan.to_dict(), 'campaign_entry': entry, 'status': status,
-              'bag': str(out / 'bags' / plan.id)}
-    tmp = folder / (RESULT_FILE + '.tmp')
-    tmp.write_text(json.dumps(result))
-    os.replace(tmp, folder / RESULT_FILE)
+    _write_result(out, plan, {'session': plan.id, 'plan': plan.to_dict(), 'campaign_entry': entry, 'status': status,
+                              'bag': str(out / 'bags' / plan.id)})
 
 
 def write_synthetic_campaign(out: str | os.PathLike, campaign: Campaign, seed: int = 0,

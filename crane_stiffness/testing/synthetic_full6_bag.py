@@ -104,7 +104,8 @@ def write_full6_session(path: str | Path, program: LoadProgram, geometry: CraneG
                         wrench_bias: ArrayLike = LOAD_CELL_BIAS, pose_noise: ArrayLike = POSE_NOISE,
                         mount: SensorMount | None = None, estimator6: dict[str, Any] | None = None,
                         pre_s: float = 0.5, post_s: float = 0.5, t0_ns: int = T0_NS,
-                        notes: str = 'synthetic six-axis session') -> Full6BagSession:
+                        notes: str = 'synthetic six-axis session', recorded_geometry: CraneGeometry | None = None
+                        ) -> Full6BagSession:
     """Write a synthetic six-axis session bag (module docstring) at ``path`` (a new directory); returns its truth.
 
     Args:
@@ -117,6 +118,8 @@ def write_full6_session(path: str | Path, program: LoadProgram, geometry: CraneG
             stiffness_estimator's sensor_rotation (quaternion), sensor_position, sensor_reaction.
         estimator6: parameters recorded as the stiffness6_estimator node's (None: none recorded).
         pre_s / post_s: sensor data before the program starts and after it ends [s].
+        recorded_geometry: the crane the session records (a campaign's nominal one) when it is not the one that
+            deflects (default: ``geometry``).
     """
     mount = mount if mount is not None else SensorMount()
     rng = np.random.default_rng(seed)
@@ -150,7 +153,8 @@ def write_full6_session(path: str | Path, program: LoadProgram, geometry: CraneG
     # The records: the rig, the program, the sensors' parameters; the nodes' parameters as they ran.
     mount_params = {'sensor_rotation': matrix_to_quaternion(mount.rotation).tolist(),
                     'sensor_position': mount.position.tolist(), 'sensor_reaction': bool(mount.reaction)}
-    meta = session_metadata(rig={'geometry': geometry_to_params(geometry), 'l0': geometry.l0, 'k': geometry.k},
+    recorded = recorded_geometry if recorded_geometry is not None else geometry
+    meta = session_metadata(rig={'geometry': geometry_to_params(recorded), 'l0': recorded.l0, 'k': recorded.k},
                             program={**program.to_params(), 'duration_s': program.duration_s, 'source': 'synthetic'},
                             start_time_ns=start_ns, notes=notes, session=Path(path).name,
                             sensors={'stiffness_estimator': mount_params})

@@ -1,0 +1,131 @@
+"""The figures of a campaign's series ``full`` (matplotlib, Agg): the whole 6×6 stiffness of every set-up against
+the model (crane_stiffness.full6.reference).
+
+- ``full_stiffness_diagonal``: K's six diagonal entries against W, one panel each, for every wire length the
+  nominal model's exact tangent (solid) and eq. (18) (dashed) over W, and each session's measured entry with its
+  95 % interval (hollow: session not OK); the calibrated model beside them when given.
+- ``full_coupling_k2``: the side–tilt coupling K2 [N/rad] against W likewise: the term the paper's eq. (18) has and
+  one-axis tests never measure, with its sign.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import matplotlib
+
+matplotlib.use('Agg')  # headless
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from crane_stiffness.campaign.rows import Full6Row  # noqa: E402
+from crane_stiffness.full6.reference import entry_name, k2_of  # noqa: E402
+
+#: A model of the crane for a set-up: geometry.* parameters -> the geometry.* parameters to draw (calibrated).
+Adjust = Callable[[dict[str, Any]], dict[str, Any]]
+UNITS = ('N/m', 'N/m', 'N/m', 'N·m/rad', 'N·m/rad', 'N·m/rad')
+COLORS = ('tab:blue', 'tab:red', 'tab:green', 'tab:purple', 'tab:brown')
+
+
+def model_matrices(nominal: dict[str, Any], weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(tangent, eq. (18)) K at rest for each W of ``weights`` [N] on the set-up ``nominal`` (its length): two
+    (n, 6, 6) arrays, eq. (18) NaN where it does not describe the geometry."""
+    from crane_stiffness.full6.reference import reference_at_rest
+    from crane_stiffness.params.geometry import geometry_from_params
+    g = geometry_from_params(nominal)
+    tangent, paper = [], []
+    for w in weights:
+        ref = reference_at_rest(g.replace(weight=float(w)))
+        tangent.append(ref.tangent)
+        paper.append(np.full((6, 6), np.nan) if ref.paper is None else ref.paper)
+    return np.array(tangent), np.array(paper)
+
+
+def _lengths(rows: Sequence[Full6Row]) -> list[float]:
+    return sorted({round(r.l0, 9) for r in rows})
+
+
+def _weights(rows: Sequence[Full6Row]) -> np.ndarray:
+    w_max = max(r.weight for r in rows) * 1.15
+    return np.linspace(max(w_max / 60, 0.5), w_max, 30)
+
+
+def _measured(ax: Any, rows: Sequence[Full6Row], value: Callable[[Full6Row], tuple[float, float, float]],
+              color: str, label: str) -> None:
+    for ok in (True, False):
+        sel = [r for r in rows if r.ok == ok]
+        if not sel:
+            continue
+        v = np.array([value(r) for r in sel], dtype=float)
+        err = np.abs(v[:, 1:].T - v[:, 0])
+        ax.errorbar([r.weight for r in sel], v[:, 0], yerr=err, fmt='o', ms=6, color=color, capsize=3,
+                    mfc=color if ok else 'none', label=label + ('' if ok else ' (not OK)'))
+
+
+def _curves(ax: Any, rows: Sequence[Full6Row], pick: Callable[[np.ndarray], np.ndarray],
+            calibrated: Adjust | None, labelled: bool) -> None:
+    weights = _weights(rows)
+    for c, l0 in zip(COLORS * 4, _lengths(rows)):
+        here = [r for r in rows if round(r.l0, 9) == l0]
+        tangent, paper = model_matrices(here[0].nominal, weights)
+        ax.plot(weights, pick(tangent), '-', color=c, lw=1.5,
+                label=f'l0 = {l0:g} m: exact tangent' if labelled else None)
+        ax.plot(weights, pick(paper), '--', color=c, lw=1.0, label='eq. (18)' if labelled and c == COLORS[0] else None)
+        if calibrated is not None:
+            cal, _ = model_matrices(calibrated(here[0].nominal), weights)
+            ax.plot(weights, pick(cal), '-', color='tab:orange', lw=1.2,
+                    label='calibrated model' if labelled and c == COLORS[0] else None)
+
+
+def plot_diagonal(rows: Sequence[Full6Row], path: Path, calibrated: Adjust | None = None) -> Path:
+    """K's diagonal against W (module docstring)."""
+    fig, axes = plt.subplots(2, 3, figsize=(15, 8.4), dpi=100)
+    for i, ax in enumerate(axes.flat):
+        _curves(ax, rows, lambda k, i=i: k[:, i, i], calibrated, labelled=i == 0)
+        for c, l0 in zip(COLORS * 4, _lengths(rows)):
+            here = [r for r in rows if round(r.l0, 9) == l0]
+            _measured(ax, here, lambda r, i=i: (r.diagonal[i]['measured'], r.diagonal[i]['low'],
+                                                 r.diagonal[i]['high']), c, f'measured, l0 = {l0:g} m')
+        ax.set_title(f'{entry_name(i, i)} [{UNITS[i]}]')
+        ax.set_xlabel('suspended weight W [N]')
+        ax.grid(True, alpha=0.3)
+        if len(_lengths(rows)) > 1:
+            ax.set_yscale('log')
+    axes.flat[0].legend(fontsize=7, loc='best')
+    fig.suptitle('The whole stiffness, one designed test per set-up: K\'s diagonal against W (95 % intervals)')
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
+def plot_k2(rows: Sequence[Full6Row], path: Path, calibrated: Adjust | None = None) -> Path:
+    """K2 against W (module docstring)."""
+    fig, ax = plt.subplots(figsize=(7.5, 5.2), dpi=100)
+    _curves(ax, rows, lambda k: np.array([k2_of(m) for m in k]), calibrated, labelled=True)
+    for c, l0 in zip(COLORS * 4, _lengths(rows)):
+        here = [r for r in rows if round(r.l0, 9) == l0]
+        _measured(ax, here, lambda r: (r.k2, r.k2_low, r.k2_high), c, f'measured, l0 = {l0:g} m')
+    ax.axhline(0.0, color='0.6', lw=0.8)
+    ax.set_xlabel('suspended weight W [N]')
+    ax.set_ylabel('K2 [N/rad] (side force per tilt)')
+    ax.set_title('The side–tilt coupling K2 against W (95 % intervals)')
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
+def write_full_figures(rows: Sequence[Full6Row], out: Path, formats: Sequence[str] = ('png',),
+                       calibrated: Adjust | None = None, suffix: str = '') -> list[str]:
+    """Both figures in every format into ``out``; the paths written."""
+    files = []
+    for fmt in formats:
+        files.append(str(plot_diagonal(rows, out / f'full_stiffness_diagonal{suffix}.{fmt}', calibrated)))
+        files.append(str(plot_k2(rows, out / f'full_coupling_k2{suffix}.{fmt}', calibrated)))
+    return files
+
+
+__all__ = ['model_matrices', 'plot_diagonal', 'plot_k2', 'write_full_figures']
