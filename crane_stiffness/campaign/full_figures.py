@@ -106,7 +106,10 @@ def plot_k2(rows: Sequence[Full6Row], path: Path, calibrated: Adjust | None = No
     for c, l0 in zip(COLORS * 4, _lengths(rows)):
         here = [r for r in rows if round(r.l0, 9) == l0]
         _measured(ax, here, lambda r: (r.k2, r.k2_low, r.k2_high), c, f'measured, l0 = {l0:g} m')
-    ax.axhline(0.0, color='0.6', lw=0.8)
+    if len(_lengths(rows)) > 1 and all(r.k2 > 0 for r in rows):
+        ax.set_yscale('log')  # the lengths differ by an order
+    else:
+        ax.axhline(0.0, color='0.6', lw=0.8)
     ax.set_xlabel('suspended weight W [N]')
     ax.set_ylabel('K2 [N/rad] (side force per tilt)')
     ax.set_title('The side–tilt coupling K2 against W (95 % intervals)')
