@@ -13,7 +13,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from helpers import REPO
 from crane_stiffness.campaign.analyze import analyze_campaign
 from crane_stiffness.campaign.calibrate import calibrate_campaign
 from crane_stiffness.campaign.errors import CampaignFileError

@@ -43,7 +43,8 @@ from typing import Any, Sequence
 import numpy as np
 
 from crane_stiffness.campaign.errors import CalibrationError
-from crane_stiffness.campaign.rows import Calibration, CalibrationSession, MatrixSession, Parameter
+from crane_stiffness.campaign.rows import (Calibration, CalibrationSession, Full6Row, MatrixSession, Parameter,
+                                           SessionRow)
 
 Session = CalibrationSession | MatrixSession
 
@@ -162,6 +163,7 @@ class _Model:
         from crane_stiffness.model import rest_pose, solve_batch
         from crane_stiffness.params.geometry import geometry_from_params
         s = self.sessions[i]
+        assert isinstance(s, CalibrationSession)
         g = geometry_from_params(self.params(i, theta))
         rest = rest_pose(g, xtol=1e-13)
         batch = solve_batch(g, s.force[:, None] * unit(s.series)[None, :], xtol=1e-13)
@@ -378,12 +380,15 @@ def calibrate_campaign(out: Any, *, weight: str = 'none', height: bool = False, 
     if any(f.session in index for f in full):
         files += full_figures.write_full_figures([f for f in full if f.session in index], target, formats,
                                                  calibrated=calibrated, suffix='_calibrated')
+    left_out: list[SessionRow | Full6Row] = []
+    left_out.extend(r for r in rows if r.session not in index)
+    left_out.extend(f for f in full if f.session not in index)
     (target / 'calibration.json').write_text(json.dumps(
         {**result.to_dict(), 'sessions_used': [s.session for s in sessions],
-         'sessions_left_out': [r.session for r in [*rows, *full] if r.session not in index], 'weight_mode': weight,
+         'sessions_left_out': [r.session for r in left_out], 'weight_mode': weight,
          'height': height}, indent=1, allow_nan=False))
     files.append(str(target / 'calibration.json'))
-    files += write_blocks(calibration_blocks(result, [r for r in [*rows, *full] if r.session not in index],
+    files += write_blocks(calibration_blocks(result, left_out,
                                              [Path(f).name for f in files if f.endswith(tuple(formats))]),
                           target, 'report', reports, 'calibration')
     return result, files

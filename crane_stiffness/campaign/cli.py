@@ -74,11 +74,11 @@ def cmd_analyze(args: argparse.Namespace) -> int:
         from crane_stiffness.axes import AXES
         print('the whole 6x6 K against the tangent (measured / tangent - 1; * interval misses the tangent):')
         print(f'{"session":<20} ' + ' '.join(f'{a:>8}' for a in AXES) + f' {"K2":>8} {"sign":>5} {"cover":>6}  status')
-    for r in result.full:
+    for f in result.full:
         diag = ' '.join(f'{100 * d["relative_error"]:>+7.2f}' + (' ' if d['covers'] else '*')
-                        if d['relative_error'] is not None else f'{"-":>8}' for d in r.diagonal)
-        sign = 'ok' if r.k2 * r.k2_tangent > 0 else 'WRONG'
-        print(f'{r.session:<20} {diag} {100 * r.k2_relative_error:>+7.2f}% {sign:>5} {r.covered:>3}/36  {r.status}')
+                        if d['relative_error'] is not None else f'{"-":>8}' for d in f.diagonal)
+        sign = 'ok' if f.k2 * f.k2_tangent > 0 else 'WRONG'
+        print(f'{f.session:<20} {diag} {100 * f.k2_relative_error:>+7.2f}% {sign:>5} {f.covered:>3}/36  {f.status}')
     for name in result.missing:
         print(f'  missing: {name}')
     for name, why in result.failed.items():

@@ -81,11 +81,15 @@ def plot_diagonal(rows: Sequence[Full6Row], path: Path, calibrated: Adjust | Non
     """K's diagonal against W (module docstring)."""
     fig, axes = plt.subplots(2, 3, figsize=(15, 8.4), dpi=100)
     for i, ax in enumerate(axes.flat):
-        _curves(ax, rows, lambda k, i=i: k[:, i, i], calibrated, labelled=i == 0)
+        def entry(k: np.ndarray, i: int = i) -> np.ndarray:
+            return k[:, i, i]
+
+        def measured(r: Full6Row, i: int = i) -> tuple[float, float, float]:
+            return r.diagonal[i]['measured'], r.diagonal[i]['low'], r.diagonal[i]['high']
+        _curves(ax, rows, entry, calibrated, labelled=i == 0)
         for c, l0 in zip(COLORS * 4, _lengths(rows)):
             here = [r for r in rows if round(r.l0, 9) == l0]
-            _measured(ax, here, lambda r, i=i: (r.diagonal[i]['measured'], r.diagonal[i]['low'],
-                                                 r.diagonal[i]['high']), c, f'measured, l0 = {l0:g} m')
+            _measured(ax, here, measured, c, f'measured, l0 = {l0:g} m')
         ax.set_title(f'{entry_name(i, i)} [{UNITS[i]}]')
         ax.set_xlabel('suspended weight W [N]')
         ax.grid(True, alpha=0.3)

@@ -68,7 +68,8 @@ def campaign_blocks(result: CampaignAnalysis, images: Sequence[str]) -> list[Blo
             full_table(result.full)]
     for image in images:
         blocks.append(('img', image, Path(image).stem.replace('_', ' ')))
-    bad = [f'{r.session}: ' + '; '.join(r.reasons) for r in [*rows, *result.full] if not r.ok]
+    every: list[SessionRow | Full6Row] = [*rows, *result.full]
+    bad = [f'{r.session}: ' + '; '.join(r.reasons) for r in every if not r.ok]
     blocks += [('h2', 'Sessions not OK (drawn hollow)'), ('ul', bad or ['none'])]
     if result.missing:
         blocks += [('h2', 'Sessions planned but not run or not analysed'), ('ul', result.missing)]
@@ -77,7 +78,8 @@ def campaign_blocks(result: CampaignAnalysis, images: Sequence[str]) -> list[Blo
     return blocks
 
 
-def calibration_blocks(cal: Calibration, left_out: Sequence[SessionRow], images: Sequence[str]) -> list[Block]:
+def calibration_blocks(cal: Calibration, left_out: Sequence[SessionRow | Full6Row],
+                       images: Sequence[str]) -> list[Block]:
     """The calibration's report: parameters with 95 % intervals, correlations, fit, per-session residuals."""
     headers = ['parameter', 'value', 'std. error', '95 % interval', 'unit', 'what']
     params = [[p.name, fmt(p.value, 7), fmt(p.stderr, 3), f'{fmt(p.ci95_low, 7)} … {fmt(p.ci95_high, 7)}', p.unit,

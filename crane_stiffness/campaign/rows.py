@@ -109,8 +109,8 @@ class CampaignAnalysis:
     def to_dict(self) -> dict[str, Any]:
         from crane_stiffness.analysis.results import json_safe
         return json_safe({'campaign': self.campaign, 'rows': [asdict(r) for r in self.rows],
-                           'full': [asdict(r) for r in self.full], 'missing': self.missing, 'analysed': self.analysed, 'failed': self.failed,
-                           'files': self.files})
+                           'full': [asdict(r) for r in self.full], 'missing': self.missing,
+                           'analysed': self.analysed, 'failed': self.failed, 'files': self.files})
 
 
 @dataclass

@@ -117,4 +117,5 @@ def linear_design(geometry: CraneGeometry, peaks: ArrayLike, *, full_scale: Arra
                           f'at {scale:.3g} of the peaks)')
 
 
-__all__ = ['LinearDesign', 'MAX_LACK_OF_FIT', 'linear_design', 'load_cell_full_scale', 'predicted_lack_of_fit', 'program_steps']
+__all__ = ['LinearDesign', 'MAX_LACK_OF_FIT', 'linear_design', 'load_cell_full_scale', 'predicted_lack_of_fit',
+           'program_steps']
