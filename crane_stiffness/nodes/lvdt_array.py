@@ -60,12 +60,12 @@ from crane_stiffness.model.rotation import quaternion_multiply, quaternion_to_ma
 from crane_stiffness.params.spec import ParamSpec
 from crane_stiffness.rosnode.device_params import check_start_only
 from crane_stiffness.rosnode.diagnostics import Counters, Diagnostics
+from crane_stiffness.rosnode.messages import pose_stamped
 from crane_stiffness.rosnode.parameters import Params, check, valid_topic_name
 from crane_stiffness.rosnode.qos import sensor_qos
 from crane_stiffness.rosnode.run import run
 from crane_stiffness.rosnode.sim_time import uses_sim_time
 from crane_stiffness.serde.cdr import CdrError, decode_stamped
-from crane_stiffness.serde.stamps import split_ns
 from crane_stiffness.sim.pose_sensor import normalised
 from crane_stiffness.status import OK, WARN
 
@@ -269,12 +269,7 @@ class LvdtArrayNode(Node):
         positions, quaternions = pose_arrays(solution.deflection, self.rest_position, self.rest_quaternion)
         frame = self.settings['frame_id']
         for (t_ns, _), u, q, cov in zip(done, positions.tolist(), quaternions.tolist(), solution.covariance):
-            msg = PoseStamped()
-            msg.header.stamp.sec, msg.header.stamp.nanosec = split_ns(t_ns)
-            msg.header.frame_id = frame
-            p, o = msg.pose.position, msg.pose.orientation
-            p.x, p.y, p.z = u
-            o.x, o.y, o.z, o.w = q
+            msg = pose_stamped(t_ns, frame, u, q)
             self.pub.publish(msg)
             out = PoseWithCovarianceStamped(header=msg.header)
             out.pose.pose = msg.pose

@@ -32,14 +32,14 @@ from rclpy.node import Node
 
 from crane_stiffness import topics
 from crane_stiffness.rosnode.diagnostics import Diagnostics, SensorCounters
-from crane_stiffness.rosnode.messages import pose_position_quaternion
+from crane_stiffness.rosnode.messages import pose_position_quaternion, pose_stamped
 from crane_stiffness.rosnode.parameters import Params
 from crane_stiffness.rosnode.qos import RELIABLE_QOS, sensor_qos, stream_qos
 from crane_stiffness.rosnode.run import run
 from crane_stiffness.rosnode.sensor_timing import STATE_WAIT_PARAM, SampleSchedule, check_sensor_params, \
     sensor_timing_params
 from crane_stiffness.rosnode.sim_time import SimTimeParticipant, drain
-from crane_stiffness.serde.stamps import split_ns, stamp_ns
+from crane_stiffness.serde.stamps import stamp_ns
 from crane_stiffness.sim.pose_sensor import POSE_SENSOR_PARAMS, PoseSensorModel, pose_sensor_from_params
 from crane_stiffness.sim.sampling import ReleaseGate, SampleClock, StampedHold
 from crane_stiffness.status import ERROR, OK, WARN
@@ -135,13 +135,7 @@ class PoseSensor(Node):
         positions, quaternions = self.model.measure(poses[:, :3], poses[:, 3:])
         frame = self.settings['frame_id']
         for t_ns, u, q in zip(times.tolist(), positions.tolist(), quaternions.tolist()):
-            msg = PoseStamped()
-            msg.header.stamp.sec, msg.header.stamp.nanosec = split_ns(t_ns)
-            msg.header.frame_id = frame
-            p, o = msg.pose.position, msg.pose.orientation
-            p.x, p.y, p.z = u
-            o.x, o.y, o.z, o.w = q
-            self.pub.publish(msg)
+            self.pub.publish(pose_stamped(t_ns, frame, u, q))
         self.counters.published += times.size
         if not self.sim.active:
             delays = self.get_clock().now().nanoseconds - times

@@ -37,3 +37,16 @@ def pose_position_quaternion(msg: PoseStamped) -> np.ndarray | None:
     if not finite(values) or math.hypot(o.x, o.y, o.z, o.w) < 1e-9:
         return None
     return np.array(values)
+
+
+def pose_stamped(t_ns: int, frame_id: str, position: Iterable[float], quaternion: Iterable[float]) -> PoseStamped:
+    """A PoseStamped stamped ``t_ns`` [ns] in ``frame_id``: position x y z [m], orientation quaternion x y z w (the
+    pose sensor's and the LVDT array's message)."""
+    from crane_stiffness.serde.stamps import split_ns
+    msg = PoseStamped()
+    msg.header.stamp.sec, msg.header.stamp.nanosec = split_ns(t_ns)
+    msg.header.frame_id = frame_id
+    p, o = msg.pose.position, msg.pose.orientation
+    p.x, p.y, p.z = position
+    o.x, o.y, o.z, o.w = quaternion
+    return msg
