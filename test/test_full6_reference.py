@@ -71,7 +71,8 @@ def test_the_package_imports_no_ros():
     code = textwrap.dedent('''
         import sys
         sys.modules["rclpy"] = None  # any import of rclpy now fails
-        for name in ("reference", "deflection", "admissible", "design", "linearity", "program", "statistics", "identify"):
+        for name in ("reference", "deflection", "admissible", "design", "linearity", "program", "statistics",
+                     "identify"):
             __import__(f"crane_stiffness.full6.{name}")
         import crane_stiffness.testing.synthetic_full6
         assert not [m for m in sys.modules if m.split(".")[0] in ("rclpy", "rosidl_runtime_py", "std_msgs")
