@@ -70,3 +70,23 @@ def test_peaks_beyond_the_margin_are_refused_naming_the_wire(tmp_path, capsys, f
     assert err.startswith('crane-stiffness: full6 design refused: the peak loads')
     assert f'step 3 of 12 (wrench fx +0 N, fy +{fy:g} N' in err and 'direction (fx +0.000, fy +1.000' in err
     assert why in err and 'fy 3.306 N' in err  # and what fy may hold alone
+
+
+def test_a_finer_pose_sensor_sees_a_smaller_bend_and_the_design_is_scaled_for_it(tmp_path, capsys):
+    """With an LVDT array's noise (ten times finer than the tracker's) the lab program's bend is what the
+    lack-of-fit test flags (predicted 2.09; the rig measured 2.10): the design is scaled down until it passes."""
+    from crane_stiffness.full6.design import NoiseLevels
+    from crane_stiffness.full6.linearity import predicted_lack_of_fit, program_steps
+    lvdt = ['1.6e-7', '1.6e-7', '1.2e-7', '1.2e-6', '1.2e-6', '9e-7']
+    out = tmp_path / 'program.yaml'
+    assert cli_main(['full6', 'design', '--crane', CRANE, '--pose-noise', *lvdt, '--out', str(out)]) == 0
+    printed = capsys.readouterr().out
+    steps = np.array([s.wrench for s in held_steps(load_program_file(out))])
+    geometry = lab_model(0.5, 50.0)
+    peaks = 0.98 * axis_peaks(geometry, 2.0)
+    scale = np.abs(steps).max(axis=0) / peaks
+    assert np.all(scale < 0.5) and np.allclose(scale, scale[0], rtol=1e-3)  # every axis scaled alike
+    noise = NoiseLevels.from_sensors([0.01, 0.01, 0.01, 5e-4, 5e-4, 5e-4], 1000.0, [float(v) for v in lvdt], 250.0)
+    full = d_optimal_design(geometry, peaks, noise=noise)
+    assert predicted_lack_of_fit(geometry, *program_steps(full), noise=noise) > 1.8  # as written, it would WARN
+    assert 'so that the lack of fit the model predicts is' in printed

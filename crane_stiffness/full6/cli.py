@@ -43,7 +43,7 @@ def _refuse(what: str, exc: SlackDesignError, limits: np.ndarray) -> int:
 
 
 def cmd_design(args: argparse.Namespace) -> int:
-    from crane_stiffness.full6.design import naive_design
+    from crane_stiffness.full6.design import LAB_NOISE, NoiseLevels, naive_design
     from crane_stiffness.full6.linearity import linear_design
     from crane_stiffness.full6.precision import compare_designs
     from crane_stiffness.full6.program import program_yaml
@@ -60,9 +60,12 @@ def cmd_design(args: argparse.Namespace) -> int:
               'safety_factor': sf}
     full_scale = None if args.full_scale_fraction == 0 else args.full_scale_fraction * np.asarray(
         args.full_scale if args.full_scale else load_cell_full_scale(), dtype=float)
+    noise = LAB_NOISE if not args.pose_noise else NoiseLevels.from_sensors(
+        LAB_NOISE.wrench_std * np.sqrt(1000.0 / LAB_NOISE.pair_rate_hz), 1000.0, args.pose_noise,
+        LAB_NOISE.pair_rate_hz)
     try:
         made = linear_design(g, peaks, full_scale=full_scale, max_lack_of_fit=args.max_lack_of_fit, seed=args.seed,
-                             **timing)
+                             noise=noise, **timing)
     except SlackDesignError as exc:
         return _refuse('the D-optimal program', exc, limits)
     design = made.design
@@ -84,7 +87,7 @@ def cmd_design(args: argparse.Namespace) -> int:
     if args.steps % 12:
         print(f'(no naive comparison: its {args.steps} steps are not a multiple of 12, each axis + and −)')
     else:
-        _print_comparison(compare_designs(design, naive_design(g, design.peaks, **timing)))
+        _print_comparison(compare_designs(design, naive_design(g, design.peaks, noise=noise, **timing)))
     print(f'wrote {args.out}')
     return EXIT_OK
 
@@ -132,6 +135,10 @@ def add_commands(subparsers: Any) -> None:
     p.add_argument('--max-lack-of-fit', type=float, default=MAX_LACK_OF_FIT,
                    help='scale the design down until the lack-of-fit statistic the nonlinear model predicts is at '
                         f'most this (1: linear; default {MAX_LACK_OF_FIT:g}; the 6x6 status turns WARN near 1.4)')
+    p.add_argument('--pose-noise', type=float, nargs=6, metavar=('UX', 'UY', 'UZ', 'TX', 'TY', 'TZ'),
+                   help='white noise of one pose sample [m, m, m, rad, rad, rad] (default the simulated tracker\'s: '
+                        '2e-6 m, 2e-5 rad; an LVDT array: about 1.6e-7 1.6e-7 1.2e-7 1.2e-6 1.2e-6 9e-7): a finer '
+                        'sensor sees a smaller bend, and the design is scaled for it')
     p.add_argument('--seed', type=int, default=0, help='seed of the exchange\'s random starts (default 0)')
     p.add_argument('--name', default='full6', help='program name (default full6)')
     p.add_argument('--title', default='', help='first lines of the file\'s header comment')
