@@ -31,6 +31,7 @@ from crane_stiffness import __version__
 from crane_stiffness.analysis.errors import SessionAnalysisError
 from crane_stiffness.analysis.full6_load import FULL6_TOPICS, Full6Data, load_full6
 from crane_stiffness.analysis.full6_result import Full6Analysis
+from crane_stiffness.full6.full_scale import with_full_scale
 from crane_stiffness.full6.identify import ComplianceFit, identify
 from crane_stiffness.full6.pairs import LabelledPairs, full6_pairs
 from crane_stiffness.full6.reference import (K2_ENTRIES, ZERO_COUPLING, Reference, entry_name, k2_of,
@@ -105,6 +106,12 @@ def _diagonal(fit: ComplianceFit, ref: Reference | None) -> list[dict[str, Any]]
     return out
 
 
+def _status(fit: ComplianceFit, data: Full6Data) -> tuple[str, str]:
+    """The fit's level name and message, the samples at full scale said as the live estimator says them."""
+    level, message = with_full_scale(fit.level, fit.message, data.saturated)
+    return NAMES[level], message
+
+
 def pairs_of(data: Full6Data) -> LabelledPairs:
     """The labelled pairs of a session read by :func:`~crane_stiffness.analysis.full6_load.load_full6`."""
     s = data.settings
@@ -146,7 +153,7 @@ def analyze_full6(bag_path: str | Path, out_dir: str | Path | None = None, *, fo
         geometry=None if g is None else {**g.to_dict(), 'l0': g.l0, 'k': g.k}, settings=s.to_dict(),
         pairs={'n': fit.n, 'steps': fit.n_steps, 'dof': fit.dof, 'poses': int(data.pose_stamp.size),
                'wrench_samples': int(data.wrench_stamp.size), 'commands': int(data.command_stamp.size)},
-        status={'level': NAMES[fit.level], 'message': fit.message}, condition=fit.condition,
+        status=dict(zip(('level', 'message'), _status(fit, data))), condition=fit.condition,
         lack_of_fit=fit.lack_of_fit, lack_of_fit_p=fit.lack_of_fit_p, inflation=fit.inflation,
         stiffness=_matrices(fit.stiffness, fit.stiffness_low, fit.stiffness_high, fit.stiffness_stderr),
         compliance=_matrices(fit.compliance, fit.compliance_low, fit.compliance_high, fit.compliance_stderr),

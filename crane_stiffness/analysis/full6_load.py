@@ -31,6 +31,8 @@ from crane_stiffness.axes import AXES
 from crane_stiffness.bag import BagReader, TopicNotFoundError
 from crane_stiffness.estimation.errors import ParameterError
 from crane_stiffness.estimation.frames import SensorMount
+from crane_stiffness.full6.errors import Full6InputError
+from crane_stiffness.full6.full_scale import at_full_scale, check_full_scale, full_scale_note
 from crane_stiffness.full6.identify import CONFIDENCE
 from crane_stiffness.full6.pairs import DEFAULT_MAX_AGE_S, DEFAULT_MAX_GAP_S
 from crane_stiffness.model import CraneGeometry, GeometryError
@@ -62,6 +64,8 @@ class Full6Settings:
     mount: SensorMount = field(default_factory=SensorMount)
     source: str = 'defaults'
     mount_source: str = 'default (at the platform centre, aligned)'
+    full_scale: tuple[float, ...] = (0.0,) * 6
+    """The load cell's full scale (6,) [N, N·m], its frame; 0 = unchecked (crane_stiffness.full6.full_scale)."""
 
     def to_dict(self) -> dict[str, Any]:
         m = self.mount
@@ -69,7 +73,8 @@ class Full6Settings:
                 'wrench_noise': None if self.wrench_noise is None else list(self.wrench_noise),
                 'confidence': self.confidence, 'source': self.source,
                 'sensor_rotation': m.rotation.tolist(), 'sensor_position': m.position.tolist(),
-                'sensor_reaction': m.reaction, 'mount_source': self.mount_source}
+                'sensor_reaction': m.reaction, 'mount_source': self.mount_source,
+                'load_cell_full_scale': list(self.full_scale)}
 
 
 @dataclass
@@ -85,6 +90,7 @@ class Full6Data:
         pose_stamp, pose_log (n_p,) [s]; position (n_p, 3) [m]; quaternion (n_p, 4) [x, y, z, w], body → crane_base.
         counts: messages per topic in the bag; dropped: non-finite samples left out per topic.
         start_ns, end_ns: the bag's first and last log time [ns].
+        saturated: load-cell samples left out at full scale, per axis (6,) (crane_stiffness.full6.full_scale).
     """
 
     path: Path
@@ -104,6 +110,7 @@ class Full6Data:
     dropped: dict[str, int]
     start_ns: int | None
     end_ns: int | None
+    saturated: NDArray[np.int64] = field(default_factory=lambda: np.zeros(6, dtype=np.int64))
 
 
 def is_full6_bag(path: str | Path) -> bool:
@@ -149,8 +156,14 @@ def read_settings(params: Mapping[str, Mapping[str, Any]], problems: list[str]) 
     except ParameterError as exc:
         problems.append(f'the load cell\'s recorded mounting is invalid ({exc}): taken at the platform centre')
         mount, mount_source = SensorMount(), Full6Settings.mount_source
+    full_scale: tuple[float, ...] = (0.0,) * 6
+    if 'load_cell_full_scale' in own:
+        try:
+            full_scale = tuple(float(v) for v in check_full_scale(own['load_cell_full_scale']))
+        except (Full6InputError, TypeError, ValueError) as exc:
+            problems.append(f'{ESTIMATOR6} parameter {exc}: no sample checked against a full scale')
     source = f'{ESTIMATOR6} parameters' if own else 'defaults (no stiffness6_estimator parameters recorded)'
-    return Full6Settings(settle, gap, age, wrench_noise, confidence, mount, source, mount_source)
+    return Full6Settings(settle, gap, age, wrench_noise, confidence, mount, source, mount_source, full_scale)
 
 
 def _geometry(session: dict[str, Any], nodes: dict[str, dict[str, Any]], problems: list[str]) -> CraneGeometry | None:
@@ -201,6 +214,9 @@ def load_full6(path: str | Path, problems: list[str]) -> Full6Data:
     c_order = np.flatnonzero(keep)[np.argsort(c['stamp_s'][keep], kind='stable')]
     w_raw = np.column_stack([w[k] for k in AXES]).astype(float)
     w_keep = np.isfinite(w['stamp_s']) & np.all(np.isfinite(w_raw), axis=1)
+    at = at_full_scale(np.where(np.isfinite(w_raw), w_raw, 0.0), settings.full_scale) & w_keep[:, None]
+    saturated = at.sum(axis=0).astype(np.int64)  # per axis; a sample at full scale on any axis is left out
+    w_keep &= ~at.any(axis=1)
     w_order = np.flatnonzero(w_keep)[np.argsort(w['log_time_ns'][w_keep], kind='stable')]
     p_raw = np.column_stack([p[k] for k in ('x', 'y', 'z', 'qx', 'qy', 'qz', 'qw')]).astype(float)
     p_keep = np.isfinite(p['stamp_s']) & np.all(np.isfinite(p_raw), axis=1) & (np.abs(p_raw[:, 3:]).sum(axis=1) > 0)
@@ -210,13 +226,16 @@ def load_full6(path: str | Path, problems: list[str]) -> Full6Data:
     for topic, n in dropped.items():
         if n:
             problems.append(f'{n} message(s) of {topic} with a non-finite value or stamp were left out')
+    if saturated.any():
+        problems.append(f'{int(at.any(axis=1).sum())} message(s) of {topics.LOAD_CELL_WRENCH}: '
+                        + full_scale_note(saturated))
     wrench = w_raw[w_order] if settings.mount.is_identity else settings.mount.apply(w_raw[w_order])
     return Full6Data(path=path, session=session, geometry=_geometry(session, nodes, problems), settings=settings,
                      command_stamp=c['stamp_s'][c_order], command_wrench=c_wrench[c_order],
                      wrench_stamp=w['stamp_s'][w_order], wrench_log=w['log_time_ns'][w_order] * 1e-9,
                      wrench=wrench, pose_stamp=p['stamp_s'][p_order], pose_log=p['log_time_ns'][p_order] * 1e-9,
                      position=p_raw[p_order, :3], quaternion=p_raw[p_order, 3:], counts=counts, dropped=dropped,
-                     start_ns=start_ns, end_ns=end_ns)
+                     start_ns=start_ns, end_ns=end_ns, saturated=saturated)
 
 
 __all__ = ['DEFAULT_SETTLE_S', 'ESTIMATOR6', 'FULL6_TOPICS', 'Full6Data', 'Full6Settings', 'is_full6_bag',

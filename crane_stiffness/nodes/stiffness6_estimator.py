@@ -5,7 +5,8 @@ Subscribes /crane/wrench_command (the load steps), /load_cell/wrench (WrenchStam
 crane_base by ``sensor_rotation``, ``sensor_position``, ``sensor_reaction`` as in the 1-D estimator) and
 /pose_sensor/pose (PoseStamped: a motion-capture tracker, or the simulated pose_sensor). Every pose sample is paired
 with the wrench interpolated at its stamp and labelled by the step in force once it has settled (``settle_s``);
-the fit uses every labelled pair since the start (or the last ~/reset).
+the fit uses every labelled pair since the start (or the last ~/reset). A load-cell sample at its full scale
+(``load_cell_full_scale``) is left out, and the status is never OK after one (crane_stiffness.full6.full_scale).
 
 Publishes, at ``publish_rate_hz`` (node clock), /stiffness6/stiffness and /stiffness6/compliance
 (Float64MultiArray: dims quantity (value, ci95_low, ci95_high) × row × column, row-major; the layout in
@@ -35,6 +36,7 @@ from std_srvs.srv import Trigger
 
 from crane_stiffness import stiffness6_layout, topics
 from crane_stiffness.estimation.frames import SensorMount
+from crane_stiffness.full6.full_scale import at_full_scale, check_full_scale, with_full_scale
 from crane_stiffness.full6.identify import ComplianceEstimator, ComplianceFit
 from crane_stiffness.full6.pairs import DEFAULT_MAX_AGE_S, DEFAULT_MAX_GAP_S, Full6Pairing
 from crane_stiffness.params.spec import ParamSpec
@@ -63,11 +65,15 @@ PARAMS = (
     ParamSpec('sensor_position', [0.0, 0.0, 0.0], 'origin of the F/T sensor frame from the platform centre, '
               'crane_base [m]'),
     ParamSpec('sensor_reaction', False, 'the sensor measures the reaction of the load: negate the wrench [-]'),
+    ParamSpec('load_cell_full_scale', [0.0] * 6, "the load cell's full scale in its own frame: a sample with any "
+              'component at or beyond it is left out and the status is never OK (crane_stiffness.full6.full_scale); '
+              '0 leaves an axis unchecked [N x3, N·m x3]', rule='6 numbers >= 0'),
 )
 _KIND_ORDER = {'command': 0, 'wrench': 1, 'pose': 2}  # at one stamp: the command first (it is in force at t)
 
 
 def _validate(values: dict[str, Any]) -> SensorMount:
+    check_full_scale(values['load_cell_full_scale'])  # Full6InputError (a ValueError) naming it
     return SensorMount.from_params(values)  # ParameterError (a ValueError) naming sensor_rotation / _position
 
 
@@ -88,7 +94,10 @@ class Stiffness6EstimatorNode(Node):
         self.pairing: Full6Pairing | None = None
         self.estimator = ComplianceEstimator()
         self.timer: Any = None
-        self.counters = {'commands': 0, 'wrenches': 0, 'poses': 0, 'malformed': 0, 'pairs': 0, 'fits': 0}
+        self.counters = {'commands': 0, 'wrenches': 0, 'poses': 0, 'malformed': 0, 'at_full_scale': 0, 'pairs': 0,
+                         'fits': 0}
+        self.full_scale = np.zeros(6)
+        self.saturated = np.zeros(6, dtype=np.int64)  # samples left out at full scale per axis, since the reset
         self.newest = {'wrench': -math.inf, 'pose': -math.inf}  # newest stamp per sensor stream [s]
         self.fit: ComplianceFit | None = None
         self.sim_time = uses_sim_time(self)
@@ -116,12 +125,14 @@ class Stiffness6EstimatorNode(Node):
 
     def _apply(self, mount: SensorMount, values: dict[str, Any]) -> None:
         self.mount = mount
+        self.full_scale = check_full_scale(values['load_cell_full_scale'])
         pairing = (values['settle_s'], values['max_gap_s'], values['max_age_s'])
         if self.pairing is None or self.pairing.settings != pairing:
             if self.pairing is not None:
                 self.get_logger().info('pairing settings changed: the fit starts again')
             self.pairing = Full6Pairing(settle_s=pairing[0], max_gap_s=pairing[1], max_age_s=pairing[2])
             self.estimator.reset()
+            self.saturated[:] = 0
         if self.timer is not None:
             self.destroy_timer(self.timer)
         self.timer = self.create_timer(1.0 / values['publish_rate_hz'], self._publish)
@@ -176,6 +187,11 @@ class Stiffness6EstimatorNode(Node):
         elif kind == 'wrench':
             self.counters['wrenches'] += 1
             self.newest['wrench'] = max(self.newest['wrench'], stamp)
+            at = at_full_scale(values, self.full_scale)[0]
+            if at.any():  # not a measurement: left out before pairing (no pose is paired across the gap it leaves)
+                self.counters['at_full_scale'] += 1
+                self.saturated += at
+                return
             pairs = self.pairing.wrench(stamp, self.mount.apply(values))
         else:
             self.counters['poses'] += 1
@@ -210,7 +226,7 @@ class Stiffness6EstimatorNode(Node):
             level, message = WAITING, f'{WAITING_PREFIX}no labelled pairs yet (a pose sensor on ' \
                                       f'{topics.POSE_SENSOR_POSE} and load steps)'
         else:
-            level, message = shown_status(fit, self.program_state)
+            level, message = with_full_scale(*shown_status(fit, self.program_state), self.saturated)
             self.pub_k.publish(stiffness6_layout.to_message(fit.stiffness, fit.stiffness_low, fit.stiffness_high))
             self.pub_c.publish(stiffness6_layout.to_message(fit.compliance, fit.compliance_low, fit.compliance_high))
         if stale:
@@ -225,7 +241,8 @@ class Stiffness6EstimatorNode(Node):
 
     def _values(self, fit: ComplianceFit | None, level: int) -> list[tuple[str, str]]:
         pairs = [('level', NAMES.get(level, str(level))), ('pairs', str(self.counters['pairs'])),
-                 ('unlabelled_pairs', str(self.pairing.unlabelled if self.pairing else 0))]
+                 ('unlabelled_pairs', str(self.pairing.unlabelled if self.pairing else 0)),
+                 ('at_full_scale', str(int(self.saturated.sum())))]
         if fit is not None:
             pairs += [('steps', str(fit.n_steps)), ('condition', f'{fit.condition:.4g}'),
                       ('lack_of_fit', f'{fit.lack_of_fit:.4g}'), ('k2', f'{fit.k2:.8g}'),
@@ -242,6 +259,7 @@ class Stiffness6EstimatorNode(Node):
         n = self.estimator.n
         self.estimator.reset()
         self.pairing.reset()
+        self.saturated[:] = 0
         response.success, response.message = True, f'forgot {n} pairs; the next pose is the new rest'
         return response
 
@@ -250,7 +268,8 @@ class Stiffness6EstimatorNode(Node):
         self._publish()  # (on simulated time what is held past the last watermark is left: it may be partial)
         fit = self.fit
         if fit is not None:
-            self.get_logger().info(f'final 6x6 fit: {NAMES.get(fit.level, fit.level)} {fit.message}; K2 = '
+            level, message = with_full_scale(fit.level, fit.message, self.saturated)
+            self.get_logger().info(f'final 6x6 fit: {NAMES.get(level, level)} {message}; K2 = '
                                    f'{fit.k2:.6g} [{fit.k2_low:.6g}, {fit.k2_high:.6g}] N/rad, diagonal of K '
                                    f'{np.array2string(np.diag(fit.stiffness), precision=6)}')
 

@@ -104,8 +104,8 @@ def write_full6_session(path: str | Path, program: LoadProgram, geometry: CraneG
                         wrench_bias: ArrayLike = LOAD_CELL_BIAS, pose_noise: ArrayLike = POSE_NOISE,
                         mount: SensorMount | None = None, estimator6: dict[str, Any] | None = None,
                         pre_s: float = 0.5, post_s: float = 0.5, t0_ns: int = T0_NS,
-                        notes: str = 'synthetic six-axis session', recorded_geometry: CraneGeometry | None = None
-                        ) -> Full6BagSession:
+                        notes: str = 'synthetic six-axis session', recorded_geometry: CraneGeometry | None = None,
+                        full_scale: ArrayLike | None = None) -> Full6BagSession:
     """Write a synthetic six-axis session bag (module docstring) at ``path`` (a new directory); returns its truth.
 
     Args:
@@ -120,6 +120,8 @@ def write_full6_session(path: str | Path, program: LoadProgram, geometry: CraneG
         pre_s / post_s: sensor data before the program starts and after it ends [s].
         recorded_geometry: the crane the session records (a campaign's nominal one) when it is not the one that
             deflects (default: ``geometry``).
+        full_scale: the load cell's full scale (6,) [N, N·m], its frame: readings clipped there, as the simulated
+            load cell does (None: no clipping).
     """
     mount = mount if mount is not None else SensorMount()
     rng = np.random.default_rng(seed)
@@ -135,6 +137,9 @@ def write_full6_session(path: str | Path, program: LoadProgram, geometry: CraneG
     to_sensor = np.linalg.inv(mount.matrix())
     wrench = _in_effect(cmd_stamp, cmd_wrench, w_stamp) @ to_sensor.T + np.asarray(wrench_bias, dtype=float)
     wrench += rng.standard_normal(wrench.shape) * np.asarray(wrench_noise, dtype=float)
+    if full_scale is not None:
+        limit = np.asarray(full_scale, dtype=float)
+        wrench = np.clip(wrench, -limit, limit)
     burst = int(round(1e9 / publish_rate_hz))
     tick = (w_stamp // burst + 1) * burst
     first = np.concatenate([[0], np.flatnonzero(np.diff(tick)) + 1])
