@@ -8,18 +8,14 @@ live estimate in them comes from the estimator's own core (LiveStiffness) run ov
 from __future__ import annotations
 
 import json
-import os
 import shutil
-import subprocess
-import sys
-import textwrap
 import warnings
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from helpers import REPO
+from helpers import REPO, run_without_ros
 from crane_stiffness import topics
 from crane_stiffness.analysis.analyze import analyze_session
 from crane_stiffness.analysis.compare import compare_sessions
@@ -292,18 +288,10 @@ def test_cli_analyze_json_and_compare(linear_session, tmp_path, capsys):
 
 
 def test_analysis_needs_no_ros(linear_session, tmp_path):
-    code = textwrap.dedent(f'''
-        import sys
-        sys.modules["rclpy"] = None  # any import of rclpy now fails
+    run_without_ros(f'''
         from crane_stiffness.cli import main
-        code = main(["analyze", {str(linear_session.path)!r}, "--out", {str(tmp_path / "noros")!r}, "--quiet"])
-        assert "rclpy" not in sys.modules or sys.modules["rclpy"] is None
-        raise SystemExit(code)
+        assert main(["analyze", {str(linear_session.path)!r}, "--out", {str(tmp_path / "noros")!r}, "--quiet"]) == 0
     ''')
-    env = {k: v for k, v in os.environ.items() if not k.startswith(('AMENT', 'ROS'))}
-    env['PYTHONPATH'] = str(REPO)
-    result = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True, env=env, timeout=120)
-    assert result.returncode == 0, result.stderr
     assert (tmp_path / 'noros' / 'report.md').is_file()
 
 

@@ -90,3 +90,20 @@ def publish_wrench_now(node, publisher, wrench, frame_id: str = 'crane_base') ->
     f.x, f.y, f.z, m.x, m.y, m.z = (float(v) for v in wrench)
     publisher.publish(msg)
     return now.nanoseconds
+
+
+def run_without_ros(body: str, blocked: tuple[str, ...] = ('rclpy',), timeout_s: float = 120.0):
+    """Run ``body`` (Python statements) in a fresh interpreter where importing any of ``blocked`` fails and no ROS
+    environment is set, from the repository's source; then check that no ROS module got imported. Returns the
+    CompletedProcess (its stdout for the caller); asserts exit 0 with stderr shown."""
+    import subprocess
+    import sys
+    import textwrap
+    code = ('import sys\n' + ''.join(f'sys.modules[{name!r}] = None\n' for name in blocked)
+            + textwrap.dedent(body) + '\nassert not [m for m in sys.modules if m.split(".")[0] in '
+            '("rclpy", "rosidl_runtime_py", "std_msgs") and sys.modules[m] is not None]\n')
+    env = {k: v for k, v in os.environ.items() if not k.startswith(('AMENT', 'ROS'))}
+    env['PYTHONPATH'] = str(REPO)
+    result = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True, env=env, timeout=timeout_s)
+    assert result.returncode == 0, result.stderr
+    return result
