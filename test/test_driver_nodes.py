@@ -297,10 +297,12 @@ def test_netft_after_a_power_cycle_publishes_nothing_from_before_it(rclpy_contex
         last_before = max(s for t, s, _ in published if t <= done['up_ns'])
         assert min(s for s, _ in late) > last_before
         c = node.counters
-        assert (c.stream_restarts, c.clock_resets, c.records_lost, c.records_duplicate) == (1, 1, 0, 0)
+        # one clock reset (one power cycle); a restart at least (a starved receiver may ask once more: test_driver_
+        # outage)
+        assert (c.stream_restarts >= 1, c.clock_resets, c.records_lost, c.records_duplicate) == (True, 1, 0, 0)
         assert c.records_stale_dropped >= 2
         status, values = probe.status(name, b'\x01')
-        assert values['stream_restarts'] == '1' and values['clock_resets'] == '1'
+        assert int(values['stream_restarts']) >= 1 and values['clock_resets'] == '1'
         assert 'counter started again' in status.message and 'before the outage not published' in status.message
     finally:
         ex.shutdown()

@@ -330,17 +330,20 @@ def test_sensors_yaml_sets_every_parameter_with_its_declared_type(rclpy_context,
 def test_grid_timer_ticks_fall_on_multiples_of_the_period(rclpy_context):
     """Sensor timers tick on the clock grid k·period, so two sensors at one rate deliver their buffers together.
 
-    Not a timing bound: a free-running timer's phase is uniform over the period (median ~ half of it); on the grid
-    it is the dispatch delay, a small fraction even on a loaded machine.
+    Not a timing bound: each call's *due* time (its clock's now plus the time until the next call, which rcl keeps
+    on the timer's schedule whatever the dispatch delay) is checked against the grid; a free-running timer created
+    half a period off would be due ~10 ms off. The median over the calls ignores a call preempted between the two
+    reads.
     """
-    from crane_stiffness.rosnode.sensor_timing import create_grid_timer
+    from crane_stiffness.rosnode.sensor_timing import ALIGN_TOLERANCE_NS, create_grid_timer, grid_phase_ns
     from crane_stiffness.rosnode.run import make_executor
     node = Node(f'grid_{os.getpid()}_{next(_ids)}', context=rclpy_context)
     period_ns = 20 * MS
     phases: list[int] = []
     # Created half a period after a grid instant: a timer that kept its creation phase would tick ~10 ms off.
     time.sleep(((period_ns // 2 - time.time_ns() % period_ns) % period_ns) * 1e-9)
-    create_grid_timer(node, period_ns * 1e-9, lambda: phases.append(time.time_ns() % period_ns))
+    timer = create_grid_timer(node, period_ns * 1e-9,
+                              lambda: phases.append(grid_phase_ns(timer, node.get_clock(), period_ns)))
     ex = make_executor('events', rclpy_context)
     ex.add_node(node)
     end = time.monotonic() + 1.5
@@ -349,7 +352,7 @@ def test_grid_timer_ticks_fall_on_multiples_of_the_period(rclpy_context):
     ex.remove_node(node)
     node.destroy_node()
     median = float(np.median(phases))
-    print(f'grid timer: {len(phases)} ticks, phase after the grid instant median {median / MS:.2f} ms, '
-          f'p90 {np.percentile(phases, 90) / MS:.2f} ms of a {period_ns / MS:.0f} ms period')
-    assert len(phases) >= 50
-    assert median < 0.25 * period_ns
+    print(f'grid timer: {len(phases)} calls, each due {median / MS:.3f} ms (median) from the grid, of a '
+          f'{period_ns / MS:.0f} ms period')
+    assert len(phases) >= 10  # (the starved process skips calls; rcl keeps the schedule)
+    assert median <= 2 * ALIGN_TOLERANCE_NS
