@@ -303,6 +303,11 @@ def _sections(path: str) -> set[str]:
     return set(data) if isinstance(data, dict) else set()
 
 
+def is_six_axis_program(path: str | os.PathLike) -> bool:
+    """The program file has a ``stiffness6_estimator`` section: the rig measures the 6×6 stiffness for it."""
+    return SIX_AXIS_SECTION in _sections(str(path))
+
+
 def rig_nodes(config_dir: str | os.PathLike, given: Mapping[str, str | bool] | None = None) -> list[NodeStart]:
     """The nodes the rig starts for the arguments ``given`` (the rest at their defaults), in start order."""
     values = argument_values(config_dir, given)
@@ -312,7 +317,7 @@ def rig_nodes(config_dir: str | os.PathLike, given: Mapping[str, str | bool] | N
         raise RigError(f"machine {values['machine']!r}: expected one of all, {', '.join(MACHINES)}")
     files = config_files(config_dir, values)
     if str(values['six_axis']).strip().lower() == 'auto':
-        values['six_axis'] = 'true' if SIX_AXIS_SECTION in _sections(files['program']) else 'false'
+        values['six_axis'] = 'true' if is_six_axis_program(files['program']) else 'false'
     sim_time = flag(values['use_sim_time'])
     if sim_time and values['transport'] != 'sim':
         raise RigError('use_sim_time:=true runs the simulated sensors only (transport:=sim): the drivers and their '

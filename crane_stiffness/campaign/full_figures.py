@@ -62,17 +62,28 @@ def _measured(ax: Any, rows: Sequence[Full6Row], value: Callable[[Full6Row], tup
                     mfc=color if ok else 'none', label=label + ('' if ok else ' (not OK)'))
 
 
-def _curves(ax: Any, rows: Sequence[Full6Row], pick: Callable[[np.ndarray], np.ndarray],
-            calibrated: Adjust | None, labelled: bool) -> None:
+#: Per wire length: (W grid, tangent K, eq. (18) K, calibrated K or None), each (n, 6, 6) (:func:`_models`).
+Models = dict[float, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]]
+
+
+def _models(rows: Sequence[Full6Row], calibrated: Adjust | None) -> Models:
+    """The model matrices of every wire length over a W grid, computed once for a figure's panels."""
     weights = _weights(rows)
-    for c, l0 in zip(COLORS * 4, _lengths(rows)):
-        here = [r for r in rows if round(r.l0, 9) == l0]
-        tangent, paper = model_matrices(here[0].nominal, weights)
+    out: Models = {}
+    for l0 in _lengths(rows):
+        nominal = next(r for r in rows if round(r.l0, 9) == l0).nominal
+        tangent, paper = model_matrices(nominal, weights)
+        cal = None if calibrated is None else model_matrices(calibrated(nominal), weights)[0]
+        out[l0] = (weights, tangent, paper, cal)
+    return out
+
+
+def _curves(ax: Any, models: Models, pick: Callable[[np.ndarray], np.ndarray], labelled: bool) -> None:
+    for c, (l0, (weights, tangent, paper, cal)) in zip(COLORS * 4, models.items()):
         ax.plot(weights, pick(tangent), '-', color=c, lw=1.5,
                 label=f'l0 = {l0:g} m: exact tangent' if labelled else None)
         ax.plot(weights, pick(paper), '--', color=c, lw=1.0, label='eq. (18)' if labelled and c == COLORS[0] else None)
-        if calibrated is not None:
-            cal, _ = model_matrices(calibrated(here[0].nominal), weights)
+        if cal is not None:
             ax.plot(weights, pick(cal), '-', color='tab:orange', lw=1.2,
                     label='calibrated model' if labelled and c == COLORS[0] else None)
 
@@ -80,13 +91,14 @@ def _curves(ax: Any, rows: Sequence[Full6Row], pick: Callable[[np.ndarray], np.n
 def plot_diagonal(rows: Sequence[Full6Row], path: Path, calibrated: Adjust | None = None) -> Path:
     """K's diagonal against W (module docstring)."""
     fig, axes = plt.subplots(2, 3, figsize=(15, 8.4), dpi=100)
+    models = _models(rows, calibrated)
     for i, ax in enumerate(axes.flat):
         def entry(k: np.ndarray, i: int = i) -> np.ndarray:
             return k[:, i, i]
 
         def measured(r: Full6Row, i: int = i) -> tuple[float, float, float]:
             return r.diagonal[i]['measured'], r.diagonal[i]['low'], r.diagonal[i]['high']
-        _curves(ax, rows, entry, calibrated, labelled=i == 0)
+        _curves(ax, models, entry, labelled=i == 0)
         for c, l0 in zip(COLORS * 4, _lengths(rows)):
             here = [r for r in rows if round(r.l0, 9) == l0]
             _measured(ax, here, measured, c, f'measured, l0 = {l0:g} m')
@@ -106,7 +118,7 @@ def plot_diagonal(rows: Sequence[Full6Row], path: Path, calibrated: Adjust | Non
 def plot_k2(rows: Sequence[Full6Row], path: Path, calibrated: Adjust | None = None) -> Path:
     """K2 against W (module docstring)."""
     fig, ax = plt.subplots(figsize=(7.5, 5.2), dpi=100)
-    _curves(ax, rows, lambda k: np.array([k2_of(m) for m in k]), calibrated, labelled=True)
+    _curves(ax, _models(rows, calibrated), lambda k: np.array([k2_of(m) for m in k]), labelled=True)
     for c, l0 in zip(COLORS * 4, _lengths(rows)):
         here = [r for r in rows if round(r.l0, 9) == l0]
         _measured(ax, here, lambda r: (r.k2, r.k2_low, r.k2_high), c, f'measured, l0 = {l0:g} m')

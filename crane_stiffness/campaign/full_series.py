@@ -29,7 +29,6 @@ from typing import Any, Mapping
 import numpy as np
 
 from crane_stiffness.campaign.errors import CampaignFileError
-from crane_stiffness.rig_description import SIX_AXIS_SECTION
 
 #: The series' name, and the program value that designs one program per set-up.
 FULL = 'full'
@@ -51,16 +50,6 @@ class DesignSettings:
     """The peaks at most this fraction of the load cell's full scale (config/sensors.yaml's load_cell)."""
     max_lack_of_fit: float = 1.2
     """The design scaled down until the lack of fit the model predicts is at most this."""
-
-
-def is_six_axis_program(path: Path) -> bool:
-    """The program file has a ``stiffness6_estimator`` section (the rig measures the 6×6 stiffness for it)."""
-    import yaml
-    try:
-        data = yaml.safe_load(path.read_text())
-    except (OSError, yaml.YAMLError):
-        return False
-    return isinstance(data, dict) and SIX_AXIS_SECTION in data
 
 
 def _where(weight: float, size: float, by_length: bool) -> str:
@@ -130,4 +119,4 @@ def full_program(program: str, nominal: Mapping[str, Any], settings: DesignSetti
 
 
 __all__ = ['DESIGN', 'DesignSettings', 'FULL', 'check_program', 'design_program_text',
-           'full_program', 'is_six_axis_program']
+           'full_program']

@@ -36,12 +36,23 @@ def check_full_scale(full_scale: ArrayLike) -> NDArray[np.float64]:
     return fs
 
 
+def full_scale_limits(full_scale: ArrayLike) -> NDArray[np.float64]:
+    """The magnitude (6,) [N, N·m] from which a reading counts as at full scale: (1 − MARGIN)·full_scale, inf for
+    an unchecked axis (0). Checked once (Full6InputError); :func:`at_limits` then compares samples against it."""
+    fs = check_full_scale(full_scale)
+    return np.where(fs > 0.0, fs * (1.0 - MARGIN), np.inf)
+
+
+def at_limits(wrench: ArrayLike, limits: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """Per sample and axis: the wrench (n, 6) (or one, (6,)) [N, N·m], sensor frame, at or beyond ``limits``
+    (:func:`full_scale_limits`); (n, 6) bool."""
+    return np.abs(np.asarray(wrench, dtype=float).reshape(-1, 6)) >= limits
+
+
 def at_full_scale(wrench: ArrayLike, full_scale: ArrayLike) -> NDArray[np.bool_]:
     """Per sample (n,) and axis: the wrench (n, 6) [N, N·m], sensor frame, in the last MARGIN of ``full_scale``
     (6,) or beyond; (n, 6) bool. Axes with a full scale of 0 are never at it."""
-    w = np.abs(np.asarray(wrench, dtype=float).reshape(-1, 6))
-    fs = check_full_scale(full_scale)
-    return (fs > 0.0) & (w >= fs * (1.0 - MARGIN))
+    return at_limits(wrench, full_scale_limits(full_scale))
 
 
 def full_scale_note(counts: Sequence[int] | NDArray[np.int64]) -> str:
@@ -62,4 +73,5 @@ def with_full_scale(level: int, message: str, counts: Sequence[int] | NDArray[np
     return (WARN if level in (OK, WAITING) else level), f'{note}; {message}'
 
 
-__all__ = ['MARGIN', 'at_full_scale', 'check_full_scale', 'full_scale_note', 'with_full_scale']
+__all__ = ['MARGIN', 'at_full_scale', 'at_limits', 'check_full_scale',
+           'full_scale_limits', 'full_scale_note', 'with_full_scale']

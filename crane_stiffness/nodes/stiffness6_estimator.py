@@ -36,7 +36,7 @@ from std_srvs.srv import Trigger
 
 from crane_stiffness import stiffness6_layout, topics
 from crane_stiffness.estimation.frames import SensorMount
-from crane_stiffness.full6.full_scale import at_full_scale, check_full_scale, with_full_scale
+from crane_stiffness.full6.full_scale import at_limits, check_full_scale, full_scale_limits, with_full_scale
 from crane_stiffness.full6.identify import ComplianceEstimator, ComplianceFit
 from crane_stiffness.full6.pairs import DEFAULT_MAX_AGE_S, DEFAULT_MAX_GAP_S, Full6Pairing
 from crane_stiffness.params.spec import ParamSpec
@@ -96,7 +96,7 @@ class Stiffness6EstimatorNode(Node):
         self.timer: Any = None
         self.counters = {'commands': 0, 'wrenches': 0, 'poses': 0, 'malformed': 0, 'at_full_scale': 0, 'pairs': 0,
                          'fits': 0}
-        self.full_scale = np.zeros(6)
+        self.full_scale_limits = np.full(6, np.inf)  # full6.full_scale.full_scale_limits of the parameter
         self.saturated = np.zeros(6, dtype=np.int64)  # samples left out at full scale per axis, since the reset
         self.newest = {'wrench': -math.inf, 'pose': -math.inf}  # newest stamp per sensor stream [s]
         self.fit: ComplianceFit | None = None
@@ -125,7 +125,7 @@ class Stiffness6EstimatorNode(Node):
 
     def _apply(self, mount: SensorMount, values: dict[str, Any]) -> None:
         self.mount = mount
-        self.full_scale = check_full_scale(values['load_cell_full_scale'])
+        self.full_scale_limits = full_scale_limits(values['load_cell_full_scale'])
         pairing = (values['settle_s'], values['max_gap_s'], values['max_age_s'])
         if self.pairing is None or self.pairing.settings != pairing:
             if self.pairing is not None:
@@ -187,7 +187,7 @@ class Stiffness6EstimatorNode(Node):
         elif kind == 'wrench':
             self.counters['wrenches'] += 1
             self.newest['wrench'] = max(self.newest['wrench'], stamp)
-            at = at_full_scale(values, self.full_scale)[0]
+            at = at_limits(values, self.full_scale_limits)[0]
             if at.any():  # not a measurement: left out before pairing (no pose is paired across the gap it leaves)
                 self.counters['at_full_scale'] += 1
                 self.saturated += at
