@@ -28,7 +28,8 @@ from setuptools.command.install import install
 PACKAGE = 'crane_stiffness'
 
 # The node executables: plain scripts in nodes_bin/ (installed to lib/crane_stiffness, see setup.cfg), each three
-# lines into crane_stiffness.entry, which holds SIGINT/SIGTERM while the node's module imports. Not console_scripts:
+# lines into crane_stiffness.rosnode.entry, which holds SIGINT/SIGTERM while the node's module imports. Not
+# console_scripts:
 # the script setuptools generates for those spends 0.1 s (seconds on a loaded machine) in importlib.metadata before
 # any code of ours runs, and Ctrl-C in that time ended the node with a KeyboardInterrupt traceback. The one list of
 # the package's nodes is crane_stiffness.nodes.NODES (read here without importing the package): a node is
@@ -57,7 +58,8 @@ if sorted(os.listdir(os.path.join(HERE, 'nodes_bin'))) != sorted(NODES):
 # ours, in its `site` import), ends it with "Fatal Python error ... KeyboardInterrupt" or kills it (-2): `ros2 launch`
 # starts every node at once and a Ctrl-C then reaches all of them. So each built node script is a small sh prologue
 # that ignores SIGINT/SIGTERM and execs the interpreter on the same file: an ignored signal stays ignored through exec
-# and the interpreter's start, until crane_stiffness.entry installs its own handlers (from then on a signal is noted
+# and the interpreter's start, until crane_stiffness.rosnode.entry installs its own handlers (from then on a signal is
+# noted
 # and the node ends cleanly). A signal in that window is dropped; launch forwards SIGINT once more and escalates to
 # SIGTERM after 5 s, which the node then ends on. To Python the prologue is a string literal.
 SH_PROLOGUE = '''#!/bin/sh
@@ -114,7 +116,7 @@ setup(
     version='0.1.0',
     packages=find_packages(exclude=['test', 'test.*', 'benchmarks']),
     # the live view's page (plain HTML/JS/CSS, served by the live_view node)
-    package_data={PACKAGE + '.view': ['web/*'], PACKAGE: ['fastdds_discovery.xml']},
+    package_data={PACKAGE + '.view': ['web/*'], PACKAGE + '.rosnode': ['fastdds_discovery.xml']},
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE]),
         ('share/' + PACKAGE, ['package.xml']),
@@ -134,6 +136,6 @@ setup(
     license='Apache-2.0',
     scripts=[f'nodes_bin/{name}' for name in NODES],
     entry_points={
-        'console_scripts': ['crane-stiffness = crane_stiffness.cli:main'],
+        'console_scripts': ['crane-stiffness = crane_stiffness.cli.main:main'],
     },
 )

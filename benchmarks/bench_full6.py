@@ -52,7 +52,7 @@ def run(env: dict, share: Path, ws: Path, program: Path) -> dict:
     import rclpy
     from geometry_msgs.msg import PoseStamped
 
-    from crane_stiffness import topics
+    from crane_stiffness.contract import topics
     from crane_stiffness.launcher import rosrun
     from crane_stiffness.launcher.rig import Observer, start_rig, wait_for_program_start
     from crane_stiffness.rosnode.qos import SENSOR_QOS

@@ -57,7 +57,7 @@ def run(rate: float, publish_rate: float, seconds: float, log_dir: Path, command
     import rclpy
     from geometry_msgs.msg import WrenchStamped
 
-    from crane_stiffness import topics
+    from crane_stiffness.contract import topics
     from crane_stiffness.serde import decode_stamped
     from crane_stiffness.rosnode.qos import SENSOR_QOS
     from crane_stiffness.rosnode.run import make_executor

@@ -86,11 +86,11 @@ def run_rate(rate: float, seconds: float, env: dict, share: Path, log_dir: Path,
     from geometry_msgs.msg import PointStamped, WrenchStamped
     from std_msgs.msg import Float64MultiArray
 
-    from crane_stiffness import topics
+    from crane_stiffness.contract import topics
     from crane_stiffness.serde import decode_stamped
     from crane_stiffness.rosnode.qos import RELIABLE_QOS, SENSOR_QOS
     from crane_stiffness.rosnode.run import make_executor
-    from crane_stiffness.rig_description import rig_nodes
+    from crane_stiffness.launcher.rig_description import rig_nodes
     from crane_stiffness.launcher import rosrun
     from crane_stiffness.testing.lab_network import emulated_ports
     from crane_stiffness.launcher.rig import estimate_fields, start_node

@@ -38,8 +38,8 @@ sys.path.insert(0, str(REPO))
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ.setdefault('ROS_DOMAIN_ID', str(random.randint(1, 100)))
 os.environ.setdefault('AMENT_PREFIX_PATH', sys.prefix)
-# The observer below discovers the nodes as quickly as they discover each other (crane_stiffness.discovery).
-from crane_stiffness.discovery import use_quick_discovery  # noqa: E402
+# The observer below discovers the nodes as quickly as they discover each other (crane_stiffness.rosnode.discovery).
+from crane_stiffness.rosnode.discovery import use_quick_discovery  # noqa: E402
 
 use_quick_discovery()
 

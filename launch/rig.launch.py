@@ -1,5 +1,6 @@
 """The whole simulated rig: crane model, load program, simulated load cell and LVDT, stiffness estimator, and the
-session recorder, as crane_stiffness.rig_description describes it (its nodes, their parameter files and parameters,
+session recorder, as crane_stiffness.launcher.rig_description describes it (its nodes, their parameter files and
+parameters,
 the arguments; the demo and the tests start the same nodes). All nodes start at once; load_program starts the
 program when the rig is ready (it is told what to wait for: the nodes started here). An unknown program or a missing
 parameter file stops the launch at once with an error naming the file (rig_description.RigError).
@@ -16,13 +17,13 @@ from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
 from launch_ros.actions import Node
 from launch_ros.substitutions import FindPackageShare
 
-from crane_stiffness.rig_description import ARGUMENTS, PACKAGE, rig_nodes
+from crane_stiffness.launcher.rig_description import ARGUMENTS, PACKAGE, rig_nodes
 
 CONFIG = PathJoinSubstitution([FindPackageShare(PACKAGE), 'config'])
 
 
 def rig(context):
-    """The rig's nodes for the launch arguments (crane_stiffness.rig_description.rig_nodes)."""
+    """The rig's nodes for the launch arguments (crane_stiffness.launcher.rig_description.rig_nodes)."""
     given = {a.name: LaunchConfiguration(a.name).perform(context) for a in ARGUMENTS}
     return [Node(package=PACKAGE, executable=n.executable, name=n.name,
                  parameters=[*n.parameter_files, n.parameters] if n.parameters else list(n.parameter_files),

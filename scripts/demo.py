@@ -34,8 +34,8 @@ sys.path.insert(0, str(REPO))  # noqa: E402  (run as a script from the repo)
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ.setdefault('ROS_DOMAIN_ID', str(random.randint(1, 100)))
 os.environ.setdefault('AMENT_PREFIX_PATH', sys.prefix)
-# The observer below discovers the nodes as quickly as they discover each other (crane_stiffness.discovery).
-from crane_stiffness.discovery import use_quick_discovery  # noqa: E402
+# The observer below discovers the nodes as quickly as they discover each other (crane_stiffness.rosnode.discovery).
+from crane_stiffness.rosnode.discovery import use_quick_discovery  # noqa: E402
 
 use_quick_discovery()
 
@@ -203,7 +203,7 @@ def report6(share: Path, args: argparse.Namespace, session: str, observer, codes
     """The six-axis result: the 6x6 K against the exact tangent, K2, the status; 0 when it can be signed."""
     import numpy as np
 
-    from crane_stiffness.axes import AXES
+    from crane_stiffness.contract.axes import AXES
     from crane_stiffness.full6.reference import DISPLACEMENTS
     from crane_stiffness.launcher.rig import config_files
     from crane_stiffness.launcher.summary6 import summarize6, verdict6

@@ -1,7 +1,8 @@
 """Write docs/parameters.md, the reference of every node's parameters, from their declarations (ParamSpec).
 
 Each parameter is declared once (crane_stiffness.params.spec); this page is generated from those declarations, so it
-cannot drift from what the nodes declare: ``test/test_parameter_reference.py`` fails when the page is out of date.
+cannot drift from what the nodes declare: ``test/params/test_parameter_reference.py`` fails when the page is out of
+date.
 
 Run: .venv/bin/python scripts/parameter_reference.py [--check]
 """

@@ -11,7 +11,8 @@ decode):
    the synchroniser's pairing over the whole arrays (arrival = the recorded log time). The clock-skew check
    (a stamp more than ``max_clock_skew_s`` ahead of its arrival at the node) takes the recorder's log time of the
    message as the arrival: the recorder receives on the same clock, a few ms from the estimator. Pairs made while a
-   rejected command was in force (absurd by :mod:`crane_stiffness.command_limits`, or on /crane/rejected_command) are
+   rejected command was in force (absurd by :mod:`crane_stiffness.contract.command_limits`, or on
+   /crane/rejected_command) are
    left out, and the fraction of each stream's samples received (from its own stamps) is reported, as live.
    The wrench is moved from the sensor's frame to the platform centre and the displacement stamps corrected by
    ``displacement_delay_s`` as live; the delay left between the streams is estimated over the whole recording
@@ -51,7 +52,9 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from crane_stiffness import __version__, topics
+from crane_stiffness import __version__
+
+from crane_stiffness.contract import topics
 from crane_stiffness.analysis import report
 from crane_stiffness.analysis.errors import SessionAnalysisError
 from crane_stiffness.analysis.live_check import live_comparison
@@ -60,13 +63,13 @@ from crane_stiffness.analysis.model_summary import accepted_commands, model_summ
 from crane_stiffness.analysis.progress import Progress
 from crane_stiffness.analysis.results import (CycleFits, SessionAnalysis, Step)
 from crane_stiffness.bag import BagDamageWarning
-from crane_stiffness.command_limits import command_faults
+from crane_stiffness.contract.command_limits import command_faults
 from crane_stiffness.params.geometry import geometry_from_params
 from crane_stiffness.estimation.branch import BRANCHES, LOADING, UNLOADING
 from crane_stiffness.estimation import quality
 from crane_stiffness.estimation.fit import LineFit, fit_or_none
 from crane_stiffness.estimation.inputs import INPUT_CHECKS, CommandSeries, Samples, checked_samples
-from crane_stiffness.axes import AXES
+from crane_stiffness.contract.axes import AXES
 from crane_stiffness.estimation.live_pairs import LivePairs, live_pairs
 from crane_stiffness.estimation.settings import LiveSettings
 from crane_stiffness.estimation.stream_delay import stream_delay_of

@@ -14,7 +14,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from crane_stiffness.analysis.sweep import ForceDisplacement, StiffnessRow  # noqa: E402
-from crane_stiffness.axes import FORCE_AXES  # noqa: E402
+from crane_stiffness.contract.axes import FORCE_AXES  # noqa: E402
 from crane_stiffness.estimation.branch import BRANCHES, LOADING, UNLOADING  # noqa: E402
 
 if TYPE_CHECKING:

@@ -36,7 +36,7 @@ from crane_stiffness.full6.identify import ComplianceFit, identify
 from crane_stiffness.full6.pairs import LabelledPairs, full6_pairs
 from crane_stiffness.full6.reference import (K2_ENTRIES, ZERO_COUPLING, Reference, entry_name, k2_of,
                                             reference_at_rest, relative_error, structural_zeros)
-from crane_stiffness.status import NAMES
+from crane_stiffness.contract.status import NAMES
 
 #: Units of K's entries (row a load, column a displacement); C's are their reciprocals.
 FORCE_UNITS = ('N/m', 'N/rad')

@@ -27,7 +27,7 @@ import numpy as np  # noqa: E402
 from matplotlib.patches import Rectangle  # noqa: E402
 from numpy.typing import NDArray  # noqa: E402
 
-from crane_stiffness.axes import AXES  # noqa: E402
+from crane_stiffness.contract.axes import AXES  # noqa: E402
 from crane_stiffness.full6.reference import DISPLACEMENTS, K2_ENTRIES  # noqa: E402
 
 if TYPE_CHECKING:

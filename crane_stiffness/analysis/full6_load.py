@@ -2,7 +2,7 @@
 pairs are built from, decoded in bulk (crane_stiffness.bag.BagReader), the load cell's wrench moved to the platform
 centre, and the settings the session ran with. Pure: no ROS import.
 
-**Streams** (crane_stiffness.topics): ``/crane/wrench_command`` (the load steps), ``/load_cell/wrench`` and
+**Streams** (crane_stiffness.contract.topics): ``/crane/wrench_command`` (the load steps), ``/load_cell/wrench`` and
 ``/pose_sensor/pose``. Samples with a non-finite value or stamp are left out (the node drops them before pairing);
 the sensor streams are put in log-time order (their arrival at the recorder, which decides what is stale as live),
 the commands in stamp order.
@@ -25,9 +25,9 @@ from typing import Any, Mapping
 import numpy as np
 from numpy.typing import NDArray
 
-from crane_stiffness import topics
+from crane_stiffness.contract import topics
 from crane_stiffness.analysis.errors import SessionAnalysisError
-from crane_stiffness.axes import AXES
+from crane_stiffness.contract.axes import AXES
 from crane_stiffness.bag import BagReader, TopicNotFoundError
 from crane_stiffness.estimation.errors import ParameterError
 from crane_stiffness.estimation.frames import SensorMount
@@ -37,7 +37,7 @@ from crane_stiffness.full6.identify import CONFIDENCE
 from crane_stiffness.full6.pairs import DEFAULT_MAX_AGE_S, DEFAULT_MAX_GAP_S
 from crane_stiffness.model import CraneGeometry, GeometryError
 from crane_stiffness.params.geometry import geometry_from_params
-from crane_stiffness.session_metadata import analysis_geometry_params, read_node_parameters, read_session
+from crane_stiffness.bag.session_metadata import analysis_geometry_params, read_node_parameters, read_session
 
 #: The streams a six-axis session needs.
 FULL6_TOPICS = (topics.WRENCH_COMMAND, topics.LOAD_CELL_WRENCH, topics.POSE_SENSOR_POSE)

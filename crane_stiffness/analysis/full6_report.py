@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Any, Sequence
 import numpy as np
 
 from crane_stiffness.analysis.report import Block, fmt, write_blocks
-from crane_stiffness.axes import AXES
+from crane_stiffness.contract.axes import AXES
 from crane_stiffness.full6.reference import DISPLACEMENTS
 
 if TYPE_CHECKING:

@@ -12,15 +12,15 @@ from typing import Any
 
 import numpy as np
 
-from crane_stiffness import topics
+from crane_stiffness.contract import topics
 from crane_stiffness.analysis.errors import SessionAnalysisError
 from crane_stiffness.bag import BagReader, TopicNotFoundError
-from crane_stiffness.axes import AXES
+from crane_stiffness.contract.axes import AXES
 from crane_stiffness.estimation.live import VALUE_FIELDS
 from crane_stiffness.estimation.settings import LiveSettings
 from crane_stiffness.serde.bulk import Columns
 from crane_stiffness.serde import CdrError, decode_diagnostic_array, decode_float64_multiarray, decode_string
-from crane_stiffness.session_metadata import analysis_geometry_params, read_node_parameters, read_session
+from crane_stiffness.bag.session_metadata import analysis_geometry_params, read_node_parameters, read_session
 from crane_stiffness.sim.program import LoadProgram
 
 REQUIRED_TOPICS = (topics.LOAD_CELL_WRENCH, topics.LVDT_DISPLACEMENT)

@@ -9,7 +9,7 @@ import numpy as np
 
 from crane_stiffness.analysis.load import SessionData
 from crane_stiffness.analysis.results import ModelSummary, Step
-from crane_stiffness.axes import AXES
+from crane_stiffness.contract.axes import AXES
 from crane_stiffness.estimation.inputs import CommandSeries
 from crane_stiffness.params.geometry import geometry_from_params
 

@@ -1,9 +1,10 @@
 """``crane-stiffness analyze | compare | recover``: thin command-line layers over crane_stiffness.analysis.analyze,
-crane_stiffness.analysis.compare and crane_stiffness.bag.recover_bag (added to the parser of crane_stiffness.cli by
+crane_stiffness.analysis.compare and crane_stiffness.bag.recover_bag (added to the parser of crane_stiffness.cli.main by
 :func:`add_commands`). ``analyze`` of a six-axis session (a bag holding /pose_sensor/pose) runs the 6×6 analysis
 (crane_stiffness.analysis.full6) and prints its table; the 1-D analysis too when the bag also holds the LVDT.
 
-Exit codes as crane_stiffness.cli: 0 ok, 2 bad input (a missing or unreadable bag, a missing sensor topic, nothing to
+Exit codes as crane_stiffness.cli.main: 0 ok, 2 bad input (a missing or unreadable bag, a missing sensor topic, nothing
+to
 fit; the reason on stderr). Damage the reader works around (a truncated or corrupt part of a bag) is reported on
 stderr as a warning and in the report, and the readable part is analysed. ``recover`` exits 2 when a file could not
 be recovered.
@@ -16,9 +17,9 @@ import sys
 import warnings
 from typing import Any, Callable
 
-from crane_stiffness.axes import AXES
+from crane_stiffness.contract.axes import AXES
 
-from crane_stiffness.exit_codes import EXIT_OK, EXIT_USAGE, run_to_exit_code
+from crane_stiffness.cli.exit_codes import EXIT_OK, EXIT_USAGE, run_to_exit_code
 
 
 def _guarded(run: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Namespace], int]:
@@ -78,7 +79,7 @@ def _print_summary(a: Any) -> None:
 def _analyze_full6(args: argparse.Namespace) -> int:
     """A six-axis session (the bag holds /pose_sensor/pose): the 6×6 analysis; the 1-D one too when the bag also
     holds the LVDT, into the same folder (its files are named apart)."""
-    from crane_stiffness import topics
+    from crane_stiffness.contract import topics
     from crane_stiffness.analysis.full6 import analyze_full6
     from crane_stiffness.analysis.full6_report import summary_lines
     from crane_stiffness.bag import BagReader

@@ -8,6 +8,8 @@
   package; a file cut short gives every complete chunk.
 - ``metadata.py``: metadata.yaml (rosbag2 v9) and MCAP metadata values; ``qos.py``: offered QoS profiles.
 - :func:`recover_bag` (``recover.py``): rewrite files left unfinished by a crash and (re)write metadata.yaml.
+- ``session_metadata.py``: the session record, what a recording says about itself (program, geometry, nodes'
+  parameters, campaign entry) in its bag's metadata records; imported on its own (it reads the load program).
 - ``msgdef.py``: ros2msg schema text and type hashes from the installed .msg files.
 - ``errors.py``: the exceptions (all :class:`BagError`) and :class:`BagDamageWarning`.
 """

@@ -121,7 +121,7 @@ def session_row(plan: dict[str, Any], analysis: dict[str, Any], result: dict[str
 def _live_difference(offline: Any, live: Any) -> float:
     """Largest |live K − offline K| over K's largest entry (NaN without a live K)."""
     import numpy as np
-    from crane_stiffness.stiffness6_layout import decode
+    from crane_stiffness.contract.stiffness6_layout import decode
     if live is None:
         return math.nan
     k_live = decode(live)[0]
@@ -212,7 +212,7 @@ def full_rows(out: str | Path) -> list[Full6Row]:
 
 def write_full_table(rows: Sequence[Full6Row], path: Path) -> None:
     """The series full's rows as CSV: K's diagonal (measured, interval, tangent, error) and K2 per session."""
-    from crane_stiffness.axes import AXES
+    from crane_stiffness.contract.axes import AXES
     head = ['session', 'weight', 'l0', 'height', 'repeat', 'status', 'pairs']
     for a in AXES:
         head += [f'K_{a}', f'K_{a}_ci95_low', f'K_{a}_ci95_high', f'K_{a}_tangent', f'K_{a}_relative_error']

@@ -1,5 +1,5 @@
 """``crane-stiffness campaign run | analyze`` and ``crane-stiffness calibrate``: thin command-line layers over
-crane_stiffness.campaign (added to the parser of crane_stiffness.cli by :func:`add_commands`).
+crane_stiffness.campaign (added to the parser of crane_stiffness.cli.main by :func:`add_commands`).
 
 Exit codes: 0 ok; 2 bad input (a campaign file with an unknown key or a value against its rule, a directory that is
 not a campaign or holds another one, data that cannot determine a calibrated parameter; one stderr line naming the
@@ -12,7 +12,7 @@ import argparse
 import sys
 from typing import Any, Callable
 
-from crane_stiffness.exit_codes import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE, run_to_exit_code
+from crane_stiffness.cli.exit_codes import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE, run_to_exit_code
 
 
 def _guarded(run: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Namespace], int]:
@@ -71,7 +71,7 @@ def cmd_analyze(args: argparse.Namespace) -> int:
         print(f'{r.session:<20} {r.k:>12.6g} [{r.ci95_low:>12.6g}, {r.ci95_high:>12.6g}] {r.model_tangent:>12.6g} '
               f'{100 * r.relative_error:>+8.3f}%  {r.status}')
     if result.full:
-        from crane_stiffness.axes import AXES
+        from crane_stiffness.contract.axes import AXES
         print('the whole 6x6 K against the tangent (measured / tangent - 1; * interval misses the tangent):')
         print(f'{"session":<20} ' + ' '.join(f'{a:>8}' for a in AXES) + f' {"K2":>8} {"sign":>5} {"cover":>6}  status')
     for f in result.full:

@@ -32,7 +32,7 @@ def _interval(value: float, low: float, high: float) -> str:
 def full_table(rows: Sequence[Full6Row]) -> Block:
     """The series full: K's diagonal against the tangent (relative error, * where the interval misses it), K2 with
     its interval against the tangent and eq. (18), the intervals covering the tangent, the status."""
-    from crane_stiffness.axes import AXES
+    from crane_stiffness.contract.axes import AXES
     headers = ['session', 'W [N]', 'l0 [m]', *(f'K {a} vs tangent' for a in AXES), 'K2 [N/rad] (95 %)',
                'K2 tangent', 'K2 eq. (18)', 'K2 vs tangent', 'intervals covering', 'status']
     body = []

@@ -5,7 +5,7 @@ Each session is the whole rig started as ``ros2 launch`` starts it (crane_stiffn
 its own process, the session recorder writing its own bag), with its set-up as parameters: the crane_model node
 runs the **true** crane (``geometry.*`` of :attr:`~crane_stiffness.campaign.spec.SessionPlan.true`), the session
 recorder records the **nominal** one as the rig's geometry and the session's place in the campaign as its
-``campaign_entry`` (crane_stiffness.session_metadata.CAMPAIGN_KEY: ``analysis_geometry: nominal``, the true crane,
+``campaign_entry`` (crane_stiffness.bag.session_metadata.CAMPAIGN_KEY: ``analysis_geometry: nominal``, the true crane,
 what the operator confirmed); the program is the series' file with its levels scaled for the set-up.
 
 The campaign directory ``DIR``::
@@ -191,7 +191,7 @@ def run_campaign(campaign: Campaign, out: str | os.PathLike, *, hardware: bool =
     from crane_stiffness.launcher import rosrun
     from crane_stiffness.params.files import share_dir
 
-    from crane_stiffness.discovery import use_quick_discovery
+    from crane_stiffness.rosnode.discovery import use_quick_discovery
     use_quick_discovery()  # the observers find the nodes as quickly as the nodes find each other
     out = Path(out)
     arguments = sim_time_arguments(arguments, hardware)

@@ -43,7 +43,7 @@ from crane_stiffness.params.errors import ConfigError
 from crane_stiffness.params.files import ParamFile, config_path, load_params, load_yaml, share_dir
 from crane_stiffness.params.geometry import geometry_from_params, geometry_to_params
 from crane_stiffness.params.spec import ParamSpec, check_spec, is_number
-from crane_stiffness.rig_description import is_six_axis_program
+from crane_stiffness.launcher.rig_description import is_six_axis_program
 from crane_stiffness.sim.program import load_program_file
 
 SECTION = 'campaign'

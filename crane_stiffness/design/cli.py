@@ -7,7 +7,7 @@
 
 Geometry flags as in the other subcommands (``--lab-model``, ``--config``, ``--height``, ``--weight`` ...); without
 them the lab model at h = 0.5 m, W = 50 N. Bad
-input exits 2 with one line naming the value and the rule (crane_stiffness.cli.main).
+input exits 2 with one line naming the value and the rule (crane_stiffness.cli.main.main).
 """
 from __future__ import annotations
 
@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from crane_stiffness.design.errors import DesignInputError
-from crane_stiffness.geometry_args import add_geometry, geometry_from_args
+from crane_stiffness.cli.geometry_args import add_geometry, geometry_from_args
 from crane_stiffness.model import CraneGeometry
 from crane_stiffness.model.geometry import WIRE_NAMES
 

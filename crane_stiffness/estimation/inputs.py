@@ -17,7 +17,8 @@ Commands (:func:`command_inputs`, one definition for both): a command is dropped
 Inf; it holds from its header stamp, or from its arrival when the header stamp is zero (a publisher that does not
 stamp). The load in effect at a stamp is that of the newest command stamped at or before it
 (:class:`CommandHold` streaming, :class:`CommandSeries` vectorized). A command is *rejected* when it is absurd by the
-shared rule (:mod:`crane_stiffness.command_limits`, the crane model's own check) or when the model republished it on
+shared rule (:mod:`crane_stiffness.contract.command_limits`, the crane model's own check) or when the model republished
+it on
 /crane/rejected_command: from its stamp until the next accepted command, pairs are not fitted.
 """
 from __future__ import annotations
@@ -74,7 +75,7 @@ class InputCounters:
     force_dropped: int = 0          # force messages dropped by any input check (malformed included)
     displacement_dropped: int = 0   # displacement messages dropped by any input check (malformed included)
     command_dropped: int = 0        # NaN/Inf load or time: not used at all
-    command_rejected: int = 0       # absurd by crane_stiffness.command_limits: held as rejected
+    command_rejected: int = 0       # absurd by crane_stiffness.contract.command_limits: held as rejected
     command_used: int = 0           # held as accepted
     rejected_received: int = 0      # /crane/rejected_command messages (the model's rejections)
     late_rejections: int = 0        # rejected commands that arrived after pairs stamped under them were fitted
@@ -190,7 +191,7 @@ class CommandSeries:
            rejected_arrival_ns: np.ndarray | None = None) -> CommandSeries | None:
         """The usable commands (:func:`command_inputs`) of arrays in order of arrival; None without one.
 
-        ``absurd``: per command, True where :func:`crane_stiffness.command_limits.command_faults` rejects it.
+        ``absurd``: per command, True where :func:`crane_stiffness.contract.command_limits.command_faults` rejects it.
         ``rejected_stamp_s``, ``rejected_arrival_ns``: the model's rejections (/crane/rejected_command)."""
         usable, stamp = command_inputs(stamp_s, arrival_ns * 1e-9, load)
         rej = np.zeros(stamp.shape, bool) if absurd is None else np.asarray(absurd, bool)

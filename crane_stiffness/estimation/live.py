@@ -33,14 +33,15 @@ publishing one:
    :meth:`LiveStiffness.refresh`). The branch follows the commanded load (the
    ``force_axis`` component of the wrench command in effect at the pair's stamp) once a command has been seen and
    ``branch_source`` is ``'auto'``, else the measured force. A pair stamped while a rejected command is in force
-   (absurd by :mod:`crane_stiffness.command_limits`, the crane model's own rule, or republished by the model on
+   (absurd by :mod:`crane_stiffness.contract.command_limits`, the crane model's own rule, or republished by the model on
    /crane/rejected_command; from its stamp to the next accepted command) is not fitted, and the statuses say so
    (WARN, never OK).
 4. Outputs. :meth:`LiveStiffness.values` is the cheap O(1) numeric estimate (rows ``BRANCHES`` × ``VALUE_FIELDS``)
    for publishing after every batch of new pairs; its ``nonlinearity`` is the value of the last
    :meth:`LiveStiffness.refresh`, which sorts the windows and is meant for a slow timer together with
    :meth:`LiveStiffness.report` (per-branch text for people, with a level: WAITING for a branch without an
-   estimate yet, STALE for every branch once a stream that delivered goes silent; :mod:`crane_stiffness.status`).
+   estimate yet, STALE for every branch once a stream that delivered goes silent;
+   :mod:`crane_stiffness.contract.status`).
 
 The model prediction (``set_prediction``) gives ``relative_error = (estimate − prediction) / prediction``.
 
@@ -62,13 +63,13 @@ from crane_stiffness.estimation.fit_lines import fit_line_rows
 from crane_stiffness.estimation.quality import CommandRange
 from crane_stiffness.estimation.settings import LiveSettings
 from crane_stiffness.estimation.stream_delay import StreamDelay
-from crane_stiffness.command_limits import command_fault
+from crane_stiffness.contract.command_limits import command_fault
 from crane_stiffness.estimation import live_status
 from crane_stiffness.estimation.live_status import VALUE_FIELDS, BranchReport
 from crane_stiffness.estimation.lag import LagHistogram
 from crane_stiffness.estimation.inputs import (CommandHold, InputCounters, StreamHealth,
                                                command_inputs, input_faults)
-from crane_stiffness.status import ERROR, OK, WARN
+from crane_stiffness.contract.status import ERROR, OK, WARN
 from crane_stiffness.estimation.sync import (DISPLACEMENT, FORCE, ApproximateTimeSync, InterpolatingSync, Pair,
                                              SyncCounters)
 
@@ -200,7 +201,8 @@ class LiveStiffness:
 
     def add_command(self, stamp_s: float, wrench: Sequence[float], arrival_s: float) -> bool:
         """A wrench command [N, N·m]; a zero stamp counts from ``arrival_s``. Returns False if dropped (NaN/Inf in
-        its load along the axis or its times) or rejected (absurd by :mod:`crane_stiffness.command_limits`: held as a
+        its load along the axis or its times) or rejected (absurd by :mod:`crane_stiffness.contract.command_limits`:
+        held as a
         rejected command, pairs are not fitted while it is in force)."""
         self.counters.command_received += 1
         load = float(wrench[self._axis])

@@ -2,7 +2,8 @@
 :class:`~crane_stiffness.estimation.live.LiveStiffness` would fit and the branch of each, composed of the vectorised
 forms that sit beside each streaming rule (:mod:`~crane_stiffness.estimation.inputs`,
 :func:`~crane_stiffness.estimation.sync.pair_by_stamp`, :func:`~crane_stiffness.estimation.sync.pair_by_interpolation`,
-:func:`~crane_stiffness.estimation.branch.branch_labels`). ``test/test_live_estimate.py`` pins it to the streaming
+:func:`~crane_stiffness.estimation.branch.branch_labels`). ``test/estimation/test_live_estimate.py`` pins it to the
+streaming
 estimator. Pure numpy, no ROS.
 """
 from __future__ import annotations

@@ -16,7 +16,7 @@ from crane_stiffness.estimation.lag import LagHistogram
 from crane_stiffness.estimation.quality import fit_problems
 from crane_stiffness.estimation.settings import LiveSettings
 from crane_stiffness.estimation.stream_delay import StreamDelay
-from crane_stiffness.status import ERROR, OK, STALE, WAITING, WAITING_PREFIX, WARN, status_value
+from crane_stiffness.contract.status import ERROR, OK, STALE, WAITING, WAITING_PREFIX, WARN, status_value
 
 
 class LiveStiffness(Protocol):
@@ -57,7 +57,7 @@ VALUE_FIELDS = ('stiffness', 'intercept', 'stderr', 'ci95_low', 'ci95_high', 'r2
 
 @dataclass(frozen=True)
 class BranchReport:
-    """One branch's status for people: level (WAITING/OK/WARN/STALE, :mod:`crane_stiffness.status`), a one-line
+    """One branch's status for people: level (WAITING/OK/WARN/STALE, :mod:`crane_stiffness.contract.status`), a one-line
     message and key/value strings."""
 
     branch: Branch

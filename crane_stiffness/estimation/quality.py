@@ -20,7 +20,7 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import ArrayLike
 
-from crane_stiffness.axes import AXES
+from crane_stiffness.contract.axes import AXES
 
 #: |Δ| of a command component below this counts as "does not move" [N or N·m] (commands are exact program values).
 MOVE_TOLERANCE = 1e-9

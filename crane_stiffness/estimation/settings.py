@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from crane_stiffness.axes import AXES
+from crane_stiffness.contract.axes import AXES
 from crane_stiffness.errors import ParameterError
 from crane_stiffness.estimation.estimator import StiffnessEstimator
 from crane_stiffness.estimation.frames import SensorMount

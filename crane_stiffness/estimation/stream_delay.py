@@ -28,7 +28,7 @@ from crane_stiffness.estimation.inputs import Samples
 from crane_stiffness.estimation.offset import DelayEstimate, estimate_delay
 from crane_stiffness.estimation.sync import DISPLACEMENT, FORCE
 from crane_stiffness.estimation.settings import DELAY_MAX_LAG_S, LiveSettings
-from crane_stiffness.status import status_value
+from crane_stiffness.contract.status import status_value
 
 #: Windows of a recording the offline estimate looks at (those where the load moves most).
 DELAY_WINDOWS = 8

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from crane_stiffness.axes import AXES
+from crane_stiffness.contract.axes import AXES
 from crane_stiffness.design.margins import RTOL, XTOL
 from crane_stiffness.full6.errors import Full6InputError, SlackDesignError
 from crane_stiffness.model import CraneGeometry, Equilibrium, rest_pose, solve_batch

@@ -19,13 +19,13 @@ from typing import Any
 
 import numpy as np
 
-from crane_stiffness.axes import AXES
-from crane_stiffness.exit_codes import EXIT_OK, EXIT_USAGE
+from crane_stiffness.contract.axes import AXES
+from crane_stiffness.cli.exit_codes import EXIT_OK, EXIT_USAGE
 from crane_stiffness.full6.admissible import DEFAULT_SAFETY_FACTOR, axis_peaks, check_steps, wire_label
 from crane_stiffness.full6.errors import SlackDesignError
 from crane_stiffness.full6.linearity import MAX_LACK_OF_FIT, load_cell_full_scale
 from crane_stiffness.full6.reference import entry_name
-from crane_stiffness.geometry_args import add_geometry, geometry_from_args
+from crane_stiffness.cli.geometry_args import add_geometry, geometry_from_args
 
 #: The peaks used by default: this share of each axis' largest admissible load alone.
 DEFAULT_PEAK_FRACTION = 0.98

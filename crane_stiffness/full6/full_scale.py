@@ -18,9 +18,9 @@ from typing import Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from crane_stiffness.axes import AXES
+from crane_stiffness.contract.axes import AXES
 from crane_stiffness.full6.errors import Full6InputError
-from crane_stiffness.status import OK, WAITING, WARN
+from crane_stiffness.contract.status import OK, WAITING, WARN
 
 #: The last fraction of the range that counts as at full scale (a designed program stays below 0.9 of it:
 #: crane_stiffness.full6.linearity).

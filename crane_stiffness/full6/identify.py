@@ -32,7 +32,7 @@ the step means, not the sensors' noise alone, then sets the precision). Every en
 ± t·stderr with Student's t at ``confidence`` (0.95) on n − k degrees of freedom. K2 (crane_stiffness.full6.reference)
 is the mean of its four signed entries, with its interval from the same covariance.
 
-**Status** (levels of crane_stiffness.status):
+**Status** (levels of crane_stiffness.contract.status):
 
 - WAITING: no pairs yet.
 - ERROR, *undetermined* — the pairs cannot determine C: fewer than :data:`MIN_STEPS` distinct steps (six compliances
@@ -61,12 +61,12 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import special
 
-from crane_stiffness.axes import AXES
+from crane_stiffness.contract.axes import AXES
 from crane_stiffness.estimation.fit import MIN_RELIABILITY, t_quantile
 from crane_stiffness.full6.errors import Full6InputError
 from crane_stiffness.full6.reference import k2_weights
 from crane_stiffness.full6.statistics import PairAccumulator, PairStatistics, pair_statistics
-from crane_stiffness.status import ERROR, NAMES, OK, WAITING, WAITING_PREFIX, WARN
+from crane_stiffness.contract.status import ERROR, NAMES, OK, WAITING, WAITING_PREFIX, WARN
 
 #: Fewest distinct load steps that determine C: seven parameters per row, plus one for the lack-of-fit test.
 MIN_STEPS = 8
@@ -97,7 +97,7 @@ class ComplianceFit:
         residual_cov: Σ_v (6, 6), the residual's pure-error covariance per pair [m², m·rad, rad²].
         wrench_noise: Σ_uu (6, 6) used [N², N²·m, N²·m²].
         confidence: of the intervals.
-        level: status level (crane_stiffness.status); message: one line for people.
+        level: status level (crane_stiffness.contract.status); message: one line for people.
     """
 
     compliance: NDArray[np.float64]

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from crane_stiffness.axes import AXES
+from crane_stiffness.contract.axes import AXES
 from crane_stiffness.full6.admissible import wire_label
 from crane_stiffness.full6.design import LoadDesign
 from crane_stiffness.full6.errors import Full6InputError

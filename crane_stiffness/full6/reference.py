@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from crane_stiffness.axes import AXES
+from crane_stiffness.contract.axes import AXES
 from crane_stiffness.model import (CraneGeometry, Equilibrium, PaperCoefficients, paper_coefficients, paper_stiffness,
                                    rest_pose, tangent_stiffness)
 

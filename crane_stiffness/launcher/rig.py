@@ -1,7 +1,8 @@
 """The simulated rig as separate node processes, started the way ``ros2 launch`` starts them, and the run's summary.
 
 Used by ``make demo`` (scripts/demo.py), the tests and the benchmarks. Every node is started the way ``ros2 run``
-starts it (crane_stiffness.launcher.rosrun) with what the launch file gives it (crane_stiffness.rig_description:
+starts it (crane_stiffness.launcher.rosrun) with what the launch file gives it
+(crane_stiffness.launcher.rig_description:
 parameter files from the install tree's config/ directory, parameters, remappings), all at the same instant: there
 is no start order to keep, load_program waits until the rig is ready (crane_stiffness.nodes.load_program).
 """
@@ -18,8 +19,10 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from std_msgs.msg import Float64, Float64MultiArray, String
 
-from crane_stiffness import __version__, topics
-from crane_stiffness.status import NAMES as LEVEL_NAMES, read_level
+from crane_stiffness import __version__
+
+from crane_stiffness.contract import topics
+from crane_stiffness.contract.status import NAMES as LEVEL_NAMES, read_level
 from crane_stiffness.params.geometry import geometry_from_params
 from crane_stiffness.params.files import load_params
 from crane_stiffness.analysis.sweep import unit
@@ -27,8 +30,8 @@ from crane_stiffness.model import (axis_stiffness, directional_stiffness, paper_
                                    tangent_stiffness)
 from crane_stiffness.rosnode.qos import KEPT_QOS, LATCHED_QOS
 from crane_stiffness.rosnode.sim_time import SIM_QOS
-from crane_stiffness.rig_description import PACKAGE, NodeStart, rig_nodes
-from crane_stiffness.rig_description import config_files as rig_config_files
+from crane_stiffness.launcher.rig_description import PACKAGE, NodeStart, rig_nodes
+from crane_stiffness.launcher.rig_description import config_files as rig_config_files
 from crane_stiffness.sim.program import LoadProgram, load_program_file
 from crane_stiffness.launcher.rosrun import Processes, RigInterrupted, RigStartError, RosRunError
 

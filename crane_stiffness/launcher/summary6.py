@@ -7,8 +7,8 @@ from typing import Any
 
 import numpy as np
 
-from crane_stiffness import stiffness6_layout
-from crane_stiffness.axes import AXES
+from crane_stiffness.contract import stiffness6_layout
+from crane_stiffness.contract.axes import AXES
 from crane_stiffness.full6.reference import k2_of, reference_at_rest
 from crane_stiffness.params.files import load_params
 from crane_stiffness.params.geometry import geometry_from_params
@@ -22,7 +22,7 @@ K2_TOLERANCE = 0.03
 def summarize6(crane_file: str | Path, stiffness: Any, status: tuple[str, str, dict[str, str]] | None
                ) -> dict[str, Any]:
     """The summary of a six-axis run: ``stiffness`` the last /stiffness6/stiffness data (None: none published; laid
-    out as crane_stiffness.stiffness6_layout says), ``status`` (level name, message, values) of the last
+    out as crane_stiffness.contract.stiffness6_layout says), ``status`` (level name, message, values) of the last
     /stiffness6/status."""
     g = geometry_from_params(load_params(crane_file))
     ref = reference_at_rest(g)

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from crane_stiffness.axes import AXES, axis_index  # noqa: F401 (AXES: re-exported by crane_stiffness.model)
+from crane_stiffness.contract.axes import AXES, axis_index  # noqa: F401 (AXES: re-exported by crane_stiffness.model)
 from crane_stiffness.model.equilibrium import Equilibrium, wrench_jacobian
 from crane_stiffness.model.errors import GeometryError
 from crane_stiffness.model.geometry import CraneGeometry

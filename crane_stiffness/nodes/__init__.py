@@ -3,7 +3,8 @@
 
 :data:`NODES` is the one list of them: setup.py installs ``nodes_bin/<name>`` for each (and refuses a build where
 nodes_bin/ differs), :func:`crane_stiffness.rosnode.parameters.node_modules` imports them, and
-:mod:`crane_stiffness.entry` starts only these. What the nodes share (``run``, parameters, QoS, diagnostics, ...) is
+:mod:`crane_stiffness.rosnode.entry` starts only these. What the nodes share (``run``, parameters, QoS, diagnostics,
+...) is
 :mod:`crane_stiffness.rosnode`. This module imports nothing: the entry points and setup.py read it before anything
 heavy is loaded.
 """

@@ -6,7 +6,8 @@ wire_1..wire_6, position = length [m], effort = tension [N]), /crane/predicted_s
 tangent) and /crane/predicted_axis_stiffness (Float64 along the commanded axis), and /crane/model_status (String:
 'ok …' or 'no_equilibrium …'). Geometry from the geometry.* parameters, changeable at run time.
 
-Every command is either accepted or rejected, and said so (crane_stiffness.topics): after EVERY command this node
+Every command is either accepted or rejected, and said so (crane_stiffness.contract.topics): after EVERY command this
+node
 publishes /crane/applied_wrench (WrenchStamped, frame crane_base, the command's stamp) = the load in force after it:
 the command when accepted, the previous load when rejected; a rejected command (non-finite, absurd, no equilibrium)
 is also republished unchanged on /crane/rejected_command. The simulated sensors apply /crane/applied_wrench, never
@@ -42,8 +43,8 @@ from rclpy.timer import Timer
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension, String
 
-from crane_stiffness import topics
-from crane_stiffness.command_limits import CommandLimits, command_fault
+from crane_stiffness.contract import topics
+from crane_stiffness.contract.command_limits import CommandLimits, command_fault
 from crane_stiffness.params.geometry import GEOMETRY_PARAMS, geometry_from_params
 from crane_stiffness.params.spec import ParamSpec
 from crane_stiffness.model import (AXES, WIRE_NAMES, CraneGeometry, Equilibrium, ModelError, axis_stiffness,
@@ -55,7 +56,7 @@ from crane_stiffness.rosnode.messages import finite
 from crane_stiffness.rosnode.run import run
 from crane_stiffness.rosnode.parameters import Params, check
 from crane_stiffness.rosnode.sim_time import SimTimeParticipant, drain, uses_sim_time
-from crane_stiffness.status import ERROR, OK
+from crane_stiffness.contract.status import ERROR, OK
 
 MODEL_STATUS = topics.MODEL_STATUS
 #: Most failed (load in force, command) pairs remembered; the oldest is forgotten first.
@@ -229,7 +230,7 @@ class CraneModel(Node):
 
     def _command_fault(self, load: np.ndarray) -> tuple[str, str] | None:
         """(counter, reason) when the command is not a load to apply, else None: the rule the estimator applies
-        too (crane_stiffness.command_limits)."""
+        too (crane_stiffness.contract.command_limits)."""
         reason = command_fault(load, self.limits)
         if reason is None:
             return None

@@ -40,7 +40,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, Float64MultiArray
 from std_srvs.srv import Trigger
 
-from crane_stiffness import stiffness6_layout, topics
+from crane_stiffness.contract import stiffness6_layout, topics
 from crane_stiffness.model import CraneGeometry
 from crane_stiffness.rosnode.qos import KEPT_QOS, LATCHED_QOS, RELIABLE_QOS, rclpy_qos
 from crane_stiffness.rosnode.run import run

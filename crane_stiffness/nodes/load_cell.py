@@ -29,8 +29,8 @@ from geometry_msgs.msg import WrenchStamped
 from rclpy.node import Node
 from std_srvs.srv import Trigger
 
-from crane_stiffness import topics
-from crane_stiffness.axes import AXES
+from crane_stiffness.contract import topics
+from crane_stiffness.contract.axes import AXES
 from crane_stiffness.params.spec import ParamSpec
 from crane_stiffness.rosnode.qos import RELIABLE_QOS, sensor_qos, stream_qos
 from crane_stiffness.rosnode.diagnostics import Diagnostics, SensorCounters
@@ -44,7 +44,7 @@ from crane_stiffness.rosnode.parameters import Params
 from crane_stiffness.serde.stamps import split_ns, stamp_ns
 from crane_stiffness.sim.sampling import SampleClock, StampedHold
 from crane_stiffness.sim.sensors import LOAD_CELL_PARAMS, LoadCellModel, load_cell_from_params
-from crane_stiffness.status import ERROR, OK, WARN
+from crane_stiffness.contract.status import ERROR, OK, WARN
 
 PARAMS = (
     *sensor_timing_params('load_cell', 'header.frame_id of the published wrench; axes aligned with crane_base [-]'),

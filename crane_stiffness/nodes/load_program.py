@@ -13,7 +13,7 @@ subscribed to its topic (by default crane_model, the simulated load cell, the es
 command; the commands are published only once DDS has matched those readers). While it waits it logs one line per
 missing item every ``ready_log_period_s``; after ``ready_timeout_s`` it logs an error naming what never came and
 exits with status 1. A user running part of the rig lists only what runs (the launch file does that for its
-arguments, see crane_stiffness.rig_description).
+arguments, see crane_stiffness.launcher.rig_description).
 """
 from __future__ import annotations
 
@@ -31,20 +31,21 @@ from rclpy.timer import Timer
 from std_msgs.msg import Float64, String
 from std_srvs.srv import Trigger
 
-from crane_stiffness import topics
+from crane_stiffness.contract import topics
 from crane_stiffness.params.spec import ParamSpec
 from crane_stiffness.rosnode.qos import LATCHED_QOS, RELIABLE_QOS, rclpy_qos, stream_qos
 from crane_stiffness.rosnode.diagnostics import Counters, Diagnostics
 from crane_stiffness.rosnode.run import run
 from crane_stiffness.rosnode.parameters import Params, check
 from crane_stiffness.rosnode.sim_time import SimTimeParticipant, uses_sim_time
-from crane_stiffness.rig_description import NODES as RIG_NODES
-from crane_stiffness.rig_description import readiness
+from crane_stiffness.launcher.rig_description import NODES as RIG_NODES
+from crane_stiffness.launcher.rig_description import readiness
 from crane_stiffness.sim.program import PROGRAM_KEYS, PROGRAM_PARAMS, LoadProgram, ProgramState
-from crane_stiffness.status import OK, WARN
+from crane_stiffness.contract.status import OK, WARN
 from crane_stiffness.serde.stamps import split_ns
 
-#: What the program waits for by default: the whole simulated rig with the recorder, as crane_stiffness.rig_description
+#: What the program waits for by default: the whole simulated rig with the recorder, as
+#: crane_stiffness.launcher.rig_description
 #: describes it (the launch file passes the lists for the nodes it starts): a message on the model's latched
 #: prediction and on both sensor streams, and every node subscribed to the topics it reads.
 _FULL_RIG = readiness(list(RIG_NODES))
@@ -99,7 +100,7 @@ def wanted_subscribers(entries: list[str]) -> list[tuple[str, str]]:
 
 class _Readiness:
     """What an automatic start waits for: each item is (description, is it there now?). Messages are awaited with
-    a subscription of the topic's contract QoS (crane_stiffness.topics), dropped once a message has come."""
+    a subscription of the topic's contract QoS (crane_stiffness.contract.topics), dropped once a message has come."""
 
     def __init__(self, node: Node, messages: list[str], subscribers: list[tuple[str, str]],
                  min_subscribers: int, matched: Callable[[], int]) -> None:

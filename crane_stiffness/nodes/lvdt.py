@@ -25,7 +25,7 @@ from geometry_msgs.msg import PointStamped, PoseStamped
 from rclpy.node import Node
 from std_srvs.srv import Trigger
 
-from crane_stiffness import topics
+from crane_stiffness.contract import topics
 from crane_stiffness.rosnode.qos import RELIABLE_QOS, sensor_qos, stream_qos
 from crane_stiffness.rosnode.diagnostics import Diagnostics, SensorCounters
 from crane_stiffness.rosnode.sensor_timing import (
@@ -38,7 +38,7 @@ from crane_stiffness.rosnode.parameters import Params
 from crane_stiffness.serde.stamps import split_ns, stamp_ns
 from crane_stiffness.sim.sampling import SampleClock, StampedHold
 from crane_stiffness.sim.sensors import LVDT_PARAMS, LvdtModel, lvdt_from_params
-from crane_stiffness.status import ERROR, OK, WARN
+from crane_stiffness.contract.status import ERROR, OK, WARN
 
 PARAMS = (
     *sensor_timing_params('lvdt', 'header.frame_id of the published reading [-]'),

@@ -53,7 +53,7 @@ import numpy as np
 from geometry_msgs.msg import PointStamped, PoseStamped, PoseWithCovarianceStamped
 from rclpy.node import Node
 
-from crane_stiffness import topics
+from crane_stiffness.contract import topics
 from crane_stiffness.full6.errors import ArrangementError
 from crane_stiffness.full6.lvdt_array import LAB_LVDT_NOISE, MAX_CONDITION, LvdtArray, lab_arrangement
 from crane_stiffness.model.rotation import quaternion_multiply, quaternion_to_matrix, rotvec_to_quaternion
@@ -67,7 +67,7 @@ from crane_stiffness.rosnode.run import run
 from crane_stiffness.rosnode.sim_time import uses_sim_time
 from crane_stiffness.serde.cdr import CdrError, decode_stamped
 from crane_stiffness.sim.pose_sensor import normalised
-from crane_stiffness.status import OK, WARN
+from crane_stiffness.contract.status import OK, WARN
 
 _LAB = lab_arrangement()
 PARAMS = (

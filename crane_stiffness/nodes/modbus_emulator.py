@@ -20,7 +20,7 @@ import numpy as np
 from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
 
-from crane_stiffness import topics
+from crane_stiffness.contract import topics
 from crane_stiffness.params.spec import ParamSpec
 from crane_stiffness.devices.modbus_device import ModbusDevice
 from crane_stiffness.drivers.errors import ParameterError
@@ -32,7 +32,7 @@ from crane_stiffness.rosnode.parameters import Params, check, positive
 from crane_stiffness.rosnode.device_params import MAX_INPUT_LAG, check_address, check_start_only
 from crane_stiffness.nodes.modbus_lvdt import CHANNEL_PARAMS, channel_from
 from crane_stiffness.sim.sensors import LVDT_PARAMS, LvdtModel, lvdt_from_params
-from crane_stiffness.status import OK, WARN
+from crane_stiffness.contract.status import OK, WARN
 
 PARAMS = (
     ParamSpec('host', '127.0.0.1', 'address to serve Modbus TCP on (keep it on loopback or a test network '

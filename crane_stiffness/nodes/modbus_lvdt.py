@@ -25,7 +25,7 @@ from geometry_msgs.msg import PointStamped
 from rclpy.node import Node
 from std_srvs.srv import Trigger
 
-from crane_stiffness import topics
+from crane_stiffness.contract import topics
 from crane_stiffness.params.spec import ParamSpec
 from crane_stiffness.drivers.errors import DeviceResponseError, DeviceSilentError, DriverError, ParameterError
 from crane_stiffness.drivers.modbus import DATA_TYPES, MODBUS_TCP_PORT, REGISTER_TYPES, Channel, ModbusPoller
@@ -36,7 +36,7 @@ from crane_stiffness.rosnode.run import run
 from crane_stiffness.rosnode.parameters import Params, check, positive
 from crane_stiffness.rosnode.device_params import check_address, check_start_only, wait_for_device
 from crane_stiffness.serde.stamps import split_ns
-from crane_stiffness.status import ERROR, OK, WARN
+from crane_stiffness.contract.status import ERROR, OK, WARN
 
 #: Parameters of the channel, shared with modbus_emulator so one parameter file describes both sides.
 CHANNEL_PARAMS = (

@@ -30,7 +30,7 @@ from geometry_msgs.msg import WrenchStamped
 from rclpy.node import Node
 from std_srvs.srv import Trigger
 
-from crane_stiffness import topics
+from crane_stiffness.contract import topics
 from crane_stiffness.params.spec import ParamSpec
 from crane_stiffness.drivers import rdt
 from crane_stiffness.drivers.errors import DriverError
@@ -43,7 +43,7 @@ from crane_stiffness.rosnode.run import run
 from crane_stiffness.rosnode.parameters import Params, check, positive
 from crane_stiffness.rosnode.device_params import check_address, check_start_only, wait_for_device
 from crane_stiffness.serde.stamps import split_ns
-from crane_stiffness.status import ERROR, OK, WARN
+from crane_stiffness.contract.status import ERROR, OK, WARN
 
 DEVICES = ('ati', 'onrobot')
 TARE_MODES = ('software', 'hardware')

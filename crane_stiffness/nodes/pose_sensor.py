@@ -30,7 +30,7 @@ import numpy as np
 from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
 
-from crane_stiffness import topics
+from crane_stiffness.contract import topics
 from crane_stiffness.rosnode.diagnostics import Diagnostics, SensorCounters
 from crane_stiffness.rosnode.messages import pose_position_quaternion, pose_stamped
 from crane_stiffness.rosnode.parameters import Params
@@ -42,7 +42,7 @@ from crane_stiffness.rosnode.sim_time import SimTimeParticipant, drain
 from crane_stiffness.serde.stamps import stamp_ns
 from crane_stiffness.sim.pose_sensor import POSE_SENSOR_PARAMS, PoseSensorModel, pose_sensor_from_params
 from crane_stiffness.sim.sampling import ReleaseGate, SampleClock, StampedHold
-from crane_stiffness.status import ERROR, OK, WARN
+from crane_stiffness.contract.status import ERROR, OK, WARN
 
 #: A motion-capture system's frame rate, and one message per frame.
 SAMPLE_RATE_HZ = 250.0

@@ -21,7 +21,7 @@ import numpy as np
 from geometry_msgs.msg import WrenchStamped
 from rclpy.node import Node
 
-from crane_stiffness import topics
+from crane_stiffness.contract import topics
 from crane_stiffness.params.spec import ParamSpec
 from crane_stiffness.devices.rdt_device import RdtDevice
 from crane_stiffness.drivers import rdt
@@ -32,7 +32,7 @@ from crane_stiffness.rosnode.run import run
 from crane_stiffness.rosnode.parameters import Params, check, positive
 from crane_stiffness.rosnode.device_params import MAX_INPUT_LAG, check_address, check_start_only
 from crane_stiffness.sim.sensors import LOAD_CELL_PARAMS, LoadCellModel, load_cell_from_params
-from crane_stiffness.status import ERROR, OK, WARN
+from crane_stiffness.contract.status import ERROR, OK, WARN
 
 #: Status word of the records served before the first applied wrench: bit 31, the summary error bit of an RDT
 #: status word (crane_stiffness.drivers.rdt: 0 = healthy), and bit 16, this emulator's "no load known yet".

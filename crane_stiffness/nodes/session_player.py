@@ -48,7 +48,7 @@ from crane_stiffness.rosnode.run import run
 from crane_stiffness.rosnode.parameters import Params, check, positive, valid_topic_name
 from crane_stiffness.rosnode.session_qos import message_class, playback_qos
 from crane_stiffness.serde.stamps import split_ns
-from crane_stiffness.status import ERROR, OK, WARN
+from crane_stiffness.contract.status import ERROR, OK, WARN
 
 CLOCK_TOPIC = '/clock'
 _NO_EVENTS = PublisherEventCallbacks(use_default_callbacks=False)  # no QoS-event handler in every executor wait

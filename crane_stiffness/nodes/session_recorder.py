@@ -1,6 +1,7 @@
 """session_recorder: records a test session of the rig to a rosbag2 bag (MCAP) with the session's description.
 
-Subscribes to ``topics`` (default: every rig topic of crane_stiffness.topics.RIG_TOPICS) as serialized messages (no
+Subscribes to ``topics`` (default: every rig topic of crane_stiffness.contract.topics.RIG_TOPICS) as serialized
+messages (no
 deserialization), each with the QoS that matches its publishers (sensor streams best effort, latched topics transient
 local, the rest reliable; topics outside the contract adapt to the publishers in the graph), and writes them with
 crane_stiffness.bag.BagWriter to ``<output_dir>/<session>/`` (metadata.yaml + ``<session>_<n>.mcap``, chunked,
@@ -55,7 +56,9 @@ from rclpy.timer import Timer
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
-from crane_stiffness import __version__, topics
+from crane_stiffness import __version__
+
+from crane_stiffness.contract import topics
 from crane_stiffness.bag import BagWriter, dump_qos_profiles
 from crane_stiffness.bag.errors import BagError, BagWriteFailedError
 from crane_stiffness.rosnode.diagnostics import Diagnostics
@@ -71,10 +74,10 @@ from crane_stiffness.rosnode.session_qos import (adapted_qos, contract_qos, has_
                                                offered_profiles, publisher_types)
 from crane_stiffness.params.files import params_files_from_args, read_params_files
 from crane_stiffness.serde import header_stamp_ns
-from crane_stiffness.session_metadata import (NODE_PARAMETERS_METADATA, SESSION_END_METADATA, SESSION_METADATA,
+from crane_stiffness.bag.session_metadata import (NODE_PARAMETERS_METADATA, SESSION_END_METADATA, SESSION_METADATA,
                                             session_record)
 from crane_stiffness.sim.program import PROGRAM_KEYS
-from crane_stiffness.status import ERROR, OK
+from crane_stiffness.contract.status import ERROR, OK
 
 
 # rclpy puts a QoS-event handler into every wait of the executor for each subscription with the default event

@@ -24,17 +24,18 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rosgraph_msgs.msg import Clock as ClockMsg
 from std_msgs.msg import String
 
-from crane_stiffness import topics
+from crane_stiffness.contract import topics
 from crane_stiffness.rosnode.diagnostics import Diagnostics
 from crane_stiffness.rosnode.parameters import Params, check
 from crane_stiffness.rosnode.run import run
 from crane_stiffness.rosnode.sim_time import SIM_QOS
 from crane_stiffness.params.spec import ParamSpec
 from crane_stiffness.sim.lockstep import LockstepClock
-from crane_stiffness.status import OK, WARN
+from crane_stiffness.contract.status import OK, WARN
 from crane_stiffness.serde.stamps import split_ns
 
-#: The nodes of the simulated rig that follow the clock (crane_stiffness.rig_description passes the ones started).
+#: The nodes of the simulated rig that follow the clock (crane_stiffness.launcher.rig_description passes the ones
+#: started).
 DEFAULT_PARTICIPANTS = ('load_program', 'crane_model', 'load_cell', 'lvdt', 'stiffness_estimator', 'session_recorder')
 
 PARAMS = (

@@ -10,7 +10,7 @@ the fit uses every labelled pair since the start (or the last ~/reset). A load-c
 
 Publishes, at ``publish_rate_hz`` (node clock), /stiffness6/stiffness and /stiffness6/compliance
 (Float64MultiArray: dims quantity (value, ci95_low, ci95_high) × row × column, row-major; the layout in
-crane_stiffness.stiffness6_layout) and /stiffness6/status
+crane_stiffness.contract.stiffness6_layout) and /stiffness6/status
 (DiagnosticArray: the fit's status, with the numbers behind it: pairs, steps, condition number, lack of fit, K2 and
 its interval, the diagonal of K). The status is never OK on a design that cannot determine C (crane_stiffness.full6
 .identify: fewer than 8 steps, no pure error, condition number > 100) or on a non-linear window (lack of fit), and
@@ -34,7 +34,7 @@ from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import Trigger
 
-from crane_stiffness import stiffness6_layout, topics
+from crane_stiffness.contract import stiffness6_layout, topics
 from crane_stiffness.estimation.frames import SensorMount
 from crane_stiffness.full6.full_scale import at_limits, check_full_scale, full_scale_limits, with_full_scale
 from crane_stiffness.full6.identify import ComplianceEstimator, ComplianceFit
@@ -46,7 +46,7 @@ from crane_stiffness.rosnode.run import run
 from crane_stiffness.rosnode.sim_time import SimTimeParticipant, uses_sim_time
 from crane_stiffness.serde.cdr import CdrError, decode_stamped
 from crane_stiffness.serde.stamps import stamp_seconds
-from crane_stiffness.status import ERROR, NAMES, STALE, WAITING, WAITING_PREFIX, wire_level
+from crane_stiffness.contract.status import ERROR, NAMES, STALE, WAITING, WAITING_PREFIX, wire_level
 
 __all__ = ['PARAMS', 'Stiffness6EstimatorNode', 'main', 'shown_status']
 

@@ -15,7 +15,7 @@ Pairs samples by header stamp, fits loading and unloading branches apart (window
   /stiffness/estimate (DiagnosticArray: one status per branch plus an input status with the counters) and again
   /stiffness/stiffness at ``diagnostics_rate_hz``. A part that has not begun (a branch without an estimate yet, the
   inputs before each stream's first sample) is published as level OK with a message starting 'waiting: '
-  (crane_stiffness.status.WAITING).
+  (crane_stiffness.contract.status.WAITING).
 For the live view (not recorded by default): /stiffness/fitted_pairs (Float64MultiArray, every pair fitted, rows ×
 PAIR_FIELDS, gathered for PAIRS_PERIOD_S) and /stiffness/fit_lines (Float64MultiArray, each branch's window as a line
 with its 95 % band, rows × FIT_LINE_FIELDS, at ``diagnostics_rate_hz``).
@@ -50,14 +50,14 @@ from rclpy.timer import Timer
 from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension
 from std_srvs.srv import Trigger
 
-from crane_stiffness import topics
+from crane_stiffness.contract import topics
 from crane_stiffness.serde import CdrError, decode_float64, decode_stamped, stamp_seconds
 from crane_stiffness.estimation.branch import BRANCHES
 from crane_stiffness.estimation.fit_lines import FIT_LINE_FIELDS
 from crane_stiffness.estimation.live import PAIR_FIELDS, VALUE_FIELDS, LiveStiffness
 from crane_stiffness.estimation.settings import ESTIMATOR_PARAMS, LiveSettings
 from crane_stiffness.params.spec import ParamSpec
-from crane_stiffness.status import wire_level
+from crane_stiffness.contract.status import wire_level
 from crane_stiffness.estimation.sync import DISPLACEMENT, FORCE
 from crane_stiffness.rosnode.qos import KEPT_QOS, LATCHED_QOS, RELIABLE_QOS, sensor_qos, stream_qos
 from crane_stiffness.rosnode.sim_time import SimTimeParticipant, uses_sim_time

@@ -8,5 +8,7 @@
 - ``diagnostics``: counters, status and input lag on /diagnostics; ``messages``: small helpers over messages;
 - ``sensor_timing``: what the simulated sensors share; ``sim_time``: a node's part in simulated time;
 - ``malloc_trim``: handing freed memory back to the system in a long-running node;
-- ``session_recorder_params``: the session recorder's parameters and their validation.
+- ``session_recorder_params``: the session recorder's parameters and their validation;
+- ``entry``: the node executables' entry points (signals held from the first instant); ``discovery``: the Fast DDS
+  profile (``fastdds_discovery.xml``) that lets nodes started at once find each other quickly.
 """

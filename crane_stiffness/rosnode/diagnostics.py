@@ -9,7 +9,7 @@ from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.node import Node
 
-from crane_stiffness import topics
+from crane_stiffness.contract import topics
 from crane_stiffness.rosnode.messages import stamp_to_s
 
 

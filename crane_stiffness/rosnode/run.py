@@ -14,7 +14,7 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
-from crane_stiffness import entry
+from crane_stiffness.rosnode import entry
 from crane_stiffness.rosnode import parameters
 from crane_stiffness.rosnode.sim_time import SimTimeParticipant
 from crane_stiffness.params.files import params_files_from_args

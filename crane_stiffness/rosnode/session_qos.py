@@ -1,7 +1,7 @@
 """QoS of recorded and replayed topics, shared by session_recorder and session_player.
 
 - :func:`contract_qos`: the QoS a subscriber needs to match the rig's publishers of a topic (the contract's table,
-  crane_stiffness.topics.TOPIC_QOS): sensor streams best effort, latched topics transient local, the rest
+  crane_stiffness.contract.topics.TOPIC_QOS): sensor streams best effort, latched topics transient local, the rest
   reliable. Topics outside the contract adapt to the publishers found in the graph (:func:`adapted_qos`), the way
   rosbag2 does.
 - :func:`offered_profiles`: the publishers' offered QoS as rosbag2 stores it in a bag (``offered_qos_profiles``).
@@ -15,7 +15,7 @@ from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from crane_stiffness import topics
+from crane_stiffness.contract import topics
 from crane_stiffness.bag.errors import UnsupportedTypeError
 from crane_stiffness.bag.msgdef import interface_prefix
 from crane_stiffness.bag.qos import policy_name, recorded_qos_profiles

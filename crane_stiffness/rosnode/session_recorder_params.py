@@ -6,7 +6,7 @@ import json
 from datetime import datetime, timezone
 from typing import Any
 
-from crane_stiffness import topics
+from crane_stiffness.contract import topics
 from crane_stiffness.bag.writer import COMPRESSIONS
 from crane_stiffness.rosnode.parameter_reader import plain
 from crane_stiffness.rosnode.parameters import check, valid_topic_name

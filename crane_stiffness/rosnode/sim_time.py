@@ -26,7 +26,7 @@ from rclpy.publisher import Publisher
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
 
-from crane_stiffness import topics
+from crane_stiffness.contract import topics
 from crane_stiffness.sim.lockstep import LEFT_NS
 
 #: The progress and watermark topics: reliable, deep enough for a reader starved of CPU for a while, and transient

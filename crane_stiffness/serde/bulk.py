@@ -19,7 +19,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from crane_stiffness.axes import AXES
+from crane_stiffness.contract.axes import AXES
 
 from .stamps import stamp_seconds
 

@@ -38,7 +38,7 @@ import numpy as np
 import yaml
 from numpy.typing import NDArray
 
-from crane_stiffness.axes import AXES
+from crane_stiffness.contract.axes import AXES
 from crane_stiffness.params.files import ParamFile, applicable_sections
 from crane_stiffness.params.spec import ParamSpec
 from crane_stiffness.sim.errors import ParameterError, ProgramFileError

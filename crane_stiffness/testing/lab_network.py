@@ -1,7 +1,7 @@
 """The rig through the drivers (``transport:=drivers``) as processes, and the lab network of two machines as two
 Linux network namespaces joined by a veth pair. Used by test_rig_drivers, test_lab_network and bench_rig.
 
-:func:`start_rig_with` starts the nodes :func:`crane_stiffness.rig_description.rig_nodes` gives for any rig
+:func:`start_rig_with` starts the nodes :func:`crane_stiffness.launcher.rig_description.rig_nodes` gives for any rig
 arguments (the demo's :func:`crane_stiffness.launcher.rig.start_rig` takes only program/record/session), each the
 way ``ros2 run`` starts it. :func:`emulated_ports` picks free loopback ports for the emulators and points the
 drivers at them, so runs side by side on one machine do not meet on the fixed ports of config/drivers_emulated.yaml.
@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 from crane_stiffness.errors import CraneStiffnessError
-from crane_stiffness.rig_description import PACKAGE, NodeStart, rig_nodes
+from crane_stiffness.launcher.rig_description import PACKAGE, NodeStart, rig_nodes
 from crane_stiffness.sim.program import LoadProgram, load_program_file
 from crane_stiffness.launcher.ports import free_port
 from crane_stiffness.launcher.rig import start_nodes

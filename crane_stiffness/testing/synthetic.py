@@ -16,16 +16,16 @@ from typing import Any, Callable
 
 import numpy as np
 
-from crane_stiffness import topics
+from crane_stiffness.contract import topics
 from crane_stiffness.bag import BagWriter, dump_qos_profiles, qos_profile
 from crane_stiffness.params.geometry import geometry_to_params
-from crane_stiffness.axes import AXES
+from crane_stiffness.contract.axes import AXES
 from crane_stiffness.estimation.live import VALUE_FIELDS, LiveStiffness
 from crane_stiffness.estimation.settings import LiveSettings
 from crane_stiffness.model import CraneGeometry
 from crane_stiffness.serde import (encode_float64, encode_float64_multiarray, encode_stamped, encode_string,
                                    stamp_seconds)
-from crane_stiffness.session_metadata import CAMPAIGN_KEY, SESSION_METADATA, session_metadata
+from crane_stiffness.bag.session_metadata import CAMPAIGN_KEY, SESSION_METADATA, session_metadata
 from crane_stiffness.sim.program import LoadProgram
 
 T0_NS = 1_700_000_000_000_000_000
@@ -106,7 +106,7 @@ def write_synthetic_session(path: str | Path, program: LoadProgram, *, geometry:
             latency); the log times follow.
         recorded_geometry: the crane the session records (the nominal one of a campaign) when it is not the one
             the displacements are made with (``geometry``, the true crane).
-        campaign: a campaign entry to record (crane_stiffness.session_metadata.CAMPAIGN_KEY).
+        campaign: a campaign entry to record (crane_stiffness.bag.session_metadata.CAMPAIGN_KEY).
     """
     if geometry is None and stiffness is None:
         raise ValueError('give a geometry (nonlinear model) or a stiffness (linear truth)')

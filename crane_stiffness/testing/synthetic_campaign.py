@@ -46,7 +46,7 @@ def write_synthetic_full(out: Path, campaign: Campaign, plan: SessionPlan, seed:
     have published last (the offline fit of the same samples, which the live one equals: test_stiffness6_node)
     and status OK."""
     from crane_stiffness.analysis.full6 import analyze_full6
-    from crane_stiffness.stiffness6_layout import encode
+    from crane_stiffness.contract.stiffness6_layout import encode
     from crane_stiffness.testing.synthetic_full6_bag import write_full6_session
     data = load_yaml(plan.program_text or Path(plan.program).read_text())
     program = LoadProgram.from_params(data['load_program']['ros__parameters'])

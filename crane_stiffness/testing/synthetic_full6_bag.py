@@ -33,14 +33,14 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from crane_stiffness import topics
+from crane_stiffness.contract import topics
 from crane_stiffness.bag import BagWriter
 from crane_stiffness.estimation.frames import SensorMount
 from crane_stiffness.model import CraneGeometry, Equilibrium, rest_pose, tangent_stiffness
 from crane_stiffness.model.rotation import matrix_to_quaternion
 from crane_stiffness.params.geometry import geometry_to_params
 from crane_stiffness.serde import encode_stamped
-from crane_stiffness.session_metadata import NODE_PARAMETERS_METADATA, SESSION_METADATA, session_metadata
+from crane_stiffness.bag.session_metadata import NODE_PARAMETERS_METADATA, SESSION_METADATA, session_metadata
 from crane_stiffness.sim.program import LoadProgram
 from crane_stiffness.testing.synthetic import T0_NS, offered_qos
 from crane_stiffness.testing.synthetic_full6 import LOAD_CELL_BIAS

@@ -14,7 +14,7 @@ import numpy as np
 from crane_stiffness.estimation.branch import BRANCHES
 from crane_stiffness.estimation.fit_lines import FIT_LINE_FIELDS, band
 from crane_stiffness.estimation.live import PAIR_FIELDS, VALUE_FIELDS
-from crane_stiffness.status import NAMES, overall, read_level
+from crane_stiffness.contract.status import NAMES, overall, read_level
 from crane_stiffness.view import jsonschema as js
 from crane_stiffness.view.errors import ViewError
 
@@ -133,8 +133,10 @@ def estimate_message(values: Sequence[float]) -> dict[str, Any]:
 
 def status_message(statuses: Sequence[tuple[str, int, str]]) -> dict[str, Any]:
     """The estimator's status (/stiffness/estimate: (name, level, message) per status, as published) as text and
-    level: each status, its level read back (:func:`~crane_stiffness.status.read_level`: WAITING for a part that has
-    not begun), and the overall level (:func:`~crane_stiffness.status.overall`: the worst of the parts, a waiting
+    level: each status, its level read back (:func:`~crane_stiffness.contract.status.read_level`: WAITING for a part
+    that has
+    not begun), and the overall level (:func:`~crane_stiffness.contract.status.overall`: the worst of the parts, a
+    waiting
     part never worse than those running)."""
     levels = [read_level(published, message) for _, published, message in statuses]
     items = [{'name': name, 'level': lvl, 'level_name': NAMES.get(lvl, str(lvl)), 'message': message}

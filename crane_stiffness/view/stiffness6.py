@@ -3,7 +3,7 @@ published (/stiffness6/stiffness, with its 95 % interval) entry by entry against
 for the view's geometry (crane_stiffness.full6.reference), the coupling K2 measured, with its interval, and the
 tangent's, and the estimator's status (/stiffness6/status). Pure numpy, no ROS.
 
-Rows are the loads fx fy fz mx my mz, columns the displacements u_x u_y u_z θ_x θ_y θ_z (crane_stiffness.axes,
+Rows are the loads fx fy fz mx my mz, columns the displacements u_x u_y u_z θ_x θ_y θ_z (crane_stiffness.contract.axes,
 crane_stiffness.full6.reference.DISPLACEMENTS); units as there (N/m, N/rad, N·m/rad). An entry the model has at zero
 (crane_stiffness.full6.reference.structural_zeros, the rule the offline analysis uses) has no relative error:
 ``model_zero`` says so.
@@ -15,10 +15,10 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from crane_stiffness import stiffness6_layout
-from crane_stiffness.axes import AXES
+from crane_stiffness.contract import stiffness6_layout
+from crane_stiffness.contract.axes import AXES
 from crane_stiffness.full6.reference import DISPLACEMENTS, k2_of, relative_error, structural_zeros
-from crane_stiffness.status import NAMES, read_level
+from crane_stiffness.contract.status import NAMES, read_level
 from crane_stiffness.view import jsonschema as js
 from crane_stiffness.view.errors import ViewError
 
@@ -38,7 +38,8 @@ def _k2_interval(values: Mapping[str, str]) -> tuple[float, float]:
 def stiffness6_message(stiffness: Sequence[float] | None, tangent: np.ndarray,
                        status: tuple[int, str, Mapping[str, str]] | None) -> dict[str, Any]:
     """The channel's message. ``stiffness``: the newest /stiffness6/stiffness data (None: no fit yet; laid out as
-    crane_stiffness.stiffness6_layout says, ViewError otherwise); ``tangent``: the model's K (6, 6); ``status``:
+    crane_stiffness.contract.stiffness6_layout says, ViewError otherwise); ``tangent``: the model's K (6, 6);
+    ``status``:
     (published level, message, key-values) of the newest /stiffness6/status (None: none yet). ``fit`` says whether a
     measured K is there; K2 measured is read from it (:func:`~crane_stiffness.full6.reference.k2_of`, what the
     estimator fits), its interval from the status."""

@@ -19,7 +19,7 @@ from typing import Callable
 
 import numpy as np
 
-from crane_stiffness import topics
+from crane_stiffness.contract import topics
 
 #: The repository (the work tree the tests run from).
 REPO = Path(__file__).resolve().parents[2]

@@ -12,7 +12,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
 from crane_stiffness.bag import BagReader, BagWriter, dump_qos_profiles, qos_profile
-from crane_stiffness.session_metadata import SESSION_METADATA, session_metadata
+from crane_stiffness.bag.session_metadata import SESSION_METADATA, session_metadata
 
 T0 = 1_700_000_000_000_000_000
 TOPICS = {

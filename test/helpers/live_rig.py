@@ -18,7 +18,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, Float64MultiArray
 
-from crane_stiffness import topics
+from crane_stiffness.contract import topics
 from crane_stiffness.estimation.live import PAIR_FIELDS, VALUE_FIELDS
 from crane_stiffness.rosnode.qos import KEPT_QOS, LATCHED_QOS, RELIABLE_QOS
 from crane_stiffness.launcher.ports import free_port

@@ -7,7 +7,7 @@ from typing import Any, Callable
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 
-from crane_stiffness import topics
+from crane_stiffness.contract import topics
 
 
 class ProbeNode:

@@ -1,5 +1,5 @@
 """Pairing by nearest stamps: :class:`ApproximateTimeSync` (streaming) and :func:`pair_by_stamp` (whole recorded
-streams, numpy), side by side; ``test/test_sync.py`` pins them together."""
+streams, numpy), side by side; ``test/estimation/test_sync.py`` pins them together."""
 from __future__ import annotations
 
 import math

@@ -1,0 +1,214 @@
+"""The live view's 6×6 stiffness with the live_view node in this process (real DDS on loopback): a test node
+publishes /stiffness6/stiffness, /stiffness6/compliance and /stiffness6/status as the six-axis estimator does
+(latched), and the wire states the scene needs. The node sends /live_view/stiffness6 only once those come, with the
+published numbers against the model's tangent for its geometry, and draws the compliance ellipsoid in the scene;
+the page (headless Chromium) shows the panel with the 36 published values."""
+from __future__ import annotations
+
+import contextlib
+import json
+import shutil
+import threading
+from typing import Any, Iterator
+
+import numpy as np
+import pytest
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+
+from crane_stiffness.contract import stiffness6_layout, topics
+from crane_stiffness.full6.reference import k2_of, reference_at_rest
+from crane_stiffness.model.geometry import WIRE_NAMES
+from crane_stiffness.nodes.live_view import LiveViewNode
+from crane_stiffness.rosnode.qos import LATCHED_QOS, RELIABLE_QOS
+from crane_stiffness.contract.status import WARN
+from crane_stiffness.view.scene import COMPLIANCE_FORCE_N
+from helpers import REPO
+from helpers.browser import Browser
+from helpers.foxglove_client import FoxgloveClient
+
+pytestmark = pytest.mark.ros
+
+SHOTS = REPO / 'out' / 'live_view'
+K6, SCENE = '/live_view/stiffness6', '/live_view/scene'
+
+
+class _Rig:
+    """The live_view node and a publisher node in one context, spun on a thread of their own."""
+
+    def __init__(self, ctx: Any) -> None:
+        self.view = LiveViewNode(context=ctx, parameter_overrides=[
+            Parameter('port', value=0), Parameter('http_port', value=0), Parameter('rate_hz', value=20.0)])
+        self.pub = Node('stiffness6_test_publisher', context=ctx)
+        self.k = self.pub.create_publisher(Float64MultiArray, topics.STIFFNESS6, LATCHED_QOS)
+        self.c = self.pub.create_publisher(Float64MultiArray, topics.COMPLIANCE6, LATCHED_QOS)
+        self.status = self.pub.create_publisher(DiagnosticArray, topics.STIFFNESS6_STATUS, LATCHED_QOS)
+        self.wires = self.pub.create_publisher(JointState, topics.WIRE_STATES, RELIABLE_QOS)
+        self.executor = SingleThreadedExecutor(context=ctx)
+        self.executor.add_node(self.view)
+        self.executor.add_node(self.pub)
+        self.stopping = False
+        self.thread = threading.Thread(target=self._spin, daemon=True)
+        self.thread.start()
+
+    def _spin(self) -> None:
+        while not self.stopping:
+            self.executor.spin_once(timeout_sec=0.05)
+
+    def publish_wires(self) -> None:
+        msg = JointState(name=list(WIRE_NAMES), position=[0.5] * 6, effort=[8.6, 8.7, 8.6, 8.7, 8.6, 8.7])
+        msg.header.stamp = self.pub.get_clock().now().to_msg()
+        self.wires.publish(msg)
+
+    def publish_fit(self, k: np.ndarray, k2_interval: tuple[float, float]) -> None:
+        c = np.linalg.inv(k)
+        self.k.publish(stiffness6_layout.to_message(k, k - 50.0, k + 75.0))
+        self.c.publish(stiffness6_layout.to_message(c, c * 0.99, c * 1.01))
+        status = DiagnosticStatus(name='stiffness6_estimator: 6x6', hardware_id='crane', level=bytes([WARN]),
+                                  message='condition 2.1e4 above 1e4')
+        status.values = [KeyValue(key='k2', value=f'{k2_of(k):.8g}'),
+                         KeyValue(key='k2_ci95', value=f'{k2_interval[0]!r} .. {k2_interval[1]!r}')]
+        self.status.publish(DiagnosticArray(status=[status]))
+
+    def close(self) -> None:
+        self.stopping = True
+        self.thread.join(10)
+        self.view.close()
+        self.executor.shutdown()
+        self.view.destroy_node()
+        self.pub.destroy_node()
+
+
+@contextlib.contextmanager
+def _rig(ctx: Any) -> Iterator[_Rig]:
+    rig = _Rig(ctx)
+    try:
+        yield rig
+    finally:
+        rig.close()
+
+
+def _measured(tangent: np.ndarray) -> np.ndarray:
+    """A measured K: the tangent within ±3 % entry by entry, plus a little noise on its zeros."""
+    rng = np.random.default_rng(66)
+    return tangent * (1.0 + rng.uniform(-0.03, 0.03, (6, 6))) + rng.normal(0.0, 2.0, (6, 6))
+
+
+def test_the_view_sends_the_6x6_only_once_published_and_draws_the_compliance_ellipsoid(rclpy_context):
+    with _rig(rclpy_context) as rig:
+        tangent = reference_at_rest(rig.view.geometry).tangent
+        assert rig.view.foxglove is not None
+        client = FoxgloveClient(rig.view.foxglove.port)
+        try:
+            assert client.channels[K6]['encoding'] == 'json'
+            assert client.channels[K6]['schemaName'] == 'crane_stiffness.Stiffness6'
+            client.subscribe(K6, SCENE)
+            rig.publish_wires()
+            # no six-axis estimator: scenes come (the second is the resend every second, which would carry the
+            # 6x6 channel too had anything come), the 6x6 channel does not, and no scene has an ellipsoid
+            assert client.poll_until(lambda: len(client.messages.get(SCENE, [])) >= 2)
+            assert K6 not in client.messages
+            for scene in client.json_messages(SCENE):
+                entity = scene['entities'][0]
+                assert len(entity['lines']) == 7
+                assert 'compliance_scale' not in {kv['key'] for kv in entity['metadata']}
+
+            k = _measured(tangent)
+            rig.publish_fit(k, (17_500.25, 18_250.5))
+            assert client.poll_until(lambda: any(m['fit'] and m['level_name'] == 'WARN'
+                                                 for m in client.json_messages(K6)))
+            msg = [m for m in client.json_messages(K6) if m['fit'] and m['level_name'] == 'WARN'][-1]
+            shown = np.array([[c['measured'] for c in r['cells']] for r in msg['rows']])
+            low = np.array([[c['ci95_low'] for c in r['cells']] for r in msg['rows']])
+            high = np.array([[c['ci95_high'] for c in r['cells']] for r in msg['rows']])
+            model = np.array([[c['tangent'] for c in r['cells']] for r in msg['rows']])
+            assert np.array_equal(shown, k) and np.array_equal(low, k - 50.0) and np.array_equal(high, k + 75.0)
+            assert np.array_equal(model, tangent)  # the model's tangent for the view's geometry
+            for i, row in enumerate(msg['rows']):
+                for j, cell in enumerate(row['cells']):
+                    if not cell['model_zero']:
+                        assert cell['relative_error'] == pytest.approx(k[i, j] / tangent[i, j] - 1.0, rel=1e-12)
+            assert sum(not c['model_zero'] for r in msg['rows'] for c in r['cells']) == 10  # diagonal + K2's four
+            assert msg['k2']['measured'] == pytest.approx(k2_of(k), rel=1e-12)
+            assert (msg['k2']['ci95_low'], msg['k2']['ci95_high']) == (17_500.25, 18_250.5)
+            assert msg['k2']['tangent'] == pytest.approx(k2_of(tangent), rel=1e-12)
+            assert msg['message'] == 'condition 2.1e4 above 1e4' and msg['level'] == WARN
+
+            # the scene: the ellipsoid of the published compliance's translational block, at the stated scale
+            def ellipsoid() -> dict | None:
+                for payload in reversed(client.messages.get(SCENE, [])):
+                    entity = json.loads(payload)['entities'][0]
+                    if len(entity['lines']) > 7:
+                        return entity
+                return None
+            rig.publish_wires()
+            assert client.poll_until(lambda: ellipsoid() is not None)
+            entity = ellipsoid()
+            assert entity is not None
+            meta = {kv['key']: kv['value'] for kv in entity['metadata']}
+            scale = float(meta['compliance_scale'])
+            assert scale == COMPLIANCE_FORCE_N * 200.0
+            block = np.linalg.inv(k)[:3, :3]
+            principal = np.linalg.eigvalsh(0.5 * (block + block.T))
+            loops = entity['lines'][7:]
+            assert len(loops) == 3
+            centre = np.array([0.0, 0.0, 0.0])  # no pose published: the platform at rest
+            reach = sorted(np.linalg.norm(np.array([[p['x'], p['y'], p['z']] for p in loop['points']]) - centre,
+                                          axis=1).max() for loop in loops)
+            # each loop spans two principal axes: its farthest point is the larger of their radii
+            assert reach == pytest.approx(np.array([principal[1], principal[2], principal[2]]) * scale, rel=1e-6)
+        finally:
+            client.close()
+
+
+
+
+def test_the_page_shows_the_6x6_panel_with_the_published_values(rclpy_context, tmp_path, chromium_path):
+    with _rig(rclpy_context) as rig:
+        tangent = reference_at_rest(rig.view.geometry).tangent
+        assert rig.view.page is not None
+        browser = Browser(chromium_path, tmp_path / 'chromium.log')
+        try:
+            browser.open(f'http://127.0.0.1:{rig.view.page.port}/')
+            browser.wait_for("document.getElementById('connection')?.textContent === 'connected'")
+            rig.publish_wires()
+            browser.wait_for("document.getElementById('scene').dataset.drawn === 'crane'")
+            # no 6x6 yet: the panel hidden, no ellipsoid
+            assert browser.evaluate("document.getElementById('stiffness6-panel').hidden") is True
+            assert browser.evaluate("document.getElementById('scene').dataset.ellipsoid") == ''
+            k = _measured(tangent)
+            rig.publish_fit(k, (17_500.25, 18_250.5))
+            browser.wait_for("!document.getElementById('stiffness6-panel').hidden && "
+                             "document.querySelectorAll('#stiffness6 td.k6').length === 36 && "
+                             "document.getElementById('stiffness6-level').dataset.level === '1' && "
+                             "document.querySelector('#stiffness6 td.k6').dataset.value !== ''")
+            cells = browser.evaluate("[...document.querySelectorAll('#stiffness6 td.k6')].map((td) => "
+                                     "[td.dataset.value, td.textContent, td.dataset.relative, td.className, "
+                                     "td.style.background])")
+            heads = browser.evaluate("[...document.querySelectorAll('#stiffness6 th')].map((th) => th.textContent)")
+            title = browser.evaluate("[document.getElementById('stiffness6-level').textContent, "
+                                     "document.getElementById('stiffness6-k2').textContent]")
+            rig.publish_wires()
+            browser.wait_for("document.getElementById('scene').dataset.ellipsoid === 'drawn'")
+            png = browser.screenshot(tmp_path / 'stiffness6.png', full_page=True)
+        finally:
+            browser.close()
+    assert heads == ['', 'u_x', 'u_y', 'u_z', 'θ_x', 'θ_y', 'θ_z', 'fx', 'fy', 'fz', 'mx', 'my', 'mz']
+    assert len(cells) == 36
+    for n, (value, text, relative, cls, background) in enumerate(cells):
+        i, j = divmod(n, 6)
+        assert float(value) == k[i, j]  # the published number, row-major fx..mz × u_x..θ_z
+        assert float(text) == pytest.approx(k[i, j], rel=5e-4)  # shown with 4 significant digits
+        if cls == 'k6 model-zero':
+            assert relative == '' and background == ''
+        else:
+            assert float(relative) == pytest.approx(k[i, j] / tangent[i, j] - 1.0, rel=1e-12)
+            assert background.startswith('rgb(')
+    assert sum(c[3] == 'k6' for c in cells) == 10
+    assert title[0] == 'WARN' and title[1].startswith('K2 = ') and 'tangent' in title[1]
+    SHOTS.mkdir(parents=True, exist_ok=True)
+    shutil.copy(png, SHOTS / 'stiffness6.png')
