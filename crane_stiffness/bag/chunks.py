@@ -18,8 +18,9 @@ from typing import Any
 import numpy as np
 from mcap.exceptions import McapError
 from mcap.opcode import Opcode
-from mcap.records import Chunk, Message
-from mcap.stream_reader import StreamReader, breakup_chunk
+from mcap.data_stream import ReadDataStream
+from mcap.records import Channel, Chunk, Message, Schema
+from mcap.stream_reader import StreamReader
 
 from crane_stiffness.serde.bulk import gather
 
@@ -29,7 +30,8 @@ COMPRESSIONS = ('', 'zstd', 'lz4')
 """Chunk compressions that can be read."""
 MESSAGE_HEADER_SIZE = 31
 """Bytes of an MCAP Message record before its data: opcode, length, channel, sequence, log and publish time."""
-LOOSE_END = 2**64 - 1
+_RECORD_HEAD = struct.Struct('<BQ')
+_READERS: dict[int, Any] = {Opcode.SCHEMA: Schema.read, Opcode.CHANNEL: Channel.read, Opcode.MESSAGE: Message.read}
 
 _MESSAGE_HEADER = np.dtype({
     'names': ['op', 'length', 'channel', 'sequence', 'log_time', 'publish_time'],
@@ -99,9 +101,25 @@ def decompress(compression: str, data: bytes, size: int, zstd: Any = None) -> by
 
 
 def records_in(data: bytes) -> list[Any]:
-    """The Schema, Channel and Message records of uncompressed chunk records (the library's ``breakup_chunk``)."""
-    return breakup_chunk(Chunk(compression='', data=data, message_end_time=0, message_start_time=0,
-                               uncompressed_crc=0, uncompressed_size=len(data)))
+    """The Schema, Channel and Message records of uncompressed chunk records (or of a run of records outside
+    chunks), each read by the library from its own body: as the MCAP specification requires, bytes after a record's
+    known fields (padding, fields of a later version) are skipped by its length, and records of other or unknown
+    opcodes are skipped whole. Raises one of :data:`READ_ERRORS` on a record cut short."""
+    out: list[Any] = []
+    view = memoryview(data)
+    pos, size = 0, len(data)
+    while pos < size:
+        if pos + 9 > size:
+            raise ValueError(f'record header cut short at byte {pos} of {size}')
+        opcode, length = _RECORD_HEAD.unpack_from(data, pos)
+        end = pos + 9 + length
+        if end > size:
+            raise ValueError(f'record (opcode {opcode:#04x}) at byte {pos} runs past the end ({end} > {size})')
+        if opcode in _READERS:
+            stream = ReadDataStream(BytesIO(view[pos + 9:end]))
+            out.append(Message.read(stream, length) if opcode == Opcode.MESSAGE else _READERS[opcode](stream))
+        pos = end
+    return out
 
 
 def index_offsets(region: bytes, region_offset: int, index: Mapping[int, int]

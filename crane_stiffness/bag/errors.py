@@ -22,6 +22,11 @@ class BagCorruptError(BagFormatError):
     """A part of a file is damaged (bad checksum, impossible record); raised instead of warning when strict."""
 
 
+class BagUnsupportedError(BagFormatError):
+    """A file is valid but uses something this reader cannot interpret (a chunk compression, a message or schema
+    encoding); the message names the file and the value."""
+
+
 class BagNotFoundError(BagError, FileNotFoundError):
     """The bag directory, metadata.yaml or .mcap file does not exist."""
 

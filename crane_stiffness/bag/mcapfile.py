@@ -14,7 +14,7 @@ import os
 import threading
 import warnings
 import zlib
-from collections.abc import Collection, Iterator
+from collections.abc import Collection, Iterator, Mapping
 from io import BytesIO
 from pathlib import Path
 from typing import Any
@@ -27,10 +27,10 @@ from mcap.records import Channel, Chunk, DataEnd, Footer, Header, Message, Messa
 from mcap.stream_reader import MAGIC_SIZE, StreamReader, read_magic
 
 from .chunks import (
-    COMPRESSIONS, LOOSE_END, READ_ERRORS, ChunkMessages, ChunkRef, decompress, gather_messages, in_file_order,
+    COMPRESSIONS, READ_ERRORS, ChunkMessages, ChunkRef, decompress, gather_messages, in_file_order,
     index_offsets, messages_from_records, partial_chunk_messages, records_in,
 )
-from .errors import BagCorruptError, BagDamageWarning, BagFormatError, BagNotFoundError
+from .errors import BagCorruptError, BagDamageWarning, BagFormatError, BagNotFoundError, BagUnsupportedError
 
 _OPCODES = frozenset(int(op) for op in Opcode)
 
@@ -46,8 +46,11 @@ class McapFile:
         verify_crc: check each chunk's CRC32 when it has one.
     """
 
-    def __init__(self, path: str | Path, *, strict: bool = False, verify_crc: bool = True) -> None:
-        self.path = Path(path)
+    def __init__(self, path: str | Path, *, strict: bool = False, verify_crc: bool = True,
+                 name: str | Path | None = None) -> None:
+        self.path = Path(name) if name is not None else Path(path)
+        """The file as named in messages (``name``: the compressed file a decompressed copy ``path`` came from)."""
+        self._disk = Path(path)
         self.strict = strict
         self.verify_crc = verify_crc
         self.problems: list[str] = []
@@ -66,13 +69,15 @@ class McapFile:
         """Offset of a chunk record cut short by the end of the file (its start is on disk)."""
         self.start_ns: int | None = None
         self.end_ns: int | None = None
+        self.statistics = False
+        """True when the counts and times come from the summary's Statistics record."""
         self._zstd = threading.local()  # a ZstdDecompressor per thread: one instance is not thread safe
         try:
-            self._file: Any = open(self.path, 'rb')
+            self._file: Any = open(self._disk, 'rb')
         except FileNotFoundError:
             raise BagNotFoundError(f'MCAP file {self.path} does not exist') from None
         try:
-            self.size = self.path.stat().st_size
+            self.size = self._disk.stat().st_size
             try:
                 reader = SeekingReader(self._file)
             except READ_ERRORS:
@@ -84,6 +89,12 @@ class McapFile:
                 pass  # reported by the scan if the file is damaged there
             if not self._read_summary():
                 self._scan()
+            self._check_structure()
+            self._discover_channels()
+            self._check_channels()
+            if not self.statistics:
+                self._count_from_indexes()
+                self._times_from_chunks()
         except BaseException:
             self.close()
             raise
@@ -149,10 +160,10 @@ class McapFile:
         except READ_ERRORS as exc:
             self._problem(f'unreadable summary ({exc}); scanning the file instead')
             return False
-        stats = summary.statistics if summary is not None else None
-        if summary is None or (not summary.chunk_indexes and (stats is None or stats.message_count > 0)):
-            return False  # un-chunked file, or a summary without chunk indexes: scan
+        if summary is None:
+            return False
         self.schemas, self.channels = dict(summary.schemas), dict(summary.channels)
+        indexed: dict[int, int] = {}  # offset of each indexed chunk -> end of its message indexes
         for entry in sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset):
             offset, length = entry.chunk_start_offset, entry.chunk_length
             try:
@@ -160,26 +171,22 @@ class McapFile:
             except (StopIteration, *READ_ERRORS) as exc:
                 self._problem(f'chunk at offset {offset} is unreadable ({exc}); its messages are skipped')
                 continue
+            indexed[offset] = offset + length + entry.message_index_length
             self.chunks.append(ChunkRef(
                 offset, offset + length - entry.compressed_size, entry.compressed_size, head.uncompressed_size,
                 head.compression, head.message_start_time, head.message_end_time, length=length,
                 index_length=entry.message_index_length,
                 index=dict(entry.message_index_offsets) if entry.message_index_length else None))
-        for meta_entry in summary.metadata_indexes:
-            try:
-                record = next(self._records_from(meta_entry.offset))
-                if not isinstance(record, Metadata):
-                    raise ValueError('no metadata record at the indexed offset')
-                self.metadata.append((record.name, dict(record.metadata)))
-            except (StopIteration, *READ_ERRORS) as exc:
-                self._problem(f'metadata record at offset {meta_entry.offset} is unreadable ({exc})')
+        # Everything of the data section the chunk indexes do not cover (schemas, channels and messages outside
+        # chunks, metadata records, chunks left out of the index) is read record by record.
+        self._scan(stop=footer.summary_start, skip=indexed)
+        self.chunks.sort(key=lambda c: c.offset)
+        stats = summary.statistics
         if stats is not None:
             self.channel_counts = dict(stats.channel_message_counts)
             if stats.message_count:
                 self.start_ns, self.end_ns = stats.message_start_time, stats.message_end_time
-        else:
-            self._count_from_indexes()
-            self._times_from_chunks()
+        self.statistics = stats is not None
         self.complete = True
         self.readable_end = self.size
         return True
@@ -204,8 +211,11 @@ class McapFile:
         stream = ReadDataStream(BytesIO(head))
         return stream.read1(), stream.read8()
 
-    def _scan(self) -> None:
-        """Read every record on disk in order (the library's StreamReader), up to where the file was cut."""
+    def _scan(self, stop: int | None = None, skip: Mapping[int, int] | None = None) -> None:
+        """Read the records on disk in order (the library's StreamReader) from the header on: up to ``stop`` (the
+        start of a finished file's summary; None: up to the footer, or where the file was cut), jumping over
+        ``skip`` (offset of a chunk the summary indexes → end of its message indexes)."""
+        skip = skip or {}
         pos = MAGIC_SIZE
         records = self._records_from(0, skip_magic=False)
         loose: list[int] = []  # [start, end, first log time, last log time] of the current run of loose messages
@@ -213,7 +223,15 @@ class McapFile:
         last_chunk: ChunkRef | None = None
         stopped = ''
         in_summary = False
-        while True:
+        while stop is None or pos < stop:
+            if pos in skip:
+                if loose:
+                    self._add_loose(loose, loose_counts)
+                    loose, loose_counts = [], {}
+                last_chunk = None
+                pos = skip[pos]
+                records = self._records_from(pos)
+                continue
             try:
                 record = next(records)
             except StopIteration:
@@ -281,28 +299,56 @@ class McapFile:
             pos = end
         if loose:
             self._add_loose(loose, loose_counts)
-        self.readable_end = pos
         if stopped == 'corrupt':
             opcode = self._read_at(pos, 1)[0]
-            self._problem(f'unreadable bytes at offset {pos} (opcode {opcode:#04x}); the {self.size - pos} bytes '
-                          f'from there on are ignored')
+            self._problem(f'unreadable bytes at offset {pos} (opcode {opcode:#04x}); the '
+                          f'{(stop or self.size) - pos} bytes from there on are ignored')
+        elif stop is not None:
+            if stopped:
+                self._problem(f'data section cut short at offset {pos}, before the summary at offset {stop}')
+            return
         elif stopped == 'cut' or not self.complete:
             self._problem(
                 f'file is truncated or unfinished (no footer): read {len(self.chunks)} complete chunk(s), '
                 f'ignored the last {self.size - pos} byte(s) from offset {pos}'
                 '; `python -m crane_stiffness.bag.recover` rewrites it as a valid file', corrupt=False)
-        self._discover_channels()
-        self._times_from_chunks()
+        self.readable_end = pos
 
     def _add_loose(self, run: list[int], counts: dict[int, int]) -> None:
         start, end, first, last = run
         self.chunks.append(ChunkRef(start, start, end - start, end - start, '', first, last, counts=dict(counts),
                                     loose=True))
 
-    def _discover_channels(self) -> None:
-        """Find schemas/channels inside chunks (where writers put them) and count messages of un-indexed chunks."""
+    def _check_structure(self) -> None:
+        """Refuse what cannot be read exactly: a chunk compression this reader does not know, messages on a channel
+        no Channel record defines, a channel whose schema no Schema record defines."""
         for chunk in self.chunks:
-            if chunk.loose or (chunk.index is not None and set(chunk.index) <= set(self.channels)):
+            if not chunk.loose and chunk.compression not in COMPRESSIONS:
+                raise BagUnsupportedError(
+                    f'{self.path}: chunk at offset {chunk.offset} uses compression {chunk.compression!r}, which this '
+                    f'reader cannot decompress (it reads {", ".join(repr(c) for c in COMPRESSIONS)})')
+
+    def _check_channels(self) -> None:
+        for cid, channel in self.channels.items():
+            if channel.schema_id and channel.schema_id not in self.schemas:
+                raise BagFormatError(f'{self.path}: channel {cid} ({channel.topic}) names schema '
+                                     f'{channel.schema_id}, which no Schema record defines')
+        for chunk in self.chunks:
+            used = [cid for cid, n in chunk.counts.items() if n] + list(chunk.index or ())
+            unknown = sorted(set(used) - set(self.channels))
+            if unknown:
+                where = 'outside chunks' if chunk.loose else 'in the chunk'
+                raise BagFormatError(
+                    f'{self.path}: messages on channel id(s) {unknown} {where} at offset {chunk.offset}, but no '
+                    'Channel record defines them; the messages cannot be attributed to a topic')
+
+    def _discover_channels(self) -> None:
+        """Learn schemas/channels inside chunks (where writers may put them only) and count the messages of chunks
+        without a message index: each chunk whose messages are not all on known channels is read."""
+        for chunk in self.chunks:
+            if chunk.loose or (chunk.index is not None and set(chunk.index) <= set(self.channels)
+                               and all(self.channels[cid].schema_id in self.schemas
+                                       for cid in chunk.index if self.channels[cid].schema_id)):
                 continue
             data = self.chunk_data(chunk)
             if data is None:
@@ -322,7 +368,6 @@ class McapFile:
                 for record in records:
                     if isinstance(record, Message):
                         chunk.counts[record.channel_id] = chunk.counts.get(record.channel_id, 0) + 1
-        self._count_from_indexes()
 
     def _count_from_indexes(self) -> None:
         counts: dict[int, int] = {}
@@ -334,16 +379,16 @@ class McapFile:
         self.channel_counts = counts
 
     def _times_from_chunks(self) -> None:
-        real = [c for c in self.chunks if c.counts or c.index is None]
-        real = [c for c in real if not (c.loose and c.end_ns == LOOSE_END)]
+        real = [c for c in self.chunks if any(c.counts.values())]
         if real:
             self.start_ns = min(c.start_ns for c in real)
             self.end_ns = max(c.end_ns for c in real)
 
     # -- chunk contents --
-    def chunk_data(self, chunk: ChunkRef) -> np.ndarray | None:
+    def chunk_data(self, chunk: ChunkRef, channels: Collection[int] | None = None) -> np.ndarray | None:
         """The chunk's uncompressed records as a uint8 array, or None (with a warning) when damaged. Safe to call
-        from several threads at once (reads with pread, a decompressor per thread)."""
+        from several threads at once (reads with pread, a decompressor per thread). ``channels`` is not used (the
+        same interface as :class:`~.sqlitefile.Sqlite3File`)."""
         if chunk.loose:
             return np.frombuffer(self._read_at(chunk.records_offset, chunk.compressed_size), dtype=np.uint8)
         try:
@@ -355,9 +400,8 @@ class McapFile:
             self._problem(f'chunk at offset {chunk.offset} is unreadable ({exc}); its messages are skipped')
             return None
         if record.compression not in COMPRESSIONS:
-            self._problem(f'chunk at offset {chunk.offset} uses unsupported compression {record.compression!r}; '
-                          'skipped')
-            return None
+            raise BagUnsupportedError(f'{self.path}: chunk at offset {chunk.offset} uses compression '
+                                      f'{record.compression!r}, which this reader cannot decompress')
         try:
             zstd = getattr(self._zstd, 'decompressor', None)
             if record.compression == 'zstd' and zstd is None:

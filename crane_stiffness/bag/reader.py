@@ -1,9 +1,11 @@
-"""Reading rosbag2 MCAP bags without ROS, with a fast bulk decoder for the rig's fixed-layout message types.
+"""Reading rosbag2 bags without ROS, with a fast bulk decoder for the rig's fixed-layout message types.
 
-:class:`BagReader` opens a bag directory (through its metadata.yaml, or by scanning ``*.mcap`` when metadata.yaml is
-missing, as after a crash) or a single .mcap file. Each file is a :class:`~.mcapfile.McapFile` (its records read by
-the ``mcap`` package): the summary when the file was finished, otherwise the records that are on disk, so a file cut
-short by SIGKILL gives every complete chunk. Only files inside the bag directory are read: a metadata.yaml entry with
+:class:`BagReader` opens a bag directory (through its metadata.yaml, or by scanning its ``*.mcap``/``*.db3`` files,
+also ``*.zstd``, when metadata.yaml is missing, as after a crash) or a single file. Each file is opened by its
+storage (``storage.py``): an MCAP file is a :class:`~.mcapfile.McapFile` (any layout the MCAP specification allows;
+a file cut short by SIGKILL gives every complete chunk), a rosbag2 sqlite3 file a :class:`~.sqlitefile.Sqlite3File`;
+rosbag2's zstd compression (``compression_mode: file`` or ``message``) is undone on the way. What cannot be read
+exactly raises a :class:`~.errors.BagError` naming the file and the reason; no message is skipped silently. Only files inside the bag directory are read: a metadata.yaml entry with
 ``..``, an absolute path or a symlink leading out raises :class:`~.errors.BagPathError` (``metadata.file_in_bag``).
 Damage is reported with :class:`~.errors.BagDamageWarning` (or raised when ``strict=True``) and the readable part is
 used.
@@ -23,9 +25,10 @@ import itertools
 from collections import deque
 from concurrent.futures import ThreadPoolExecutor
 import re
+import threading
 import warnings
 from collections.abc import Iterable, Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from types import TracebackType
 from typing import Any, NamedTuple
@@ -34,11 +37,21 @@ import numpy as np
 
 from crane_stiffness.serde.bulk import SUPPORTED_TYPES, Decoder, new_decoder
 
-from .errors import BagCorruptError, BagDamageWarning, BagNotFoundError, TopicNotFoundError, UnsupportedTypeError
-from .chunks import ChunkRef
-from .mcapfile import McapFile
+from .chunks import ChunkMessages, ChunkRef, in_file_order
+from .errors import (
+    BagCorruptError, BagDamageWarning, BagNotFoundError, BagUnsupportedError, TopicNotFoundError,
+    UnsupportedTypeError,
+)
 from .metadata import METADATA_FILENAME, ROSBAG2_METADATA, file_in_bag, read_metadata_yaml
+from .storage import BagFile, TemporaryCopy, check_compression, decompress_messages, open_bag_file
 
+
+#: The message encoding the readers hand out (RawMessage.data) and decode, and the schema encodings whose type
+#: names the bulk decoders know.
+MESSAGE_ENCODING = 'cdr'
+SCHEMA_ENCODINGS = ('ros2msg', 'ros2idl')
+#: File names a bag directory without metadata.yaml is read from (rosbag2's storages, compressed or not).
+BAG_FILE_PATTERNS = ('*.mcap', '*.db3', '*.mcap.zstd', '*.db3.zstd')
 
 #: Chunks read and decompressed ahead of the bulk decoder, and the threads doing it (BagReader._read_ahead).
 READ_AHEAD_CHUNKS = 4
@@ -63,11 +76,15 @@ class TopicInfo:
     offered_qos_profiles: str = ''
     type_description_hash: str = ''
     message_definition: str = ''
+    message_encoding: str = MESSAGE_ENCODING
+    """How the messages are serialized (``cdr`` for ROS 2)."""
+    schema_encoding: str = 'ros2msg'
+    """What the type's definition is written in (``ros2msg``; empty when the bag has no schema)."""
 
 
 # -------------------------------------------------------------------------------------------------- bag reader --
 def _file_order(path: Path) -> tuple[str, int]:
-    match = re.match(r'^(.*?)(?:_(\d+))?\.mcap$', path.name)
+    match = re.match(r'^(.*?)(?:_(\d+))?\.(?:mcap|db3)(?:\.zstd)?$', path.name)
     assert match
     return match.group(1), int(match.group(2) or 0)
 
@@ -76,7 +93,7 @@ class BagReader:
     """Read a rosbag2 bag directory, or one .mcap file. Use as a context manager.
 
     Args:
-        path: bag directory (with or without metadata.yaml) or a .mcap file.
+        path: bag directory (with or without metadata.yaml) or one file (.mcap, .db3, or either zstd-compressed).
         strict: raise :class:`~.errors.BagCorruptError` on damaged data instead of warning and skipping it.
         verify_crc: check chunk CRCs (cheap; catches corrupted bytes).
     """
@@ -86,13 +103,24 @@ class BagReader:
         self.bag_metadata: dict[str, Any] | None = None
         """The ``rosbag2_bagfile_information`` of metadata.yaml, when present and readable."""
         self._problems: list[str] = []
-        self._files: list[McapFile] = []
+        self._files: list[BagFile] = []
+        self._copies: list[TemporaryCopy] = []
+        self.compression_mode = ''
+        """rosbag2's compression of the bag: '' (none), 'file' or 'message' (zstd), from metadata.yaml."""
+        self._zstd = threading.local()
         if not self.path.exists():
             raise BagNotFoundError(f'bag {self.path} does not exist')
         paths = self._resolve_files(strict)
         try:
+            if self.bag_metadata is not None:
+                self.compression_mode = check_compression(
+                    self.path, str(self.bag_metadata.get('compression_format') or ''),
+                    str(self.bag_metadata.get('compression_mode') or ''))
             for file_path in paths:
-                self._files.append(McapFile(file_path, strict=strict, verify_crc=verify_crc))
+                opened, copy = open_bag_file(file_path, strict=strict, verify_crc=verify_crc)
+                self._files.append(opened)
+                if copy is not None:
+                    self._copies.append(copy)
         except BaseException:
             self.close()
             raise
@@ -125,17 +153,20 @@ class BagReader:
                 present = [p for p in found if p.is_file()]
                 if present:
                     return present
-        files = [file_in_bag(self.path, p.name, f'{self.path}') for p in sorted(self.path.glob('*.mcap'),
-                                                                                 key=_file_order)]
+        found = {p for pattern in BAG_FILE_PATTERNS for p in self.path.glob(pattern)}
+        files = [file_in_bag(self.path, p.name, f'{self.path}') for p in sorted(found, key=_file_order)]
         if not files:
-            raise BagNotFoundError(f'{self.path} holds no metadata.yaml and no .mcap file')
+            raise BagNotFoundError(f'{self.path} holds no metadata.yaml and no bag file '
+                                   f'({", ".join(BAG_FILE_PATTERNS)})')
         return files
 
     # -- lifetime --
     def close(self) -> None:
-        """Close the files."""
-        for mcap_file in getattr(self, '_files', []):
-            mcap_file.close()
+        """Close the files (and delete the decompressed copies of file-compressed ones)."""
+        for bag_file in getattr(self, '_files', []):
+            bag_file.close()
+        for copy in getattr(self, '_copies', []):
+            copy.remove()
 
     def __enter__(self) -> BagReader:
         return self
@@ -147,7 +178,7 @@ class BagReader:
     # -- overview --
     @property
     def files(self) -> list[Path]:
-        """The .mcap files read, in order."""
+        """The files read, in order (as the bag names them: a compressed file, not its decompressed copy)."""
         return [f.path for f in self._files]
 
     @property
@@ -159,21 +190,20 @@ class BagReader:
     def topics(self) -> dict[str, TopicInfo]:
         """Topic name → :class:`TopicInfo` (type, message count, QoS, type hash, definition), all files."""
         out: dict[str, TopicInfo] = {}
-        for mcap_file in self._files:
-            for cid, channel in mcap_file.channels.items():
-                schema = mcap_file.schemas.get(channel.schema_id)
-                count = mcap_file.channel_counts.get(cid, 0)
+        for bag_file in self._files:
+            for cid, channel in bag_file.channels.items():
+                schema = bag_file.schemas.get(channel.schema_id)
+                count = bag_file.channel_counts.get(cid, 0)
                 previous = out.get(channel.topic)
                 if previous is not None:
-                    out[channel.topic] = TopicInfo(previous.name, previous.msg_type, previous.count + count,
-                                                   previous.offered_qos_profiles, previous.type_description_hash,
-                                                   previous.message_definition)
+                    out[channel.topic] = replace(previous, count=previous.count + count)
                     continue
                 out[channel.topic] = TopicInfo(
                     name=channel.topic, msg_type=schema.name if schema else '', count=count,
                     offered_qos_profiles=channel.metadata.get('offered_qos_profiles', ''),
                     type_description_hash=channel.metadata.get('topic_type_hash', ''),
-                    message_definition=schema.data.decode('utf-8', 'replace') if schema else '')
+                    message_definition=schema.data.decode('utf-8', 'replace') if schema else '',
+                    message_encoding=channel.message_encoding, schema_encoding=schema.encoding if schema else '')
         return out
 
     @property
@@ -212,43 +242,76 @@ class BagReader:
 
     # -- topics --
     def _channels_for(self, topics: Iterable[str]) -> list[dict[int, str]]:
+        """Per file, channel id → topic of the channels of ``topics``; every channel must hold CDR messages."""
         wanted = list(topics)
         known = self.topics
         for topic in wanted:
             if topic not in known:
                 present = ', '.join(f'{t} [{i.msg_type}]' for t, i in sorted(known.items())) or 'none'
                 raise TopicNotFoundError(f'topic {topic!r} is not in bag {self.path}; topics present: {present}')
-        return [{cid: ch.topic for cid, ch in f.channels.items() if ch.topic in wanted} for f in self._files]
+        per_file = []
+        for bag_file in self._files:
+            channels = {}
+            for cid, channel in bag_file.channels.items():
+                if channel.topic not in wanted:
+                    continue
+                if channel.message_encoding != MESSAGE_ENCODING:
+                    raise BagUnsupportedError(
+                        f'{bag_file.path}: topic {channel.topic} (channel {cid}) holds messages encoded as '
+                        f'{channel.message_encoding!r}; this reader reads ROS 2 messages ({MESSAGE_ENCODING!r})')
+                channels[cid] = channel.topic
+            per_file.append(channels)
+        return per_file
+
+    def _gather(self, bag_file: BagFile, chunk: ChunkRef, data: Any, channels: dict[int, str]
+                ) -> dict[int, ChunkMessages]:
+        """Per channel, the chunk's messages, their data decompressed in a message-compressed bag."""
+        found = bag_file.chunk_messages(chunk, data, channels)
+        if self.compression_mode != 'message':
+            return found
+        zstd = getattr(self._zstd, 'decompressor', None)
+        if zstd is None:
+            import zstandard
+            zstd = self._zstd.decompressor = zstandard.ZstdDecompressor()
+        try:
+            return {cid: decompress_messages(messages, zstd) for cid, messages in found.items()}
+        except BagUnsupportedError:
+            raise
+        except Exception as exc:
+            raise BagCorruptError(f'{bag_file.path}: a message of the chunk at {chunk.offset} of this '
+                                  f'message-compressed bag does not decompress: {exc}') from None
 
     def _chunks(self, per_file: list[dict[int, str]], start_ns: int | None, end_ns: int | None
-                ) -> Iterator[tuple[McapFile, ChunkRef, dict[int, str]]]:
-        for mcap_file, channels in zip(self._files, per_file):
+                ) -> Iterator[tuple[BagFile, ChunkRef, dict[int, str]]]:
+        for bag_file, channels in zip(self._files, per_file):
             if not channels:
                 continue
-            for chunk in mcap_file.chunks:
+            for chunk in bag_file.chunks:
                 if chunk.index is not None and not set(chunk.index) & set(channels):
                     continue
                 if not chunk.loose and ((start_ns is not None and chunk.end_ns < start_ns)
                                         or (end_ns is not None and chunk.start_ns >= end_ns)):
                     continue
-                yield mcap_file, chunk, channels
+                yield bag_file, chunk, channels
 
     # -- raw messages --
     def messages(self, topics: Iterable[str] | None = None, *, start_ns: int | None = None,
                  end_ns: int | None = None) -> Iterator[RawMessage]:
-        """Serialized messages in log-time order, optionally only some topics and ``start_ns <= t < end_ns``."""
+        """Serialized messages in log-time order (equal log times in file order), optionally only some topics and
+        ``start_ns <= t < end_ns``. The chunks are read in the order of their first log time, whatever their order
+        in the files, and merged."""
         per_file = self._channels_for(self.topics if topics is None else topics)
         heap: list[tuple[int, int, str, bytes]] = []
         order = itertools.count()
-        for mcap_file, chunk, channels in self._chunks(per_file, start_ns, end_ns):
-            if not chunk.loose:
-                while heap and heap[0][0] < chunk.start_ns:
-                    log, _, topic, data = heapq.heappop(heap)
-                    yield RawMessage(topic, log, data)
-            data_array = mcap_file.chunk_data(chunk)
+        refs = sorted(self._chunks(per_file, start_ns, end_ns), key=lambda ref: ref[1].start_ns)
+        for bag_file, chunk, channels in refs:
+            while heap and heap[0][0] < chunk.start_ns:
+                log, _, topic, data = heapq.heappop(heap)
+                yield RawMessage(topic, log, data)
+            data_array = bag_file.chunk_data(chunk, channels)
             if data_array is None:
                 continue
-            for cid, _, log, _, payload in mcap_file.iter_chunk_messages(chunk, data_array, channels):
+            for cid, _, log, _, payload in in_file_order(self._gather(bag_file, chunk, data_array, channels)):
                 if (start_ns is None or log >= start_ns) and (end_ns is None or log < end_ns):
                     heapq.heappush(heap, (log, next(order), channels[cid], payload))
         while heap:
@@ -281,24 +344,28 @@ class BagReader:
         decoders: dict[str, Decoder] = {}
         for topic in topics:
             msg_type = known[topic].msg_type
+            if known[topic].schema_encoding not in SCHEMA_ENCODINGS:
+                raise BagUnsupportedError(
+                    f'{self.path}: topic {topic} has schema encoding {known[topic].schema_encoding!r} (type '
+                    f'{msg_type!r}); the bulk decoder reads ROS 2 types ({", ".join(SCHEMA_ENCODINGS)})')
             decoder = new_decoder(msg_type)
             if decoder is None:
                 raise UnsupportedTypeError(f'topic {topic} has type {msg_type}, which the bulk decoder does not '
                                            f'handle (supported: {", ".join(SUPPORTED_TYPES)}); use messages()')
             decoders[topic] = decoder
         parts: dict[str, list[dict[str, np.ndarray]]] = {t: [] for t in topics}
-        for mcap_file, chunk, channels, data in self._read_ahead(self._chunks(per_file, start_ns, end_ns)):
+        for bag_file, chunk, channels, data in self._read_ahead(self._chunks(per_file, start_ns, end_ns)):
             if data is None:
                 continue
-            for cid, found in mcap_file.chunk_messages(chunk, data, channels).items():
+            for cid, found in self._gather(bag_file, chunk, data, channels).items():
                 if not len(found):
                     continue
                 topic = channels[cid]
                 cols, valid = decoders[topic].decode(found.buf, found.data_offset, found.data_length)
                 if not valid.all():
-                    text = (f'{mcap_file.path}: {int((~valid).sum())} message(s) of {topic} in chunk at offset '
+                    text = (f'{bag_file.path}: {int((~valid).sum())} message(s) of {topic} in chunk at offset '
                             f'{chunk.offset} do not have the {decoders[topic].msg_type} layout; skipped')
-                    if mcap_file.strict:
+                    if bag_file.strict:
                         raise BagCorruptError(text)
                     self._warn(text)
                     if not valid.any():
@@ -316,16 +383,16 @@ class BagReader:
             return dict(zip(topics, arrays))
 
     @staticmethod
-    def _read_ahead(refs: Iterator[tuple[McapFile, ChunkRef, dict[int, str]]], ahead: int = READ_AHEAD_CHUNKS
-                    ) -> Iterator[tuple[McapFile, ChunkRef, dict[int, str], np.ndarray | None]]:
-        """``refs`` in order, each with its chunk's data (``McapFile.chunk_data``) read and decompressed up to
+    def _read_ahead(refs: Iterator[tuple[BagFile, ChunkRef, dict[int, str]]], ahead: int = READ_AHEAD_CHUNKS
+                    ) -> Iterator[tuple[BagFile, ChunkRef, dict[int, str], Any]]:
+        """``refs`` in order, each with its chunk's data (``BagFile.chunk_data``) read and decompressed up to
         ``ahead`` chunks in advance on worker threads: pread, zstd/lz4 and the CRC release the GIL, so on two cores
         decompression overlaps the decoding of the chunk before (a bounded window: an hour's chunks decompressed at
         once would take gigabytes)."""
         with ThreadPoolExecutor(max_workers=READ_THREADS, thread_name_prefix='bag_read') as pool:
             pending: deque = deque()
             for ref in refs:
-                pending.append((ref, pool.submit(ref[0].chunk_data, ref[1])))
+                pending.append((ref, pool.submit(ref[0].chunk_data, ref[1], ref[2])))
                 if len(pending) > ahead:
                     done, future = pending.popleft()
                     yield (*done, future.result())
