@@ -232,6 +232,15 @@ class McapFile:
                 pos = skip[pos]
                 records = self._records_from(pos)
                 continue
+            head = self._record_head(pos)
+            if head is not None and head[0] not in _OPCODES and pos + 9 + head[1] <= self.size:
+                # A record of an opcode this reader does not know (a later version's, or private): skipped by its
+                # length as the specification says (here, not by the library, to keep ``pos`` on record starts).
+                if loose:
+                    loose[1] = pos + 9 + head[1]
+                pos += 9 + head[1]
+                records = self._records_from(pos)
+                continue
             try:
                 record = next(records)
             except StopIteration:
@@ -343,12 +352,20 @@ class McapFile:
                     'Channel record defines them; the messages cannot be attributed to a topic')
 
     def _discover_channels(self) -> None:
-        """Learn schemas/channels inside chunks (where writers may put them only) and count the messages of chunks
-        without a message index: each chunk whose messages are not all on known channels is read."""
+        """Learn the schemas and channels defined only inside chunks (where a writer may put them; a chunk may
+        define a channel whose messages come in later chunks) and count the messages of chunks without a message
+        index. Chunks are read in file order while a channel or schema in use is still undefined, and every chunk
+        without a message index is read; a file whose definitions are all outside chunks reads none here."""
+        used = {cid for chunk in self.chunks for cid in chunk.index or ()}
+        used |= {cid for chunk in self.chunks for cid, n in chunk.counts.items() if n}
+
+        def missing() -> bool:
+            return bool(used - set(self.channels)) or any(
+                ch.schema_id and ch.schema_id not in self.schemas for ch in self.channels.values())
+
+        need = missing()
         for chunk in self.chunks:
-            if chunk.loose or (chunk.index is not None and set(chunk.index) <= set(self.channels)
-                               and all(self.channels[cid].schema_id in self.schemas
-                                       for cid in chunk.index if self.channels[cid].schema_id)):
+            if chunk.loose or (chunk.index is not None and not need):
                 continue
             data = self.chunk_data(chunk)
             if data is None:
@@ -368,6 +385,9 @@ class McapFile:
                 for record in records:
                     if isinstance(record, Message):
                         chunk.counts[record.channel_id] = chunk.counts.get(record.channel_id, 0) + 1
+                used |= set(chunk.counts)
+            if need:
+                need = missing()
 
     def _count_from_indexes(self) -> None:
         counts: dict[int, int] = {}
