@@ -27,13 +27,19 @@ from .errors import BagFormatError, BagNotFoundError
 
 SQLITE_MAGIC = b'SQLite format 3\x00'
 """The first 16 bytes of every SQLite database file."""
-BLOCK_SHIFT = 16
+BLOCK_SHIFT = 14
 BLOCK_IDS = 1 << BLOCK_SHIFT
-"""Message ids per block: the unit read (and decoded) at once, like an MCAP chunk."""
+"""Message ids per block: the unit read (and decoded) at once, like an MCAP chunk (small enough that the reader's
+read-ahead threads query blocks side by side)."""
+MMAP_BYTES = 1 << 31
+"""SQLite reads the file through a memory map up to this size (fewer copies than read(); it is read only)."""
 
+# One pass over the block's rows in id order, every value gathered inside SQLite: no Python object per message.
 _BLOCK_QUERY = (
-    "SELECT topic_id, group_concat(id), group_concat(timestamp), group_concat(length(data)), "
-    "CAST(group_concat(data, '') AS BLOB) FROM messages WHERE id >= ? AND id < ? GROUP BY topic_id")
+    "SELECT group_concat(topic_id), group_concat(timestamp), group_concat(length(data)), "
+    "CAST(group_concat(data, '') AS BLOB), count(*) FROM messages WHERE id >= ? AND id < ?")
+_BLOCK_TOPICS = ('SELECT topic_id, count(*), min(timestamp), max(timestamp) FROM messages WHERE id >= ? AND id < ? '
+                 'GROUP BY topic_id')
 
 
 def _ints(text: str | None, count: int) -> np.ndarray:
@@ -89,6 +95,7 @@ class Sqlite3File:
         conn = getattr(self._local, 'conn', None)
         if conn is None:
             conn = sqlite3.connect(f'{self._disk.resolve().as_uri()}?mode=ro', uri=True, check_same_thread=False)
+            conn.execute(f'PRAGMA mmap_size = {MMAP_BYTES}')
             self._local.conn = conn
             with self._lock:
                 self._connections.append(conn)
@@ -143,9 +150,16 @@ class Sqlite3File:
                 id=int(topic['id']), topic=str(topic['name']), message_encoding=str(topic['serialization_format']),
                 schema_id=schema_ids[msg_type], metadata=metadata)
         blocks: dict[int, ChunkRef] = {}
-        for block, topic_id, count, first, last in conn.execute(
-                f'SELECT id >> {BLOCK_SHIFT}, topic_id, count(*), min(timestamp), max(timestamp) FROM messages '
-                'GROUP BY 1, 2'):
+        lowest, highest, total = conn.execute('SELECT min(id), max(id), count(*) FROM messages').fetchone()
+        if total and (highest >> BLOCK_SHIFT) - (lowest >> BLOCK_SHIFT) < 4 * total // BLOCK_IDS + 64:
+            rows: list[tuple[int, int, int, int, int]] = []
+            for block in range(lowest >> BLOCK_SHIFT, (highest >> BLOCK_SHIFT) + 1):
+                rows += [(block, *row) for row in conn.execute(
+                    _BLOCK_TOPICS, (block << BLOCK_SHIFT, (block + 1) << BLOCK_SHIFT))]
+        else:  # ids spread far apart: one grouping pass instead of a query per (mostly empty) block
+            rows = conn.execute(f'SELECT id >> {BLOCK_SHIFT}, topic_id, count(*), min(timestamp), max(timestamp) '
+                                'FROM messages GROUP BY 1, 2').fetchall()
+        for block, topic_id, count, first, last in rows:
             ref = blocks.get(block)
             if ref is None:
                 lo = block << BLOCK_SHIFT
@@ -168,27 +182,31 @@ class Sqlite3File:
     def chunk_data(self, chunk: ChunkRef, channels: Collection[int] | None = None) -> dict[int, ChunkMessages]:
         """Per topic id (all, or those in ``channels``): the block's messages in id order. Safe to call from several
         threads at once (a connection per thread; SQLite runs the query without Python's lock)."""
+        topic_text, stamp_text, length_text, data, count = self._connection().execute(
+            _BLOCK_QUERY, (chunk.offset, chunk.offset + chunk.length)).fetchone()
+        try:
+            topic, log_time, length = (_ints(topic_text, count), _ints(stamp_text, count),
+                                       _ints(length_text, count))
+        except ValueError as exc:
+            raise BagFormatError(f'{self.path}: the messages with ids from {chunk.offset} do not read back '
+                                 f'({exc})') from None
+        blob = bytes(data or b'')
+        if int(length.sum()) != len(blob):
+            raise BagFormatError(f'{self.path}: the messages with ids from {chunk.offset} hold {len(blob)} bytes, '
+                                 f'not the {int(length.sum())} their lengths add up to')
+        offset = np.zeros(count, np.int64)
+        np.cumsum(length[:-1], out=offset[1:])
+        buf = np.frombuffer(blob or b'\0', dtype=np.uint8)
+        rank = np.arange(count, dtype=np.int64)
+        stamps = log_time.astype(np.uint64)
         out = {}
-        rows = self._connection().execute(_BLOCK_QUERY, (chunk.offset, chunk.offset + chunk.length)).fetchall()
-        for topic_id, ids, stamps, lengths, data in rows:
-            if channels is not None and topic_id not in channels:
+        for topic_id in (channels if channels is not None else chunk.counts):
+            mine = topic == topic_id
+            if not mine.any():
                 continue
-            count = chunk.counts.get(topic_id, 0)
-            try:
-                length, position, log_time = _ints(lengths, count), _ints(ids, count), _ints(stamps, count)
-            except ValueError as exc:
-                raise BagFormatError(f'{self.path}: the messages of topic id {topic_id} with ids from {chunk.offset} '
-                                     f'changed while read ({exc})') from None
-            blob = bytes(data or b'')
-            if int(length.sum()) != len(blob):
-                raise BagFormatError(f'{self.path}: the messages of topic id {topic_id} with ids from {chunk.offset} '
-                                     f'hold {len(blob)} bytes, not the {int(length.sum())} their lengths add up to')
-            offset = np.zeros(count, np.int64)
-            np.cumsum(length[:-1], out=offset[1:])
             out[topic_id] = ChunkMessages(
-                buf=np.frombuffer(blob or b'\0', dtype=np.uint8), position=position, data_offset=offset,
-                data_length=length, log_time=log_time.astype(np.uint64), publish_time=log_time.astype(np.uint64),
-                sequence=np.zeros(count, np.uint32))
+                buf=buf, position=rank[mine], data_offset=offset[mine], data_length=length[mine],
+                log_time=stamps[mine], publish_time=stamps[mine], sequence=np.zeros(int(mine.sum()), np.uint32))
         return out
 
     def chunk_messages(self, chunk: ChunkRef, data: dict[int, ChunkMessages],
