@@ -29,7 +29,8 @@ from crane_stiffness.bag import BagReader  # noqa: E402
 
 TARGET_RATIO = 2.0  # time per message of any storage vs the original MCAP bag, same run
 
-STORAGES = {'MCAP (rosbags, uncompressed)': ('mcap', ''), 'sqlite3 (.db3)': ('sqlite3', ''), 'MCAP, file zstd (.mcap.zstd)': ('mcap', 'file'),
+STORAGES = {'MCAP (rosbags, uncompressed)': ('mcap', ''), 'sqlite3 (.db3)': ('sqlite3', ''),
+            'MCAP, file zstd (.mcap.zstd)': ('mcap', 'file'),
             'sqlite3, file zstd (.db3.zstd)': ('sqlite3', 'file'), 'sqlite3, message zstd': ('sqlite3', 'message'),
             'MCAP, message zstd': ('mcap', 'message')}
 

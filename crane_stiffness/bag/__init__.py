@@ -50,7 +50,8 @@ def __getattr__(name: str) -> object:
 __all__ = [
     'BagCorruptError', 'BagDamageWarning', 'BagError', 'BagExistsError', 'BagFormatError', 'BagNotFoundError',
     'BagPathError', 'BagUnsupportedError', 'BagWriteFailedError',
-    'BagReader', 'BagWriter', 'BagWriterError', 'McapFile', 'Sqlite3File', 'MessageDefinitionError', 'RawMessage', 'RecoveryReport',
+    'BagReader', 'BagWriter', 'BagWriterError', 'McapFile', 'MessageDefinitionError', 'RawMessage', 'RecoveryReport',
+    'Sqlite3File',
     'SUPPORTED_TYPES', 'TopicInfo', 'TopicNotFoundError', 'UnsupportedTypeError', 'dump_qos_profiles',
     'normalize_qos_profiles', 'qos_profile', 'recover_bag',
 ]

@@ -5,10 +5,10 @@ also ``*.zstd``, when metadata.yaml is missing, as after a crash) or a single fi
 storage (``storage.py``): an MCAP file is a :class:`~.mcapfile.McapFile` (any layout the MCAP specification allows;
 a file cut short by SIGKILL gives every complete chunk), a rosbag2 sqlite3 file a :class:`~.sqlitefile.Sqlite3File`;
 rosbag2's zstd compression (``compression_mode: file`` or ``message``) is undone on the way. What cannot be read
-exactly raises a :class:`~.errors.BagError` naming the file and the reason; no message is skipped silently. Only files inside the bag directory are read: a metadata.yaml entry with
-``..``, an absolute path or a symlink leading out raises :class:`~.errors.BagPathError` (``metadata.file_in_bag``).
-Damage is reported with :class:`~.errors.BagDamageWarning` (or raised when ``strict=True``) and the readable part is
-used.
+exactly raises a :class:`~.errors.BagError` naming the file and the reason; no message is skipped silently. Only
+files inside the bag directory are read: a metadata.yaml entry with ``..``, an absolute path or a symlink leading
+out raises :class:`~.errors.BagPathError` (``metadata.file_in_bag``). Damage is reported with
+:class:`~.errors.BagDamageWarning` (or raised when ``strict=True``) and the readable part is used.
 
 Bulk decoding (:meth:`BagReader.decode`) works a chunk at a time: decompress, gather the messages of a channel at
 once (:meth:`~.mcapfile.McapFile.chunk_messages`), then decode their CDR fields with numpy
@@ -153,8 +153,8 @@ class BagReader:
                 present = [p for p in found if p.is_file()]
                 if present:
                     return present
-        found = {p for pattern in BAG_FILE_PATTERNS for p in self.path.glob(pattern)}
-        files = [file_in_bag(self.path, p.name, f'{self.path}') for p in sorted(found, key=_file_order)]
+        on_disk = {p for pattern in BAG_FILE_PATTERNS for p in self.path.glob(pattern)}
+        files = [file_in_bag(self.path, p.name, f'{self.path}') for p in sorted(on_disk, key=_file_order)]
         if not files:
             raise BagNotFoundError(f'{self.path} holds no metadata.yaml and no bag file '
                                    f'({", ".join(BAG_FILE_PATTERNS)})')
