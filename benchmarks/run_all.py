@@ -14,6 +14,7 @@ OUT = HERE.parent / 'out' / 'bench'
 BENCHMARKS = [
     ('bench_solver.py', [], 'bench_solver.json'),
     ('bench_bag_decode.py', [], None),
+    ('bench_bag_storage.py', [], None),
     ('bench_sync.py', [], 'bench_sync.json'),
     ('bench_analyze.py', [], None),
     ('bench_campaign.py', [], 'bench_campaign.json'),   # campaign analyze with 1 and 2 worker processes
