@@ -233,3 +233,20 @@ def test_bad_mappings_raise_errors_naming_the_value(tmp_path):
     with pytest.raises(MappingError, match=r"displacement_type = 'volts': must be one of .*\(from f.yaml\)"):
         SensorMapping(estimator_params={'displacement_type': 'volts'},
                       estimator_params_source='f.yaml').asked_displacement_type()
+
+
+def test_the_documented_recipe_runs(sessions, tmp_path, capsys):
+    """docs/recording.md's `crane-stiffness analyze` command, on the lab bag: the original's stiffness."""
+    import shlex
+    _, analysed, lab, _ = sessions
+    text = (REPO / 'docs' / 'recording.md').read_text()
+    start = text.index('crane-stiffness analyze bags/lab_run')
+    command = text[start:text.index('\n```', start)].replace('\\\n', ' ')
+    args = shlex.split(command)[1:]
+    args[args.index('bags/lab_run')] = str(lab)
+    args[args.index('config/crane_lab.yaml')] = str(CRANE)
+    assert cli_main([*args, '--quiet', '--json', '--out', str(tmp_path)]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert result['branch_fits']['loading']['stiffness'] == pytest.approx(
+        analysed.branch_fits['loading'].stiffness, rel=1e-9)
+    assert result['mapping']['displacement_topic'] == DAQ and result['mapping']['displacement_gain'] == GAIN
