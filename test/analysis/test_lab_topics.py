@@ -45,11 +45,12 @@ def _program() -> LoadProgram:
     return LoadProgram(segs, repeats=2, name='short_steps', rate_hz=100.0)
 
 
-def write_lab_bag(original: Path, path: Path) -> dict[str, np.ndarray]:
+def write_lab_bag(original: Path, path: Path, commands: bool = True) -> dict[str, np.ndarray]:
     """The original session's load cell, LVDT and commands written with rosbags' rosbag2 Writer (MCAP storage), no
     session metadata: the wrenches as they are on /netft_data; each LVDT reading x as a Float64 of volts
     (x - OFFSET) / GAIN on /daq/ch0, logged at the reading's stamp (a Float64 has no stamp: its log time is its
-    instant); the commands on /crane/wrench_command. Returns the volts written and their log times."""
+    instant); the commands on /crane/wrench_command (unless ``commands`` is False: a lab whose program publishes
+    none). Returns the volts written and their log times."""
     from rosbags.rosbag2 import StoragePlugin, Writer
     from rosbags.typesys import Stores, get_typestore
     store = get_typestore(Stores.ROS2_JAZZY)
@@ -57,7 +58,8 @@ def write_lab_bag(original: Path, path: Path) -> dict[str, np.ndarray]:
     out: list[tuple[int, str, bytes]] = []
     volts, logs = [], []
     with BagReader(original) as reader:
-        for msg in reader.messages([topics.LOAD_CELL_WRENCH, topics.LVDT_DISPLACEMENT, topics.WRENCH_COMMAND]):
+        for msg in reader.messages([topics.LOAD_CELL_WRENCH, topics.LVDT_DISPLACEMENT] +
+                                   ([topics.WRENCH_COMMAND] if commands else [])):
             if msg.topic == topics.LVDT_DISPLACEMENT:
                 sec, nanosec, (x, _, _) = decode_stamped(msg.data, 3)
                 v = (x - OFFSET) / GAIN
@@ -72,7 +74,8 @@ def write_lab_bag(original: Path, path: Path) -> dict[str, np.ndarray]:
     with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
         conns = {topic: writer.add_connection(topic, msg_type, typestore=store)
                  for topic, msg_type in ((WRENCH, 'geometry_msgs/msg/WrenchStamped'), (DAQ, 'std_msgs/msg/Float64'),
-                                         (topics.WRENCH_COMMAND, 'geometry_msgs/msg/WrenchStamped'))}
+                                         (topics.WRENCH_COMMAND, 'geometry_msgs/msg/WrenchStamped'))
+                 if commands or topic != topics.WRENCH_COMMAND}
         for t, topic, data in out:
             writer.write(conns[topic], t, data)
     return {'volts': np.array(volts), 'log_time_ns': np.array(logs, dtype=np.int64)}
@@ -131,6 +134,21 @@ def test_cli_analyze_with_the_flags_finds_the_original_stiffness(sessions, tmp_p
                  'float64 (flag)', '0.002 m/V (flag), -0.001 m (flag)', f'| geometry from | --config {CRANE} |'):
         assert text in report
     assert json.loads((out / 'analysis.json').read_text())['mapping'] == result['mapping']
+
+
+def test_without_commands_the_branches_follow_the_force(sessions, tmp_path):
+    """A lab whose program publishes no /crane/wrench_command: no test steps, the branches from the measured force
+    (as the live estimator without commands), the loading stiffness still within the original's interval."""
+    original, analysed, _, _ = sessions
+    write_lab_bag(original.path, tmp_path / 'lab', commands=False)
+    result = analyze_session(tmp_path / 'lab', write_files=False, mapping=SensorMapping(
+        wrench_topic=WRENCH, displacement_topic=DAQ, displacement_gain=GAIN, displacement_offset=OFFSET))
+    reference, loading = analysed.branch_fits['loading'], result.branch_fits['loading']
+    assert reference is not None and loading is not None
+    assert reference.ci95_low <= loading.stiffness <= reference.ci95_high
+    assert result.steps == [] and result.pairing['pairs'] == analysed.pairing['pairs']
+    assert result.mapping['sources']['displacement_type'] == "the bag's message type"
+    assert any('/crane/wrench_command is not in the bag: no test steps' in p for p in result.problems)
 
 
 def test_a_parameter_file_sets_the_mapping_as_the_flags_do(sessions, tmp_path):
@@ -250,3 +268,17 @@ def test_the_documented_recipe_runs(sessions, tmp_path, capsys):
     assert result['branch_fits']['loading']['stiffness'] == pytest.approx(
         analysed.branch_fits['loading'].stiffness, rel=1e-9)
     assert result['mapping']['displacement_topic'] == DAQ and result['mapping']['displacement_gain'] == GAIN
+
+
+@pytest.mark.parametrize('command', ['analyze', 'compare'])
+def test_help_shows_the_flags_with_their_units(command, capsys):
+    with pytest.raises(SystemExit):
+        cli_main([command, '--help'])
+    text = ' '.join(capsys.readouterr().out.split())
+    for flag in ('--wrench-topic TOPIC', '--displacement-topic TOPIC', '--displacement-type {point_stamped,float64}',
+                 '--displacement-gain M_PER_V', '--displacement-offset M', '--params-file FILE',
+                 '--config CRANE.yaml'):
+        assert flag in text
+    for unit in ('metres per volt [m/V]', 'metres at 0 V [m]', 'wrench in N and N·m', 'point.x in m', 'geometry.* '
+                 'parameters [m, N, Pa]'):
+        assert unit in text
