@@ -151,7 +151,7 @@ def test_without_commands_the_branches_follow_the_force(sessions, tmp_path):
     assert any('/crane/wrench_command is not in the bag: no test steps' in p for p in result.problems)
 
 
-def test_a_parameter_file_sets_the_mapping_as_the_flags_do(sessions, tmp_path):
+def test_a_parameter_file_sets_the_mapping_as_the_flags_do(sessions, tmp_path, capsys):
     _, _, lab, _ = sessions
     params = tmp_path / 'lab_estimator.yaml'
     params.write_text('stiffness_estimator:\n  ros__parameters:\n    displacement_type: float64\n'
@@ -169,6 +169,12 @@ def test_a_parameter_file_sets_the_mapping_as_the_flags_do(sessions, tmp_path):
     # Without --config a bag without session metadata has no geometry: said, no model.
     assert result['mapping']['geometry_source'] == 'none' and result['model'] is None
     assert any('no rig geometry recorded' in p for p in result['problems'])
+    # A bad value in the file is named, with the file.
+    params.write_text('stiffness_estimator:\n  ros__parameters:\n    displacement_gain: 0.0\n')
+    assert cli_main(['analyze', str(lab), '--wrench-topic', WRENCH, '--displacement-topic', DAQ,
+                     '--params-file', str(params), '--quiet', '--out', str(out)]) == 2
+    assert f'displacement_gain = 0.0: must be non-zero (m/V) (from --params-file {params})' in \
+        capsys.readouterr().err
 
 
 def test_cli_compare_names_each_sessions_mapping(sessions, tmp_path, capsys):
