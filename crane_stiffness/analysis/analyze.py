@@ -59,6 +59,7 @@ from crane_stiffness.analysis import report
 from crane_stiffness.analysis.errors import SessionAnalysisError
 from crane_stiffness.analysis.live_check import live_comparison
 from crane_stiffness.analysis.load import SessionData, load_session
+from crane_stiffness.analysis.mapping import SensorMapping
 from crane_stiffness.analysis.model_summary import accepted_commands, model_summary
 from crane_stiffness.analysis.progress import Progress
 from crane_stiffness.analysis.results import (CycleFits, SessionAnalysis, Step)
@@ -112,10 +113,10 @@ def _inputs(data: SessionData) -> tuple[Samples, Samples, dict[str, int]]:
     # live estimator's matrix, vectorised; as is when the sensor is at the centre.
     force, f_counts = checked_samples(f_stamp, f['log_time_ns'], component, finite, s.max_abs_force,
                                       s.max_clock_skew_s)
-    if 'stamp_s' in d:
+    if data.mapping is None or data.mapping.displacement_type == 'point_stamped':
         d_stamp = d['stamp_s']
         d_value = s.reading_to_displacement(d['x'].astype(float))
-    else:  # std_msgs/Float64 in volts, stamped on arrival by the estimator
+    else:  # std_msgs/Float64 in volts: no stamp, taken at its arrival as live (here the recorder's log time)
         d_stamp = d['log_time_ns'] * 1e-9
         d_value = s.reading_to_displacement(s.volts_to_displacement(d['data']))
     d_stamp = correct_stamps(d_stamp, s.displacement_delay_s)  # the instants the samples were taken, as live
@@ -263,7 +264,7 @@ def _default_out(bag: Path) -> Path:
 def analyze_session(bag_path: str | Path, out_dir: str | Path | None = None, *, formats: Sequence[str] = ('png',),
                     reports: Sequence[str] = ('md',), write_json: bool = True, axis: str | None = None,
                     settle_fraction: float = 0.3, model_points: int = 41, progress: bool = False,
-                    write_files: bool = True) -> SessionAnalysis:
+                    write_files: bool = True, mapping: SensorMapping | None = None) -> SessionAnalysis:
     """Analyse one recorded session (see the module docstring) and write its figures, report and JSON.
 
     Args:
@@ -277,6 +278,9 @@ def analyze_session(bag_path: str | Path, out_dir: str | Path | None = None, *, 
         model_points: points per model curve.
         progress: show a tqdm progress bar over the stages.
         write_files: False computes the results only (no figures, report or JSON).
+        mapping: the sensor topics, the displacement's type and conversion, estimator parameters from a file and
+            the geometry (:class:`~crane_stiffness.analysis.mapping.SensorMapping`; default: the rig's topics, as
+            recorded); the result's ``mapping`` says what was used.
 
     Returns:
         the :class:`SessionAnalysis` (its ``files`` lists what was written).
@@ -284,7 +288,8 @@ def analyze_session(bag_path: str | Path, out_dir: str | Path | None = None, *, 
     Raises:
         BagNotFoundError / BagFormatError: no readable bag at ``bag_path``.
         TopicNotFoundError: a sensor topic is missing (named, with the topics present).
-        SessionAnalysisError: nothing to pair or fit.
+        SessionAnalysisError: nothing to pair or fit; a sensor topic of another type than expected (both named).
+        ParameterError / MappingError: a bad value of the mapping (named).
     """
     _check_options(formats, reports, settle_fraction)
     path = Path(bag_path)
@@ -295,7 +300,7 @@ def analyze_session(bag_path: str | Path, out_dir: str | Path | None = None, *, 
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter('always', BagDamageWarning)
             bar.stage('open+decode')
-            data = load_session(path, axis, problems, missing)
+            data = load_session(path, axis, problems, missing, mapping)
             bar.done()
             bar.stage('pair')
             force, disp, input_counters = _inputs(data)
@@ -332,7 +337,7 @@ def analyze_session(bag_path: str | Path, out_dir: str | Path | None = None, *, 
             unit=data.settings.stiffness_unit, program=_program_summary(data),
             geometry=_geometry_summary(data, problems), settings=asdict(data.settings), counts=data.counts,
             pairing=counters, steps=steps, model=model, problems=problems, missing_topics=missing,
-            stream_delay=dict(delay_values), **fits)
+            stream_delay=dict(delay_values), mapping=data.mapping.to_dict() if data.mapping else {}, **fits)
         bar.done()
         if write_files:
             out = Path(out_dir) if out_dir is not None else _default_out(path)

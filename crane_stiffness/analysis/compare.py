@@ -11,6 +11,7 @@ from typing import Any, Iterable, Sequence
 
 from crane_stiffness.analysis import report
 from crane_stiffness.analysis.analyze import analyze_session
+from crane_stiffness.analysis.mapping import SensorMapping
 from crane_stiffness.analysis.results import SessionAnalysis, SessionComparison
 from crane_stiffness.estimation.branch import LOADING, UNLOADING
 from crane_stiffness.estimation.fit import LineFit
@@ -35,16 +36,20 @@ def comparison_row(a: SessionAnalysis) -> dict[str, Any]:
         'model_tangent_k': tangent,
         'relative_error_loading': (lk - tangent) / tangent if math.isfinite(tangent) and tangent else math.nan,
         'nonlinearity_loading': k(a.branch_fits.get(LOADING), 'nonlinearity'),
-        'steps': len(a.steps), 'problems': len(a.problems),
+        'steps': len(a.steps), 'problems': len(a.problems), 'mapping': a.mapping,
     }
     return row
 
 
 def compare_sessions(bags: Iterable[str | Path], out_dir: str | Path | None = None, *,
                      formats: Sequence[str] = ('png',), reports: Sequence[str] = ('md',), write_json: bool = True,
-                     axis: str | None = None, progress: bool = False) -> SessionComparison:
+                     axis: str | None = None, progress: bool = False,
+                     mapping: SensorMapping | None = None) -> SessionComparison:
     """Analyse several sessions and set them side by side: a table (Markdown/HTML, JSON) and an overlay figure of
     their quasi-static force–displacement points with each session's nonlinear model curve.
+
+    ``mapping`` (topics, displacement type and conversion, geometry: :class:`~crane_stiffness.analysis.mapping.
+    SensorMapping`) applies to every bag; each row names what was used.
 
     Raises what :func:`analyze_session` raises, naming the bag.
     """
@@ -57,7 +62,7 @@ def compare_sessions(bags: Iterable[str | Path], out_dir: str | Path | None = No
         from tqdm import tqdm
         iterator = tqdm(paths, desc='compare', unit='session', leave=False)
     for p in iterator:
-        analyses.append(analyze_session(p, axis=axis, write_files=False))
+        analyses.append(analyze_session(p, axis=axis, write_files=False, mapping=mapping))
     comparison = SessionComparison(rows=[comparison_row(a) for a in analyses], sessions=analyses)
     out = Path(out_dir) if out_dir is not None else Path('out') / 'compare'
     out.mkdir(parents=True, exist_ok=True)

@@ -14,7 +14,9 @@ import numpy as np
 
 from crane_stiffness.contract import topics
 from crane_stiffness.analysis.errors import SessionAnalysisError
-from crane_stiffness.bag import BagReader, TopicNotFoundError
+from crane_stiffness.analysis.mapping import (MappingUsed, SensorMapping, check_topics, mapping_problems,
+                                              mapping_used, settings_with_mapping)
+from crane_stiffness.bag import BagReader
 from crane_stiffness.contract.axes import AXES
 from crane_stiffness.estimation.live import VALUE_FIELDS
 from crane_stiffness.estimation.settings import LiveSettings
@@ -23,7 +25,6 @@ from crane_stiffness.serde import CdrError, decode_diagnostic_array, decode_floa
 from crane_stiffness.bag.session_metadata import analysis_geometry_params, read_node_parameters, read_session
 from crane_stiffness.sim.program import LoadProgram
 
-REQUIRED_TOPICS = (topics.LOAD_CELL_WRENCH, topics.LVDT_DISPLACEMENT)
 OPTIONAL_TOPICS = (topics.WRENCH_COMMAND, topics.PROGRAM_STATE, topics.STIFFNESS_VALUES,
                    topics.PREDICTED_AXIS_STIFFNESS, topics.STIFFNESS)
 
@@ -54,6 +55,8 @@ class SessionData:
     start_ns: int | None = None
     end_ns: int | None = None
     message_count: int = 0
+    #: The topics, displacement type and conversion and the geometry's source the analysis used.
+    mapping: MappingUsed | None = None
 
 
 def _program_from_record(record: Any, problems: list[str]) -> LoadProgram | None:
@@ -137,8 +140,13 @@ def _live_input_reports(reader: BagReader) -> list[tuple[int, dict[str, str]]]:
 
 
 
-def load_session(path: Path, axis: str | None, problems: list[str], missing: list[str]) -> SessionData:
+def load_session(path: Path, axis: str | None, problems: list[str], missing: list[str],
+                 mapping: SensorMapping | None = None) -> SessionData:
     """Read a session's bag: records, settings and the streams the analysis needs, decoded in bulk.
+
+    ``mapping`` (:mod:`crane_stiffness.analysis.mapping`) names the sensor topics (default the rig's,
+    /load_cell/wrench and /lvdt/displacement), the displacement's type and conversion, estimator parameters from a
+    file and a geometry, over what the bag records.
 
     ``axis`` overrides the analysed axis (default: the estimator's recorded ``force_axis``, else the program's
     dominant axis). Problems found on the way are appended to ``problems``, absent optional topics to ``missing``.
@@ -146,16 +154,14 @@ def load_session(path: Path, axis: str | None, problems: list[str], missing: lis
     Raises:
         BagNotFoundError / BagFormatError: no readable bag at ``path``.
         TopicNotFoundError: a sensor topic is missing (named, with the topics present).
-        SessionAnalysisError: an unknown axis, or a sensor topic of an unexpected type.
+        SessionAnalysisError: an unknown axis, or a sensor topic of an unexpected type (both types named).
+        ParameterError / MappingError: a mapped value breaking the estimator's rules (named).
     """
+    mapping = mapping or SensorMapping()
     reader = BagReader(path)
     try:
         known = reader.topics
-        for topic in REQUIRED_TOPICS:
-            if topic not in known:
-                present = ', '.join(f'{t} [{i.msg_type}]' for t, i in sorted(known.items())) or 'none'
-                raise TopicNotFoundError(f'{path}: required topic {topic} is not in the bag (topics present: '
-                                         f'{present})')
+        displacement_type = check_topics(mapping, known, path)
         for topic in OPTIONAL_TOPICS:
             if topic not in known or known[topic].count == 0:
                 missing.append(topic)
@@ -168,35 +174,37 @@ def load_session(path: Path, axis: str | None, problems: list[str], missing: lis
         recorded_sensors = session.get('sensors')
         sensors = dict(recorded_sensors) if isinstance(recorded_sensors, dict) else {}
         sensors.update(nodes)
-        est_params = sensors.get('stiffness_estimator') or sensors.get('/stiffness_estimator') or {}
+        est_params = dict(sensors.get('stiffness_estimator') or sensors.get('/stiffness_estimator') or {})
         try:
-            settings = LiveSettings.from_params(est_params)
+            LiveSettings.from_params(est_params)
         except ValueError as exc:
             problems.append(f'recorded stiffness_estimator parameters are invalid ({exc}); using the defaults')
-            settings = LiveSettings()
             est_params = {}
+        # The mapping's parameter file and flags over the recorded parameters (ParameterError when they are bad).
+        est_params, settings, sources = settings_with_mapping(est_params, mapping)
         chosen = axis or (est_params.get('force_axis') if 'force_axis' in est_params else None) \
             or _dominant_axis(program) or settings.force_axis
         if chosen not in AXES:
             raise SessionAnalysisError(f'axis = {chosen!r}: must be one of {", ".join(AXES)}')
         settings = replace(settings, force_axis=chosen)
         # The crane_model node's geometry as it ran, unless the record says the simulated crane differs from the
-        # nominal one on purpose (a campaign's true crane): then the nominal one, as the analysis of a real crane.
+        # nominal one on purpose (a campaign's true crane): then the nominal one, as the analysis of a real crane;
+        # a geometry given with the mapping (--config) over either.
         geometry_params = analysis_geometry_params(session, nodes)
+        geometry_source = 'recorded with the session' if geometry_params is not None else 'none'
+        if mapping.geometry_params is not None:
+            geometry_params = dict(mapping.geometry_params)
+            geometry_source = mapping.geometry_source or 'given'
         if geometry_params is None:
-            problems.append('no rig geometry recorded: no model curves')
+            problems.append('no rig geometry recorded: no model curves (give --config CRANE.yaml)')
+        used = mapping_used(mapping, known, displacement_type, settings, sources, geometry_source)
+        problems += mapping_problems(used, mapping)
         data = SessionData(path=path, session=session, counts={t: i.count for t, i in known.items()},
                      topic_types={t: i.msg_type for t, i in known.items()}, program=program,
                      program_record=program_record, geometry_params=geometry_params, settings=settings,
                      sensors=sensors, start_ns=reader.start_ns, end_ns=reader.end_ns,
-                     message_count=reader.message_count)
-        if known[topics.LOAD_CELL_WRENCH].msg_type != 'geometry_msgs/msg/WrenchStamped':
-            raise SessionAnalysisError(f'{topics.LOAD_CELL_WRENCH} has type {known[topics.LOAD_CELL_WRENCH].msg_type}'
-                                       ', expected geometry_msgs/msg/WrenchStamped')
-        if known[topics.LVDT_DISPLACEMENT].msg_type not in ('geometry_msgs/msg/PointStamped', 'std_msgs/msg/Float64'):
-            raise SessionAnalysisError(f'{topics.LVDT_DISPLACEMENT} has type '
-                                       f'{known[topics.LVDT_DISPLACEMENT].msg_type}, expected PointStamped or Float64')
-        wanted = list(REQUIRED_TOPICS)
+                     message_count=reader.message_count, mapping=used)
+        wanted = [mapping.wrench_topic, mapping.displacement_topic]
         for topic, msg_type in ((topics.WRENCH_COMMAND, 'geometry_msgs/msg/WrenchStamped'),
                                 (topics.REJECTED_COMMAND, 'geometry_msgs/msg/WrenchStamped'),
                                 (topics.PREDICTED_AXIS_STIFFNESS, 'std_msgs/msg/Float64'),
@@ -204,8 +212,8 @@ def load_session(path: Path, axis: str | None, problems: list[str], missing: lis
             if topic in known and known[topic].count and known[topic].msg_type == msg_type:
                 wanted.append(topic)
         arrays = reader.decode_topics(wanted, columns=True)
-        data.force = arrays[topics.LOAD_CELL_WRENCH]
-        data.disp = arrays[topics.LVDT_DISPLACEMENT]
+        data.force = arrays[mapping.wrench_topic]
+        data.disp = arrays[mapping.displacement_topic]
         data.command = arrays.get(topics.WRENCH_COMMAND)
         data.rejected = arrays.get(topics.REJECTED_COMMAND)
         data.prediction = arrays.get(topics.PREDICTED_AXIS_STIFFNESS)

@@ -41,6 +41,31 @@ def _fit_cells(fit: LineFit | None) -> list[str]:
             fmt(fit.nonlinearity, 3)]
 
 
+def _mapping_rows(m: dict[str, Any]) -> list[list[Any]]:
+    """The report's rows of what was read and how (analysis.mapping.MappingUsed as a dict)."""
+    if not m:
+        return []
+    src = m.get('sources', {})
+    return [['load', f'{m["wrench_topic"]} [{m["wrench_msg_type"]}]'],
+            ['displacement', f'{m["displacement_topic"]} [{m["displacement_msg_type"]}], displacement_type '
+                             f'{m["displacement_type"]} ({src.get("displacement_type", "?")}): {m["conversion"]}; '
+                             f'{m["sample_instant"]}'],
+            ['displacement_gain, _offset', f'{fmt(m["displacement_gain"])} m/V ({src.get("displacement_gain", "?")}), '
+                                           f'{fmt(m["displacement_offset"])} m '
+                                           f'({src.get("displacement_offset", "?")})'],
+            ['geometry from', m['geometry_source']]]
+
+
+def mapping_text(m: dict[str, Any]) -> str:
+    """One line: the topics, type, gain and offset a session was read with (the comparison's table)."""
+    if not m:
+        return '–'
+    text = f'{m["wrench_topic"]}, {m["displacement_topic"]} ({m["displacement_type"]}'
+    if m['displacement_type'] == 'float64':
+        text += f', {fmt(m["displacement_gain"])} m/V, {fmt(m["displacement_offset"])} m'
+    return text + f'); geometry {m["geometry_source"]}'
+
+
 def session_blocks(a: SessionAnalysis, images: Sequence[str] = ()) -> list[Block]:
     """The report of one session as blocks."""
     unit = a.unit
@@ -63,6 +88,7 @@ def session_blocks(a: SessionAnalysis, images: Sequence[str] = ()) -> list[Block
         g = a.geometry
         rows.append(['geometry', f'a = {fmt(g["a"])} m, b = {fmt(g["b"])} m, h = {fmt(g["height"])} m, '
                                  f'W = {fmt(g["weight"])} N, l0 = {fmt(g["l0"])} m, k = {fmt(g["k"])} N/m'])
+    rows += _mapping_rows(a.mapping)
     s = a.settings
     pairing = pairing_text(s.get('pairing', 'nearest'), s['slop_s'], s.get('max_interpolation_gap_s', math.nan))
     noise = noise_text(s.get('displacement_noise', 0.0), 'm' if a.axis.startswith('f') else 'rad')
@@ -156,6 +182,9 @@ def comparison_blocks(c: SessionComparison, images: Sequence[str] = ()) -> list[
     for image in images:
         blocks.append(('img', image, Path(image).stem.replace('_', ' ')))
     problems = [f'{a.session}: {p}' for a in c.sessions for p in a.problems]
+    blocks += [('h2', 'Topics and units read'),
+               ('table', ['session', 'load, displacement (type, gain, offset); geometry'],
+                [[a.session, mapping_text(a.mapping)] for a in c.sessions])]
     if problems:
         blocks += [('h2', 'Problems'), ('ul', problems)]
     return blocks

@@ -128,6 +128,9 @@ class SessionAnalysis:
     timings_s: dict[str, float] = field(default_factory=dict)
     #: The delay between the streams estimated from the data (the keys the live input status reports, stream_delay_*).
     stream_delay: dict[str, str] = field(default_factory=dict)
+    #: What was read and how (analysis.mapping.MappingUsed): the load and displacement topics and their types, the
+    #: displacement type, gain and offset, where the sample instants and the geometry came from.
+    mapping: dict[str, Any] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         return json_safe(self)

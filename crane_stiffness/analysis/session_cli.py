@@ -53,6 +53,9 @@ def _print_summary(a: Any) -> None:
     print(f'session {a.session} ({a.bag}): axis {a.axis}, {len(a.steps)} hold step(s), {a.pairing.get("pairs", 0)} '
           f'pairs of {a.pairing.get("force_messages", 0)} load-cell and {a.pairing.get("displacement_messages", 0)} '
           'LVDT samples')
+    if a.mapping:
+        from crane_stiffness.analysis.report import mapping_text
+        print(f'read: {mapping_text(a.mapping)}')
     print('stiffness, all pairs of each branch over the program:')
     for branch in ('loading', 'unloading'):
         print(_fit_line(branch, a.branch_fits.get(branch), a.unit))
@@ -76,15 +79,39 @@ def _print_summary(a: Any) -> None:
         print(f'  ! {problem}')
 
 
+def _mapping(args: argparse.Namespace) -> Any:
+    """The :class:`~crane_stiffness.analysis.mapping.SensorMapping` the flags ask for (MappingError /
+    ParameterError / ConfigError naming a bad value)."""
+    from crane_stiffness.analysis.mapping import SensorMapping
+    from crane_stiffness.cli.geometry_args import config_geometry_params
+    from crane_stiffness.estimation.settings import ESTIMATOR_PARAMS
+    from crane_stiffness.params.files import config_path, load_params
+    estimator = source = None
+    if args.params_file:
+        path = config_path(args.params_file)
+        names = {spec.name for spec in ESTIMATOR_PARAMS} | {'displacement_type'}
+        estimator = {k: v for k, v in load_params(path, 'stiffness_estimator').items() if k in names}
+        source = f'--params-file {path}'
+    geometry = geometry_source = None
+    if args.config:
+        geometry = config_geometry_params(args.config)
+        geometry_source = f'--config {config_path(args.config)}'
+    return SensorMapping(wrench_topic=args.wrench_topic, displacement_topic=args.displacement_topic,
+                         displacement_type=args.displacement_type, displacement_gain=args.displacement_gain,
+                         displacement_offset=args.displacement_offset, estimator_params=estimator,
+                         estimator_params_source=source or '', geometry_params=geometry,
+                         geometry_source=geometry_source or '')
+
+
 def _analyze_full6(args: argparse.Namespace) -> int:
     """A six-axis session (the bag holds /pose_sensor/pose): the 6×6 analysis; the 1-D one too when the bag also
     holds the LVDT, into the same folder (its files are named apart)."""
-    from crane_stiffness.contract import topics
     from crane_stiffness.analysis.full6 import analyze_full6
     from crane_stiffness.analysis.full6_report import summary_lines
     from crane_stiffness.bag import BagReader
+    mapping = _mapping(args)
     with BagReader(args.bag) as reader:
-        info = reader.topics.get(topics.LVDT_DISPLACEMENT)
+        info = reader.topics.get(mapping.displacement_topic)
         one_axis = info is not None and info.count > 0
     result = analyze_full6(args.bag, args.out, formats=(args.format,), reports=(args.report,))
     one = None
@@ -92,7 +119,7 @@ def _analyze_full6(args: argparse.Namespace) -> int:
         from crane_stiffness.analysis.analyze import analyze_session
         one = analyze_session(args.bag, args.out, formats=(args.format,), reports=(args.report,),
                               write_json=args.json, axis=args.axis, settle_fraction=args.settle,
-                              progress=not args.quiet and not args.json)
+                              progress=not args.quiet and not args.json, mapping=mapping)
     if args.json:
         json.dump({'full6': result.to_dict(), 'one_axis': None if one is None else one.to_dict()}, sys.stdout,
                   indent=1, allow_nan=False)
@@ -103,7 +130,7 @@ def _analyze_full6(args: argparse.Namespace) -> int:
         print('\nthe 1-D analysis of the LVDT:')
         _print_summary(one)
     else:
-        print('(no /lvdt/displacement in the bag: no 1-D analysis)')
+        print(f'(no {mapping.displacement_topic} in the bag: no 1-D analysis)')
     print('wrote:')
     for path in result.files + (one.files if one is not None else []):
         print(f'  {path}')
@@ -117,7 +144,7 @@ def cmd_analyze(args: argparse.Namespace) -> int:
         return _analyze_full6(args)
     analysis = analyze_session(args.bag, args.out, formats=(args.format,), reports=(args.report,),
                                write_json=args.json, axis=args.axis, settle_fraction=args.settle,
-                               progress=not args.quiet and not args.json)
+                               progress=not args.quiet and not args.json, mapping=_mapping(args))
     if args.json:
         json.dump(analysis.to_dict(), sys.stdout, indent=1, allow_nan=False)
         print()
@@ -132,7 +159,8 @@ def cmd_analyze(args: argparse.Namespace) -> int:
 def cmd_compare(args: argparse.Namespace) -> int:
     from crane_stiffness.analysis.compare import compare_sessions
     comparison = compare_sessions(args.bags, args.out, formats=(args.format,), reports=(args.report,),
-                                  write_json=args.json, axis=args.axis, progress=not args.quiet and not args.json)
+                                  write_json=args.json, axis=args.axis, progress=not args.quiet and not args.json,
+                                  mapping=_mapping(args))
     if args.json:
         json.dump(comparison.to_dict(), sys.stdout, indent=1, allow_nan=False)
         print()
@@ -169,19 +197,55 @@ def _add_output_options(p: argparse.ArgumentParser, default_out: str) -> None:
     p.add_argument('--quiet', action='store_true', help='no progress bar')
 
 
+def _add_mapping_options(p: argparse.ArgumentParser) -> None:
+    """The topics and units of a lab's own recording, as the stiffness_estimator node takes them (its remaps and its
+    displacement_type / _gain / _offset parameters; analysis.mapping), and the geometry of a bag without one."""
+    from crane_stiffness.contract import topics
+    from crane_stiffness.estimation.settings import DISPLACEMENT_TYPE_PARAM, DISPLACEMENT_TYPES, ESTIMATOR_PARAMS
+    spec = {s.name: s for s in ESTIMATOR_PARAMS}
+    g = p.add_argument_group("topics and units (the stiffness_estimator node's remaps and parameters, same names "
+                             'and meanings; docs/recording.md)')
+    g.add_argument('--wrench-topic', metavar='TOPIC', default=topics.LOAD_CELL_WRENCH,
+                   help='the F/T sensor\'s geometry_msgs/WrenchStamped topic in the bag, wrench in N and N·m '
+                   '(live: -r %(default)s:=TOPIC; default %(default)s)')
+    g.add_argument('--displacement-topic', metavar='TOPIC', default=topics.LVDT_DISPLACEMENT,
+                   help='the displacement topic in the bag: PointStamped (point.x in m) or std_msgs/Float64 (in V) '
+                   '(live: -r %(default)s:=TOPIC; default %(default)s)')
+    g.add_argument('--displacement-type', choices=DISPLACEMENT_TYPES, default=None,
+                   help=f'{DISPLACEMENT_TYPE_PARAM.description}; a Float64 is taken at its log time in the bag, as the '
+                   "node takes it at its receipt (default: --params-file's, else the recorded message type's)")
+    for name, metavar in (('displacement_gain', 'M_PER_V'), ('displacement_offset', 'M')):
+        rule = spec[name].rule_text()
+        g.add_argument('--' + name.replace('_', '-'), type=float, metavar=metavar, default=None,
+                       help=f'{spec[name].description}{f" ({rule})" if rule else ""}; reading [m] = '
+                       'displacement_gain × volts + displacement_offset (default: --params-file\'s, else the '
+                       f'recorded parameter, else {spec[name].default:g})')
+    g.add_argument('--params-file', metavar='FILE', default=None,
+                   help='ROS parameter YAML (as ros2 run ... --params-file): its stiffness_estimator parameters '
+                   '(displacement_type, displacement_gain, pairing, ...) over the recorded ones, under these flags '
+                   '(a path, or a name in the installed config/)')
+    g.add_argument('--config', metavar='CRANE.yaml', default=None,
+                   help='ROS parameter YAML with geometry.* parameters [m, N, Pa] for the model, over the bag\'s '
+                   'recorded geometry (a bag without session metadata has none); a path, or a name in the installed '
+                   'config/, e.g. crane_lab')
+
+
 def add_commands(subparsers: Any) -> None:
     """Add ``analyze``, ``compare`` and ``recover`` to the ``crane-stiffness`` subparsers."""
     p = subparsers.add_parser('analyze', help='stiffness, test steps, model curves, figures and report of a '
                               'recorded session (bag); of a six-axis session (with /pose_sensor/pose) the 6x6 '
                               'stiffness and compliance with intervals, against the exact tangent and eq. (18)')
-    p.add_argument('bag', metavar='BAG', help='bag directory (or .mcap file) written by session_recorder')
+    p.add_argument('bag', metavar='BAG', help='bag directory (or .mcap file) written by session_recorder, or by '
+                   'ros2 bag record with the flags below')
     _add_output_options(p, 'out/analysis/<bag name>')
     p.add_argument('--settle', type=float, default=0.3, metavar='FRACTION',
                    help='part of each hold skipped before averaging (default 0.3)')
+    _add_mapping_options(p)
     p.set_defaults(func=_guarded(cmd_analyze))
     p = subparsers.add_parser('compare', help='sessions side by side: table and overlay figure')
     p.add_argument('bags', metavar='BAG', nargs='+', help='bag directories (or .mcap files)')
     _add_output_options(p, 'out/compare')
+    _add_mapping_options(p)
     p.set_defaults(func=_guarded(cmd_compare))
     p = subparsers.add_parser('recover', help='repair a bag left unfinished by a crash (SIGKILL, power loss) and '
                               'rewrite its metadata.yaml')

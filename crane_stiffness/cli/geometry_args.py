@@ -41,6 +41,13 @@ def add_geometry(p: argparse.ArgumentParser) -> None:
     g.add_argument('--l0', type=float, help='unstretched wire length instead of --height [m]')
 
 
+def config_geometry_params(config: str, node: str | None = None) -> dict[str, Any]:
+    """Every geometry.* parameter of a ROS parameter YAML (a path, or a name in the installed config/), those the
+    file does not set at their defaults: what ``--config`` reads, here and in ``analyze``/``compare``. Raises
+    ConfigError / GeometryError naming the file or the bad value."""
+    return geometry_to_params(geometry_from_params(load_params(config_path(config), node)))
+
+
 def geometry_from_args(args: argparse.Namespace) -> CraneGeometry:
     """The geometry the flags and --config describe, read as geometry parameters (params.geometry: the one reading of
     ``wire_stiffness`` 0). A flag beats --config; --wire-stiffness beats a diameter and modulus from --config, and
@@ -48,8 +55,7 @@ def geometry_from_args(args: argparse.Namespace) -> CraneGeometry:
     naming the bad value."""
     params: dict[str, Any] = {}
     if args.config:
-        # every geometry parameter, those the file does not set at their defaults
-        params = geometry_to_params(geometry_from_params(load_params(config_path(args.config), args.node)))
+        params = config_geometry_params(args.config, args.node)
     if args.lab_model:
         params.update({PREFIX + k: v for k, v in lab_model_fields().items()})
         params[PREFIX + 'wire_stiffness'] = 0.0

@@ -28,6 +28,17 @@ DELAY_MAX_LAG_S = 0.05
 #: every displacement sample with the force interpolated at its stamp, 'interpolate_displacement' the other way
 #: round (sync.InterpolatingSync: drivers at different rates, e.g. a 1 kHz F/T sensor and a 100 Hz Modbus LVDT).
 PAIRINGS = {'nearest': None, 'interpolate_force': FORCE, 'interpolate_displacement': DISPLACEMENT}
+#: The displacement messages the estimator takes (its ``displacement_type``) and the ROS type of each: a
+#: PointStamped (point.x in m, its header stamp the sample's instant) or a std_msgs/Float64 in volts (converted by
+#: :meth:`LiveSettings.volts_to_displacement`; without a stamp, its arrival stands in for the sample's instant: the
+#: node's receipt time live, the bag's log time offline).
+DISPLACEMENT_MSG_TYPES = {'point_stamped': 'geometry_msgs/msg/PointStamped', 'float64': 'std_msgs/msg/Float64'}
+DISPLACEMENT_TYPES = tuple(DISPLACEMENT_MSG_TYPES)
+#: The stiffness_estimator node's ``displacement_type`` (which message it subscribes the displacement as); the
+#: offline analysis's ``--displacement-type`` is the same choice.
+DISPLACEMENT_TYPE_PARAM = ParamSpec(
+    'displacement_type', 'point_stamped', "displacement message: 'point_stamped' (PointStamped, point.x in m, header "
+    "stamp) or 'float64' (Float64 in V, stamped on arrival) [-]", choices=DISPLACEMENT_TYPES)
 
 
 @dataclass(frozen=True)
@@ -191,7 +202,9 @@ class LiveSettings:
         return w[:, self.axis_index] if mount.is_identity else mount.component(w, self.axis_index)
 
     def volts_to_displacement(self, volts: Any) -> Any:
-        """Displacement, m (or rad), of a reading in volts (a float, or element-wise an array)."""
+        """Displacement reading, m (or rad), of a std_msgs/Float64 channel in volts (a float, or element-wise an
+        array): ``displacement_gain * volts + displacement_offset``. The one conversion: the live estimator
+        (LiveStiffness.add_volts) and ``analyze``/``compare`` (``--displacement-type float64``) both call it."""
         return self.displacement_gain * volts + self.displacement_offset
 
     def reading_to_displacement(self, reading: Any) -> Any:
@@ -267,4 +280,5 @@ def pairing_text(pairing: str, slop_s: float, max_interpolation_gap_s: float) ->
     return f'{pairing} across gaps up to max_interpolation_gap_s = {max_interpolation_gap_s:g} s'
 
 
-__all__ = ['BRANCH_SOURCES', 'ESTIMATOR_PARAMS', 'PAIRINGS', 'LiveSettings', 'noise_text', 'pairing_text']
+__all__ = ['BRANCH_SOURCES', 'DISPLACEMENT_MSG_TYPES', 'DISPLACEMENT_TYPES', 'DISPLACEMENT_TYPE_PARAM',
+           'ESTIMATOR_PARAMS', 'PAIRINGS', 'LiveSettings', 'noise_text', 'pairing_text']

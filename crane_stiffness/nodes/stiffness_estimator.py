@@ -55,7 +55,7 @@ from crane_stiffness.serde import CdrError, decode_float64, decode_stamped, stam
 from crane_stiffness.estimation.branch import BRANCHES
 from crane_stiffness.estimation.fit_lines import FIT_LINE_FIELDS
 from crane_stiffness.estimation.live import PAIR_FIELDS, VALUE_FIELDS, LiveStiffness
-from crane_stiffness.estimation.settings import ESTIMATOR_PARAMS, LiveSettings
+from crane_stiffness.estimation.settings import DISPLACEMENT_TYPE_PARAM, ESTIMATOR_PARAMS, LiveSettings
 from crane_stiffness.params.spec import ParamSpec
 from crane_stiffness.contract.status import wire_level
 from crane_stiffness.estimation.sync import DISPLACEMENT, FORCE
@@ -68,7 +68,6 @@ from crane_stiffness.rosnode.parameters import Params
 
 __all__ = ['VALUE_FIELDS', 'PARAMS', 'StiffnessEstimatorNode', 'main']
 
-DISPLACEMENT_TYPES = ('point_stamped', 'float64')
 # rclpy's SingleThreadedExecutor adds QoS-event handlers to every wait set for each publisher and subscription with
 # default callbacks (a few µs each per wait). The high-rate endpoints below go without: a best-effort volatile
 # subscription matches every publisher, and a reliable volatile publisher every volatile subscriber.
@@ -94,8 +93,7 @@ def _take_queued(subscription) -> tuple[Any, dict] | None:
 
 #: The node's parameters: the live estimator's settings (declared once, in estimation.settings), and the node's own.
 PARAMS = (
-    ParamSpec('displacement_type', 'point_stamped', "displacement message: 'point_stamped' (PointStamped, point.x "
-              "in m, header stamp) or 'float64' (Float64 in V, stamped on arrival) [-]", choices=DISPLACEMENT_TYPES),
+    DISPLACEMENT_TYPE_PARAM,
     *ESTIMATOR_PARAMS,
     ParamSpec('diagnostics_rate_hz', 5.0, 'rate of /stiffness/estimate and of the nonlinearity update [Hz]',
               above=0.0),

@@ -220,7 +220,7 @@ def share_dir() -> Path:
             share = Path(get_package_share_directory(PACKAGE))
             if (share / 'config').is_dir():
                 return share
-        except PackageNotFoundError:
+        except (PackageNotFoundError, OSError):  # OSError: no AMENT_PREFIX_PATH (not in a sourced ROS environment)
             pass
     except ImportError:  # offline analysis without ROS
         pass
