@@ -120,9 +120,11 @@ class Listener:
             self.seen[(topic, stamp)] = info['source_timestamp']
         return on_message
 
-    def take(self) -> dict[tuple[str, int], int]:
+    def take(self, since_ns: int) -> dict[tuple[str, int], int]:
+        """What was heard since the last take, written at or after ``since_ns`` (system time): a message of the
+        run before that a loaded machine delivered late has the same key and is left out."""
         out, self.seen = self.seen, {}
-        return out
+        return {k: t for k, t in out.items() if t >= since_ns}
 
     def close(self) -> None:
         self.ctx.try_shutdown()      # wakes the executor: spin() returns
@@ -198,11 +200,12 @@ def play_bag(bag: Path, offset: float, seconds: float, listener: Listener) -> di
             cmd = [str(Path(sys.prefix) / 'bin' / 'session_player'), '--ros-args', '-p', f'bag:={bag}',
                    '-p', f'start_offset_s:={offset}', '-p', f'topics_include:={json.dumps(list(TOPICS))}',
                    '-p', 'start_delay_s:=3.0']
+        started = time.time_ns()  # DDS source time stamps are system time
         run = subprocess.run(cmd, capture_output=True, text=True, timeout=seconds + 120, env=env)
         if run.returncode:
             raise SystemExit(f'{name} failed:\n{run.stdout}{run.stderr}')
         time.sleep(0.5)
-        results[name] = timing(expected, listener.take())
+        results[name] = timing(expected, listener.take(started))
     return results
 
 

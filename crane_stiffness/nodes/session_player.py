@@ -18,9 +18,11 @@ Services (std_srvs/Trigger): ~/start (start, resume after pause, restart when fi
 
 A ``start_offset_s`` past the end of the bag is an error naming the offset and the bag's duration: at start-up the
 node exits with status 2, ~/start answers failure. Counters (FINAL_COUNTERS, /diagnostics) account for every message
-read from the bag: ``read = published + skipped_*`` (``skipped_stopped``: read, then the playback was stopped before
-its time; ``skipped_publish_error``: the publish raised). Only message types the ament index lists as interfaces are
-played (session_qos.message_class); a bag naming another type gets a warning naming it, and that topic is not played.
+read from the bag: ``read = published + skipped_*`` (``read``: taken from the read-ahead buffer to be played; what
+the buffer held when the playback stopped is not counted; ``skipped_stopped``: read, then the playback was stopped
+before its time; ``skipped_publish_error``: the publish raised). Only message types the ament index lists as
+interfaces are played (session_qos.message_class); a bag naming another type gets a warning naming it, and that
+topic is not played.
 """
 from __future__ import annotations
 

@@ -433,9 +433,10 @@ class SessionRecorder(Node):
 
     def _take(self, channel: _Channel, data: bytes, now_ns: int) -> None:
         """A message received at clock time ``now_ns``: written (wall clock), or held with its log time until its
-        simulated time is complete (simulated time)."""
+        simulated time is complete (simulated time). Simulated time from a /clock without the lock-step's watermarks
+        (a player's or a simulator's clock: no watermark ever heard) is logged at receipt, as on the wall clock."""
         stamp = header_stamp_ns(data) if channel.stamped else None
-        if self.log_times is None:
+        if self.log_times is None or self.sim.watermark_ns < 0:
             self._write(channel, data, now_ns, stamp)
         else:
             self.log_times.hold(channel.topic, stamp, now_ns, (channel, data, stamp))
