@@ -1,13 +1,14 @@
 """session_player: republishes a recorded session (a rosbag2 MCAP bag) with its original timing.
 
-Reads ``bag`` with crane_stiffness.bag.BagReader (a damaged bag plays its readable part, with a warning) and publishes
-each message's serialized bytes as recorded (no deserialization) at ``log time / rate`` after the start, on a
-thread of its own, with the QoS recorded in the bag (reliable / transient local only where every recorded publisher
-was; see session_qos.playback_qos). Topics: ``topics_include`` (empty = all) minus ``topics_exclude``, both lists of
-names or fnmatch patterns; ``remap`` renames topics ('from:=to' strings), and ordinary ROS remapping
-(``--ros-args -r /a:=/b``) also applies to the player's publishers. ``start_offset_s`` skips the start of the bag;
-``loop`` plays it again and again. With ``publish_clock`` the bag's log time is published on /clock
-(rosgraph_msgs/Clock) at ``clock_rate_hz``, so other nodes can run with use_sim_time.
+Reads ``bag`` with crane_stiffness.bag.BagReader (a damaged bag plays its readable part, with a warning) and
+publishes each message's serialized bytes as recorded (no deserialization) at ``log time / rate`` after the start,
+on a thread of its own (the bag read ahead on another, the garbage collector kept off the objects of before the
+playback: crane_stiffness.rosnode.replay_timing), with the QoS recorded in the bag (reliable / transient local only
+where every recorded publisher was; see session_qos.playback_qos). Topics: ``topics_include`` (empty = all) minus
+``topics_exclude``, both lists of names or fnmatch patterns; ``remap`` renames topics ('from:=to' strings), and
+ordinary ROS remapping (``--ros-args -r /a:=/b``) also applies to the player's publishers. ``start_offset_s`` skips
+the start of the bag; ``loop`` plays it again and again. With ``publish_clock`` the bag's log time is published on
+/clock (rosgraph_msgs/Clock) at ``clock_rate_hz``, so other nodes can run with use_sim_time.
 
 Stamps are not rewritten: the rig's estimator pairs and fits by header stamp, so a replay reproduces the live
 estimates whatever the timing jitter of the replay.
@@ -17,9 +18,11 @@ Services (std_srvs/Trigger): ~/start (start, resume after pause, restart when fi
 
 A ``start_offset_s`` past the end of the bag is an error naming the offset and the bag's duration: at start-up the
 node exits with status 2, ~/start answers failure. Counters (FINAL_COUNTERS, /diagnostics) account for every message
-read from the bag: ``read = published + skipped_*`` (``skipped_stopped``: read, then the playback was stopped before
-its time; ``skipped_publish_error``: the publish raised). Only message types the ament index lists as interfaces are
-played (session_qos.message_class); a bag naming another type gets a warning naming it, and that topic is not played.
+read from the bag: ``read = published + skipped_*`` (``read``: taken from the read-ahead buffer to be played; what
+the buffer held when the playback stopped is not counted; ``skipped_stopped``: read, then the playback was stopped
+before its time; ``skipped_publish_error``: the publish raised). Only message types the ament index lists as
+interfaces are played (session_qos.message_class); a bag naming another type gets a warning naming it, and that
+topic is not played.
 """
 from __future__ import annotations
 
@@ -40,12 +43,14 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from std_srvs.srv import Trigger
 
-from crane_stiffness.bag import BagReader
+from crane_stiffness.bag import BagReader, RawMessage
 from crane_stiffness.bag.errors import BagDamageWarning, BagError
 from crane_stiffness.params.spec import ParamSpec
 from crane_stiffness.rosnode.diagnostics import Diagnostics
 from crane_stiffness.rosnode.run import run
 from crane_stiffness.rosnode.parameters import Params, check, positive, valid_topic_name
+from crane_stiffness.rosnode import replay_timing
+from crane_stiffness.rosnode.replay_timing import ReadAhead, fine_timer_slack, quiet_interpreter
 from crane_stiffness.rosnode.session_qos import message_class, playback_qos
 from crane_stiffness.serde.stamps import split_ns
 from crane_stiffness.contract.status import ERROR, OK, WARN
@@ -125,10 +130,14 @@ class _Playback(threading.Thread):
         self.error: BaseException | None = None
         self.finished = False
         self.pending = False  # a message read but not yet published (counted as skipped if the playback stops)
+        self.base_ns = 0  # the bag time the playback starts at [ns]
+        self.last_clock: int | None = None  # when /clock was last published (monotonic ns)
 
     def run(self) -> None:
         try:
-            self._play()
+            fine_timer_slack()
+            with quiet_interpreter():
+                self._play()
             self.finished = not self.stop_event.is_set()
         except BaseException as exc:  # reported by the node; the thread must not die silently
             self.error = exc
@@ -148,52 +157,86 @@ class _Playback(threading.Thread):
         start = self.reader.start_ns
         if start is None:
             return
-        base_ns = start + self.offset_ns
+        base_ns = self.base_ns = start + self.offset_ns
         topics = list(self.publishers)
-        stats = self.player.stats
         while not self.stop_event.is_set():
-            wall0 = None
-            last_clock = None
-            for msg in self.reader.messages(topics, start_ns=base_ns):
-                if wall0 is None:  # the clock starts once the first chunk is read: its read made the start late
-                    wall0 = time.monotonic_ns()
-                stats['read'] += 1
-                self.pending = True
-                due = wall0 + int((msg.log_time_ns - base_ns) / self.rate)
-                while True:
-                    if self.stop_event.is_set():
-                        return
-                    if not self.resume_event.is_set():
-                        paused_at = time.monotonic_ns()
-                        while not self.resume_event.wait(0.05):
-                            if self.stop_event.is_set():
-                                return
-                        shift = time.monotonic_ns() - paused_at
-                        wall0 += shift
-                        due += shift
-                    now = time.monotonic_ns()
-                    if self.clock_pub is not None and (last_clock is None or now - last_clock >= self.clock_period_ns):
-                        self._publish_clock(base_ns + min(msg.log_time_ns - base_ns, (now - wall0) * self.rate))
-                        last_clock = now
-                    wait = due - now
-                    if wait <= 0:
-                        break
-                    time.sleep(min(wait, self.clock_period_ns if self.clock_pub is not None else wait,
-                                   50_000_000) / 1e9)
-                self.pending = False
-                try:
-                    self.publishers[msg.topic].publish(msg.data)
-                except BaseException:
-                    stats['skipped_publish_error'] += 1
-                    raise
-                late = time.monotonic_ns() - due
-                stats['published'] += 1
-                stats['max_late_ms'] = max(stats['max_late_ms'], late / 1e6)
-                stats['bag_time_ns'] = msg.log_time_ns
-            stats['loops'] += 1
+            ahead = ReadAhead(self.reader.messages(topics, start_ns=base_ns), replay_timing.READ_AHEAD_HIGH,
+                              replay_timing.READ_AHEAD_LOW, name='session_player_read')
+            try:
+                if not self._play_once(ahead, base_ns):
+                    return
+            finally:
+                ahead.close()  # before the reader can be closed
+            self.player.stats['loops'] += 1
             if not self.loop:
-                self._publish_clock(stats.get('bag_time_ns') or base_ns)
+                self._publish_clock(self.player.stats.get('bag_time_ns') or base_ns)
                 return
+
+    def _play_once(self, ahead: ReadAhead[RawMessage], base_ns: int) -> bool:
+        """Publish the messages of ``ahead`` at their times; False when stopped."""
+        stats = self.player.stats
+        while not ahead.wait_filled(0.05):  # the clock starts once the buffer is full: the reads at the start do not
+            if self.stop_event.is_set():    # make the first messages late
+                return False
+        wall0 = time.monotonic_ns()
+        self.last_clock = None
+        while True:
+            try:
+                got, msg = ahead.take(0.05)
+            except StopIteration:
+                return True
+            if self.stop_event.is_set():
+                if got:
+                    stats['read'] += 1
+                    stats['skipped_stopped'] += 1
+                return False
+            if msg is None:  # the read-ahead is behind (a busy machine): this message will be late
+                continue
+            stats['read'] += 1
+            self.pending = True
+            due = wall0 + int((msg.log_time_ns - base_ns) / self.rate)
+            shift = self._wait_until(due, msg.log_time_ns - base_ns, wall0)
+            if shift is None:
+                return False
+            wall0 += shift
+            due += shift
+            self.pending = False
+            try:
+                self.publishers[msg.topic].publish(msg.data)
+            except BaseException:
+                stats['skipped_publish_error'] += 1
+                raise
+            late = time.monotonic_ns() - due
+            stats['published'] += 1
+            if late > stats['max_late_ms'] * 1e6:
+                stats['max_late_ms'] = late / 1e6
+            stats['bag_time_ns'] = msg.log_time_ns
+
+    def _wait_until(self, due: int, bag_rel_ns: int, wall0: int) -> int | None:
+        """Sleep until monotonic time ``due`` [ns] (publishing /clock meanwhile, holding while paused); returns how
+        far a pause moved the schedule [ns], or None when stopped."""
+        shift = 0
+        while True:
+            if self.stop_event.is_set():
+                return None
+            if not self.resume_event.is_set():
+                paused_at = time.monotonic_ns()
+                while not self.resume_event.wait(0.05):
+                    if self.stop_event.is_set():
+                        return None
+                moved = time.monotonic_ns() - paused_at
+                shift += moved
+                wall0 += moved
+                due += moved
+            now = time.monotonic_ns()
+            if self.clock_pub is not None and (self.last_clock is None
+                                               or now - self.last_clock >= self.clock_period_ns):
+                self._publish_clock(self.base_ns + min(bag_rel_ns, (now - wall0) * self.rate))
+                self.last_clock = now
+            wait = due - now
+            if wait <= 0:
+                return shift
+            time.sleep(min(wait, self.clock_period_ns if self.clock_pub is not None else wait, 50_000_000) / 1e9)
 
 
 class SessionPlayer(Node):

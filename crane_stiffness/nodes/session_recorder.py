@@ -6,7 +6,10 @@ deserialization), each with the QoS that matches its publishers (sensor streams 
 local, the rest reliable; topics outside the contract adapt to the publishers in the graph), and writes them with
 crane_stiffness.bag.BagWriter to ``<output_dir>/<session>/`` (metadata.yaml + ``<session>_<n>.mcap``, chunked,
 zstd by default, optionally split). Per message: log time = receive time (node clock), publish time = the header
-stamp for stamped types, else the receive time. Each channel carries its publishers' offered QoS (YAML).
+stamp for stamped types, else the log time. Each channel carries its publishers' offered QoS (YAML). On simulated
+time the streams the lock-step counts (``SIM_INPUTS``) are logged at their header stamps, the rest at the clock time,
+each message held until its simulated time is complete and written in log-time order (crane_stiffness.sim.log_times:
+the bag keeps each stream's pacing for a player, and the same log times in every run).
 
 The session is described in the MCAP metadata record ``crane_stiffness/session``: rig geometry (every geometry.*
 parameter, the same crane YAML the model reads) with the derived l0 and k, the test program (the recorder's own
@@ -76,6 +79,7 @@ from crane_stiffness.params.files import params_files_from_args, read_params_fil
 from crane_stiffness.serde import header_stamp_ns
 from crane_stiffness.bag.session_metadata import (NODE_PARAMETERS_METADATA, SESSION_END_METADATA, SESSION_METADATA,
                                             session_record)
+from crane_stiffness.sim.log_times import SimLogTimes
 from crane_stiffness.sim.program import PROGRAM_KEYS
 from crane_stiffness.contract.status import ERROR, OK
 
@@ -116,6 +120,9 @@ class SessionRecorder(Node):
         # this node (stage 3), so nothing published is lost at any load.
         self.sim_time = uses_sim_time(self)
         self.before_time: list[tuple[_Channel, bytes]] = []  # received on simulated time before it started
+        # Simulated time: the messages held until their simulated time is complete, with their log times (per
+        # recording; None on the wall clock)
+        self.log_times: SimLogTimes[tuple[_Channel, bytes, int | None]] | None = None
         self.writer: BagWriter | None = None
         self.bag_path: Path | None = None
         self.channels: dict[str, _Channel] = {}
@@ -194,6 +201,7 @@ class SessionRecorder(Node):
             flush_interval_s=float(p['flush_interval_s']) or None, fsync=bool(p['fsync']),
             custom_data={'session': path.name, 'software_version': __version__})
         self.bag_path = path
+        self.log_times = SimLogTimes(self.sim.inputs) if self.sim.active else None
         self.recordings += 1
         self.write_failure = None
         self.program_ran = False
@@ -218,9 +226,10 @@ class SessionRecorder(Node):
 
     def stop(self, reason: str = 'service') -> tuple[Path | None, int]:
         """Close the bag (metadata.yaml written), unsubscribe; returns (bag directory, messages written)."""
+        if self.writer is not None:  # (outside the lock: a write error in them stops the recording itself)
+            self._write_before_time(self.get_clock().now().nanoseconds)  # time never started: logged at 0, not lost
+            self._release(None)  # simulated time: what is held, in log-time order
         with self._lock:
-            if self.writer is not None:  # time never started: what came is logged at 0 rather than lost
-                self._write_before_time(self.get_clock().now().nanoseconds)
             writer, self.writer = self.writer, None
             if writer is None:
                 return self.last_bag, self.last_count
@@ -326,7 +335,16 @@ class SessionRecorder(Node):
         if self.writer is None:
             self.sim.leave()
             return
+        self._release(t_ns)
         self.sim.report(t_ns)
+
+    def _release(self, t_ns: int | None) -> None:
+        """Simulated time: write the messages held with log times up to ``t_ns`` (None: all), in log-time order."""
+        log_times = self.log_times
+        if log_times is None:
+            return
+        for log_ns, (channel, data, stamp) in log_times.release_all() if t_ns is None else log_times.release(t_ns):
+            self._write(channel, data, log_ns, stamp)
 
     def _drain_channels(self) -> None:
         for channel in list(self.channels.values()):
@@ -405,15 +423,25 @@ class SessionRecorder(Node):
             self.before_time.append((channel, data))
             return
         self._write_before_time(now_ns)
-        self._write(channel, data, now_ns)
+        self._take(channel, data, now_ns)
 
     def _write_before_time(self, now_ns: int) -> None:
         """The messages received before simulated time started, logged at ``now_ns``, in the order received."""
         held, self.before_time = self.before_time, []
         for channel, data in held:
-            self._write(channel, data, now_ns)
+            self._take(channel, data, now_ns)
 
-    def _write(self, channel: _Channel, data: bytes, now_ns: int) -> None:
+    def _take(self, channel: _Channel, data: bytes, now_ns: int) -> None:
+        """A message received at clock time ``now_ns``: written (wall clock), or held with its log time until its
+        simulated time is complete (simulated time). Simulated time from a /clock without the lock-step's watermarks
+        (a player's or a simulator's clock: no watermark ever heard) is logged at receipt, as on the wall clock."""
+        stamp = header_stamp_ns(data) if channel.stamped else None
+        if self.log_times is None or self.sim.watermark_ns < 0:
+            self._write(channel, data, now_ns, stamp)
+        else:
+            self.log_times.hold(channel.topic, stamp, now_ns, (channel, data, stamp))
+
+    def _write(self, channel: _Channel, data: bytes, log_ns: int, stamp: int | None) -> None:
         writer = self.writer
         if writer is None:  # closed meanwhile (stop() from another thread)
             self.dropped['not_recording'] += 1
@@ -423,8 +451,7 @@ class SessionRecorder(Node):
                 offered = offered_profiles(self, channel.topic, fallback=channel.qos)
                 writer.add_topic(channel.topic, channel.msg_type, dump_qos_profiles(offered))
                 channel.added = True
-            stamp = header_stamp_ns(data) if channel.stamped else None
-            writer.write(channel.topic, data, now_ns, stamp if stamp is not None else now_ns)
+            writer.write(channel.topic, data, log_ns, stamp if stamp is not None else log_ns)
         except BagWriteFailedError as exc:
             self._write_failed(exc)  # closes the bag as far as the disk allows: what is on disk is known after it
             if writer.failed_write_on_disk or writer.failed_write_counted:

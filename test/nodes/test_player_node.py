@@ -34,6 +34,7 @@ from crane_stiffness.nodes.load_cell import LoadCell
 from crane_stiffness.nodes.load_program import LoadProgramNode
 from crane_stiffness.nodes.lvdt import Lvdt
 from crane_stiffness.nodes.session_player import SessionPlayer
+from crane_stiffness.rosnode import replay_timing
 from crane_stiffness.nodes.session_recorder import SessionRecorder
 from crane_stiffness.nodes.sim_clock import PARAMS as SIM_CLOCK_PARAMS, SimClock
 from crane_stiffness.nodes.stiffness_estimator import StiffnessEstimatorNode
@@ -127,6 +128,40 @@ def test_replay_timing_rate_and_offset(rclpy_context, small_bag):
         assert player.stats['published'] == 101 - first
         ex.remove_node(player)
         player.destroy_node()
+    ex.shutdown()
+
+
+def test_every_message_in_order_through_the_read_ahead(rclpy_context, tmp_path, monkeypatch):
+    """Ten times the messages the read-ahead buffer holds (made small here), in many chunks: each one replayed, in
+    order, as recorded."""
+    monkeypatch.setattr(replay_timing, 'READ_AHEAD_HIGH', 100)
+    monkeypatch.setattr(replay_timing, 'READ_AHEAD_LOW', 50)
+    n = 1000
+    bag = tmp_path / 'long'
+    sent = []
+    with BagWriter(bag, chunk_size=4_000) as w:
+        w.add_topic('/long', 'geometry_msgs/msg/WrenchStamped',
+                    dump_qos_profiles([qos_profile(reliability='reliable', depth=n)]))
+        for i in range(n):
+            log = T0 + i * 2_000_000  # 500 Hz
+            m = WrenchStamped()
+            m.header.stamp.sec, m.header.stamp.nanosec = divmod(log, NS)
+            m.wrench.force.x, m.wrench.torque.z = float(i), -0.5 * i
+            sent.append(serialize_message(m))
+            w.write('/long', sent[-1], log, log)
+    ctx = rclpy_context
+    ex = SingleThreadedExecutor(context=ctx)
+    sink = Sink(ctx)
+    got: list[bytes] = []
+    sink.node.create_subscription(WrenchStamped, '/long', got.append,
+                                  QoSProfile(depth=n, reliability=ReliabilityPolicy.RELIABLE), raw=True)
+    ex.add_node(sink.node)
+    player = make_player(ctx, bag, rate=2.0)
+    ex.add_node(player)
+    play(ex, player, timeout=60)
+    assert spin_until(ex, lambda: len(got) >= n, 20), len(got)
+    assert got == sent  # every message, in order, byte for byte
+    assert player.stats['read'] == player.stats['published'] == n
     ex.shutdown()
 
 
@@ -267,6 +302,13 @@ def test_replay_through_the_estimator_reproduces_the_live_estimates(rclpy_contex
         counts = {t: i.count for t, i in reader.topics.items()}
         nodes = {k: json.loads(v) for k, v in reader.metadata_records()[NODE_PARAMETERS_METADATA].items()}
         live = [decode_float64_multiarray(m.data)[1] for m in reader.messages([topics.STIFFNESS_VALUES])]
+        sensors = {t: reader.decode(t) for t in (topics.LOAD_CELL_WRENCH, topics.LVDT_DISPLACEMENT)}
+    # On simulated time the sensor streams are logged at their stamps: one log time per sample, 10 ms apart at
+    # 100 Hz (not one per 50 ms clock step), so a player replays them at their pace.
+    for topic, rows in sensors.items():
+        stamp_ns = rows['stamp_sec'].astype(np.int64) * NS + rows['stamp_nanosec'].astype(np.int64)
+        assert np.array_equal(rows['log_time_ns'], stamp_ns), topic
+        assert set(np.diff(rows['log_time_ns']).tolist()) == {10_000_000}, topic
     # about one estimate per sensor buffer (20 Hz) while pairs come in: the estimator publishes once per batch
     assert counts[topics.LOAD_CELL_WRENCH] > 250 and counts[topics.STIFFNESS_VALUES] > 50
     # the recorder read the nodes' parameters as they ran (the estimator's window was not in any file)

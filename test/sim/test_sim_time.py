@@ -1,6 +1,7 @@
 """Simulated time: the lockstep clock's rules (pure), and the rig on simulated time giving the same recorded sensor
 streams, stamp for stamp and value for value, at real-time factor 1 on a quiet machine and as fast as it goes beside
-two busy processes, with nothing lost."""
+two busy processes, with nothing lost; the sensor streams logged at their stamps (their pacing kept for a player, the
+same log times in every run) and every file in log-time order."""
 from __future__ import annotations
 
 import glob
@@ -72,13 +73,19 @@ def test_bad_settings_are_refused_naming_the_field(bad):
         LockstepClock(**{**args, **bad})
 
 
-def _streams(bag: Path) -> dict[str, list[tuple[int, bytes]]]:
-    """Each stream's (header stamp as publish time, serialized message) as the mcap package reads the bag."""
-    out: dict[str, list[tuple[int, bytes]]] = {}
+def _streams(bag: Path) -> dict[str, list[tuple[int, int, bytes]]]:
+    """Each stream's (header stamp as publish time, log time, serialized message) as the mcap package reads the bag
+    in file order; asserts that every file's log times (all topics) never go back."""
+    out: dict[str, list[tuple[int, int, bytes]]] = {}
     for path in sorted(glob.glob(str(bag / '*.mcap'))):
         with open(path, 'rb') as f:
-            for _, channel, message in make_reader(f).iter_messages(topics=list(STREAMS)):
-                out.setdefault(channel.topic, []).append((message.publish_time, bytes(message.data)))
+            logs = []
+            for _, channel, message in make_reader(f).iter_messages(log_time_order=False):
+                logs.append(message.log_time)
+                if channel.topic in STREAMS:
+                    out.setdefault(channel.topic, []).append(
+                        (message.publish_time, message.log_time, bytes(message.data)))
+        assert logs == sorted(logs), path
     return out
 
 
@@ -111,12 +118,16 @@ def test_the_same_streams_at_any_speed_and_load(install_tree, tmp_path):
     a, b = _streams(tmp_path / 'quiet' / 'bags' / 's'), _streams(tmp_path / 'busy' / 'bags' / 's')
     for topic in STREAMS:
         end = min(a[topic][-1][0], b[topic][-1][0])  # the runs stop at different simulated times after the program
-        common_a = [m for m in a[topic] if m[0] <= end]
-        common_b = [m for m in b[topic] if m[0] <= end]
+        common_a = [(stamp, data) for stamp, _, data in a[topic] if stamp <= end]
+        common_b = [(stamp, data) for stamp, _, data in b[topic] if stamp <= end]
         assert len(common_a) > 10 and common_a == common_b, topic
     # Every sample of the program (5.3 s at 1 kHz, after 0.5 s at rest) is there, on its 1 ms grid.
-    stamps = [t for t, _ in a['/load_cell/wrench']]
+    stamps = [t for t, _, _ in a['/load_cell/wrench']]
     assert len(stamps) >= 5800 and all(t2 - t1 == MS for t1, t2 in zip(stamps, stamps[1:]))
+    # The sensor streams logged at their stamps in both runs (so the same log times): distinct log times keeping
+    # the stream's 1 ms period, not one per 50 ms clock step.
+    for topic in ('/load_cell/wrench', '/lvdt/displacement'):
+        assert all(log == stamp for stamp, log, _ in a[topic] + b[topic]), topic
 
 
 @pytest.mark.ros

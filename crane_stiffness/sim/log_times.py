@@ -1,0 +1,91 @@
+"""Log times of a recording on simulated time that keep each stream's pacing, the same in every run (pure, no ROS).
+
+On simulated time the clock moves in steps (``step_s``, 50 ms): a recorder that logged each message at the clock time
+it received it at would give a 1 kHz stream 20 distinct log times a second, and every player (``session_player``,
+``ros2 bag play``, Foxglove) would play it as bursts of 50. Instead the recorder gives each message a log time here:
+
+- A message of a *paced* topic (one the lock-step counts: the load program's commands, the model's outputs, the
+  sensor streams; ``SIM_INPUTS`` of the recorder) with a header stamp later than the last released watermark is
+  logged at its header stamp. The lock-step guarantees that every such message stamped up to a watermark is in before
+  the recorder acts on that watermark, so its stamp lies in the step being recorded, and the log time is the same in
+  every run at any speed and load.
+- Any other message (``/clock``, the estimator's outputs, status, a message without a stamp) is logged at the
+  recorder's clock time, but never before the last released watermark.
+- Within a topic a log time never goes back (a stamp earlier than the topic's last log time is logged at that
+  time): the messages of a topic keep the order they were received in.
+
+Messages are held until a watermark at or past their log time is released (:meth:`SimLogTimes.release`): then they go
+to the file sorted by (log time, topic, order received), so the log times in a file never decrease (its chunks'
+start and end times and message indexes in order, as readers expect), whatever order the middleware delivered the
+topics in. A message logged at or before a released watermark can no longer arrive on a paced topic (the lock-step's
+rule), and any other is logged at the watermark or later, so nothing released is ever followed by an earlier log
+time. :meth:`release_all` hands over what is held when the recording stops.
+
+Times are integer nanoseconds of simulated time.
+"""
+from __future__ import annotations
+
+import itertools
+from collections.abc import Collection
+from typing import Generic, TypeVar
+
+Item = TypeVar('Item')
+
+
+class SimLogTimes(Generic[Item]):
+    """Log times for messages recorded on simulated time, and the order they are written in (module docstring).
+
+    Args:
+        paced: Topics logged at their header stamp (resolved names): those whose messages the lock-step counts.
+    """
+
+    def __init__(self, paced: Collection[str]) -> None:
+        self.paced = frozenset(paced)
+        self.released_ns = -1                 #: the last watermark released: nothing is logged before it any more
+        self._last: dict[str, int] = {}       # the last log time per topic
+        self._held: list[tuple[int, str, int, Item]] = []
+        self._order = itertools.count()
+
+    def log_time(self, topic: str, stamp_ns: int | None, now_ns: int) -> int:
+        """The log time of a message of ``topic`` with header stamp ``stamp_ns`` (None: no stamp) received at clock
+        time ``now_ns`` [ns]."""
+        if topic in self.paced and stamp_ns is not None and stamp_ns > self.released_ns:
+            t = stamp_ns
+        else:
+            t = max(now_ns, self.released_ns)
+        last = self._last.get(topic)
+        if last is not None and t < last:
+            t = last
+        self._last[topic] = t
+        return t
+
+    def hold(self, topic: str, stamp_ns: int | None, now_ns: int, item: Item) -> int:
+        """Hold ``item`` (a message of ``topic``) until its log time is released; returns the log time."""
+        t = self.log_time(topic, stamp_ns, now_ns)
+        self._held.append((t, topic, next(self._order), item))
+        return t
+
+    @property
+    def held(self) -> int:
+        """Messages held."""
+        return len(self._held)
+
+    def release(self, watermark_ns: int) -> list[tuple[int, Item]]:
+        """(log time, item) of the messages logged at or before ``watermark_ns``, in the order to write them: by log
+        time, then topic name, then the order received. Nothing later is logged at or before ``watermark_ns``."""
+        if watermark_ns > self.released_ns:
+            self.released_ns = watermark_ns
+        ready = [h for h in self._held if h[0] <= watermark_ns]
+        if not ready:
+            return []
+        self._held = [h for h in self._held if h[0] > watermark_ns]
+        ready.sort(key=lambda h: (h[0], h[1], h[2]))
+        return [(t, item) for t, _, _, item in ready]
+
+    def release_all(self) -> list[tuple[int, Item]]:
+        """Everything held, in the order to write it (the recording stops)."""
+        ready = sorted(self._held, key=lambda h: (h[0], h[1], h[2]))
+        self._held = []
+        if ready:
+            self.released_ns = max(self.released_ns, ready[-1][0])
+        return [(t, item) for t, _, _, item in ready]
