@@ -475,7 +475,8 @@ class LiveStiffness:
         if delay_problem:
             level = max(level, WARN)
             reasons.append(delay_problem)
-        axis_problem = self._command_range.problem(s.force_axis)
+        # (combined loading is what a six-axis program does: no problem there)
+        axis_problem = '' if s.six_axis_program else self._command_range.problem(s.force_axis)
         if axis_problem:
             level = max(level, WARN)
             reasons.append(axis_problem)
