@@ -1,12 +1,13 @@
 """CPU budget: what `make demo` costs the machine. The demo's rig (every node its own process, the side-force program
 on simulated time at real-time factor 1, the recorder and the live view) is run twice in one run: first with nobody
-watching (the baseline), then with the page open in headless Chromium.
+watching (the baseline), then with the page open in headless Chromium. ``--program full6``: the six-axis run (its
+page leads with the 6×6), the same way.
 
 Reports, over the program (from its start to its end), the CPU time (user + system, /proc) of the rig's processes and
 of Chromium's process tree, each as a fraction of one core, and the rig's cost with the page against the baseline.
 Targets: the rig ≤ 1 core, the page in Chromium ≤ 15 % of a core. Exits 1 when a target is missed.
 
-Run: .venv/bin/python benchmarks/bench_cpu.py [--json out.json]   (needs `chromium` on PATH)
+Run: .venv/bin/python benchmarks/bench_cpu.py [--program full6] [--json out.json]   (needs `chromium` on PATH)
 """
 from __future__ import annotations
 
@@ -55,7 +56,7 @@ def tree_cpu_s(roots: list[int]) -> float:
     return total / TICK
 
 
-def run(env: dict, share: Path, ws: Path, page: bool) -> dict:
+def run(env: dict, share: Path, ws: Path, page: bool, program_name: str = 'side_force') -> dict:
     """One demo run; CPU fractions of one core over the program."""
     import rclpy
 
@@ -70,7 +71,7 @@ def run(env: dict, share: Path, ws: Path, page: bool) -> dict:
         with rosrun.Processes(env, ws / 'logs') as procs:
             view = {'port': free_port(), 'http_port': free_port()}
             session = f'bench_cpu_{"page" if page else "baseline"}_{time.strftime("%Y%m%dT%H%M%S")}'
-            program = start_rig(procs, share, 'side_force', session,
+            program = start_rig(procs, share, program_name, session,
                                 ws / 'bags', live_view=True, overrides={'live_view': view},
                                 arguments={'use_sim_time': 'true', 'real_time_factor': '1.0'})
             deadline = time.monotonic() + 60
@@ -112,12 +113,14 @@ def run(env: dict, share: Path, ws: Path, page: bool) -> dict:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     ap.add_argument('--json', help='write the figures here')
+    ap.add_argument('--program', default='side_force', help="the program played (config/program_<name>.yaml)")
     args = ap.parse_args(argv)
     from crane_stiffness.launcher import rosrun
     ws = REPO / 'out' / 'bench_cpu'
     env, share = rosrun.build_workspace(REPO, ws)
-    base = run(env, share, ws, page=False)
-    watched = run(env, share, ws, page=True)
+    base = run(env, share, ws, page=False, program_name=args.program)
+    watched = run(env, share, ws, page=True, program_name=args.program)
+    print(f'program {args.program}')
     for r in (base, watched):
         print(f"--- {'page open' if r['page'] else 'baseline '}: the rig's {r['nodes']} processes "
               f"{100 * r['rig_cores']:.0f} % of a core, Chromium {100 * r['chromium_cores']:.1f} % "

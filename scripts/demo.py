@@ -208,8 +208,10 @@ def report6(share: Path, args: argparse.Namespace, session: str, observer, codes
     from crane_stiffness.launcher.rig import config_files
     from crane_stiffness.launcher.summary6 import summarize6, verdict6
     summary = summarize6(config_files(share, args.program)['crane'], observer.stiffness6, observer.status6)
+    # The one-axis estimator runs beside the 6x6 fit (its pairs are recorded); its statuses say it does not apply.
+    one_axis = {part: {'level': level, 'message': message} for part, (level, message) in observer.statuses.items()}
     summary.update(program=args.program, seed=args.seed, node_exit_codes=codes,
-                   bag=str(Path(args.bags) / session))
+                   bag=str(Path(args.bags) / session), one_axis_estimator=one_axis)
     (out / 'summary.json').write_text(json.dumps(summary, indent=1))
     status = summary['status'] or {'level': 'NONE', 'message': 'no status received'}
     if summary['stiffness'] is not None:
@@ -226,6 +228,8 @@ def report6(share: Path, args: argparse.Namespace, session: str, observer, codes
               f"{summary['covered']} of 36 intervals cover the tangent's entry")
     message = status['message']
     print(f"  6x6 status {message if message.startswith(status['level']) else status['level'] + ': ' + message}")
+    loading = one_axis.get('loading', {'level': 'NONE', 'message': 'no status received'})
+    print(f"  one-axis estimator {loading['level']}: {loading['message']}")
     print(f"  summary -> {out / 'summary.json'}; session recorded: {summary['bag']}")
     why = verdict6(summary)
     if why:

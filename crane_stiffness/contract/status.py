@@ -10,6 +10,9 @@ What each means to the people at the rig:
 - OK, WARN, ERROR: as diagnostic_msgs means them.
 - STALE: data that was flowing stopped (a silent sensor): the numbers shown are frozen.
 
+A part that does not apply to the run (the one-axis estimate in a six-axis program) is no level of its own: it is
+OK with a message that starts with :data:`NOT_APPLICABLE_PREFIX` and says where the run's result is.
+
 The overall status of several parts (:func:`overall`) is the worst of them in the order WAITING < OK < WARN < ERROR <
 STALE: a part that waits never makes it worse than the parts that are running, and it reads WAITING only when every
 part waits.
@@ -25,6 +28,9 @@ WAITING = -1
 NAMES = {WAITING: 'WAITING', OK: 'OK', WARN: 'WARN', ERROR: 'ERROR', STALE: 'STALE'}
 #: How the message of a WAITING status starts, on the wire and for people.
 WAITING_PREFIX = 'waiting: '
+#: How the message of a status starts whose part does not apply to the run (the one-axis fit of a six-axis
+#: program): level OK, nothing wrong and nothing to stand by; the message says where to look instead.
+NOT_APPLICABLE_PREFIX = 'not applicable: '
 
 
 def wire_level(level: int) -> int:
@@ -48,5 +54,5 @@ def status_value(value: float) -> str:
     return f'{value:.6g}'
 
 
-__all__ = ['ERROR', 'NAMES', 'OK', 'STALE', 'WAITING', 'WAITING_PREFIX', 'WARN', 'overall', 'read_level',
-           'status_value', 'wire_level']
+__all__ = ['ERROR', 'NAMES', 'NOT_APPLICABLE_PREFIX', 'OK', 'STALE', 'WAITING', 'WAITING_PREFIX', 'WARN', 'overall',
+           'read_level', 'status_value', 'wire_level']

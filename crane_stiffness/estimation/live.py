@@ -450,7 +450,9 @@ class LiveStiffness:
         """What makes the inputs invalid or doubtful now (``now_s``: the node clock, s; NaN: silence not judged):
         (worst level, reasons). ERROR: a stream silent for longer than ``dropout_factor`` delivery periods and
         ``min_silence_s`` (a dead sensor, not a busy machine's hiccup); WARN: a rejected command in force, a stream
-        that lost more than ``max_loss_fraction``."""
+        that lost more than ``max_loss_fraction``, and for a one-axis program a stream delay beyond
+        ``max_stream_delay_s`` or commands moving other axes than the fitted one (neither judged in a six-axis
+        program: both judge the one-axis fit)."""
         s = self._settings
         level, reasons = OK, []
         for stream, health in self.health.items():
@@ -471,11 +473,14 @@ class LiveStiffness:
                 level = max(level, WARN)
                 reasons.append(f'{stream}: received {fraction:.2%} of its samples (lost {1.0 - fraction:.2%} > '
                                f'max_loss_fraction {s.max_loss_fraction:.2%})')
-        delay_problem = self._delay.problem()
+        # (the delay is estimated from the fitted axis' force against its displacement: under a six-axis program's
+        # combined loading that correlation judges the one-axis fit, not the sensors)
+        delay_problem = '' if s.six_axis_program else self._delay.problem()
         if delay_problem:
             level = max(level, WARN)
             reasons.append(delay_problem)
-        axis_problem = self._command_range.problem(s.force_axis)
+        # (combined loading is what a six-axis program does: no problem there)
+        axis_problem = '' if s.six_axis_program else self._command_range.problem(s.force_axis)
         if axis_problem:
             level = max(level, WARN)
             reasons.append(axis_problem)

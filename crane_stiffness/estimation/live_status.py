@@ -16,7 +16,9 @@ from crane_stiffness.estimation.lag import LagHistogram
 from crane_stiffness.estimation.quality import fit_problems
 from crane_stiffness.estimation.settings import LiveSettings
 from crane_stiffness.estimation.stream_delay import StreamDelay
-from crane_stiffness.contract.status import ERROR, OK, STALE, WAITING, WAITING_PREFIX, WARN, status_value
+from crane_stiffness.contract import topics
+from crane_stiffness.contract.status import (ERROR, NOT_APPLICABLE_PREFIX, OK, STALE, WAITING, WAITING_PREFIX, WARN,
+                                             status_value)
 
 
 class LiveStiffness(Protocol):
@@ -120,10 +122,18 @@ def input_report(live: LiveStiffness, consumer: str = '', now_s: float = math.na
     if reasons:
         return level, '; '.join(reasons), pairs
     summary = f'{sc.pairs} pairs, {c.pairs_fitted} fitted'
+    if live._settings.six_axis_program:  # the sensors' health counts (above); the one-axis fit does not
+        return OK, not_applicable_message(live._settings.force_axis) + f' ({summary})', pairs
     missing = [stream for stream, health in live.health.items() if not health.count]
     if missing:  # a stream that has not begun: nothing wrong yet, nothing to stand by either
         return WAITING, f'{WAITING_PREFIX}no usable {" or ".join(missing)} sample yet; {summary}', pairs
     return OK, summary, pairs
+
+
+def not_applicable_message(force_axis: str) -> str:
+    """The status message of every part of the one-axis estimate in a six-axis program (level OK)."""
+    return (f'{NOT_APPLICABLE_PREFIX}six-axis program, a one-axis fit of {force_axis} means nothing under its '
+            f'multi-axis load; see {topics.STIFFNESS6_STATUS}')
 
 
 def branch_reports(live: LiveStiffness, now_s: float = math.nan) -> list[BranchReport]:
@@ -176,10 +186,12 @@ def branch_reports(live: LiveStiffness, now_s: float = math.nan) -> list[BranchR
             message = WAITING_PREFIX + message
         if live.counters.segments > 1:
             message += f'; new fit {segment}'
+        if s.six_axis_program:  # a one-axis verdict on a multi-axis load means nothing: said, not judged
+            level, message = OK, not_applicable_message(s.force_axis)
         pairs += [('unit', unit), ('axis', s.force_axis), ('current', str(branch == live._current).lower()),
                   ('segment', str(live.counters.segments)), ('segment_reason', live._segment_reason)]
         out.append(BranchReport(branch, level, message, pairs))
     return out
 
 
-__all__ = ['VALUE_FIELDS', 'BranchReport', 'accounting', 'branch_reports', 'input_report']
+__all__ = ['VALUE_FIELDS', 'BranchReport', 'accounting', 'branch_reports', 'input_report', 'not_applicable_message']

@@ -97,6 +97,11 @@ class LiveSettings:
                                        'pairing up [s]', above=0.0, rule='<= max_age_s')
     max_loss_fraction: float = declared(0.01, 'WARN when a sensor stream lost more than this fraction of its samples '
                                         '(expected from its own stamps) [-]', at_least=0.0, at_most=1.0)
+    six_axis_program: bool = declared(
+        False, 'the rig plays a six-axis program (the rig sets it from the program file, '
+        'crane_stiffness.launcher.rig_description.is_six_axis_program): a one-axis fit of force_axis does not apply '
+        "to the multi-axis load, so every status says 'not applicable' (OK) and points to /stiffness6/status; the "
+        'pairs are still fitted and recorded [-]')
     # The F/T sensor's mounting (frames.SensorMount): wrenches are moved to the platform centre in crane_base before
     # the force_axis component is taken.
     sensor_rotation: tuple[float, ...] = declared(

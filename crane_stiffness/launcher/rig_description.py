@@ -124,6 +124,9 @@ class RigNode:
     floats: tuple[str, ...] = ()
     #: Its stage in simulated time (crane_stiffness.sim.lockstep): the clock waits for it; None: not a participant.
     sim_stage: int | None = None
+    #: A boolean parameter set to whether the program is a six-axis test (:func:`is_six_axis_program`): the one-axis
+    #: estimator says it does not apply then, the live view leads with the 6×6.
+    six_axis_parameter: str | None = None
 
     @property
     def name(self) -> str:
@@ -158,7 +161,7 @@ NODES: tuple[RigNode, ...] = (
     # With transport:=drivers the estimator reads the drivers file last: how to pair depends on the drivers' rates
     # (a 1 kHz F/T sensor and a 100 Hz DAQ: pairing interpolate_force), and a lab's file may set its lever arm.
     RigNode('stiffness_estimator', ('crane', 'sensors', 'program', 'drivers'), reads=(topics.WRENCH_COMMAND, *_STREAMS),
-            machine='analysis', sim_stage=3),
+            machine='analysis', sim_stage=3, six_axis_parameter='six_axis_program'),
     # The 6x6 fit of a program whose file says so (program:=full6, six_axis): the load cell and a pose sensor.
     RigNode('stiffness6_estimator', ('sensors', 'program'), condition='six_axis',
             reads=(topics.WRENCH_COMMAND, topics.LOAD_CELL_WRENCH, topics.POSE_SENSOR_POSE), machine='analysis',
@@ -170,7 +173,7 @@ NODES: tuple[RigNode, ...] = (
     # For people watching: reads the rig's topics, waits for nothing, and the program does not wait for it.
     RigNode('live_view', ('crane',), condition='live_view', machine='analysis',
             arguments={'host': 'view_host', 'port': 'view_port', 'http_port': 'view_http_port'},
-            integers=('port', 'http_port')),
+            integers=('port', 'http_port'), six_axis_parameter='six_axis_program'),
 )
 #: Topics a message must have arrived on before the program starts: the model's prediction (latched) and both
 #: sensor streams (from the simulated sensors, or from real drivers remapped onto them).
@@ -318,8 +321,9 @@ def rig_nodes(config_dir: str | os.PathLike, given: Mapping[str, str | bool] | N
     if values['machine'] not in ('all', *MACHINES):
         raise RigError(f"machine {values['machine']!r}: expected one of all, {', '.join(MACHINES)}")
     files = config_files(config_dir, values)
+    six_axis_program = is_six_axis_program(files['program'])
     if str(values['six_axis']).strip().lower() == 'auto':
-        values['six_axis'] = 'true' if is_six_axis_program(files['program']) else 'false'
+        values['six_axis'] = 'true' if six_axis_program else 'false'
     sim_time = flag(values['use_sim_time'])
     if sim_time and values['transport'] != 'sim':
         raise RigError('use_sim_time:=true runs the simulated sensors only (transport:=sim): the drivers and their '
@@ -338,6 +342,7 @@ def rig_nodes(config_dir: str | os.PathLike, given: Mapping[str, str | bool] | N
     return [NodeStart(node.name, node.executable,
                       tuple(files[f] for f in node.files if f != 'drivers' or values['transport'] == 'drivers'),
                       {**{param: _argument(node, param, arg, values[arg]) for param, arg in node.arguments.items()},
-                       **(readiness(started) if node.runs_program else {}), **clock(node)},
+                       **(readiness(started) if node.runs_program else {}), **clock(node),
+                       **({node.six_axis_parameter: six_axis_program} if node.six_axis_parameter else {})},
                       node.remappings, node.runs_program, node.machine)
             for node in started if values['machine'] in ('all', node.machine)]

@@ -15,7 +15,8 @@ Serves, on ``host`` (127.0.0.1 by default; 0.0.0.0 opens it to the lab network):
 - the page (crane_stiffness/view/web) on ``http_port``, which talks to the same WebSocket server.
 
 Reads /stiffness/fitted_pairs and /stiffness/fit_lines (the estimator's pairs and fit lines: nothing is refitted
-here), /stiffness/estimate_values, /stiffness/estimate, /crane/predicted_axis_stiffness, /crane/wire_states,
+here), /stiffness/estimate_values (the estimate, and the prediction of the fitted axis), /stiffness/estimate (the
+statuses, the fitted axis and its unit), /crane/wire_states,
 /crane/platform_pose and /crane/applied_wrench, /stiffness6/stiffness, /stiffness6/compliance and
 /stiffness6/status (latched); the geometry from the geometry.* parameters (the crane file).
 The high-rate inputs are taken serialized and only the newest is decoded, at ``rate_hz``. Port 0 takes a free port;
@@ -23,6 +24,7 @@ the addresses are logged at start (``live view: page http://â€¦, Foxglove ws://â
 """
 from __future__ import annotations
 
+import math
 import os
 import threading
 from typing import Any, Callable
@@ -37,7 +39,7 @@ from rclpy.serialization import deserialize_message
 from rclpy.subscription import Subscription
 from rclpy.timer import Timer
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64, Float64MultiArray
+from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
 
 from crane_stiffness.contract import stiffness6_layout, topics
@@ -84,6 +86,9 @@ PARAMS = (
               'estimator fits every pair) [-]', low=2, high=100000),
     ParamSpec('deflection_scale', 200.0, "the platform's displacement and rotation are drawn this many times larger "
               'in the 3D scene [-]', above=0.0),
+    ParamSpec('six_axis_program', False, 'the rig plays a six-axis program (the rig sets it, '
+              'crane_stiffness.launcher.rig_description): the page leads with the 6x6 and shows no one-axis verdict; '
+              'it also does once a 6x6 fit is published [-]'),
     ParamSpec('topics', DEFAULT_TOPICS, 'ROS topics offered to Foxglove clients (types from the rig contract) [-]'),
     ParamSpec('services', DEFAULT_SERVICES, 'std_srvs/Trigger services offered through the WebSocket [-]'),
     ParamSpec('service_timeout_s', 5.0, 'longest wait for a forwarded service call [s]', above=0.0),
@@ -115,7 +120,8 @@ class LiveViewNode(Node):
         self.points: plot.PointBuffer | None = None
         self.latest: dict[str, Any] = {}  # serialized newest message per high-rate input topic
         self.fit_lines: list[float] | None = None
-        self.prediction = float('nan')
+        self.prediction = float('nan')  # the estimator's (its values' prediction: always of its own axis)
+        self.axis: tuple[str, str] | None = None  # (fitted axis, stiffness unit) from the estimator's status
         self.statuses: list[tuple[str, int, str]] = []
         # the six-axis estimator's newest K and C data, and status (level, message, key-values); None: not yet
         self.k6: list[float] | None = None
@@ -129,7 +135,6 @@ class LiveViewNode(Node):
         self.create_subscription(Float64MultiArray, topics.FITTED_PAIRS, self._on_pairs, RELIABLE_QOS)
         self.create_subscription(Float64MultiArray, topics.FIT_LINES, self._on_fit_lines, RELIABLE_QOS)
         self.create_subscription(DiagnosticArray, topics.STIFFNESS_ESTIMATE, self._on_estimate, KEPT_QOS)
-        self.create_subscription(Float64, topics.PREDICTED_AXIS_STIFFNESS, self._on_prediction, LATCHED_QOS)
         self.create_subscription(Float64MultiArray, topics.STIFFNESS6, self._on_k6, LATCHED_QOS)
         self.create_subscription(Float64MultiArray, topics.COMPLIANCE6, self._on_c6, LATCHED_QOS)
         self.create_subscription(DiagnosticArray, topics.STIFFNESS6_STATUS, self._on_status6, LATCHED_QOS)
@@ -153,8 +158,9 @@ class LiveViewNode(Node):
                 self.trigger_clients[name] = self.create_client(Trigger, name)
         if self.foxglove is None:
             self._start_servers(values)
-        elif any(values[k] != self.settings[k] for k in ('host', 'port', 'http_port', 'topics', 'services')):
-            self.get_logger().warn('host, ports, topics and services take effect at the next start')
+        elif any(values[k] != self.settings[k] for k in ('host', 'port', 'http_port', 'topics', 'services',
+                                                           'six_axis_program')):
+            self.get_logger().warn('host, ports, topics, services and six_axis_program take effect at the next start')
         self.dirty.update(('xy', 'scene', 'stiffness6'))
         self.settings = values
 
@@ -167,7 +173,8 @@ class LiveViewNode(Node):
         self.foxglove = FoxgloveServer(values['host'], values['port'], ros, derived, services, self._want,
                                        logger.info, logger.warn)
         try:
-            self.page = PageServer(values['host'], values['http_port'], self.foxglove.port)
+            self.page = PageServer(values['host'], values['http_port'], self.foxglove.port,
+                                   'six_axis' if values['six_axis_program'] else 'one_axis')
         except ValueError:
             self.foxglove.stop()
             raise
@@ -239,13 +246,14 @@ class LiveViewNode(Node):
         self.fit_lines = list(msg.data)
         self.dirty.add('fit_lines')
 
-    def _on_prediction(self, msg: Float64) -> None:
-        self.prediction = msg.data
-        self.dirty.add('fit_lines')
-
     def _on_estimate(self, msg: DiagnosticArray) -> None:
         self.statuses = [(s.name, s.level[0] if isinstance(s.level, bytes) else int(s.level), s.message)
                          for s in msg.status]
+        for s in msg.status:  # the fitted axis and its unit, from the first branch status that names them
+            values = {kv.key: kv.value for kv in s.values}
+            if 'axis' in values and 'unit' in values:
+                self.axis = (values['axis'], values['unit'])
+                break
         self.dirty.add('status')
 
     def _on_k6(self, msg: Float64MultiArray) -> None:
@@ -277,7 +285,7 @@ class LiveViewNode(Node):
         try:
             sent += self._send_plot(fox, dirty, now)
             if 'status' in dirty and self.statuses:
-                sent += fox.log_json(PREFIX + 'status', plot.status_message(self.statuses), now)
+                sent += fox.log_json(PREFIX + 'status', plot.status_message(self.statuses, self.axis), now)
             if topics.STIFFNESS_VALUES in dirty and fox.wanted(PREFIX + 'estimate'):
                 values = self._newest(topics.STIFFNESS_VALUES)
                 sent += fox.log_json(PREFIX + 'estimate', plot.estimate_message(values.data), now)
@@ -290,6 +298,13 @@ class LiveViewNode(Node):
     def _send_plot(self, fox: FoxgloveServer, dirty: set[str], now: int) -> int:
         assert self.points is not None
         sent = 0
+        if topics.STIFFNESS_VALUES in dirty:  # the prediction line: the estimator's prediction, of its own axis
+            values = self._newest(topics.STIFFNESS_VALUES)
+            prediction = plot.estimate_message(values.data)['loading']['prediction']
+            prediction = math.nan if prediction is None else prediction
+            if not (prediction == self.prediction or math.isnan(prediction) and math.isnan(self.prediction)):
+                self.prediction = prediction
+                dirty.add('fit_lines')
         if ('xy' in dirty or 'fit_lines' in dirty) and fox.wanted(PREFIX + 'xy'):
             sent += fox.log_json(PREFIX + 'xy', self.points.message(self.fit_lines, self.prediction), now)
         if 'fit_lines' in dirty or 'xy' in dirty:

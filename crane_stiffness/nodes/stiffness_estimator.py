@@ -7,7 +7,9 @@ Subscribes (sensor QoS: best effort, so reliable and best-effort publishers both
   reception time;
 and (reliable) /crane/wrench_command for the load branch, /crane/rejected_command (commands the crane model
 rejected: no pair is fitted while one is in force, nor while an absurd command is), (transient local)
-/crane/predicted_axis_stiffness.
+/crane/predicted_stiffness (the model's 6×6 tangent: the prediction is its stiffness along this estimator's own
+``force_axis``, crane_stiffness.model.axis_stiffness, whatever axis the model's /crane/predicted_axis_stiffness
+follows; so the prediction beside an estimate is always of the fitted axis, in its unit).
 Pairs samples by header stamp, fits loading and unloading branches apart (windowed LS + RLS) and publishes
   /stiffness/estimate_values (Float64MultiArray, rows loading, unloading × columns VALUE_FIELDS) and
   /stiffness/stiffness (Float64, loading branch) once per batch of queued messages that changed it (a sensor
@@ -40,6 +42,8 @@ from __future__ import annotations
 from functools import partial
 from typing import Any, Callable, cast
 
+import numpy as np
+
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PointStamped, WrenchStamped
 from rclpy.clock import ROSClock
@@ -51,6 +55,7 @@ from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension
 from std_srvs.srv import Trigger
 
 from crane_stiffness.contract import topics
+from crane_stiffness.model.stiffness import axis_stiffness
 from crane_stiffness.serde import CdrError, decode_float64, decode_stamped, stamp_seconds
 from crane_stiffness.estimation.branch import BRANCHES
 from crane_stiffness.estimation.fit_lines import FIT_LINE_FIELDS
@@ -149,8 +154,9 @@ class StiffnessEstimatorNode(Node):
         self.sub_force = self.create_subscription(WrenchStamped, topics.LOAD_CELL_WRENCH,
                                                   self._then_drain(self._on_force), sensor_qos(self.sim_time),
                                                   event_callbacks=_NO_EVENTS_SUB, raw=True)
+        self.tangent: np.ndarray | None = None  # the model's newest 6x6 tangent (/crane/predicted_stiffness)
         self.params = Params(self, PARAMS, _validate, self._apply)  # subscribes the displacement
-        self.create_subscription(Float64, topics.PREDICTED_AXIS_STIFFNESS, self._on_prediction, LATCHED_QOS)
+        self.create_subscription(Float64MultiArray, topics.PREDICTED_STIFFNESS, self._on_tangent, LATCHED_QOS)
         for stream, topic in ((DISPLACEMENT, topics.LVDT_ZERO), (FORCE, topics.LOAD_CELL_TARE)):
             self.create_subscription(Float64, topic, partial(self._on_zero_epoch, stream), LATCHED_QOS)
         self.create_service(Trigger, '~/reset', self._srv_reset)
@@ -206,6 +212,7 @@ class StiffnessEstimatorNode(Node):
                 self.destroy_timer(self.timer)
             self.timer = self.create_timer(1.0 / values['diagnostics_rate_hz'], self._publish_estimate)
         self.settings = values
+        self._set_prediction()  # force_axis may have changed: the prediction follows it
 
     # --- inputs: a message (sensors: serialized) and, when taken by _drain, its message info ---
     def _decode(self, data: bytes, count: int, stream: str) -> tuple[float, tuple[float, ...]] | None:
@@ -361,9 +368,19 @@ class StiffnessEstimatorNode(Node):
             self.get_logger().warn(f'new fit segment: {self.core.segment_reason} (zero epoch {msg.data:g})')
             self._publish_values()
 
-    def _on_prediction(self, msg: Float64) -> None:
-        assert self.core is not None
-        self.core.set_prediction(msg.data)
+    def _on_tangent(self, msg: Float64MultiArray) -> None:
+        k = np.asarray(msg.data, dtype=float)
+        if k.size != 36:  # not the model's 6x6 (a foreign publisher): said, not fatal
+            self.get_logger().warn(f'{topics.PREDICTED_STIFFNESS}: {k.size} values, expected 36 (6x6); ignored',
+                                   throttle_duration_sec=5.0)
+            return
+        self.tangent = k.reshape(6, 6)
+        self._set_prediction()
+
+    def _set_prediction(self) -> None:
+        """The prediction of the fitted axis: the model's tangent along ``force_axis`` (N/m, or N·m/rad)."""
+        if self.core is not None and self.tangent is not None:
+            self.core.set_prediction(axis_stiffness(self.tangent, self.core.settings.force_axis))
 
     # --- outputs ---
     def _publish_values(self) -> None:

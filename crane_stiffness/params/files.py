@@ -213,14 +213,16 @@ def load_params(path: str | os.PathLike, node_name: str | None = None) -> dict[s
 
 
 def share_dir() -> Path:
-    """The package's share directory: via the ament index when available, else next to the sources."""
+    """The package's share directory: via the ament index when one is set (a sourced workspace), else the venv's
+    share/ (``make install``), else next to the sources. A plain shell (no ``AMENT_PREFIX_PATH``: ament_index raises
+    OSError) is not an error: the package's own files are used."""
     try:
         from ament_index_python.packages import PackageNotFoundError, get_package_share_directory
         try:
             share = Path(get_package_share_directory(PACKAGE))
             if (share / 'config').is_dir():
                 return share
-        except (PackageNotFoundError, OSError):  # OSError: no AMENT_PREFIX_PATH (not in a sourced ROS environment)
+        except (PackageNotFoundError, OSError):  # not in the index, or no index at all (nothing sourced)
             pass
     except ImportError:  # offline analysis without ROS
         pass

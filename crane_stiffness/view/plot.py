@@ -131,19 +131,23 @@ def estimate_message(values: Sequence[float]) -> dict[str, Any]:
     return {b: {k: _num(row[k]) for k in _ESTIMATE_FIELDS} for b, row in rows.items()}
 
 
-def status_message(statuses: Sequence[tuple[str, int, str]]) -> dict[str, Any]:
+def status_message(statuses: Sequence[tuple[str, int, str]], axis: tuple[str, str] | None = None
+                   ) -> dict[str, Any]:
     """The estimator's status (/stiffness/estimate: (name, level, message) per status, as published) as text and
     level: each status, its level read back (:func:`~crane_stiffness.contract.status.read_level`: WAITING for a part
     that has
     not begun), and the overall level (:func:`~crane_stiffness.contract.status.overall`: the worst of the parts, a
     waiting
-    part never worse than those running)."""
+    part never worse than those running). ``axis``: (fitted axis, stiffness unit) as the estimator's status names
+    them ('' until known)."""
     levels = [read_level(published, message) for _, published, message in statuses]
     items = [{'name': name, 'level': lvl, 'level_name': NAMES.get(lvl, str(lvl)), 'message': message}
              for (name, _, message), lvl in zip(statuses, levels)]
     level = overall(levels)
     text = '\n'.join(f'{i["name"]}: {i["level_name"]} {i["message"]}' for i in items)
-    return {'level': level, 'level_name': NAMES.get(level, str(level)), 'text': text, 'statuses': items}
+    axis_name, unit = axis if axis is not None else ('', '')
+    return {'level': level, 'level_name': NAMES.get(level, str(level)), 'text': text, 'statuses': items,
+            'axis': axis_name, 'unit': unit}
 
 
 def wires_message(names: Sequence[str], lengths: Sequence[float], tensions: Sequence[float],
@@ -170,7 +174,8 @@ SCHEMAS: dict[str, dict[str, Any]] = {
                        'crane_stiffness.Estimate'),
     'status': js.obj({'level': js.INTEGER, 'level_name': js.STRING, 'text': js.STRING,
                       'statuses': js.array(js.obj({'name': js.STRING, 'level': js.INTEGER, 'level_name': js.STRING,
-                                                   'message': js.STRING}))}, 'crane_stiffness.Status'),
+                                                   'message': js.STRING})),
+                      'axis': js.STRING, 'unit': js.STRING}, 'crane_stiffness.Status'),
     'wires': js.obj({'wires': js.array(js.obj({'name': js.STRING, 'length': js.NUMBER, 'tension': js.NUMBER,
                                                'slack': js.BOOLEAN}))}, 'crane_stiffness.Wires'),
 }

@@ -156,13 +156,19 @@ class FoxgloveServer:
         logging.getLogger('foxglove').removeHandler(self._log_forward)
 
 
+#: The kinds of run the page knows: 'one_axis' (the force-displacement fit leads) and 'six_axis' (the 6×6 leads; no
+#: one-axis verdict is shown).
+RUNS = ('one_axis', 'six_axis')
+
+
 class _PageHandler(http.server.SimpleHTTPRequestHandler):
     ws_port = 0
+    run = 'one_axis'
     log_error_fn: Callable[[str], Any] = print
 
     def do_GET(self) -> None:  # noqa: N802 (the http.server name)
         if self.path.split('?')[0] == '/config.json':
-            body = json.dumps({'ws_port': self.ws_port, 'subprotocol': SUBPROTOCOL}).encode()
+            body = json.dumps({'ws_port': self.ws_port, 'subprotocol': SUBPROTOCOL, 'run': self.run}).encode()
             self.send_response(200)
             self.send_header('Content-Type', 'application/json')
             self.send_header('Content-Length', str(len(body)))
@@ -180,10 +186,13 @@ class _PageHandler(http.server.SimpleHTTPRequestHandler):
 
 
 class PageServer:
-    """The page (``web/``) on ``http://host:port/`` in a thread of its own; ``config.json`` names ``ws_port``."""
+    """The page (``web/``) on ``http://host:port/`` in a thread of its own; ``config.json`` names ``ws_port`` and
+    the kind of ``run`` (one of :data:`RUNS`: the page lays itself out for it from its first frame)."""
 
-    def __init__(self, host: str, port: int, ws_port: int) -> None:
-        handler = type('Handler', (_PageHandler,), {'ws_port': ws_port})
+    def __init__(self, host: str, port: int, ws_port: int, run: str = 'one_axis') -> None:
+        if run not in RUNS:
+            raise ViewError(f'run {run!r}: expected one of {", ".join(RUNS)}')
+        handler = type('Handler', (_PageHandler,), {'ws_port': ws_port, 'run': run})
         try:
             self.httpd = http.server.ThreadingHTTPServer((host, port), functools.partial(handler,
                                                                                          directory=str(WEB_DIR)))

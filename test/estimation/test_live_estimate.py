@@ -290,3 +290,31 @@ def test_a_rejection_that_arrives_after_pairs_under_it_were_fitted_is_warned_unt
     assert live.counters.late_rejections == 2
     live.add_rejected(T0 + 100.0, _wrench(2.0), T0 + 100.0)
     assert live.counters.late_rejections == 2
+
+
+def test_in_a_six_axis_program_every_part_says_not_applicable_never_a_one_axis_verdict() -> None:
+    """The same softening, multi-axis commands (fy with fz and mx beside it): a one-axis estimator is WARN 'combined
+    loading' and 'nonlinear'; told the program is six-axis, every status is OK 'not applicable' pointing to the 6x6
+    status, while the pairs are still fitted (the same numbers)."""
+    n = 400
+    f = np.linspace(0.0, 8.0, n)
+    x = f / K + np.where(f > 4.0, (f - 4.0) / (0.3 * K), 0.0)
+    reports = {}
+    for six in (False, True):
+        live = LiveStiffness(LiveSettings(window=1000, nonlinearity_warn=0.2, six_axis_program=six))
+        for i, (fi, d) in enumerate(zip(f, x)):
+            t = T0 + i * PERIOD
+            live.add_command(t, (0.0, fi, 3.0 * fi, 0.2 * fi, 0.0, 0.0), t)
+            live.add_force(t, _wrench(fi))
+            live.add_displacement(t, d)
+        live.refresh()
+        reports[six] = (live.report(), live.input_report('test'), live.values())
+    one, six = reports[False], reports[True]
+    assert one[0][0].level == WARN and 'nonlinear' in one[0][0].message
+    assert one[1][0] == WARN and 'combined loading' in one[1][1]
+    for report in six[0]:
+        assert report.level == OK, report
+        assert report.message == ('not applicable: six-axis program, a one-axis fit of fy means nothing under its '
+                                  'multi-axis load; see /stiffness6/status')
+    assert six[1][0] == OK and six[1][1].startswith('not applicable: six-axis program') and 'combined' not in six[1][1]
+    assert six[2] == one[2]  # the same pairs fitted, the same numbers recorded

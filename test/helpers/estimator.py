@@ -40,7 +40,7 @@ def isolated_estimator(extra_remaps: dict[str, str] | None = None) -> tuple[str,
     args = ['--ros-args', '-r', f'__node:={name}']
     for topic in (topics.WRENCH_COMMAND, topics.REJECTED_COMMAND, topics.LOAD_CELL_WRENCH, topics.LVDT_DISPLACEMENT,
                   topics.LVDT_ZERO, topics.LOAD_CELL_TARE, topics.PREDICTED_AXIS_STIFFNESS, topics.STIFFNESS_ESTIMATE,
-                  topics.STIFFNESS_VALUES,
+                  topics.STIFFNESS_VALUES, topics.PREDICTED_STIFFNESS,
                   topics.STIFFNESS, topics.DIAGNOSTICS):
         target = (extra_remaps or {}).get(topic, prefix + topic)
         args += ['-r', f'{topic}:={target}']
@@ -184,6 +184,7 @@ class EstimatorProbe(ProbeNode):
         self.stiffness: list[float] = self.record(topics.STIFFNESS, Float64, RELIABLE_QOS, lambda m: m.data)
         self.estimates: list[DiagnosticArray] = self.record(topics.STIFFNESS_ESTIMATE, DiagnosticArray, RELIABLE_QOS)
         self.pub_prediction = self.publisher(topics.PREDICTED_AXIS_STIFFNESS, Float64, LATCHED_QOS)
+        self.pub_tangent = self.publisher(topics.PREDICTED_STIFFNESS, Float64MultiArray, LATCHED_QOS)
 
     def _on_values(self, msg: Float64MultiArray, info: dict) -> None:
         self.values.append((info['source_timestamp'], list(msg.data)))

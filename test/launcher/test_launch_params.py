@@ -119,6 +119,17 @@ def test_a_six_axis_program_starts_the_pose_sensor_and_the_6x6_fit():
         rig_nodes(CONFIG, {'program': 'nothing'})
 
 
+def test_the_one_axis_estimator_and_the_live_view_are_told_whether_the_program_is_six_axis():
+    """The program's file decides (rig_description.is_six_axis_program), not the six_axis argument: the one-axis
+    estimator says its fit does not apply and the page leads with the 6x6 in a six-axis program only."""
+    for given, six in (({'program': 'full6'}, True), ({'program': 'side_force'}, False),
+                       ({'program': 'side_force', 'six_axis': 'true'}, False), ({'program': 'moment_z'}, False)):
+        nodes = {n.name: n for n in rig_nodes(CONFIG, {**given, 'live_view': 'true'})}
+        assert nodes['stiffness_estimator'].parameters['six_axis_program'] is six, given
+        assert nodes['live_view'].parameters['six_axis_program'] is six, given
+        assert 'six_axis_program' not in nodes['crane_model'].parameters
+
+
 def test_live_view_argument_starts_it_with_integer_ports():
     """live_view:=true adds the view (on the analysis machine) with its ports as integers: launch_ros would hand a
     string to the node, which declares integers."""
@@ -126,7 +137,7 @@ def test_live_view_argument_starts_it_with_integer_ports():
     assert 'live_view' not in names
     view = {n.name: n for n in rig_nodes(CONFIG, {'live_view': 'true', 'view_port': '9000',
                                                   'view_http_port': '9001'})}['live_view']
-    assert view.parameters == {'host': '127.0.0.1', 'port': 9000, 'http_port': 9001}
+    assert view.parameters == {'host': '127.0.0.1', 'port': 9000, 'http_port': 9001, 'six_axis_program': False}
     assert view.machine == 'analysis' and view.parameter_files == (str(CONFIG / 'crane_lab.yaml'),)
     assert 'live_view' not in [n.name for n in rig_nodes(CONFIG, {'live_view': 'true', 'machine': 'daq'})]
     with pytest.raises(RigError, match='view_port:=80a: expected an integer'):

@@ -17,13 +17,14 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
-from std_msgs.msg import Float64  # noqa: E402
+from std_msgs.msg import Float64, Float64MultiArray  # noqa: E402
 
 from helpers import call_trigger as call  # noqa: E402
 from helpers import spin_until  # noqa: E402
 from helpers.estimator import (C, K, EstimatorProbe, SyntheticRig, assert_refused, executor_with,  # noqa: E402
                                isolated_estimator, row, run_in_own_process, run_program)
 from crane_stiffness.contract import topics  # noqa: E402
+from crane_stiffness.model.stiffness import axis_stiffness  # noqa: E402
 from crane_stiffness.params.files import load_params  # noqa: E402
 from crane_stiffness.nodes import stiffness_estimator  # noqa: E402
 from crane_stiffness.nodes.stiffness_estimator import StiffnessEstimatorNode  # noqa: E402
@@ -47,7 +48,13 @@ def latencies_ms(probe: EstimatorProbe, rig: SyntheticRig) -> np.ndarray:
 def test_known_stiffness_interval_prediction_outputs_and_reset(rclpy_context):
     name, prefix, args = isolated_estimator()
     probe = EstimatorProbe(rclpy_context, prefix)
-    probe.pub_prediction.publish(Float64(data=1800.0))  # latched before the estimator exists
+    # The model's tangent, latched before the estimator exists: the prediction is its stiffness along the fitted
+    # axis (fy), whatever axis the model's single-axis prediction follows (here another one's, ignored).
+    tangent = np.diag([1500.0, 1800.0, 9.9e5, 40.0, 40.0, 5.0])
+    tangent[1, 3] = tangent[3, 1] = 10.0
+    prediction = axis_stiffness(tangent, 'fy')
+    probe.pub_tangent.publish(Float64MultiArray(data=[float(v) for v in tangent.ravel()]))
+    probe.pub_prediction.publish(Float64(data=9.9e5))
     estimator = StiffnessEstimatorNode(context=rclpy_context, cli_args=args, parameter_overrides=[
         Parameter('window', value=600), Parameter('diagnostics_rate_hz', value=5.0)])
     rig = SyntheticRig(rclpy_context, prefix, rate_hz=500.0, seed=7)
@@ -65,8 +72,8 @@ def test_known_stiffness_interval_prediction_outputs_and_reset(rclpy_context):
         assert r['intercept'] == pytest.approx(C, abs=0.01)
         assert r['r2'] > 0.999
         assert r['n'] > 450
-        assert r['prediction'] == 1800.0
-        assert r['relative_error'] == pytest.approx((r['stiffness'] - 1800.0) / 1800.0, rel=1e-12)
+        assert r['prediction'] == prediction and prediction < 1800.0  # (the coupling to mx softens fy)
+        assert r['relative_error'] == pytest.approx((r['stiffness'] - prediction) / prediction, rel=1e-12)
     assert unloading['current'] == 1.0 and loading['current'] == 0.0
     assert probe.stiffness[-1] == loading['stiffness']
     counters = estimator.core.counters

@@ -177,12 +177,15 @@ def test_the_page_shows_the_6x6_panel_with_the_published_values(rclpy_context, t
             browser.wait_for("document.getElementById('connection')?.textContent === 'connected'")
             rig.publish_wires()
             browser.wait_for("document.getElementById('scene').dataset.drawn === 'crane'")
-            # no 6x6 yet: the panel hidden, no ellipsoid
-            assert browser.evaluate("document.getElementById('stiffness6-panel').hidden") is True
+            # no 6x6 yet (a view not told of a six-axis program): laid out for one axis, the 6x6 panel not shown,
+            # no ellipsoid
+            assert browser.evaluate("document.body.dataset.run") == 'one_axis'
+            assert browser.evaluate("document.getElementById('stiffness6-panel').offsetParent") is None
             assert browser.evaluate("document.getElementById('scene').dataset.ellipsoid") == ''
             k = _measured(tangent)
             rig.publish_fit(k, (17_500.25, 18_250.5))
-            browser.wait_for("!document.getElementById('stiffness6-panel').hidden && "
+            # a 6x6 fit: the page is laid out for a six-axis run, the 6x6 panel leads
+            browser.wait_for("document.body.dataset.run === 'six_axis' && "
                              "document.querySelectorAll('#stiffness6 td.k6').length === 36 && "
                              "document.getElementById('stiffness6-level').dataset.level === '1' && "
                              "document.querySelector('#stiffness6 td.k6').dataset.value !== ''")

@@ -163,3 +163,23 @@ def test_every_derived_channel_has_a_schema_foxglove_apps_parse_and_its_messages
     for name, message in messages.items():
         decoded = json.loads(json.dumps(message, allow_nan=False))
         assert _conforms(decoded, schemas[name]) == [], name
+
+
+def test_the_page_is_told_the_kind_of_run_in_its_config_and_a_status_names_the_fitted_axis():
+    import urllib.request
+
+    from crane_stiffness.view.server import PageServer
+    for run in ('one_axis', 'six_axis'):
+        page = PageServer('127.0.0.1', 0, 4321, run)
+        try:
+            with urllib.request.urlopen(f'http://127.0.0.1:{page.port}/config.json', timeout=30) as reply:
+                config = json.loads(reply.read())
+        finally:
+            page.stop()
+        assert config['run'] == run and config['ws_port'] == 4321
+    with pytest.raises(ViewError, match="run 'three_axis'"):
+        PageServer('127.0.0.1', 0, 4321, 'three_axis')
+    status = plot.status_message([('/stiffness_estimator: loading', 0, 'not applicable: six-axis program')],
+                                 ('mz', 'N·m/rad'))
+    assert (status['axis'], status['unit'], status['level_name']) == ('mz', 'N·m/rad', 'OK')
+    assert plot.status_message([])['axis'] == ''

@@ -2,8 +2,14 @@
 // the live_view node on plain canvases. No library: JSON channels, binary messageData frames (opcode 1:
 // u32 subscription id, u64 log time, payload).
 'use strict';
+// The kind of run (config.json's run, or six_axis once a 6×6 fit arrives) decides the layout, once: a six-axis run
+// leads with the 6×6 and shows no one-axis verdict (the one-axis fit does not apply to its multi-axis load).
 const CHANNELS = ['xy', 'fit_lines', 'prediction', 'estimate', 'status', 'wires', 'scene', 'stiffness6'];
-const state = { messages: 0, lastCount: 0, data: {}, dirty: new Set(), drawnAt: 0 };
+const state = { messages: 0, lastCount: 0, data: {}, dirty: new Set(), drawnAt: 0, run: null, k6Row: 1 };
+// The boxes of the text drawn on each canvas, in its pixels ({text, left, top, width, height}), as the drawing code
+// placed it: what a test reads to check that no two texts of the page overlap (the DOM's text it reads itself).
+window.__textBoxes = { xy: [], scene: [] };
+const WIRE_LABEL = /^wire_\d/;
 // What each channel changes on the page: only that part is drawn again (the rest keeps its pixels and DOM).
 const PART = { xy: 'plot', fit_lines: 'plot', prediction: 'plot', estimate: 'text', status: 'text', wires: 'wires',
   scene: 'scene', stiffness6: 'stiffness6' };
@@ -25,6 +31,34 @@ function diverging(rel) {
   const t = Math.max(-1, Math.min(1, rel / SATURATION));
   const fade = Math.round(255 * (1 - Math.abs(t)));
   return t >= 0 ? `rgb(255,${fade},${fade})` : `rgb(${fade},${fade},255)`;
+}
+
+function setRun(run) {
+  // The layout for the kind of run, set before the page is shown (and once more only if a six-axis fit arrives on
+  // a run the rig did not say was six-axis).
+  if (state.run === run) return;
+  state.run = run;
+  document.body.className = run === 'six_axis' ? 'six-axis' : 'one-axis';
+  document.body.dataset.run = run;
+  document.getElementById('main').hidden = false;
+  state.dirty.add('plot'); state.dirty.add('scene'); state.dirty.add('stiffness6'); state.dirty.add('text');
+}
+
+function buildTables() {
+  // Every table in its final shape from the first frame, each cell saying '–' until its data come.
+  const axes = ['fx', 'fy', 'fz', 'mx', 'my', 'mz'], disp = ['u_x', 'u_y', 'u_z', 'θ_x', 'θ_y', 'θ_z'];
+  document.getElementById('stiffness6').innerHTML = '<tr><th></th>' + disp.map((d) => `<th>${d}</th>`).join('') +
+    '</tr>' + axes.map((a) => `<tr><th>${a}</th>` + disp.map(() => '<td class="k6">–</td>').join('') + '</tr>')
+      .join('');
+  const select = document.getElementById('k6-row');
+  select.innerHTML = axes.map((a, i) => `<option value="${i}">${a}</option>`).join('');
+  select.value = String(state.k6Row);
+  select.onchange = () => { state.k6Row = Number(select.value); state.dirty.add('stiffness6'); };
+  document.getElementById('k6-row-table').innerHTML =
+    '<tr><th>displacement</th><th>K measured</th><th>95 % interval</th><th>model tangent</th><th>measured / tangent − 1</th></tr>' +
+    disp.map((d) => `<tr><td>${d}</td><td>–</td><td>–</td><td>–</td><td>–</td></tr>`).join('');
+  document.getElementById('wires').innerHTML = '<tr><th>wire</th><th>tension</th><th>length</th></tr>' +
+    [1, 2, 3, 4, 5, 6].map((i) => `<tr><td>wire_${i}</td><td>–</td><td>–</td></tr>`).join('');
 }
 
 function connect(config) {
@@ -56,6 +90,7 @@ function connect(config) {
     const name = bySubscription[view.getUint32(1, true)];
     if (!name) return;
     state.data[name] = JSON.parse(new TextDecoder().decode(new Uint8Array(event.data, 13)));
+    if (name === 'stiffness6' && state.data.stiffness6.fit) setRun('six_axis');
     state.messages++;
     state.dirty.add(PART[name]);
   };
@@ -67,13 +102,21 @@ function setConnection(level, text) {
   el.textContent = text;
 }
 
+function axisOf() {
+  // The fitted axis and its stiffness unit, as the estimator's status names them (N/m until it has said).
+  const st = state.data.status;
+  return { axis: st && st.axis ? st.axis : '', unit: st && st.unit ? st.unit : 'N/m' };
+}
+
 function updateText() {
   const est = state.data.estimate;
+  const { axis, unit } = axisOf();
+  document.getElementById('axis').textContent = axis ? `fitting ${axis}, k in ${unit}` : '';
   if (est) {
     for (const b of ['loading', 'unloading']) {
       const e = est[b];
       const k = document.getElementById(`k-${b}`);
-      k.textContent = e.stiffness === null ? '–' : `${fmt(e.stiffness, 6)} N/m`;
+      k.textContent = e.stiffness === null ? '–' : `${fmt(e.stiffness, 6)} ${unit}`;
       k.dataset.value = e.stiffness === null ? '' : String(e.stiffness);
       k.dataset.sampleStamp = e.sample_stamp === null ? '' : String(e.sample_stamp);
       document.getElementById(`ci-${b}`).textContent =
@@ -81,7 +124,7 @@ function updateText() {
       document.getElementById(`n-${b}`).textContent = e.n === null ? '–' : e.n;
     }
     const p = est.loading.prediction;
-    document.getElementById('k-prediction').textContent = p === null ? '–' : `${fmt(p, 6)} N/m`;
+    document.getElementById('k-prediction').textContent = p === null ? '–' : `${fmt(p, 6)} ${unit}`;
     const rel = est.loading.relative_error;
     document.getElementById('rel-error').textContent = rel === null ? '' : `loading ${(100 * rel).toFixed(2)} %`;
   }
@@ -106,7 +149,7 @@ function updateWires() {
   const wires = state.data.wires;
   if (!wires) return;
   const table = document.getElementById('wires');
-  if (table.rows.length !== wires.wires.length + 1) {
+  if (table.rows.length !== wires.wires.length + 1) {  // (six, made at the start: another count is rebuilt)
     table.innerHTML = '<tr><th>wire</th><th>tension</th><th>length</th></tr>' +
       wires.wires.map(() => '<tr><td></td><td></td><td></td></tr>').join('');
   }
@@ -122,16 +165,10 @@ function updateWires() {
 }
 
 function updateStiffness6() {
-  // The 6×6 panel: hidden until the channel arrives; the table made once (header and 36 cells), its cells rewritten.
+  // The 6×6 panel (its tables made at the start, their cells rewritten) and the chosen row of K.
   const k6 = state.data.stiffness6;
   if (!k6) return;
-  document.getElementById('stiffness6-panel').hidden = false;
   const table = document.getElementById('stiffness6');
-  if (table.rows.length !== 7) {
-    table.innerHTML = '<tr><th></th>' + k6.rows[0].cells.map((c) => `<th>${c.displacement}</th>`).join('') + '</tr>' +
-      k6.rows.map((r) => `<tr><th>${r.load}</th>` + r.cells.map(() => '<td class="k6"></td>').join('') + '</tr>')
-        .join('');
-  }
   k6.rows.forEach((row, i) => row.cells.forEach((c, j) => {
     const td = table.rows[i + 1].cells[j + 1];
     td.textContent = compact(c.measured);
@@ -148,38 +185,77 @@ function updateStiffness6() {
   badge.textContent = k6.level_name;
   badge.dataset.level = k6.level;
   const k2 = k6.k2;
-  document.getElementById('stiffness6-k2').textContent = `K2 = ${compact(k2.measured)} ` +
-    `[${compact(k2.ci95_low)}, ${compact(k2.ci95_high)}] N/rad, tangent ${compact(k2.tangent)}`;
-  document.getElementById('stiffness6-message').textContent = k6.message;
+  document.getElementById('stiffness6-k2').textContent = k6.fit ? `K2 = ${compact(k2.measured)} ` +
+    `[${compact(k2.ci95_low)}, ${compact(k2.ci95_high)}] N/rad, model tangent ${compact(k2.tangent)}` :
+    `K2: waiting for the 6×6 fit… (model tangent ${compact(k2.tangent)} N/rad)`;
+  document.getElementById('stiffness6-message').textContent = k6.message || 'waiting for the six-axis estimator…';
+  const row = k6.rows[state.k6Row], rowTable = document.getElementById('k6-row-table');
+  row.cells.forEach((c, j) => {
+    const cells = rowTable.rows[j + 1].cells;
+    cells[1].textContent = compact(c.measured);
+    cells[2].textContent = c.ci95_low === null ? '–' : `${compact(c.ci95_low)} .. ${compact(c.ci95_high)}`;
+    cells[3].textContent = compact(c.tangent);
+    cells[4].textContent = c.model_zero ? 'model: 0' :
+      (c.relative_error === null ? '–' : `${(100 * c.relative_error).toFixed(2)} %`);
+  });
+}
+
+// Text on a canvas, its box recorded (window.__textBoxes[canvas id]): align 'left'/'center'/'right' about x, the
+// baseline at y; with `vertical`, turned by -90° about (x, y) (read upwards).
+function canvasText(ctx, id, text, x, y, align = 'left', vertical = false) {
+  const m = ctx.measureText(text);
+  const w = m.width, up = m.actualBoundingBoxAscent, down = m.actualBoundingBoxDescent;
+  const shift = align === 'center' ? w / 2 : align === 'right' ? w : 0;
+  ctx.save();
+  ctx.textAlign = 'left';
+  if (vertical) {
+    ctx.translate(x, y); ctx.rotate(-Math.PI / 2); ctx.fillText(text, -shift, 0); ctx.restore();
+    window.__textBoxes[id].push({ text, left: x - up, top: y - w + shift, width: up + down, height: w });
+    return;
+  }
+  ctx.fillText(text, x - shift, y);
+  ctx.restore();
+  window.__textBoxes[id].push({ text, left: x - shift, top: y - up, width: w, height: up + down });
+}
+
+function overlaps(a, b, gap = 0) {
+  return a.left < b.left + b.width + gap && b.left < a.left + a.width + gap &&
+    a.top < b.top + b.height + gap && b.top < a.top + a.height + gap;
 }
 
 function drawPlot() {
   const canvas = document.getElementById('xy');
   const ctx = canvas.getContext('2d');
-  const W = canvas.width, H = canvas.height, m = { l: 70, r: 15, t: 15, b: 45 };
+  const W = canvas.width, H = canvas.height, m = { l: 72, r: 20, t: 15, b: 48 };
   ctx.clearRect(0, 0, W, H);
+  window.__textBoxes.xy = [];
+  ctx.font = '12px sans-serif'; ctx.fillStyle = '#333';
   const xy = state.data.xy || { loading: [], unloading: [] };
   canvas.dataset.loadingPoints = xy.loading.length;  // drawn below: what a test waits for before a screenshot
   const lines = state.data.fit_lines || {};
   const pred = state.data.prediction || { line: [] };
   const all = [...xy.loading, ...xy.unloading];
   for (const b of ['loading', 'unloading']) if (lines[b]) all.push(...lines[b].line);
-  if (!all.length) { ctx.fillText('waiting for fitted pairs…', W / 2 - 60, H / 2); return; }
+  if (!all.length) { canvasText(ctx, 'xy', 'waiting for fitted pairs…', W / 2, H / 2, 'center'); return; }
   let [x0, x1, y0, y1] = [Infinity, -Infinity, Infinity, -Infinity];
   for (const p of all) { x0 = Math.min(x0, p.x); x1 = Math.max(x1, p.x); y0 = Math.min(y0, p.y); y1 = Math.max(y1, p.y); }
   const padX = (x1 - x0) * 0.05 || 1e-6, padY = (y1 - y0) * 0.05 || 1e-3;
   x0 -= padX; x1 += padX; y0 -= padY; y1 += padY;
   const sx = (x) => m.l + (x - x0) / (x1 - x0) * (W - m.l - m.r);
   const sy = (y) => H - m.b - (y - y0) / (y1 - y0) * (H - m.t - m.b);
-  ctx.strokeStyle = '#999'; ctx.fillStyle = '#333'; ctx.lineWidth = 1; ctx.font = '12px sans-serif';
+  ctx.strokeStyle = '#999'; ctx.lineWidth = 1;
   ctx.strokeRect(m.l, m.t, W - m.l - m.r, H - m.t - m.b);
+  // tick labels: x centred under their tick, y right-aligned left of the frame; the axis titles outside them
+  const moment = axisOf().axis.startsWith('m');
   for (let i = 0; i <= 5; i++) {
     const x = x0 + (x1 - x0) * i / 5, y = y0 + (y1 - y0) * i / 5;
-    ctx.fillText((x * 1e6).toFixed(1), sx(x) - 12, H - m.b + 15);
-    ctx.fillText(y.toFixed(2), 8, sy(y) + 4);
+    canvasText(ctx, 'xy', (x * 1e6).toFixed(1), sx(x), H - m.b + 16, 'center');
+    canvasText(ctx, 'xy', y.toFixed(2), m.l - 6, sy(y) + 4, 'right');
   }
-  ctx.fillText('displacement [µm]', W / 2 - 50, H - 8);
-  ctx.save(); ctx.translate(14, H / 2 + 30); ctx.rotate(-Math.PI / 2); ctx.fillText('force [N]', 0, 0); ctx.restore();
+  canvasText(ctx, 'xy', moment ? 'rotation [µrad]' : 'displacement [µm]', (m.l + W - m.r) / 2, H - 8, 'center');
+  const widest = Math.max(...window.__textBoxes.xy.filter((b) => b.left + b.width <= m.l).map((b) => b.width));
+  canvasText(ctx, 'xy', moment ? 'moment [N·m]' : 'force [N]', Math.max(14, m.l - 6 - widest - 8),
+    (m.t + H - m.b) / 2, 'center', true);
   const colors = { loading: '#1f77b4', unloading: '#e07b00' };
   for (const b of ['loading', 'unloading']) {
     ctx.fillStyle = colors[b];
@@ -196,9 +272,11 @@ function drawPlot() {
     }
   }
   if (pred.line.length) {
+    ctx.save();
+    ctx.beginPath(); ctx.rect(m.l, m.t, W - m.l - m.r, H - m.t - m.b); ctx.clip();  // a steep line stays in the frame
     ctx.strokeStyle = '#2a9d2a'; ctx.setLineDash([8, 5]); ctx.lineWidth = 2; ctx.beginPath();
     pred.line.forEach((p, i) => (i ? ctx.lineTo(sx(p.x), sy(p.y)) : ctx.moveTo(sx(p.x), sy(p.y))));
-    ctx.stroke(); ctx.setLineDash([]);
+    ctx.stroke(); ctx.restore();
   }
 }
 
@@ -209,12 +287,18 @@ function drawScene() {
   const ctx = canvas.getContext('2d');
   ctx.clearRect(0, 0, canvas.width, canvas.height);
   canvas.dataset.drawn = scene && scene.entities.length ? 'crane' : '';  // what a test waits for (as above)
-  if (!scene || !scene.entities.length) return;
+  window.__textBoxes.scene = [];
+  if (!scene || !scene.entities.length) {
+    ctx.font = '12px sans-serif'; ctx.fillStyle = '#333';
+    canvasText(ctx, 'scene', 'waiting for the crane…', canvas.width / 2, canvas.height / 2, 'center');
+    return;
+  }
   const e = scene.entities[0];
   const yaw = 0.6, pitch = 0.35, s = 480;
   const project = (p) => {
     const x = p.x * Math.cos(yaw) - p.y * Math.sin(yaw), d = p.x * Math.sin(yaw) + p.y * Math.cos(yaw);
-    return [canvas.width / 2 + s * x, canvas.height - 60 - s * (p.z * Math.cos(pitch) - d * Math.sin(pitch))];
+    // the crane left of centre: the column of wire labels is at the right
+    return [canvas.width * 0.38 + s * x, canvas.height - 60 - s * (p.z * Math.cos(pitch) - d * Math.sin(pitch))];
   };
   const rgba = (c) => `rgba(${Math.round(c.r * 255)},${Math.round(c.g * 255)},${Math.round(c.b * 255)},${c.a})`;
   for (const t of e.triangles) {
@@ -248,18 +332,57 @@ function drawScene() {
     ctx.lineTo(u1 - 10 * Math.cos(ang + 0.4), v1 - 10 * Math.sin(ang + 0.4)); ctx.closePath();
     ctx.fillStyle = rgba(a.color); ctx.fill();
   }
+  // The texts, placed so that none covers another: the wire labels in a column at the right, each with a swatch of
+  // its wire's colour and a leader line to the wire's middle; the others near their anchor where they cover no
+  // text and not the platform; the compliance ellipsoid's caption is the legend under the canvas.
   ctx.font = '11px sans-serif';
+  const placed = [];
+  const platform = e.triangles.length ? e.triangles[0].points.map(project) : [];
+  const obstacle = platform.length ? {
+    left: Math.min(...platform.map((p) => p[0])), top: Math.min(...platform.map((p) => p[1])),
+    width: Math.max(...platform.map((p) => p[0])) - Math.min(...platform.map((p) => p[0])),
+    height: Math.max(...platform.map((p) => p[1])) - Math.min(...platform.map((p) => p[1])) } : null;
+  const W = canvas.width, H = canvas.height;
+  const put = (t, x, y) => {
+    ctx.fillStyle = rgba(t.color);
+    canvasText(ctx, 'scene', t.text, x, y);
+    placed.push(window.__textBoxes.scene[window.__textBoxes.scene.length - 1]);
+  };
+  const wireLines = e.lines.filter((l) => l.type === 2);  // the six wires, in order (the loops are LINE_LOOPs)
+  let row = 0;
   for (const t of e.texts) {
+    if (!WIRE_LABEL.test(t.text)) continue;
     const [u, v] = project(t.pose.position);
-    ctx.fillStyle = rgba(t.color); ctx.fillText(t.text, u + 3, v);
+    const x = W - 112, y = 16 + 15 * row;
+    const colour = wireLines[row] ? rgba(wireLines[row].color) : '#555';
+    ctx.strokeStyle = colour; ctx.globalAlpha = 0.6; ctx.lineWidth = 1; ctx.setLineDash([2, 2]);
+    ctx.beginPath(); ctx.moveTo(u, v); ctx.lineTo(x - 12, y - 4); ctx.stroke(); ctx.setLineDash([]);
+    ctx.globalAlpha = 1; ctx.fillStyle = colour; ctx.fillRect(x - 11, y - 8, 8, 8);
+    put(t, x, y);
+    row++;
+  }
+  for (const t of e.texts) {
+    if (WIRE_LABEL.test(t.text) || t.text.startsWith('compliance')) continue;
+    const [u, v] = project(t.pose.position);
+    const w = ctx.measureText(t.text).width;
+    const candidates = [[u - w / 2, v], [u + 6, v], [u - w - 6, v], [u + 6, v + 16], [u - w - 6, v + 16],
+      [u + 6, v - 16], [u - w - 6, v - 16], [u - w / 2, v + 22], [u - w / 2, v - 22]];
+    for (let y = H - 6; y > 14; y -= 15) candidates.push([6, y]);  // else the lowest free line at the left
+    const fits = ([x, y]) => {
+      const box = { left: x, top: y - 11, width: w, height: 14 };
+      return x >= 0 && x + w <= W && y - 11 >= 0 && y + 3 <= H && !placed.some((b) => overlaps(b, box, 2)) &&
+        !(obstacle && overlaps(obstacle, box));
+    };
+    const [x, y] = candidates.find(fits) || [6, H - 6];
+    put(t, x, y);
   }
   const scale = e.metadata.find((kv) => kv.key === 'deflection_scale');
   const ellipsoid = e.metadata.find((kv) => kv.key === 'compliance_force_n');
   canvas.dataset.ellipsoid = ellipsoid ? 'drawn' : '';
-  if (scale) {
-    document.getElementById('scale').textContent = `deflection shown ×${Number(scale.value)}` +
-      (ellipsoid ? `; compliance ellipsoid (magenta): displacement under ${Number(ellipsoid.value)} N` : '');
-  }
+  if (scale) document.getElementById('scale').textContent = `deflection shown ×${Number(scale.value)}`;
+  document.getElementById('ellipsoid-text').textContent = ellipsoid ?
+    `(magenta): displacement under ${Number(ellipsoid.value)} N in any direction, ×${Number(scale.value)}` :
+    'waiting for the 6×6 fit…';
 }
 
 function frame(now) {
@@ -282,5 +405,6 @@ setInterval(() => {
   state.lastCount = state.messages;
 }, 1000);
 
-fetch('config.json').then((r) => r.json()).then(connect);
+buildTables();
+fetch('config.json').then((r) => r.json()).then((config) => { setRun(config.run || 'one_axis'); connect(config); });
 requestAnimationFrame(frame);
