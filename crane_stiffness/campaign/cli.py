@@ -46,7 +46,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     campaign = load_campaign(args.campaign)
     confirm = service_confirm() if args.confirm == 'service' else terminal_confirm
     run = run_campaign(campaign, args.out, hardware=args.hardware, confirm=confirm,
-                       arguments=_rig_arguments(args.rig_arg), progress=not args.quiet, jobs=args.jobs)
+                       arguments=_rig_arguments(args.rig_arg), progress=not args.quiet, jobs=args.jobs,
+                       scheduler=args.scheduler)
     print(f'campaign {campaign.name}: {len(run.ran)} session(s) run, {len(run.skipped)} done before, '
           f'{run.planned} planned -> {run.out}')
     return EXIT_OK
@@ -126,6 +127,10 @@ def add_commands(subparsers: Any) -> None:
                    help='sessions run side by side on simulated time, each rig in a ROS domain of its own '
                         '(ROS_DOMAIN_ID, ROS_DOMAIN_ID + 1, ...); default: on simulated time one more than the '
                         'cores (at most 4), else 1')
+    r.add_argument('--scheduler', metavar='ADDRESS', default=None,
+                   help='a Dask scheduler (tcp://host:8786): run the sessions on its workers (simulated time; each '
+                        'worker runs its rigs in ROS domains from its own ROS_DOMAIN_ID, one per thread) and bring '
+                        'their bags and results back into --out (needs the extra \'dask\')')
     r.add_argument('--quiet', action='store_true', help='no progress bar')
     r.set_defaults(func=_guarded(cmd_run))
     a = sub.add_parser('analyze', help='analyse every session of a campaign directory: Figs. 10 and 13 with the '

@@ -12,6 +12,10 @@ if TYPE_CHECKING:
     from crane_stiffness.campaign.rows import CampaignAnalysis, Calibration, Full6Row, SessionRow
 
 
+#: Sessions per quantity from which the report shows the intervals' coverage (a coverage study's campaign).
+COVERAGE_STUDY = 10
+
+
 def _pct(value: float) -> str:
     return '–' if not math.isfinite(value) else f'{100 * value:+.3f} %'
 
@@ -66,6 +70,15 @@ def campaign_blocks(result: CampaignAnalysis, images: Sequence[str]) -> list[Blo
                   'side–tilt coupling K2 with its interval and sign. Largest |diagonal error|: '
                   f'{_pct(worst6)}. Per session: full6 report and figures in its analysis folder.'),
             full_table(result.full)]
+    if any(c.total >= COVERAGE_STUDY for c in result.coverage):
+        departures = [c.quantity for c in result.coverage if not c.consistent]
+        blocks += [('h2', 'Coverage of the 95 % intervals'),
+                   ('p', 'How often each quantity\'s 95 % interval covers the model\'s value (the exact tangent, '
+                         'its inverse for C), with the fraction\'s Clopper–Pearson 95 % interval (coverage.csv, '
+                         'coverage figure). Outside 0.95: ' + (', '.join(departures) or 'none') + '.'),
+                   ('table', ['quantity', 'covered', 'fraction', '95 % interval'],
+                    [[c.quantity, f'{c.covered}/{c.total}', f'{c.fraction:.3f}',
+                      f'{c.interval[0]:.3f} … {c.interval[1]:.3f}'] for c in result.coverage])]
     for image in images:
         blocks.append(('img', image, Path(image).stem.replace('_', ' ')))
     every: list[SessionRow | Full6Row] = [*rows, *result.full]

@@ -105,12 +105,17 @@ class CampaignAnalysis:
     failed: dict[str, str]
     """Sessions whose analysis failed, and why."""
     files: list[str] = field(default_factory=list)
+    coverage: list[Any] = field(default_factory=list)
+    """How often each quantity's 95 % intervals cover the model (crane_stiffness.campaign.coverage.Coverage)."""
 
     def to_dict(self) -> dict[str, Any]:
         from crane_stiffness.analysis.results import json_safe
         return json_safe({'campaign': self.campaign, 'rows': [asdict(r) for r in self.rows],
                            'full': [asdict(r) for r in self.full], 'missing': self.missing,
-                           'analysed': self.analysed, 'failed': self.failed, 'files': self.files})
+                           'analysed': self.analysed, 'failed': self.failed, 'files': self.files,
+                           'coverage': [{'quantity': c.quantity, 'covered': c.covered, 'sessions': c.total,
+                                         'fraction': c.fraction, 'ci95': list(c.interval),
+                                         'consistent_with_95': c.consistent} for c in self.coverage]})
 
 
 @dataclass

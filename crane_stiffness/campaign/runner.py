@@ -65,6 +65,12 @@ def instructions(plan: SessionPlan, total: int) -> str:
                f'program {Path(plan.program).name} scaled by {plan.program_scale:.4g}'))
 
 
+def session_program_text(plan: SessionPlan) -> str:
+    """The program file a session plays: its designed program, or the series' file with its levels scaled."""
+    return plan.program_text if plan.program_text is not None else scaled_program_text(Path(plan.program),
+                                                                                        plan.program_scale)
+
+
 def session_done(out: Path, plan: SessionPlan) -> bool:
     return (out / 'sessions' / plan.id / RESULT_FILE).is_file()
 
@@ -168,7 +174,8 @@ def default_jobs(arguments: Mapping[str, str], hardware: bool) -> int:
 def run_campaign(campaign: Campaign, out: str | os.PathLike, *, hardware: bool = False,
                  confirm: Confirm | None = None, arguments: Mapping[str, str] | None = None,
                  progress: bool = True, ready_timeout_s: float = 120.0, jobs: int | None = None,
-                 on_session: Callable[[SessionPlan], None] | None = None) -> CampaignRun:
+                 on_session: Callable[[SessionPlan], None] | None = None, scheduler: str | None = None
+                 ) -> CampaignRun:
     """Run every session of ``campaign`` not done yet in ``out`` (see the module docstring).
 
     Args:
@@ -182,6 +189,9 @@ def run_campaign(campaign: Campaign, out: str | os.PathLike, *, hardware: bool =
             :func:`default_jobs` (cores + 1, at most 4, on simulated time). Only simulated time gives the same
             numbers at any load, so more than one job needs it; hardware runs one session at a time.
         on_session: called before each session is started (tests use it to interrupt a campaign).
+        scheduler: a Dask scheduler's address (``tcp://host:8786``): the sessions run on its workers, each rig on
+            its worker's machine, and come back into ``out`` (crane_stiffness.campaign.distributed); simulated
+            rig on simulated time only. ``jobs`` does not apply (the cluster's workers and threads decide).
 
     Raises:
         CampaignError: ``out`` holds another campaign; a true crane with --hardware; jobs without simulated time.
@@ -201,6 +211,9 @@ def run_campaign(campaign: Campaign, out: str | os.PathLike, *, hardware: bool =
     jobs = default_jobs(arguments, hardware) if jobs is None else int(jobs)
     if jobs < 1:
         raise CampaignError(f'--jobs {jobs}: must be at least 1')
+    if scheduler and default_jobs(arguments, hardware) == 1:
+        raise CampaignError(f'--scheduler {scheduler}: sessions on a cluster need the simulated rig on simulated time '
+                            '(the same numbers on any machine); run hardware and wall-clock sessions here')
     if jobs > 1 and default_jobs(arguments, hardware) == 1:
         raise CampaignError(f'--jobs {jobs}: sessions side by side need the simulated rig on simulated time (on the '
                             'wall clock they would take each other\'s cores and lose samples); use --jobs 1')
@@ -241,7 +254,11 @@ def run_campaign(campaign: Campaign, out: str | os.PathLike, *, hardware: bool =
         show()
 
     try:
-        if jobs == 1:
+        if scheduler:
+            from crane_stiffness.campaign.distributed import run_on_cluster
+            texts = {plan.id: session_program_text(plan) for plan in todo}
+            run_on_cluster(campaign, out, todo, texts, arguments, scheduler, ready_timeout_s, on_session, finished)
+        elif jobs == 1:
             for plan in todo:
                 if on_session is not None:
                     on_session(plan)
@@ -311,9 +328,12 @@ class _SessionRunner:
     """One session of a campaign on the rig: its folder, program and parameters, the rig run, its result.json."""
 
     def __init__(self, campaign: Campaign, out: Path, hardware: bool, arguments: Mapping[str, str],
-                 env: Mapping[str, str], share: Path, executables: Path | None, ready_timeout_s: float) -> None:
+                 env: Mapping[str, str], share: Path, executables: Path | None, ready_timeout_s: float,
+                 program_texts: Mapping[str, str] | None = None) -> None:
         self.campaign, self.out, self.hardware, self.arguments = campaign, out, hardware, dict(arguments)
         self.env, self.share, self.executables, self.ready_timeout_s = dict(env), share, executables, ready_timeout_s
+        #: Program files by session id, made where the plan was made (a Dask worker gets them with the task).
+        self.program_texts = dict(program_texts or {})
 
     def run(self, plan: SessionPlan, confirmed: Mapping[str, Any] | None, domain: int,
             progress: Callable[[float], None], should_stop: Callable[[], bool] | None = None,
@@ -329,8 +349,8 @@ class _SessionRunner:
             folder = out / 'sessions' / plan.id
             folder.mkdir(parents=True)
             program = folder / 'program.yaml'
-            program.write_text(plan.program_text if plan.program_text is not None else
-                               scaled_program_text(Path(plan.program), plan.program_scale))
+            program.write_text(self.program_texts[plan.id] if plan.id in self.program_texts else
+                               session_program_text(plan))
             entry = campaign_entry(self.campaign, plan, self.hardware, confirmed)
             model = plan.nominal if self.hardware else plan.true
             seeds = {} if self.hardware or plan.seeds is None else plan.seeds

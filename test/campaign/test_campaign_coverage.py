@@ -1,0 +1,75 @@
+"""The intervals' coverage over a campaign (crane_stiffness.campaign.coverage): the binomial interval against
+scipy's own exact interval, and the counts on synthetic campaigns against the campaign rows' own verdicts (the
+loading interval against the tangent per one-axis session, the 36 intervals of K per six-axis session)."""
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import pytest
+from scipy.stats import binomtest
+
+from crane_stiffness.campaign.analyze import analyze_campaign
+from crane_stiffness.campaign.coverage import binomial_interval
+from crane_stiffness.campaign.spec import load_campaign
+from crane_stiffness.testing.synthetic_campaign import write_synthetic_campaign
+
+
+@pytest.mark.parametrize('k,n', [(0, 1), (1, 1), (0, 20), (19, 20), (20, 20), (190, 200), (47, 50), (1, 3)])
+def test_the_fraction_s_interval_is_clopper_pearson(k, n):
+    expected = binomtest(k, n).proportion_ci(confidence_level=0.95, method='exact')
+    low, high = binomial_interval(k, n)
+    assert (low, high) == pytest.approx((expected.low, expected.high), abs=1e-12)
+    assert low <= k / n <= high
+
+
+@pytest.mark.parametrize('k,n', [(1, 0), (-1, 5), (6, 5)])
+def test_an_impossible_count_is_refused_naming_it(k, n):
+    with pytest.raises(ValueError, match=f'k = {k}, n = {n}'):
+        binomial_interval(k, n)
+
+
+def campaign(tmp_path: Path, body: str) -> Path:
+    path = tmp_path / 'coverage.yaml'
+    path.write_text('campaign:\n  ros__parameters:\n    name: cov\n    weights: [50.0]\n    lengths: [0.5]\n'
+                    + ''.join(f'    {line}\n' for line in body.strip().splitlines()))
+    return path
+
+
+def test_one_axis_coverage_counts_each_session_s_loading_and_unloading_interval(tmp_path):
+    spec = load_campaign(campaign(tmp_path, 'series: [fy]\nprograms: [campaign_side_force]\nrepeats: 12\nseed: 3'))
+    out = tmp_path / 'campaign'
+    write_synthetic_campaign(out, spec, seed=40, sample_rate_hz=200)
+    result = analyze_campaign(out, workers=2)
+    coverage = {c.quantity: c for c in result.coverage}
+    assert set(coverage) == {'k fy loading', 'k fy unloading'}
+    assert coverage['k fy loading'].total == coverage['k fy unloading'].total == 12
+    # the rows' own verdict, computed by the campaign analysis from the same session analyses
+    assert coverage['k fy loading'].covered == sum(r.ci95_low <= r.model_tangent <= r.ci95_high for r in result.rows)
+    with open(out / 'campaign' / 'coverage.csv') as f:
+        table = {row['quantity']: row for row in csv.DictReader(f)}
+    assert int(table['k fy loading']['covered']) == coverage['k fy loading'].covered
+    assert int(table['k fy loading']['sessions']) == 12
+    assert (out / 'campaign' / 'coverage.png').stat().st_size > 5000
+    report = (out / 'campaign' / 'report.md').read_text()
+    assert 'Coverage of the 95 % intervals' in report and 'k fy unloading' in report
+
+
+def test_six_axis_coverage_counts_every_entry_of_k_and_c_and_k2(tmp_path):
+    spec = load_campaign(campaign(tmp_path, 'series: [full]\nprograms: [design]\nrepeats: 2\nseed: 5\n'
+                                            'design.steps: 16\ndesign.hold_s: 2.0\ndesign.baseline_s: 1.0'))
+    out = tmp_path / 'campaign'
+    write_synthetic_campaign(out, spec, seed=9)
+    result = analyze_campaign(out, workers=2)
+    coverage = {c.quantity: c for c in result.coverage}
+    k_entries = [q for q in coverage if q.startswith('K[')]
+    c_entries = [q for q in coverage if q.startswith('C[')]
+    assert len(k_entries) == len(c_entries) == 36 and 'K2' in coverage
+    assert 'K[fy,uy]' in coverage and 'C[uy,fy]' in coverage
+    assert all(coverage[q].total == 2 for q in [*k_entries, *c_entries, 'K2'])
+    # K's entries covered, summed over the entries, equal the sessions' own counts of covering intervals
+    assert sum(coverage[q].covered for q in k_entries) == sum(r.covered for r in result.full)
+    assert coverage['K2'].covered == sum(r.k2_low <= r.k2_tangent <= r.k2_high for r in result.full)
+    # two sessions are no coverage study: the report leaves the table out, the CSV has it
+    assert 'Coverage of the 95 % intervals' not in (out / 'campaign' / 'report.md').read_text()
+    assert len((out / 'campaign' / 'coverage.csv').read_text().splitlines()) == 1 + 73
