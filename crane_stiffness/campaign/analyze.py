@@ -31,7 +31,8 @@ from crane_stiffness import __version__
 from crane_stiffness.campaign.errors import CampaignError
 from crane_stiffness.campaign.full_series import FULL
 from crane_stiffness.campaign.rows import CampaignAnalysis, Full6Row, SessionRow
-from crane_stiffness.campaign.runner import RESULT_FILE, read_plan
+from crane_stiffness.campaign.runner import read_plan
+from crane_stiffness.campaign.session import RESULT_FILE
 
 SOURCE_FILE = 'source.json'
 #: The analysis file of a one-axis session and of a session of the series full.

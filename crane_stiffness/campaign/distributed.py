@@ -73,7 +73,7 @@ def remote_session(campaign: Campaign, plan: SessionPlan, program_text: str, arg
     sessions/<id>>, 'worker': <address>}``. The scratch directory goes when the session ends, however it ends."""
     from dask.distributed import get_worker
 
-    from crane_stiffness.campaign.runner import _SessionRunner
+    from crane_stiffness.campaign.session import SessionRunner
     from crane_stiffness.launcher import rosrun
     from crane_stiffness.params.files import share_dir
     from crane_stiffness.rosnode.discovery import use_quick_discovery
@@ -85,7 +85,7 @@ def remote_session(campaign: Campaign, plan: SessionPlan, program_text: str, arg
     domain = _DOMAINS.take(worker.state.nthreads)
     scratch = Path(tempfile.mkdtemp(prefix=f'session-{plan.id}-', dir=worker.local_directory))
     try:
-        runner = _SessionRunner(campaign, scratch, False, arguments, env, share_dir() / 'config',
+        runner = SessionRunner(campaign, scratch, False, arguments, env, share_dir() / 'config',
                                 rosrun.node_executables(), ready_timeout_s, {plan.id: program_text})
         result = runner.run(plan, None, domain, lambda fraction: None)
         buffer = io.BytesIO()
@@ -103,7 +103,7 @@ def store_session(out: Path, plan: SessionPlan, returned: Mapping[str, Any]) -> 
     """Put a session a worker returned into the campaign directory ``out``: its bag and its folder, ``result.json``
     (naming the bag where it now is and the worker it ran on) written last. Whatever an earlier attempt left of the
     same session is set aside first (``interrupted/``), as a local run does."""
-    from crane_stiffness.campaign.runner import RESULT_FILE, _set_aside
+    from crane_stiffness.campaign.session import RESULT_FILE, set_aside
 
     staging = out / INCOMING / f'{plan.id}-{uuid.uuid4().hex[:8]}'
     staging.mkdir(parents=True)
@@ -115,7 +115,7 @@ def store_session(out: Path, plan: SessionPlan, returned: Mapping[str, Any]) -> 
         result['bag'] = str(out / 'bags' / plan.id)
         result['worker'] = returned['worker']
         (folder / RESULT_FILE).unlink(missing_ok=True)  # written again below, after the bag is in place
-        _set_aside(out, plan)
+        set_aside(out, plan)
         (out / 'bags').mkdir(exist_ok=True)
         (out / 'sessions').mkdir(exist_ok=True)
         os.replace(staging / 'bags' / plan.id, out / 'bags' / plan.id)

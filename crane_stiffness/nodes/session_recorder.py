@@ -50,9 +50,7 @@ from functools import partial
 from pathlib import Path
 from typing import Any, Sequence
 
-from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
-from rclpy.qos import QoSProfile
 from rclpy.serialization import deserialize_message
 from rclpy.subscription import Subscription
 from rclpy.timer import Timer
@@ -70,11 +68,11 @@ from crane_stiffness.rosnode.run import run
 from crane_stiffness.rosnode.parameter_reader import NodeParameterReader, plain
 from crane_stiffness.rosnode.parameters import Params
 from crane_stiffness.rosnode.qos import SIM_STREAM_QOS
+from crane_stiffness.rosnode.recorded_channel import NO_EVENTS, SIM_INPUTS, RecordedChannel
 from crane_stiffness.rosnode.sim_time import SimTimeParticipant, drain, uses_sim_time
 from crane_stiffness.rosnode.session_recorder_params import (OWN_SECTIONS, PARAMS, RECORDING_KEYS, utc_session_name,
                                                           validate)
-from crane_stiffness.rosnode.session_qos import (adapted_qos, contract_qos, has_header, message_class,
-                                               offered_profiles, publisher_types)
+from crane_stiffness.rosnode.session_qos import (adapted_qos, contract_qos, offered_profiles, publisher_types)
 from crane_stiffness.params.files import params_files_from_args, read_params_files
 from crane_stiffness.serde import header_stamp_ns
 from crane_stiffness.bag.session_metadata import (NODE_PARAMETERS_METADATA, SESSION_END_METADATA, SESSION_METADATA,
@@ -82,33 +80,6 @@ from crane_stiffness.bag.session_metadata import (NODE_PARAMETERS_METADATA, SESS
 from crane_stiffness.sim.log_times import SimLogTimes
 from crane_stiffness.sim.program import PROGRAM_KEYS
 from crane_stiffness.contract.status import ERROR, OK
-
-
-# rclpy puts a QoS-event handler into every wait of the executor for each subscription with the default event
-# callbacks (~15 µs each per wait): with a dozen recorded topics at a few kHz that is a large share of a core.
-_NO_EVENTS = SubscriptionEventCallbacks(use_default_callbacks=False)
-
-
-class _Channel:
-    """One subscribed topic: type, subscriber QoS, whether its messages carry a header stamp, count."""
-
-    __slots__ = ('topic', 'msg_type', 'msg_class', 'qos', 'stamped', 'subscription', 'added', 'count')
-
-    def __init__(self, topic: str, msg_type: str, qos: QoSProfile) -> None:
-        self.topic = topic
-        self.msg_type = msg_type
-        self.msg_class = message_class(msg_type)
-        self.qos = qos
-        self.stamped = has_header(self.msg_class)
-        self.subscription: Subscription | None = None
-        self.added = False
-        self.count = 0
-
-
-#: What the stages below the recorder publish (crane_stiffness.sim.lockstep): on simulated time the recorder waits
-#: until it has every message of them up to the stage's watermark.
-SIM_INPUTS = (topics.WRENCH_COMMAND, topics.APPLIED_WRENCH, topics.REJECTED_COMMAND, topics.PLATFORM_POSE,
-              topics.WIRE_STATES, topics.LOAD_CELL_WRENCH, topics.LVDT_DISPLACEMENT, topics.POSE_SENSOR_POSE)
 
 
 class SessionRecorder(Node):
@@ -119,13 +90,13 @@ class SessionRecorder(Node):
         # Simulated time: /clock is recorded too, the sensor streams are taken reliably, and the clock waits for
         # this node (stage 3), so nothing published is lost at any load.
         self.sim_time = uses_sim_time(self)
-        self.before_time: list[tuple[_Channel, bytes]] = []  # received on simulated time before it started
+        self.before_time: list[tuple[RecordedChannel, bytes]] = []  # received on simulated time before it started
         # Simulated time: the messages held until their simulated time is complete, with their log times (per
         # recording; None on the wall clock)
-        self.log_times: SimLogTimes[tuple[_Channel, bytes, int | None]] | None = None
+        self.log_times: SimLogTimes[tuple[RecordedChannel, bytes, int | None]] | None = None
         self.writer: BagWriter | None = None
         self.bag_path: Path | None = None
-        self.channels: dict[str, _Channel] = {}
+        self.channels: dict[str, RecordedChannel] = {}
         self.pending: list[str] = []          # topics outside the contract not yet seen in the graph
         self.last_bag: Path | None = None
         self.last_count = 0
@@ -358,14 +329,14 @@ class SessionRecorder(Node):
         if qos is None:
             qos = adapted_qos([i.qos_profile for i in self.get_publishers_info_by_topic(topic)])
         try:
-            channel = _Channel(topic, msg_type, qos)
+            channel = RecordedChannel(topic, msg_type, qos)
         except ValueError as exc:
             self.get_logger().error(f'cannot record {topic}: {exc}')
             self.errors += 1
             return
         channel.subscription = self.create_subscription(
             channel.msg_class, topic, partial(self._on_message, channel), qos, raw=True,
-            event_callbacks=_NO_EVENTS)
+            event_callbacks=NO_EVENTS)
         self.channels[topic] = channel
 
     def _unsubscribe_all(self) -> None:
@@ -412,7 +383,7 @@ class SessionRecorder(Node):
                 self._subscribe(topic, next(iter(graph)))
 
     # --- messages ---
-    def _on_message(self, channel: _Channel, data: bytes) -> None:
+    def _on_message(self, channel: RecordedChannel, data: bytes) -> None:
         self.received += 1
         self.sim.received(channel.topic)
         if self.writer is None:
@@ -431,7 +402,7 @@ class SessionRecorder(Node):
         for channel, data in held:
             self._take(channel, data, now_ns)
 
-    def _take(self, channel: _Channel, data: bytes, now_ns: int) -> None:
+    def _take(self, channel: RecordedChannel, data: bytes, now_ns: int) -> None:
         """A message received at clock time ``now_ns``: written (wall clock), or held with its log time until its
         simulated time is complete (simulated time). Simulated time from a /clock without the lock-step's watermarks
         (a player's or a simulator's clock: no watermark ever heard) is logged at receipt, as on the wall clock."""
@@ -441,7 +412,7 @@ class SessionRecorder(Node):
         else:
             self.log_times.hold(channel.topic, stamp, now_ns, (channel, data, stamp))
 
-    def _write(self, channel: _Channel, data: bytes, log_ns: int, stamp: int | None) -> None:
+    def _write(self, channel: RecordedChannel, data: bytes, log_ns: int, stamp: int | None) -> None:
         writer = self.writer
         if writer is None:  # closed meanwhile (stop() from another thread)
             self.dropped['not_recording'] += 1

@@ -12,7 +12,8 @@ from pathlib import Path
 from typing import Any
 
 from crane_stiffness.campaign.full_series import FULL
-from crane_stiffness.campaign.runner import RESULT_FILE, prepare_campaign, campaign_entry
+from crane_stiffness.campaign.runner import prepare_campaign
+from crane_stiffness.campaign.session import RESULT_FILE, campaign_entry
 from crane_stiffness.campaign.spec import Campaign, SessionPlan, plan_sessions, scaled_program_text
 from crane_stiffness.params.files import load_yaml
 from crane_stiffness.params.geometry import geometry_from_params

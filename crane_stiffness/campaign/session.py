@@ -1,0 +1,126 @@
+"""One session of a campaign on the rig: its program file, its place in the campaign as the recorder stores it,
+the rig run in its ROS domain and its ``result.json`` (written last: the session is done). The local runner
+(:mod:`.runner`) and a Dask worker (:mod:`.distributed`) run a session through the same :class:`SessionRunner`."""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import sys
+import time
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any, Callable, Mapping
+
+from crane_stiffness.campaign.spec import Campaign, SessionPlan, scaled_program_text
+
+RESULT_FILE = 'result.json'
+
+
+def session_program_text(plan: SessionPlan) -> str:
+    """The program file a session plays: its designed program, or the series' file with its levels scaled."""
+    return plan.program_text if plan.program_text is not None else scaled_program_text(Path(plan.program),
+                                                                                        plan.program_scale)
+
+
+def campaign_entry(campaign: Campaign, plan: SessionPlan, hardware: bool, confirmed: Mapping[str, Any] | None
+                   ) -> dict[str, Any]:
+    """The session's place in the campaign as the recorder stores it (session_metadata.CAMPAIGN_KEY)."""
+    entry: dict[str, Any] = {
+        'campaign': campaign.name, 'file': str(campaign.path), 'session': plan.id, 'index': plan.index,
+        'series': plan.series, 'weight': plan.weight, 'l0': plan.l0, 'height': plan.height, 'repeat': plan.repeat,
+        'program_scale': plan.program_scale, 'rig': 'hardware' if hardware else 'simulated',
+        'seeds': None if hardware else plan.seeds,
+        'analysis_geometry': 'nominal'}
+    if not hardware:
+        entry['true_geometry'] = dict(plan.true)
+    if confirmed is not None:
+        entry['confirmed'] = dict(confirmed)
+    return entry
+
+
+def set_aside(out: Path, plan: SessionPlan) -> None:
+    """A session started before and not finished: its partial bag and logs moved together to interrupted/<id>-N/
+    (bags/ and sessions/ in it, N counting the attempts set aside)."""
+    parts = [part for part in (out / 'bags' / plan.id, out / 'sessions' / plan.id) if part.exists()]
+    if not parts:
+        return
+    n = 1
+    while (out / 'interrupted' / f'{plan.id}-{n}').exists():
+        n += 1
+    target = out / 'interrupted' / f'{plan.id}-{n}'
+    target.mkdir(parents=True)
+    for part in parts:
+        shutil.move(str(part), str(target / part.parent.name))
+
+
+class SessionRunner:
+    """One session of a campaign on the rig: its folder, program and parameters, the rig run, its result.json."""
+
+    def __init__(self, campaign: Campaign, out: Path, hardware: bool, arguments: Mapping[str, str],
+                 env: Mapping[str, str], share: Path, executables: Path | None, ready_timeout_s: float,
+                 program_texts: Mapping[str, str] | None = None) -> None:
+        self.campaign, self.out, self.hardware, self.arguments = campaign, out, hardware, dict(arguments)
+        self.env, self.share, self.executables, self.ready_timeout_s = dict(env), share, executables, ready_timeout_s
+        #: Program files by session id, made where the plan was made (a Dask worker gets them with the task).
+        self.program_texts = dict(program_texts or {})
+
+    def run(self, plan: SessionPlan, confirmed: Mapping[str, Any] | None, domain: int,
+            progress: Callable[[float], None], should_stop: Callable[[], bool] | None = None,
+            attempts: int = 2) -> dict[str, Any]:
+        """Run ``plan`` in ROS domain ``domain`` and write its result.json; the result. A rig that did not start
+        its program (RigStartError: nothing measured) is started again, ``attempts`` times in all."""
+        from crane_stiffness.launcher.rig import decode_values, run_rig
+        from crane_stiffness.launcher.rosrun import RigStartError
+
+        out = self.out
+        for attempt in range(1, attempts + 1):
+            set_aside(out, plan)
+            folder = out / 'sessions' / plan.id
+            folder.mkdir(parents=True)
+            program = folder / 'program.yaml'
+            program.write_text(self.program_texts[plan.id] if plan.id in self.program_texts else
+                               session_program_text(plan))
+            entry = campaign_entry(self.campaign, plan, self.hardware, confirmed)
+            model = plan.nominal if self.hardware else plan.true
+            seeds = {} if self.hardware or plan.seeds is None else plan.seeds
+            overrides = {**{node: {'seed': seed} for node, seed in seeds.items()}, 'crane_model': dict(model),
+                         'session_recorder': {**plan.nominal, 'campaign_entry': _yaml_string(json.dumps(entry)),
+                                              'notes': f'campaign {self.campaign.name}, session {plan.id}'}}
+            started = time.time()
+            try:
+                summary, observer, startup_s, _ = run_rig(
+                    self.share, self.env, folder, str(program), session=plan.id, ready_timeout_s=self.ready_timeout_s,
+                    overrides=overrides, executables=self.executables, bags=out / 'bags', progress=progress,
+                    arguments=self.arguments, domain_id=domain, should_stop=should_stop)
+            except RigStartError as exc:
+                if attempt == attempts:
+                    raise
+                print(f'\nsession {plan.id}: the rig did not start ({exc}); starting it again (attempt {attempt + 1} '
+                      f'of {attempts}; the first is kept in {out / "interrupted"})', file=sys.stderr, flush=True)
+                continue
+            break
+        result = {'session': plan.id, 'plan': plan.to_dict(), 'campaign_entry': entry,
+                  'time': 'simulated' if self.arguments.get('use_sim_time') == 'true' else 'wall',
+                  'wall_s': round(time.time() - started, 3), 'ros_domain_id': domain, 'attempts': attempt,
+                  'bag': str(out / 'bags' / plan.id), 'started_utc': utc(started), 'finished_utc': utc(),
+                  'startup_s': startup_s, 'estimate': decode_values(observer.values) if observer.values else None,
+                  'status': summary['status'], 'node_exit_codes': summary['node_exit_codes'],
+                  # The six-axis fit's last K (quantity × row × column, /stiffness6/stiffness) and status, if it ran.
+                  'stiffness6': observer.stiffness6,
+                  'status6': None if observer.status6 is None else
+                  {'level': observer.status6[0], 'message': observer.status6[1], 'values': observer.status6[2]}}
+        tmp = folder / (RESULT_FILE + '.tmp')
+        tmp.write_text(json.dumps(result, indent=1, allow_nan=True))
+        os.replace(tmp, folder / RESULT_FILE)
+        return result
+
+
+def _yaml_string(text: str) -> str:
+    """``text`` as a YAML single-quoted scalar: a ``-p name:=value`` override is read as YAML, and a JSON object
+    unquoted would be a mapping, not the string parameter."""
+    return "'" + text.replace("'", "''") + "'"
+
+
+def utc(t: float | None = None) -> str:
+    return datetime.fromtimestamp(time.time() if t is None else t, tz=timezone.utc).isoformat(timespec='seconds')
