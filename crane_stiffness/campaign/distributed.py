@@ -140,15 +140,9 @@ def run_on_cluster(campaign: Campaign, out: Path, todo: list[SessionPlan], progr
     (:func:`store_session`) and passed to ``finished``. A worker lost mid-session: Dask runs its task again on
     another worker (up to the scheduler's ``allowed-failures``); a session that fails on its worker raises here
     and the tasks not yet finished are cancelled (the finished ones are kept: run again to resume)."""
-    try:
-        from dask.distributed import Client, as_completed
-    except ImportError:
-        raise CampaignError(f'--scheduler {scheduler}: dask.distributed is not installed (pip install '
-                            "'crane_stiffness[dask]')") from None
-    try:
-        client = Client(scheduler, timeout='30s')
-    except (OSError, TimeoutError) as exc:
-        raise CampaignError(f'--scheduler {scheduler}: cannot connect: {exc}') from None
+    from crane_stiffness.campaign.parallel import connect
+    client = connect(scheduler)
+    from dask.distributed import as_completed
     futures = []
     try:
         plans = {}

@@ -65,17 +65,24 @@ def _context(func: Callable[..., str]) -> BaseContext:
     return context
 
 
-def _on_dask(func: Callable[..., str], jobs: Sequence[Job], scheduler: str,
-             progress: Callable[[str], None] | None) -> list[str]:
+def connect(scheduler: str, timeout_s: float = 30.0) -> Any:
+    """A dask.distributed Client of the scheduler at ``scheduler`` (``tcp://host:8786``); CampaignError saying why
+    when dask.distributed is not installed or the scheduler cannot be reached."""
     try:
-        from dask.distributed import Client, as_completed as dask_completed
+        from dask.distributed import Client
     except ImportError:
         raise CampaignError(f'--scheduler {scheduler}: dask.distributed is not installed (pip install '
                             "'crane_stiffness[dask]')") from None
     try:
-        client = Client(scheduler, timeout='20s')
+        return Client(scheduler, timeout=f'{timeout_s}s')
     except (OSError, TimeoutError) as exc:
         raise CampaignError(f'--scheduler {scheduler}: cannot connect: {exc}') from None
+
+
+def _on_dask(func: Callable[..., str], jobs: Sequence[Job], scheduler: str,
+             progress: Callable[[str], None] | None) -> list[str]:
+    client = connect(scheduler)
+    from dask.distributed import as_completed as dask_completed
     try:
         futures = [client.submit(func, *job, pure=False) for job in jobs]
         index = {f.key: i for i, f in enumerate(futures)}

@@ -15,10 +15,10 @@ import subprocess
 import uuid
 from typing import Sequence
 
-from crane_stiffness.testing.lab_network import LabNetworkError, _ip
+from crane_stiffness.testing.lab_network import LabNetworkError, NetworkNamespaces, _ip
 
 
-class StarNetwork:
+class StarNetwork(NetworkNamespaces):
     """Namespaces ``hub`` and ``leaves`` (names given), leaf ``i`` linked to the hub over ``10.x.y.(4i+1)`` (hub
     end) and ``10.x.y.(4i+2)`` (leaf end). A context manager: ``__exit__`` ends every process left in them and
     removes them (the veth pairs go with them)."""
@@ -33,7 +33,7 @@ class StarNetwork:
         self.hub_address = {leaf: f'{base}.{4 * i + 1}' for i, leaf in enumerate(leaves)}
         self.address = {leaf: f'{base}.{4 * i + 2}' for i, leaf in enumerate(leaves)}
         self._links = {leaf: (f'csh{i}{tag}', f'csl{i}{tag}') for i, leaf in enumerate(leaves)}
-        self.made: list[str] = []
+        super().__init__()
 
     def create(self) -> 'StarNetwork':
         for name in self.namespaces.values():
@@ -72,28 +72,11 @@ class StarNetwork:
         return pids
 
     def remove(self) -> list[str]:
-        """End what runs in the namespaces and remove them; the errors, if any."""
-        errors = []
+        """End what runs in the namespaces, then remove them; the errors, if any."""
         for machine, name in self.namespaces.items():
             if name in self.made:
                 self.kill(machine)
-        for name in reversed(self.made):
-            try:
-                _ip('netns', 'del', name)
-            except LabNetworkError as exc:
-                errors.append(str(exc))
-        self.made = []
-        return errors
-
-    def __enter__(self) -> 'StarNetwork':
-        try:
-            return self.create()
-        except BaseException:
-            self.remove()
-            raise
-
-    def __exit__(self, *exc: object) -> None:
-        self.remove()
+        return super().remove()
 
 
 __all__ = ['StarNetwork']

@@ -70,7 +70,39 @@ def _ip(*args: str) -> str:
     return out.stdout
 
 
-class LabNetwork:
+class NetworkNamespaces:
+    """Network namespaces made by a test (``made``: their names, in order) and removed again: a context manager whose
+    ``__exit__`` removes them even when making them failed half-way. Subclasses make them in :meth:`create`."""
+
+    def __init__(self) -> None:
+        self.made: list[str] = []
+
+    def create(self) -> 'NetworkNamespaces':
+        raise NotImplementedError
+
+    def remove(self) -> list[str]:
+        """Remove the namespaces made (their veth pairs go with them); returns the errors, if any."""
+        errors = []
+        for name in reversed(self.made):
+            try:
+                _ip('netns', 'del', name)
+            except LabNetworkError as exc:
+                errors.append(str(exc))
+        self.made = []
+        return errors
+
+    def __enter__(self) -> Any:
+        try:
+            return self.create()
+        except BaseException:
+            self.remove()
+            raise
+
+    def __exit__(self, *exc: object) -> None:
+        self.remove()
+
+
+class LabNetwork(NetworkNamespaces):
     """Two network namespaces, ``daq`` and ``analysis``, joined by a veth pair: ``daq_address`` on one end,
     ``analysis_address`` on the other, a /30 of ``subnet`` (private, 10.x) that exists only inside the namespaces;
     each namespace has its loopback up and a multicast route on its veth end (DDS discovery by multicast needs
@@ -83,7 +115,7 @@ class LabNetwork:
         self.links = {'daq': f'csd{tag}', 'analysis': f'csa{tag}'}
         base = subnet.rsplit('.', 1)[0]
         self.addresses = {'daq': f'{base}.1', 'analysis': f'{base}.2'}
-        self.made: list[str] = []
+        super().__init__()
 
     @property
     def daq_address(self) -> str:
@@ -117,26 +149,6 @@ class LabNetwork:
         tx = next(i for i, p in enumerate(parts) if p and p[0].startswith('TX'))
         return {'rx_bytes': int(parts[rx + 1][0]), 'tx_bytes': int(parts[tx + 1][0])}
 
-    def remove(self) -> list[str]:
-        """Remove the namespaces made (and with them the veth pair); returns the errors, if any."""
-        errors = []
-        for name in reversed(self.made):
-            try:
-                _ip('netns', 'del', name)
-            except LabNetworkError as exc:
-                errors.append(str(exc))
-        self.made = []
-        return errors
-
-    def __enter__(self) -> 'LabNetwork':
-        try:
-            return self.create()
-        except BaseException:
-            self.remove()
-            raise
-
-    def __exit__(self, *exc) -> None:
-        self.remove()
 
 
 class NamespacedProcesses(Processes):
@@ -159,5 +171,5 @@ class NamespacedProcesses(Processes):
         return self._popen(name, ['ip', 'netns', 'exec', ns, *command(package, executable, args, env)], env)
 
 
-__all__ = ['LabNetwork', 'LabNetworkError', 'NamespacedProcesses', 'emulated_ports', 'free_port', 'start_rig_with',
-           'PACKAGE']
+__all__ = ['LabNetwork', 'LabNetworkError', 'NetworkNamespaces', 'NamespacedProcesses', 'emulated_ports',
+           'free_port', 'start_rig_with', 'PACKAGE']
