@@ -432,6 +432,12 @@ class LiveStiffness:
         self._update_rows()
         return self._rows[LOADING][0]
 
+    def headline_stiffness(self) -> float:
+        """The number /stiffness/stiffness carries: the loading branch's stiffness, NaN while there is none and in a
+        six-axis program (a one-axis fit of a multi-axis load is no number to publish; the values for tools keep
+        it, beside the 'not applicable' status)."""
+        return math.nan if self._settings.six_axis_program else self.loading_stiffness()
+
     def refresh(self) -> dict[Branch, float]:
         """Recompute the nonlinearity indicator and scatter of each branch's window (each a pass over the window: call
         it slowly)."""

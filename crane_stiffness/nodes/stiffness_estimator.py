@@ -389,7 +389,7 @@ class StiffnessEstimatorNode(Node):
         self.values_msg.data = self.core.values()
         self.pub_values.publish(self.values_msg)
         self.core.published(self.get_clock().now().nanoseconds * 1e-9)
-        k = self.core.loading_stiffness()
+        k = self.core.headline_stiffness()
         if k != self.last_stiffness and k == k:  # changed and not NaN
             self.pub_stiffness.publish(Float64(data=k))
         self.last_stiffness = k
@@ -423,7 +423,7 @@ class StiffnessEstimatorNode(Node):
         self._catch_up()
         self._check_publishers()
         assert self.core is not None
-        stiffness = self.core.loading_stiffness()
+        stiffness = self.core.headline_stiffness()
         if stiffness == stiffness:  # not NaN; also at this slow rate, for a late subscriber during a hold
             self.pub_stiffness.publish(Float64(data=stiffness))
         self.core.refresh()

@@ -308,7 +308,7 @@ def test_in_a_six_axis_program_every_part_says_not_applicable_never_a_one_axis_v
             live.add_force(t, _wrench(fi))
             live.add_displacement(t, d)
         live.refresh()
-        reports[six] = (live.report(), live.input_report('test'), live.values())
+        reports[six] = (live.report(), live.input_report('test'), live.values(), live.headline_stiffness())
     one, six = reports[False], reports[True]
     assert one[0][0].level == WARN and 'nonlinear' in one[0][0].message
     assert one[1][0] == WARN and 'combined loading' in one[1][1]
@@ -318,3 +318,4 @@ def test_in_a_six_axis_program_every_part_says_not_applicable_never_a_one_axis_v
                                   'multi-axis load; see /stiffness6/status')
     assert six[1][0] == OK and six[1][1].startswith('not applicable: six-axis program') and 'combined' not in six[1][1]
     assert six[2] == one[2]  # the same pairs fitted, the same numbers recorded
+    assert one[3] > 0 and math.isnan(six[3])  # but no headline number (/stiffness/stiffness) for a six-axis program
