@@ -28,6 +28,8 @@ from crane_stiffness.model.stiffness import axis_stiffness  # noqa: E402
 from crane_stiffness.params.files import load_params  # noqa: E402
 from crane_stiffness.nodes import stiffness_estimator  # noqa: E402
 from crane_stiffness.nodes.stiffness_estimator import StiffnessEstimatorNode  # noqa: E402
+from crane_stiffness.launcher.rig import ros_args  # noqa: E402
+from crane_stiffness.launcher.rig_description import NODES as RIG_NODES, rig_nodes  # noqa: E402
 
 pytestmark = pytest.mark.ros  # every test here starts ROS (conftest)
 
@@ -287,10 +289,24 @@ def test_parameters_validated_on_start_and_on_change(rclpy_context, capsys):
 
 
 def test_sensors_yaml_sets_every_estimator_parameter_with_its_declared_type(rclpy_context):
+    """Every parameter but those the rig sets per run: a value in the node's own section of a parameter file beats
+    the rig's ``-p`` (seen with rclpy 7.1.6), so a file must not set them (test below)."""
     path = Path(__file__).resolve().parents[2] / 'config' / 'sensors.yaml'
     values = load_params(path, 'stiffness_estimator')
-    assert set(values) == {spec.name for spec in stiffness_estimator.PARAMS}
+    set_by_the_rig = {node.six_axis_parameter for node in RIG_NODES if node.six_axis_parameter}
+    assert set_by_the_rig == {'six_axis_program'}
+    assert set(values) == {spec.name for spec in stiffness_estimator.PARAMS} - set_by_the_rig
     node = StiffnessEstimatorNode(context=rclpy_context, cli_args=['--ros-args', '--params-file', str(path)])
     for name, value in values.items():
         assert node.get_parameter(name).value == value, name
+    node.destroy_node()
+
+
+@pytest.mark.parametrize('program,six', [('full6', True), ('side_force', False)])
+def test_the_rig_tells_the_estimator_whether_its_program_is_six_axis(rclpy_context, program, six):
+    """With exactly the arguments the rig starts it with (its parameter files, then the rig's own values)."""
+    config = Path(__file__).resolve().parents[2] / 'config'
+    start = {n.name: n for n in rig_nodes(config, {'program': program})}['stiffness_estimator']
+    node = StiffnessEstimatorNode(context=rclpy_context, cli_args=ros_args(start))
+    assert node.get_parameter('six_axis_program').value is six
     node.destroy_node()
