@@ -27,7 +27,7 @@ NOT_COMPARED = ('bag', 'session', 'timings_s', 'files')
 #: What the original has from its session record (program, geometry: the steps and cycles of the recorded program,
 #: the model curves, notes) and a copy has not, or says it has not (problems), beside the NOT_COMPARED keys. All the
 #: rest (branch and hold fits, pairing, counts, the live estimate's comparison, stream delays) is identical.
-SESSION_RECORD_KEYS = {'bag', 'cycle_fits', 'files', 'geometry', 'model', 'notes', 'problems', 'program',
+SESSION_RECORD_KEYS = {'bag', 'cycle_fits', 'files', 'geometry', 'mapping', 'model', 'notes', 'problems', 'program',
                        'recorded_with', 'session', 'steps', 'timings_s'}
 
 
@@ -70,6 +70,12 @@ def test_analyze_gives_the_same_numbers_on_every_storage(bags, capsys, tmp_path)
     assert different == SESSION_RECORD_KEYS, ' '.join(sorted(different))
     assert {'branch_fits', 'hold_fits', 'pairing', 'counts', 'live'} <= set(original) - different
     assert original['live'] is not None and original['branch_fits']['loading'] is not None
+    # the mapping differs only in where the geometry came from: the session record, which the copies lack
+    for name in COPIES:
+        assert ({**results[name]['mapping'], 'geometry_source': None}
+                == {**original['mapping'], 'geometry_source': None}), name
+    assert (original['mapping']['geometry_source'], results['mcap']['mapping']['geometry_source']) == (
+        'recorded with the session', 'none')
     # compare reads them alike
     assert cli_main(['compare', str(bags['original']), str(bags['sqlite3']), str(bags['mcap_file_zstd']),
                      '--out', str(tmp_path / 'compare'), '--quiet']) == 0
