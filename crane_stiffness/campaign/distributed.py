@@ -109,7 +109,7 @@ def store_session(out: Path, plan: SessionPlan, returned: Mapping[str, Any]) -> 
     staging.mkdir(parents=True)
     try:
         with tarfile.open(fileobj=io.BytesIO(returned['archive']), mode='r') as tar:
-            tar.extractall(staging, filter='data')
+            tar.extractall(staging, members=_session_members(tar, plan))
         folder = staging / 'sessions' / plan.id
         result = dict(returned['result'])
         result['bag'] = str(out / 'bags' / plan.id)
@@ -130,6 +130,20 @@ def store_session(out: Path, plan: SessionPlan, returned: Mapping[str, Any]) -> 
             (out / INCOMING).rmdir()
         except OSError:  # another session is being unpacked, or it is gone already
             pass
+
+
+def _session_members(tar: tarfile.TarFile, plan: SessionPlan) -> list[tarfile.TarInfo]:
+    """The archive's members, each a plain file or folder under ``bags/<id>/`` or ``sessions/<id>/``; anything else
+    (a link, a device, an absolute path, ``..``) is refused naming it: the campaign directory only ever gets the
+    session's own files. (Python's extraction filters are not in every 3.11.)"""
+    members = tar.getmembers()
+    for m in members:
+        parts = Path(m.name).parts
+        if (not (m.isfile() or m.isdir()) or Path(m.name).is_absolute() or '..' in parts or len(parts) < 2
+                or parts[0] not in ('bags', 'sessions') or parts[1] != plan.id):
+            raise CampaignError(f'session {plan.id}: the archive its worker returned holds {m.name!r} '
+                                f'(not a file of bags/{plan.id}/ or sessions/{plan.id}/): refused')
+    return members
 
 
 def run_on_cluster(campaign: Campaign, out: Path, todo: list[SessionPlan], program_texts: Mapping[str, str],

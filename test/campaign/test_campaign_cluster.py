@@ -140,3 +140,39 @@ def test_a_campaign_on_a_dask_cluster_survives_a_lost_worker(tmp_path, ros_domai
         # nothing lost or recorded twice: every wrench of the program on its 1 ms grid, once
         stamps = [t for t, _ in recorded['/load_cell/wrench']]
         assert len(stamps) >= 5800 and all(t2 - t1 == MS for t1, t2 in zip(stamps, stamps[1:])), session
+
+
+@pytest.mark.parametrize('name,kind', [('bags/s1/../../x', 'file'), ('/etc/x', 'file'), ('bags/other/x', 'file'),
+                                       ('sessions/s1/link', 'symlink'), ('plan.json', 'file')])
+def test_a_returned_session_holding_anything_but_its_own_files_is_refused(tmp_path, name, kind):
+    """What a worker returns goes into the campaign directory only as the session's own files."""
+    import io
+    import tarfile
+    from types import SimpleNamespace
+
+    from crane_stiffness.campaign.distributed import store_session
+    from crane_stiffness.campaign.errors import CampaignError
+
+    def archive(entries: list[tuple[str, str]]) -> bytes:
+        buffer = io.BytesIO()
+        with tarfile.open(fileobj=buffer, mode='w') as tar:
+            for path, what in entries:
+                info = tarfile.TarInfo(path)
+                if what == 'symlink':
+                    info.type, info.linkname = tarfile.SYMTYPE, '/etc/passwd'
+                    tar.addfile(info)
+                else:
+                    info.size = 2
+                    tar.addfile(info, io.BytesIO(b'{}'))
+        return buffer.getvalue()
+
+    plan = SimpleNamespace(id='s1')
+    good = [('bags/s1/s1_0.mcap', 'file'), ('sessions/s1/result.json', 'file')]
+    out = tmp_path / 'ok'
+    result = store_session(out, plan, {'archive': archive(good), 'result': {'session': 's1'}, 'worker': 'tcp://w'})
+    assert result['bag'] == str(out / 'bags' / 's1') and (out / 'bags' / 's1' / 's1_0.mcap').is_file()
+    assert sorted(p.name for p in out.iterdir()) == ['bags', 'sessions']
+    bad = tmp_path / 'bad'
+    with pytest.raises(CampaignError, match='refused'):
+        store_session(bad, plan, {'archive': archive([*good, (name, kind)]), 'result': {}, 'worker': 'tcp://w'})
+    assert not (bad / 'bags').exists() and not (bad / 'sessions').exists() and not (tmp_path / 'x').exists()
