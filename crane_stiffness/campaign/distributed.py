@@ -71,15 +71,14 @@ def remote_session(campaign: Campaign, plan: SessionPlan, program_text: str, arg
                    ready_timeout_s: float) -> dict[str, Any]:
     """Run one session on this Dask worker: ``{'result': <result.json>, 'archive': <tar bytes of bags/<id> and
     sessions/<id>>, 'worker': <address>}``. The scratch directory goes when the session ends, however it ends."""
-    from dask.distributed import get_worker
-
+    from crane_stiffness.campaign.parallel import distributed
     from crane_stiffness.campaign.session import SessionRunner
     from crane_stiffness.launcher import rosrun
     from crane_stiffness.params.files import share_dir
     from crane_stiffness.rosnode.discovery import use_quick_discovery
 
     use_quick_discovery()
-    worker = get_worker()
+    worker = distributed('this worker').get_worker()
     env = dict(os.environ)
     env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     domain = _DOMAINS.take(worker.state.nthreads)
@@ -154,9 +153,9 @@ def run_on_cluster(campaign: Campaign, out: Path, todo: list[SessionPlan], progr
     (:func:`store_session`) and passed to ``finished``. A worker lost mid-session: Dask runs its task again on
     another worker (up to the scheduler's ``allowed-failures``); a session that fails on its worker raises here
     and the tasks not yet finished are cancelled (the finished ones are kept: run again to resume)."""
-    from crane_stiffness.campaign.parallel import connect
+    from crane_stiffness.campaign.parallel import connect, distributed
     client = connect(scheduler)
-    from dask.distributed import as_completed
+    as_completed = distributed(scheduler).as_completed
     futures = []
     try:
         plans = {}

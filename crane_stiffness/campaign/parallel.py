@@ -65,16 +65,22 @@ def _context(func: Callable[..., str]) -> BaseContext:
     return context
 
 
-def connect(scheduler: str, timeout_s: float = 30.0) -> Any:
-    """A dask.distributed Client of the scheduler at ``scheduler`` (``tcp://host:8786``); CampaignError saying why
-    when dask.distributed is not installed or the scheduler cannot be reached."""
+def distributed(scheduler: str) -> Any:
+    """The ``dask.distributed`` module (the optional extra ``dask``); CampaignError saying so when it is missing."""
     try:
-        from dask.distributed import Client
+        import dask.distributed
     except ImportError:
         raise CampaignError(f'--scheduler {scheduler}: dask.distributed is not installed (pip install '
                             "'crane_stiffness[dask]')") from None
+    return dask.distributed
+
+
+def connect(scheduler: str, timeout_s: float = 30.0) -> Any:
+    """A dask.distributed Client of the scheduler at ``scheduler`` (``tcp://host:8786``); CampaignError saying why
+    when dask.distributed is not installed or the scheduler cannot be reached."""
+    client = distributed(scheduler).Client
     try:
-        return Client(scheduler, timeout=f'{timeout_s}s')
+        return client(scheduler, timeout=f'{timeout_s}s')
     except (OSError, TimeoutError) as exc:
         raise CampaignError(f'--scheduler {scheduler}: cannot connect: {exc}') from None
 
@@ -82,7 +88,7 @@ def connect(scheduler: str, timeout_s: float = 30.0) -> Any:
 def _on_dask(func: Callable[..., str], jobs: Sequence[Job], scheduler: str,
              progress: Callable[[str], None] | None) -> list[str]:
     client = connect(scheduler)
-    from dask.distributed import as_completed as dask_completed
+    dask_completed = distributed(scheduler).as_completed
     try:
         futures = [client.submit(func, *job, pure=False) for job in jobs]
         index = {f.key: i for i, f in enumerate(futures)}

@@ -269,7 +269,7 @@ def test_replay_through_the_estimator_reproduces_the_live_estimates(rclpy_contex
                                                         f'{topics.APPLIED_WRENCH}: load_cell',
                                                         f'{topics.PLATFORM_POSE}: lvdt'])]
     inputs = [topics.LOAD_CELL_WRENCH, topics.LVDT_DISPLACEMENT, topics.WRENCH_COMMAND,
-              topics.PREDICTED_AXIS_STIFFNESS]
+              topics.PREDICTED_STIFFNESS]  # the estimator's prediction: the model's tangent along its own axis
     recorder = SessionRecorder(context=ctx, parameter_overrides=[
         Parameter('output_dir', value=str(tmp_path)), Parameter('session', value='live'),
         Parameter('topics', value=inputs + [topics.STIFFNESS_VALUES, topics.STIFFNESS_ESTIMATE,
