@@ -195,11 +195,14 @@ class _Playback(threading.Thread):
             stats['read'] += 1
             self.pending = True
             due = wall0 + int((msg.log_time_ns - base_ns) / self.rate)
-            shift = self._wait_until(due, msg.log_time_ns - base_ns, wall0)
-            if shift is None:
-                return False
-            wall0 += shift
-            due += shift
+            # A message already due goes out at once (no clock to publish, not paused): in a burst of log times
+            # (a wall-clock bag's receipt times come dozens within tens of µs) every µs spent per message adds up.
+            if due > time.monotonic_ns() or self.clock_pub is not None or not self.resume_event.is_set():
+                shift = self._wait_until(due, msg.log_time_ns - base_ns, wall0)
+                if shift is None:
+                    return False
+                wall0 += shift
+                due += shift
             self.pending = False
             try:
                 self.publishers[msg.topic].publish(msg.data)
@@ -236,7 +239,11 @@ class _Playback(threading.Thread):
             wait = due - now
             if wait <= 0:
                 return shift
-            time.sleep(min(wait, self.clock_period_ns if self.clock_pub is not None else wait, 50_000_000) / 1e9)
+            if wait <= replay_timing.SPIN_NS:  # a sleep this short costs more than it waits: spin instead
+                replay_timing.spin_until_ns(due)
+                return shift
+            time.sleep(min(wait - replay_timing.SPIN_NS,
+                           self.clock_period_ns if self.clock_pub is not None else wait, 50_000_000) / 1e9)
 
 
 class SessionPlayer(Node):

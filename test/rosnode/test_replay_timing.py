@@ -82,3 +82,14 @@ def test_the_interpreter_settings_come_back_after_a_playback():
         assert gc.get_freeze_count() > 0
     assert sys.getswitchinterval() == before and gc.get_freeze_count() == 0
     assert fine_timer_slack() in (True, False)  # available or not: never an error
+
+
+def test_a_spin_returns_at_its_time_not_before():
+    """The publishing thread's last stretch before a message: never early, whatever the machine's speed."""
+    import time
+    from crane_stiffness.rosnode.replay_timing import SPIN_NS, spin_until_ns
+    for wait_ns in (0, 1_000, SPIN_NS // 2, SPIN_NS):
+        due = time.monotonic_ns() + wait_ns
+        spin_until_ns(due)
+        assert time.monotonic_ns() >= due
+    spin_until_ns(time.monotonic_ns() - 1_000_000)  # already past: returns at once
