@@ -12,22 +12,16 @@ is six-axis, fed the six-axis estimator's topics, the one-axis estimator's 'not 
 """
 from __future__ import annotations
 
-import contextlib
 import shutil
-import threading
-from typing import Any, Iterator
+from typing import Any
 
 import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped, WrenchStamped
-from rclpy.executors import SingleThreadedExecutor
-from rclpy.node import Node
-from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64MultiArray
 
-from crane_stiffness.contract import stiffness6_layout, topics
+from crane_stiffness.contract import stiffness6_layout
 from crane_stiffness.contract.status import OK
 from crane_stiffness.estimation.live_status import not_applicable_message
 from crane_stiffness.full6.reference import k2_of, reference_at_rest
@@ -35,10 +29,9 @@ from crane_stiffness.launcher.rosrun import installed_config
 from crane_stiffness.model import solve_equilibrium
 from crane_stiffness.model.geometry import WIRE_NAMES
 from crane_stiffness.model.rotation import matrix_to_quaternion
-from crane_stiffness.nodes.live_view import LiveViewNode
-from crane_stiffness.rosnode.qos import LATCHED_QOS, RELIABLE_QOS
 from helpers import REPO
 from helpers.browser import Browser
+from helpers.view_rig import ViewRig
 from helpers.live_rig import live_rig, wait_for_pairs
 
 pytestmark = pytest.mark.ros
@@ -163,32 +156,12 @@ def test_one_axis_page_no_text_covers_another(install_tree, rclpy_context, tmp_p
     assert png.stat().st_size > 10_000
 
 
-class _SixAxisRig:
+class _SixAxisRig(ViewRig):
     """The live_view node told of a six-axis program, and a node publishing what a six-axis run publishes, in one
     context spun on a thread of its own."""
 
     def __init__(self, ctx: Any) -> None:
-        self.view = LiveViewNode(context=ctx, parameter_overrides=[
-            Parameter('port', value=0), Parameter('http_port', value=0), Parameter('rate_hz', value=20.0),
-            Parameter('six_axis_program', value=True)])
-        self.pub = Node('six_axis_page_publisher', context=ctx)
-        self.k = self.pub.create_publisher(Float64MultiArray, topics.STIFFNESS6, LATCHED_QOS)
-        self.c = self.pub.create_publisher(Float64MultiArray, topics.COMPLIANCE6, LATCHED_QOS)
-        self.status6 = self.pub.create_publisher(DiagnosticArray, topics.STIFFNESS6_STATUS, LATCHED_QOS)
-        self.estimate = self.pub.create_publisher(DiagnosticArray, topics.STIFFNESS_ESTIMATE, LATCHED_QOS)
-        self.wires = self.pub.create_publisher(JointState, topics.WIRE_STATES, RELIABLE_QOS)
-        self.pose = self.pub.create_publisher(PoseStamped, topics.PLATFORM_POSE, RELIABLE_QOS)
-        self.wrench = self.pub.create_publisher(WrenchStamped, topics.APPLIED_WRENCH, RELIABLE_QOS)
-        self.executor = SingleThreadedExecutor(context=ctx)
-        self.executor.add_node(self.view)
-        self.executor.add_node(self.pub)
-        self.stopping = False
-        self.thread = threading.Thread(target=self._spin, daemon=True)
-        self.thread.start()
-
-    def _spin(self) -> None:
-        while not self.stopping:
-            self.executor.spin_once(timeout_sec=0.05)
+        super().__init__(ctx, 'six_axis_page_publisher', six_axis_program=True)
 
     def publish_crane(self) -> None:
         """The crane under the first load of the six-axis program (config/program_full6.yaml, step 1): its pose, its
@@ -232,27 +205,10 @@ class _SixAxisRig:
                          KeyValue(key='k2_ci95', value=f'{0.995 * k2!r} .. {1.005 * k2!r}')]
         self.status6.publish(DiagnosticArray(status=[status]))
 
-    def close(self) -> None:
-        self.stopping = True
-        self.thread.join(10)
-        self.view.close()
-        self.executor.shutdown()
-        self.view.destroy_node()
-        self.pub.destroy_node()
-
-
-@contextlib.contextmanager
-def _six_axis_rig(ctx: Any) -> Iterator[_SixAxisRig]:
-    rig = _SixAxisRig(ctx)
-    try:
-        yield rig
-    finally:
-        rig.close()
-
 
 def test_six_axis_page_leads_with_the_6x6_in_a_stable_layout_and_no_text_covers_another(rclpy_context, tmp_path,
                                                                                       chromium_path):
-    with _six_axis_rig(rclpy_context) as rig:
+    with _SixAxisRig(rclpy_context) as rig:
         tangent = reference_at_rest(rig.view.geometry).tangent
         measured = tangent * (1.0 + np.random.default_rng(6).uniform(-0.006, 0.006, (6, 6)))
         assert rig.view.page is not None

@@ -5,31 +5,24 @@ published numbers against the model's tangent for its geometry, and draws the co
 the page (headless Chromium) shows the panel with the 36 published values."""
 from __future__ import annotations
 
-import contextlib
 import json
 import shutil
-import threading
-from typing import Any, Iterator
+from typing import Any
 
 import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from rclpy.executors import SingleThreadedExecutor
-from rclpy.node import Node
-from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64MultiArray
 
-from crane_stiffness.contract import stiffness6_layout, topics
+from crane_stiffness.contract import stiffness6_layout
 from crane_stiffness.full6.reference import k2_of, reference_at_rest
 from crane_stiffness.model.geometry import WIRE_NAMES
-from crane_stiffness.nodes.live_view import LiveViewNode
-from crane_stiffness.rosnode.qos import LATCHED_QOS, RELIABLE_QOS
 from crane_stiffness.contract.status import WARN
 from crane_stiffness.view.scene import COMPLIANCE_FORCE_N
 from helpers import REPO
 from helpers.browser import Browser
 from helpers.foxglove_client import FoxgloveClient
+from helpers.view_rig import ViewRig
 
 pytestmark = pytest.mark.ros
 
@@ -37,27 +30,11 @@ SHOTS = REPO / 'out' / 'live_view'
 K6, SCENE = '/live_view/stiffness6', '/live_view/scene'
 
 
-class _Rig:
+class _Rig(ViewRig):
     """The live_view node and a publisher node in one context, spun on a thread of their own."""
 
     def __init__(self, ctx: Any) -> None:
-        self.view = LiveViewNode(context=ctx, parameter_overrides=[
-            Parameter('port', value=0), Parameter('http_port', value=0), Parameter('rate_hz', value=20.0)])
-        self.pub = Node('stiffness6_test_publisher', context=ctx)
-        self.k = self.pub.create_publisher(Float64MultiArray, topics.STIFFNESS6, LATCHED_QOS)
-        self.c = self.pub.create_publisher(Float64MultiArray, topics.COMPLIANCE6, LATCHED_QOS)
-        self.status = self.pub.create_publisher(DiagnosticArray, topics.STIFFNESS6_STATUS, LATCHED_QOS)
-        self.wires = self.pub.create_publisher(JointState, topics.WIRE_STATES, RELIABLE_QOS)
-        self.executor = SingleThreadedExecutor(context=ctx)
-        self.executor.add_node(self.view)
-        self.executor.add_node(self.pub)
-        self.stopping = False
-        self.thread = threading.Thread(target=self._spin, daemon=True)
-        self.thread.start()
-
-    def _spin(self) -> None:
-        while not self.stopping:
-            self.executor.spin_once(timeout_sec=0.05)
+        super().__init__(ctx, 'stiffness6_test_publisher')
 
     def publish_wires(self) -> None:
         msg = JointState(name=list(WIRE_NAMES), position=[0.5] * 6, effort=[8.6, 8.7, 8.6, 8.7, 8.6, 8.7])
@@ -72,24 +49,7 @@ class _Rig:
                                   message='condition 2.1e4 above 1e4')
         status.values = [KeyValue(key='k2', value=f'{k2_of(k):.8g}'),
                          KeyValue(key='k2_ci95', value=f'{k2_interval[0]!r} .. {k2_interval[1]!r}')]
-        self.status.publish(DiagnosticArray(status=[status]))
-
-    def close(self) -> None:
-        self.stopping = True
-        self.thread.join(10)
-        self.view.close()
-        self.executor.shutdown()
-        self.view.destroy_node()
-        self.pub.destroy_node()
-
-
-@contextlib.contextmanager
-def _rig(ctx: Any) -> Iterator[_Rig]:
-    rig = _Rig(ctx)
-    try:
-        yield rig
-    finally:
-        rig.close()
+        self.status6.publish(DiagnosticArray(status=[status]))
 
 
 def _measured(tangent: np.ndarray) -> np.ndarray:
@@ -99,7 +59,7 @@ def _measured(tangent: np.ndarray) -> np.ndarray:
 
 
 def test_the_view_sends_the_6x6_only_once_published_and_draws_the_compliance_ellipsoid(rclpy_context):
-    with _rig(rclpy_context) as rig:
+    with _Rig(rclpy_context) as rig:
         tangent = reference_at_rest(rig.view.geometry).tangent
         assert rig.view.foxglove is not None
         client = FoxgloveClient(rig.view.foxglove.port)
@@ -168,7 +128,7 @@ def test_the_view_sends_the_6x6_only_once_published_and_draws_the_compliance_ell
 
 
 def test_the_page_shows_the_6x6_panel_with_the_published_values(rclpy_context, tmp_path, chromium_path):
-    with _rig(rclpy_context) as rig:
+    with _Rig(rclpy_context) as rig:
         tangent = reference_at_rest(rig.view.geometry).tangent
         assert rig.view.page is not None
         browser = Browser(chromium_path, tmp_path / 'chromium.log')
