@@ -27,6 +27,7 @@ topic is not played.
 from __future__ import annotations
 
 import fnmatch
+import gc
 import threading
 import time
 import warnings
@@ -178,6 +179,7 @@ class _Playback(threading.Thread):
         while not ahead.wait_filled(0.05):  # the clock starts once the buffer is full: the reads at the start do not
             if self.stop_event.is_set():    # make the first messages late
                 return False
+        gc.freeze()  # the messages read ahead: out of the full collections' reach (each would scan them all)
         wall0 = time.monotonic_ns()
         self.last_clock = None
         while True:
@@ -195,10 +197,13 @@ class _Playback(threading.Thread):
             stats['read'] += 1
             self.pending = True
             due = wall0 + int((msg.log_time_ns - base_ns) / self.rate)
-            # A message already due goes out at once (no clock to publish, not paused): in a burst of log times
-            # (a wall-clock bag's receipt times come dozens within tens of µs) every µs spent per message adds up.
-            if due > time.monotonic_ns() or self.clock_pub is not None or not self.resume_event.is_set():
+            # A message due within EARLY_NS goes out at once (no clock to publish, not paused): in a burst of log
+            # times (a wall-clock bag's receipt times come dozens within tens of µs) every µs per message adds up.
+            if (due - time.monotonic_ns() > replay_timing.EARLY_NS or self.clock_pub is not None
+                    or not self.resume_event.is_set()):
+                ahead.resume()  # the reader reads while this thread sleeps, and waits while it publishes
                 shift = self._wait_until(due, msg.log_time_ns - base_ns, wall0)
+                ahead.pause()
                 if shift is None:
                     return False
                 wall0 += shift
@@ -239,11 +244,9 @@ class _Playback(threading.Thread):
             wait = due - now
             if wait <= 0:
                 return shift
-            if wait <= replay_timing.SPIN_NS:  # a sleep this short costs more than it waits: spin instead
-                replay_timing.spin_until_ns(due)
+            if wait <= replay_timing.EARLY_NS:  # a sleep this short costs more than it waits: publish now
                 return shift
-            time.sleep(min(wait - replay_timing.SPIN_NS,
-                           self.clock_period_ns if self.clock_pub is not None else wait, 50_000_000) / 1e9)
+            time.sleep(min(wait, self.clock_period_ns if self.clock_pub is not None else wait, 50_000_000) / 1e9)
 
 
 class SessionPlayer(Node):

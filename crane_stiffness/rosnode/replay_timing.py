@@ -7,7 +7,7 @@ and the garbage collector's full collections over every object of the process (r
 
 - :class:`ReadAhead` reads the bag's messages on a thread of its own into a buffer and refills it in batches (from
   ``low`` up to ``high`` messages), so that the publishing thread only takes messages out of memory and the reader
-  runs seldom, between messages, not once per message.
+  runs seldom, between messages, not once per message; a bag of a few minutes is read whole before it plays.
 - :func:`quiet_interpreter` (a context manager around the playback): the objects that exist before the playback are
   frozen out of the garbage collector's reach (``gc.freeze``: a collection then scans only what the playback made),
   and the interpreter's thread switch interval is short, so that the publishing thread, waking from its sleep, gets
@@ -15,11 +15,15 @@ and the garbage collector's full collections over every object of the process (r
   default, 5 ms, would let the reader hold it for that long).
 - :func:`fine_timer_slack`: the publishing thread's timer slack (Linux's allowance for waking a sleeper late,
   50 µs by default) set to 1 µs.
-- :func:`spin_until_ns`: the last :data:`SPIN_NS` before a message's time are spun, not slept, and a message already
-  due is published at once. A bag recorded on the wall clock logs its messages at their receipt times, which come in
-  bursts (dozens of messages within tens of µs after the recorder was held up); there the cost per message, not the
-  sleep's accuracy, decides: at ~45 µs per message (a sleep call and its wake-up, plus the publish) the messages at
-  the end of a burst go out 1–3 ms late, at ~20 µs none does (computed from the demo's wall-clock bag).
+- a message due within :data:`EARLY_NS` (0.1 ms) is published at once, not slept for. A bag recorded on the wall
+  clock logs its messages at their receipt times, which come in bursts (dozens of messages within tens of µs after
+  the recorder was held up); there the cost per message decides: at ~45 µs per message (a sleep call and its
+  wake-up, plus the publish) the messages at the end of a burst go out 1–3 ms late, at ~20 µs none does (computed
+  from the demo's wall-clock bag).
+- the reader reads only while the publishing thread sleeps (:meth:`ReadAhead.pause` / :meth:`ReadAhead.resume`):
+  during a burst the two threads would otherwise take turns at the interpreter, one switch interval each, and every
+  message of the burst would wait for the reader's turn (p99 1.3 ms on the wall-clock bag with the reader free,
+  0.34 ms with the whole bag read before the playback).
 """
 from __future__ import annotations
 
@@ -28,7 +32,6 @@ import ctypes.util
 import gc
 import sys
 import threading
-import time
 from collections import deque
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
@@ -37,16 +40,21 @@ from typing import Generic, TypeVar
 T = TypeVar('T')
 
 #: Messages the read-ahead buffer holds at most, and the level at which it is refilled (up to READ_AHEAD_HIGH):
-#: at the rig's ~2,000 messages/s about 4 s and 2 s of a recording.
-READ_AHEAD_HIGH = 8000
-READ_AHEAD_LOW = 4000
+#: at the rig's ~2,600 messages/s (every topic) about 190 s and 95 s of a recording, ~120 MB and ~60 MB (a message
+#: in memory is ~240 bytes). A session bag of a few minutes is so read whole before its playback starts (about 8 µs
+#: per message); the reader then never runs during the playback. Reading goes in runs of a whole chunk (~1,000
+#: messages, a few ms that no pause can cut), and a run that overlaps a burst of the playback makes its messages
+#: late: on the demo's wall-clock bag p99 1.3 ms with a buffer of 8,000, 0.34 ms read whole.
+READ_AHEAD_HIGH = 500_000
+READ_AHEAD_LOW = 250_000
 #: The interpreter's thread switch interval during a playback [s] (Python's default is 0.005).
 SWITCH_INTERVAL_S = 0.0002
 _PR_SET_TIMERSLACK = 29
-#: The last stretch before a message's time [ns] that the publishing thread spins (reading the monotonic clock)
-#: instead of sleeping: a sleep and its wake-up cost tens of µs of their own, which a burst of messages due tens of
-#: µs apart (a wall-clock bag's receipt times) would add up message after message.
-SPIN_NS = 100_000
+#: A message due within this [ns] is published at once, not slept for: a sleep and its wake-up cost tens of µs of
+#: their own, which a burst of messages due tens of µs apart (a wall-clock bag's receipt times) would add up message
+#: after message. (Spinning out the wait instead was tried: on a loaded machine the spinning thread then loses the
+#: scheduler's favour for sleepers and whole time slices, p99 7x worse.)
+EARLY_NS = 100_000
 
 
 class ReadAhead(Generic[T]):
@@ -69,13 +77,24 @@ class ReadAhead(Generic[T]):
         self._done = False
         self._closed = False
         self._error: BaseException | None = None
+        self._may_read = threading.Event()  # cleared by pause(): the reader waits before its next item
+        self._may_read.set()
         self._thread = threading.Thread(target=self._fill, name=name, daemon=True)
         self._thread.start()
 
     def _fill(self) -> None:
-        buffer, cond = self._buffer, self._cond
+        buffer, cond, source, may_read = self._buffer, self._cond, self._source, self._may_read
         try:
-            for item in self._source:
+            while True:
+                while not may_read.is_set():  # paused: the taker is publishing
+                    if may_read.wait(0.5) or self._closed:
+                        break
+                if self._closed:
+                    return
+                try:
+                    item = next(source)
+                except StopIteration:
+                    break
                 if len(buffer) >= self.high:
                     with cond:
                         cond.notify_all()  # a full buffer: whoever waits for it to fill goes on
@@ -111,6 +130,7 @@ class ReadAhead(Generic[T]):
             try:
                 item = buffer.popleft()
             except IndexError:
+                self._may_read.set()  # nothing to take: the reader must run, paused or not
                 with self._cond:
                     if not buffer:
                         if self._done:
@@ -126,11 +146,21 @@ class ReadAhead(Generic[T]):
                     self._cond.notify_all()
             return True, item
 
+    def pause(self) -> None:
+        """Keep the reader from starting its next item until :meth:`resume` (or until the buffer runs empty): while
+        the taker publishes a burst, the reader would take every other turn at the interpreter."""
+        self._may_read.clear()
+
+    def resume(self) -> None:
+        """Let the reader go on (the taker is about to sleep)."""
+        self._may_read.set()
+
     def close(self, timeout: float = 10.0) -> None:
         """Stop reading (the thread ends once the item it is reading is in) and drop what is buffered."""
         with self._cond:
             self._closed = True
             self._cond.notify_all()
+        self._may_read.set()
         if self._thread is not threading.current_thread():
             self._thread.join(timeout)
         self._buffer.clear()
@@ -158,14 +188,6 @@ def quiet_interpreter(switch_interval_s: float = SWITCH_INTERVAL_S) -> Iterator[
     finally:
         sys.setswitchinterval(previous)
         gc.unfreeze()
-
-
-def spin_until_ns(due_ns: int) -> None:
-    """Return at monotonic time ``due_ns`` [ns], reading the clock meanwhile (for waits of at most SPIN_NS: the
-    interpreter's switch interval still lets the other threads run)."""
-    clock = time.monotonic_ns
-    while clock() < due_ns:
-        pass
 
 
 def fine_timer_slack(slack_ns: int = 1000) -> bool:

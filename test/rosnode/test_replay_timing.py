@@ -1,5 +1,6 @@
 """The player's read-ahead (crane_stiffness.rosnode.replay_timing): every item in order, an error of the source where
-it happened, stopping early; the interpreter settings restored after a playback."""
+it happened, stopping early, holding still while paused (and going on when its buffer runs empty); the interpreter
+settings restored after a playback."""
 from __future__ import annotations
 
 import gc
@@ -84,12 +85,19 @@ def test_the_interpreter_settings_come_back_after_a_playback():
     assert fine_timer_slack() in (True, False)  # available or not: never an error
 
 
-def test_a_spin_returns_at_its_time_not_before():
-    """The publishing thread's last stretch before a message: never early, whatever the machine's speed."""
-    import time
-    from crane_stiffness.rosnode.replay_timing import SPIN_NS, spin_until_ns
-    for wait_ns in (0, 1_000, SPIN_NS // 2, SPIN_NS):
-        due = time.monotonic_ns() + wait_ns
-        spin_until_ns(due)
-        assert time.monotonic_ns() >= due
-    spin_until_ns(time.monotonic_ns() - 1_000_000)  # already past: returns at once
+
+def test_a_paused_reader_takes_no_further_item_and_an_empty_buffer_lets_it_go_on():
+    pulled = []
+
+    def source():
+        for i in range(5000):
+            pulled.append(i)
+            yield i
+
+    ahead = ReadAhead(source(), high=10_000, low=5_000)
+    ahead.pause()
+    at_pause = len(pulled)
+    time.sleep(0.3)
+    assert len(pulled) <= at_pause + 1  # at most the item it had started on when paused
+    assert _take_all(ahead) == list(range(5000))  # taking from an empty buffer resumes it, paused or not
+    ahead.close()
