@@ -35,6 +35,10 @@ from crane_stiffness.launcher.rig_description import config_files as rig_config_
 from crane_stiffness.sim.program import LoadProgram, load_program_file
 from crane_stiffness.launcher.rosrun import Processes, RigInterrupted, RigStartError, RosRunError
 
+#: A program whose progress has not moved for this long [s of wall time], past its own length plus a minute, has
+#: stopped: the session fails.
+PROGRESS_STALL_S = 60.0
+
 if TYPE_CHECKING:
     from rclpy.executors import SingleThreadedExecutor
 
@@ -279,6 +283,31 @@ def summarize(share: Path, program: str, session: str, bags: Path, observer: Obs
     }
 
 
+def wait_for_program_end(procs: Processes, observer: Observer, duration_s: float,
+                         progress: Callable[[float], None] | None = None, margin_s: float = 60.0,
+                         stall_s: float = PROGRESS_STALL_S) -> None:
+    """Spin ``observer`` until load_program has exited with status 0; RosRunError when it failed, another node
+    died, or it is still running ``duration_s + margin_s`` [s of wall time] after the start and its progress has not
+    moved for ``stall_s``. On simulated time a busy machine slows the rig down (half real time at load 10): that
+    must not fail the session, so the wait goes on as long as the program keeps advancing."""
+    deadline = time.monotonic() + duration_s + margin_s
+    seen, seen_at = observer.progress, time.monotonic()
+    while procs.procs['load_program'].poll() is None:
+        now = time.monotonic()
+        if observer.progress != seen:
+            seen, seen_at = observer.progress, now
+        if now >= deadline and now - seen_at >= stall_s:
+            break
+        procs.check_alive(allow_exit=('load_program',))
+        observer.spin_once(0.1)
+        if progress is not None:
+            progress(observer.progress)
+    if procs.procs['load_program'].poll() != 0:
+        stalled = (f' (its progress stayed at {seen:.3f} for {time.monotonic() - seen_at:.0f} s)'
+                   if procs.procs['load_program'].poll() is None else '')
+        raise RosRunError(f'load_program did not finish{stalled}: {procs.log("load_program")[-3000:]}')
+
+
 def run_rig(share: Path, env: Mapping[str, str], out: Path, program: str, session: str = 'rig', record: bool = True,
             ready_timeout_s: float = 120.0, overrides: Mapping[str, Mapping[str, Any]] | None = None,
             executables: Path | None = None, bags: Path | None = None,
@@ -308,14 +337,7 @@ def run_rig(share: Path, env: Mapping[str, str], out: Path, program: str, sessio
             wait_for_program_start(observer, procs, ready_timeout_s + 30)
             assert observer.running_at is not None  # set when the program started
             started_after = observer.running_at - launched
-            deadline = time.monotonic() + prog.duration_s + 60
-            while procs.procs['load_program'].poll() is None and time.monotonic() < deadline:
-                procs.check_alive(allow_exit=('load_program',))
-                observer.spin_once(0.1)
-                if progress is not None:
-                    progress(observer.progress)
-            if procs.procs['load_program'].poll() != 0:
-                raise RosRunError(f'load_program did not finish: {procs.log("load_program")[-3000:]}')
+            wait_for_program_end(procs, observer, prog.duration_s, progress)
             observer.settle()  # the last samples reach the estimator
             codes = procs.stop()
             logs = {name: procs.log(name) for name in procs.procs}
