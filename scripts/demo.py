@@ -98,7 +98,7 @@ def main(argv=None) -> int:
 
     from crane_stiffness.launcher import rosrun
     from crane_stiffness.launcher.ports import free_port
-    from crane_stiffness.launcher.rig import Observer, start_rig, summarize, wait_for_program_start
+    from crane_stiffness.launcher.rig import Observer, ProgramWatch, start_rig, summarize, wait_for_program_start
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -129,12 +129,12 @@ def main(argv=None) -> int:
         print(f'  program started {observer.running_at - launched:.1f} s after launch', flush=True)
         bar = tqdm(total=100, desc=f'program {program.name}', unit='%', mininterval=0.5,
                    bar_format='{l_bar}{bar}| {n:.0f}/{total}% [{elapsed}<{remaining}]')
-        deadline = time.monotonic() + program.duration_s + 90
+        watch = ProgramWatch(program.duration_s, margin_s=90)  # waits as long as the program keeps advancing
 
         def finished() -> bool:  # the final state message, or load_program's clean exit after it
             return observer.done or procs.procs['load_program'].poll() == 0
 
-        while not finished() and time.monotonic() < deadline:
+        while not finished() and not watch.expired(observer.progress):
             observer.spin_once(0.1)
             percent = int(100 * observer.progress)
             if percent != bar.n:
@@ -143,7 +143,7 @@ def main(argv=None) -> int:
         bar.update(100 - bar.n if finished() else 0)
         bar.close()
         if not finished():
-            print('the load program did not finish in time; logs in', out / 'logs', file=sys.stderr)
+            print(f'the load program did not finish ({watch.reason()}); logs in', out / 'logs', file=sys.stderr)
             return 1
         observer.settle(procs)  # the last samples reach the estimator (simulated time: through the run's end)
         codes = procs.stop()

@@ -283,28 +283,44 @@ def summarize(share: Path, program: str, session: str, bags: Path, observer: Obs
     }
 
 
+class ProgramWatch:
+    """When to give up waiting for a program of ``duration_s``: once it is ``margin_s`` [s of wall time] past its
+    length and its progress (0 .. 1) has not moved for ``stall_s``. On simulated time a busy machine slows the rig
+    down (half real time at load 10): that must not fail the session, so the wait goes on as long as the program
+    keeps advancing."""
+
+    def __init__(self, duration_s: float, margin_s: float = 60.0, stall_s: float = PROGRESS_STALL_S) -> None:
+        now = time.monotonic()
+        self.deadline = now + duration_s + margin_s
+        self.stall_s = stall_s
+        self.seen: float | None = None
+        self.seen_at = now
+
+    def expired(self, progress: float) -> bool:
+        """Give up now? ``progress``: the program's latest reported progress."""
+        now = time.monotonic()
+        if progress != self.seen:
+            self.seen, self.seen_at = progress, now
+        return now >= self.deadline and now - self.seen_at >= self.stall_s
+
+    def reason(self) -> str:
+        """Where the program stopped, for the error."""
+        return f'its progress stayed at {self.seen or 0.0:.3f} for {time.monotonic() - self.seen_at:.0f} s'
+
+
 def wait_for_program_end(procs: Processes, observer: Observer, duration_s: float,
                          progress: Callable[[float], None] | None = None, margin_s: float = 60.0,
                          stall_s: float = PROGRESS_STALL_S) -> None:
     """Spin ``observer`` until load_program has exited with status 0; RosRunError when it failed, another node
-    died, or it is still running ``duration_s + margin_s`` [s of wall time] after the start and its progress has not
-    moved for ``stall_s``. On simulated time a busy machine slows the rig down (half real time at load 10): that
-    must not fail the session, so the wait goes on as long as the program keeps advancing."""
-    deadline = time.monotonic() + duration_s + margin_s
-    seen, seen_at = observer.progress, time.monotonic()
-    while procs.procs['load_program'].poll() is None:
-        now = time.monotonic()
-        if observer.progress != seen:
-            seen, seen_at = observer.progress, now
-        if now >= deadline and now - seen_at >= stall_s:
-            break
+    died, or :class:`ProgramWatch` gives up on it."""
+    watch = ProgramWatch(duration_s, margin_s, stall_s)
+    while procs.procs['load_program'].poll() is None and not watch.expired(observer.progress):
         procs.check_alive(allow_exit=('load_program',))
         observer.spin_once(0.1)
         if progress is not None:
             progress(observer.progress)
     if procs.procs['load_program'].poll() != 0:
-        stalled = (f' (its progress stayed at {seen:.3f} for {time.monotonic() - seen_at:.0f} s)'
-                   if procs.procs['load_program'].poll() is None else '')
+        stalled = f' ({watch.reason()})' if procs.procs['load_program'].poll() is None else ''
         raise RosRunError(f'load_program did not finish{stalled}: {procs.log("load_program")[-3000:]}')
 
 
