@@ -194,7 +194,12 @@ class SimClock(Node):
     def _log_held(self, now: float, what: str, warn: bool = False) -> None:
         if now - self._last_log >= self.params['log_period_s']:
             self._last_log = now
-            (self.get_logger().warning if warn else self.get_logger().info)(what)
+            # One call site per severity: rclpy's logger refuses a call site whose severity changes between calls
+            # (ValueError; it ended the clock the first time a held message followed a waiting one, under load).
+            if warn:
+                self.get_logger().warning(what)
+            else:
+                self.get_logger().info(what)
 
     def _publish_clock(self) -> None:
         assert self.lockstep is not None
