@@ -201,9 +201,7 @@ class _Playback(threading.Thread):
             # times (a wall-clock bag's receipt times come dozens within tens of µs) every µs per message adds up.
             if (due - time.monotonic_ns() > replay_timing.EARLY_NS or self.clock_pub is not None
                     or not self.resume_event.is_set()):
-                ahead.resume()  # the reader reads while this thread sleeps, and waits while it publishes
                 shift = self._wait_until(due, msg.log_time_ns - base_ns, wall0)
-                ahead.pause()
                 if shift is None:
                     return False
                 wall0 += shift

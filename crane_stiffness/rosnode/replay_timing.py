@@ -20,10 +20,6 @@ and the garbage collector's full collections over every object of the process (r
   the recorder was held up); there the cost per message decides: at ~45 µs per message (a sleep call and its
   wake-up, plus the publish) the messages at the end of a burst go out 1–3 ms late, at ~20 µs none does (computed
   from the demo's wall-clock bag).
-- the reader reads only while the publishing thread sleeps (:meth:`ReadAhead.pause` / :meth:`ReadAhead.resume`):
-  during a burst the two threads would otherwise take turns at the interpreter, one switch interval each, and every
-  message of the burst would wait for the reader's turn (p99 1.3 ms on the wall-clock bag with the reader free,
-  0.34 ms with the whole bag read before the playback).
 """
 from __future__ import annotations
 
@@ -77,24 +73,13 @@ class ReadAhead(Generic[T]):
         self._done = False
         self._closed = False
         self._error: BaseException | None = None
-        self._may_read = threading.Event()  # cleared by pause(): the reader waits before its next item
-        self._may_read.set()
         self._thread = threading.Thread(target=self._fill, name=name, daemon=True)
         self._thread.start()
 
     def _fill(self) -> None:
-        buffer, cond, source, may_read = self._buffer, self._cond, self._source, self._may_read
+        buffer, cond = self._buffer, self._cond
         try:
-            while True:
-                while not may_read.is_set():  # paused: the taker is publishing
-                    if may_read.wait(0.5) or self._closed:
-                        break
-                if self._closed:
-                    return
-                try:
-                    item = next(source)
-                except StopIteration:
-                    break
+            for item in self._source:
                 if len(buffer) >= self.high:
                     with cond:
                         cond.notify_all()  # a full buffer: whoever waits for it to fill goes on
@@ -130,7 +115,6 @@ class ReadAhead(Generic[T]):
             try:
                 item = buffer.popleft()
             except IndexError:
-                self._may_read.set()  # nothing to take: the reader must run, paused or not
                 with self._cond:
                     if not buffer:
                         if self._done:
@@ -146,21 +130,11 @@ class ReadAhead(Generic[T]):
                     self._cond.notify_all()
             return True, item
 
-    def pause(self) -> None:
-        """Keep the reader from starting its next item until :meth:`resume` (or until the buffer runs empty): while
-        the taker publishes a burst, the reader would take every other turn at the interpreter."""
-        self._may_read.clear()
-
-    def resume(self) -> None:
-        """Let the reader go on (the taker is about to sleep)."""
-        self._may_read.set()
-
     def close(self, timeout: float = 10.0) -> None:
         """Stop reading (the thread ends once the item it is reading is in) and drop what is buffered."""
         with self._cond:
             self._closed = True
             self._cond.notify_all()
-        self._may_read.set()
         if self._thread is not threading.current_thread():
             self._thread.join(timeout)
         self._buffer.clear()
