@@ -31,6 +31,7 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped, WrenchStamped
 from rclpy.node import Node
+from rclpy.time import Time
 from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import Trigger
 
@@ -43,7 +44,7 @@ from crane_stiffness.params.spec import ParamSpec
 from crane_stiffness.rosnode.parameters import Params
 from crane_stiffness.rosnode.qos import LATCHED_QOS, RELIABLE_QOS, sensor_qos, stream_qos
 from crane_stiffness.rosnode.run import run
-from crane_stiffness.rosnode.sim_time import SimTimeParticipant, uses_sim_time
+from crane_stiffness.rosnode.sim_time import PeriodicOutput, SimTimeParticipant, uses_sim_time
 from crane_stiffness.serde.cdr import CdrError, decode_stamped
 from crane_stiffness.serde.stamps import stamp_seconds
 from crane_stiffness.contract.status import ERROR, NAMES, STALE, WAITING, WAITING_PREFIX, wire_level
@@ -101,6 +102,7 @@ class Stiffness6EstimatorNode(Node):
         self.newest = {'wrench': -math.inf, 'pose': -math.inf}  # newest stamp per sensor stream [s]
         self.fit: ComplianceFit | None = None
         self.sim_time = uses_sim_time(self)
+        self._mark_ns: int | None = None  # simulated time: the last watermark handled [ns]
         self.held: list[tuple[float, int, int, str, Any]] = []  # simulated time: (stamp, kind order, seq, kind, data)
         self._seq = 0
         # How far behind the pose stream the fit is: node clock at handling − the pose's stamp, last samples [s]
@@ -133,9 +135,10 @@ class Stiffness6EstimatorNode(Node):
             self.pairing = Full6Pairing(settle_s=pairing[0], max_gap_s=pairing[1], max_age_s=pairing[2])
             self.estimator.reset()
             self.saturated[:] = 0
-        if self.timer is not None:
-            self.destroy_timer(self.timer)
-        self.timer = self.create_timer(1.0 / values['publish_rate_hz'], self._publish)
+        if self.timer is None:  # (on simulated time: at the watermarks, see _on_watermark)
+            self.timer = PeriodicOutput(self, 1.0 / values['publish_rate_hz'], self._publish, self.sim_time)
+        else:
+            self.timer.set_period(1.0 / values['publish_rate_hz'])
 
     # --- inputs: on the wall clock handled as they come; on simulated time held until the watermark ---
     def _on_command(self, msg: WrenchStamped) -> None:
@@ -177,6 +180,9 @@ class Stiffness6EstimatorNode(Node):
         self.held = [h for h in self.held if h[0] > mark]
         for stamp, _, _, kind, values in now:
             self._handle(stamp, kind, values)
+        self._mark_ns = t_ns
+        if self.timer is not None:
+            self.timer.at_watermark(t_ns)
         self.sim.report(t_ns)
 
     def _handle(self, stamp: float, kind: str, values: tuple[float, ...]) -> None:
@@ -210,9 +216,16 @@ class Stiffness6EstimatorNode(Node):
             self.program_state = ''
 
     # --- outputs ---
+    def _now_ns(self) -> int:
+        """The node's time [ns]: on simulated time the watermark handled last, the same in every run (the node clock
+        is wherever /clock had got to when the callback ran)."""
+        if self.sim_time and self._mark_ns is not None:
+            return self._mark_ns
+        return self.get_clock().now().nanoseconds
+
     def _stale(self) -> str:
         """Which flowing stream stopped (no sample within stale_after_s of now), or ''."""
-        now = self.get_clock().now().nanoseconds * 1e-9
+        now = self._now_ns() * 1e-9
         limit = self.params['stale_after_s']
         return ', '.join(f'{topics.LOAD_CELL_WRENCH if k == "wrench" else topics.POSE_SENSOR_POSE} (newest sample '
                          f'{now - t:.2f} s old)' for k, t in self.newest.items()
@@ -235,7 +248,7 @@ class Stiffness6EstimatorNode(Node):
                                   message=message)
         status.values = [KeyValue(key=k, value=v) for k, v in self._values(fit, level)]
         out = DiagnosticArray()
-        out.header.stamp = self.get_clock().now().to_msg()
+        out.header.stamp = Time(nanoseconds=self._now_ns()).to_msg()
         out.status = [status]
         self.pub_status.publish(out)
 
@@ -272,6 +285,10 @@ class Stiffness6EstimatorNode(Node):
             self.get_logger().info(f'final 6x6 fit: {NAMES.get(level, level)} {message}; K2 = '
                                    f'{fit.k2:.6g} [{fit.k2_low:.6g}, {fit.k2_high:.6g}] N/rad, diagonal of K '
                                    f'{np.array2string(np.diag(fit.stiffness), precision=6)}')
+
+
+#: The node a rig host loads (crane_stiffness.launcher.rig_host), built with its node arguments (``cli_args``).
+COMPONENT = Stiffness6EstimatorNode
 
 
 def main(args=None) -> int:

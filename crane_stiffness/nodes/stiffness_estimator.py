@@ -49,8 +49,8 @@ from geometry_msgs.msg import PointStamped, WrenchStamped
 from rclpy.clock import ROSClock
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.node import Node
+from rclpy.time import Time
 from rclpy.subscription import Subscription
-from rclpy.timer import Timer
 from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension
 from std_srvs.srv import Trigger
 
@@ -65,7 +65,7 @@ from crane_stiffness.params.spec import ParamSpec
 from crane_stiffness.contract.status import wire_level
 from crane_stiffness.estimation.sync import DISPLACEMENT, FORCE
 from crane_stiffness.rosnode.qos import KEPT_QOS, LATCHED_QOS, RELIABLE_QOS, sensor_qos, stream_qos
-from crane_stiffness.rosnode.sim_time import SimTimeParticipant, uses_sim_time
+from crane_stiffness.rosnode.sim_time import PeriodicOutput, SimTimeParticipant, uses_sim_time
 from crane_stiffness.rosnode.diagnostics import Diagnostics
 from crane_stiffness.rosnode.run import run
 from crane_stiffness.rosnode.messages import stamp_to_s
@@ -120,7 +120,7 @@ class StiffnessEstimatorNode(Node):
         self.settings: dict[str, Any] = {}
         self.sub_displacement: Subscription | None = None  # created by _apply, for the displacement_type
         self.drained: list = []  # (subscription, handler) taken from in turn: command, force, displacement
-        self.timer: Timer | None = None
+        self.timer: PeriodicOutput | None = None
         self.last_stiffness = float('nan')
         self.changed = False  # new pairs fitted since the last /stiffness/estimate_values
         self.pub_values = self.create_publisher(Float64MultiArray, topics.STIFFNESS_VALUES, KEPT_QOS,
@@ -142,6 +142,7 @@ class StiffnessEstimatorNode(Node):
         # On simulated time the streams are reliable and the clock waits for this node (stage 3): nothing is lost,
         # and what arrives is held until the watermark says every input up to it is in (_drain_all).
         self.sim_time = uses_sim_time(self)
+        self._mark_ns: int | None = None  # simulated time: the last watermark handled [ns]
         self.held: list[tuple[bool, Callable[..., None], Any]] = []  # simulated time: (is a command, handler, msg)
         self.sub_command = self.create_subscription(WrenchStamped, topics.WRENCH_COMMAND,
                                                     self._held_until_watermark(self._on_command, command=True),
@@ -167,6 +168,9 @@ class StiffnessEstimatorNode(Node):
 
     def sim_report(self, t_ns: int) -> None:
         """Simulated time: every input up to ``t_ns`` has been handled (drained before this call)."""
+        self._mark_ns = t_ns
+        if self.timer is not None:
+            self.timer.at_watermark(t_ns)
         self.sim.report(t_ns)
 
     def _diagnostics_report(self) -> tuple[int, str, list[tuple[str, str]]]:
@@ -181,8 +185,15 @@ class StiffnessEstimatorNode(Node):
         assert self.core is not None
         return self.core.accounting()
 
+    def _now_ns(self) -> int:
+        """The node's time [ns]: on simulated time the watermark handled last (every input up to it is in), the same
+        in every run; the node clock would be wherever /clock had got to when the callback ran."""
+        if self.sim_time and self._mark_ns is not None:
+            return self._mark_ns
+        return self.get_clock().now().nanoseconds
+
     def _now_s(self) -> float:
-        return self.get_clock().now().nanoseconds * 1e-9
+        return self._now_ns() * 1e-9
 
     def _apply(self, settings: LiveSettings, values: dict[str, Any]) -> None:
         first = self.core is None
@@ -208,9 +219,11 @@ class StiffnessEstimatorNode(Node):
                             (self.sub_force, self._on_force), (self.sub_displacement, handle)]
             self.publisher_counts.pop(DISPLACEMENT, None)
         if values['diagnostics_rate_hz'] != self.settings.get('diagnostics_rate_hz'):
-            if self.timer is not None:
-                self.destroy_timer(self.timer)
-            self.timer = self.create_timer(1.0 / values['diagnostics_rate_hz'], self._publish_estimate)
+            if self.timer is None:  # (on simulated time: at the watermarks, see sim_report)
+                self.timer = PeriodicOutput(self, 1.0 / values['diagnostics_rate_hz'], self._publish_estimate,
+                                            self.sim_time)
+            else:
+                self.timer.set_period(1.0 / values['diagnostics_rate_hz'])
         self.settings = values
         self._set_prediction()  # force_axis may have changed: the prediction follows it
 
@@ -388,7 +401,7 @@ class StiffnessEstimatorNode(Node):
         self.changed = False
         self.values_msg.data = self.core.values()
         self.pub_values.publish(self.values_msg)
-        self.core.published(self.get_clock().now().nanoseconds * 1e-9)
+        self.core.published(self._now_s())
         k = self.core.headline_stiffness()
         if k != self.last_stiffness and k == k:  # changed and not NaN
             self.pub_stiffness.publish(Float64(data=k))
@@ -429,7 +442,7 @@ class StiffnessEstimatorNode(Node):
         self.core.refresh()
         name = self.get_fully_qualified_name()
         msg = DiagnosticArray()
-        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.header.stamp = Time(nanoseconds=self._now_ns()).to_msg()
         now = self._now_s()
         for r in self.core.report(now):
             msg.status.append(DiagnosticStatus(level=bytes([wire_level(r.level)]), name=f'{name}: {r.branch}',
@@ -461,6 +474,10 @@ def _table(data: list[float], rows: str, columns: tuple[str, ...]) -> Float64Mul
     msg.layout.dim = [MultiArrayDimension(label=rows, size=len(data) // n, stride=len(data)),
                       MultiArrayDimension(label='field', size=n, stride=n)]
     return msg
+
+
+#: The node a rig host loads (crane_stiffness.launcher.rig_host), built with its node arguments (``cli_args``).
+COMPONENT = StiffnessEstimatorNode
 
 
 def main(args=None) -> int:

@@ -194,3 +194,38 @@ class SimTimeParticipant:
         if self._end_ns is not None:
             report['end'] = self._end_ns
         self._pub.publish(String(data=json.dumps(report)))
+
+
+class PeriodicOutput:
+    """A node's periodic output (a status, a fit): a timer of ``period_s`` on the wall clock; on simulated time
+    (``sim_time``) called from the node's watermark handler instead, by :meth:`at_watermark`, each time simulated time
+    passes a multiple of the period: after every input up to that time has been handled, so each output holds the
+    same data in every run. (A timer on simulated time fires when /clock moves, before or after the watermark's
+    inputs are handled as the executor happens to order them: the same instant's status then counted 100 samples
+    more in one run than in another.)"""
+
+    def __init__(self, node: Node, period_s: float, callback: Callable[[], None], sim_time: bool) -> None:
+        self._node, self._callback, self._sim_time = node, callback, sim_time
+        self._timer: Any = None
+        self._period_ns = 0
+        self._slot: int | None = None  # the last multiple of the period an output went out for (simulated time)
+        self.set_period(period_s)
+
+    def set_period(self, period_s: float) -> None:
+        """A new period [s] (> 0)."""
+        self._period_ns = max(1, round(period_s * 1e9))
+        if self._sim_time:
+            return
+        if self._timer is not None:
+            self._node.destroy_timer(self._timer)
+        self._timer = self._node.create_timer(period_s, self._callback)
+
+    def at_watermark(self, t_ns: int) -> None:
+        """Simulated time: every input up to ``t_ns`` has been handled; the output goes out if a multiple of the
+        period was reached since the last one (the first watermark sends one)."""
+        if not self._sim_time:
+            return
+        slot = t_ns // self._period_ns
+        if self._slot is None or slot > self._slot:
+            self._slot = slot
+            self._callback()
