@@ -10,7 +10,7 @@ analyses removed in between. The baseline is the
 sessions per minute of 1 (the per-session analyses are independent; two cores). Draws the figure
 (``--figure``, docs/figures/campaign_throughput.png) and exits 1 when the target is missed. Usage::
 
-    python benchmarks/bench_campaign.py [--json FILE] [--figure PNG] [--keep]
+    python benchmarks/bench_campaign_analyze.py [--json FILE] [--figure PNG] [--keep]
 """
 from __future__ import annotations
 

@@ -17,7 +17,10 @@ BENCHMARKS = [
     ('bench_bag_storage.py', [], None),
     ('bench_sync.py', [], 'bench_sync.json'),
     ('bench_analyze.py', [], None),
-    ('bench_campaign.py', [], 'bench_campaign.json'),   # campaign analyze with 1 and 2 worker processes
+    ('bench_campaign_analyze.py', [], 'bench_campaign_analyze.json'),   # campaign analyze, 1 and 2 workers
+    # campaign run of the paper's campaign: rig hosts against a fresh rig of processes per session, idle and busy
+    ('bench_campaign.py', [], 'bench_campaign.json'),
+    ('bench_campaign.py', ['--busy', '1'], 'bench_campaign_busy.json'),
     ('bench_replay.py', [], 'bench_replay.json'),
     ('bench_rig.py', [], 'bench_rig.json'),
     # The rig through the drivers (rig.launch.py transport:=drivers) against the direct topics, back to back.

@@ -47,7 +47,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     confirm = service_confirm() if args.confirm == 'service' else terminal_confirm
     run = run_campaign(campaign, args.out, hardware=args.hardware, confirm=confirm,
                        arguments=_rig_arguments(args.rig_arg), progress=not args.quiet, jobs=args.jobs,
-                       scheduler=args.scheduler)
+                       scheduler=args.scheduler, rig=args.rig)
     print(f'campaign {campaign.name}: {len(run.ran)} session(s) run, {len(run.skipped)} done before, '
           f'{run.planned} planned -> {run.out}')
     return EXIT_OK
@@ -131,6 +131,11 @@ def add_commands(subparsers: Any) -> None:
                    help='a Dask scheduler (tcp://host:8786): run the sessions on its workers (simulated time; each '
                         'worker runs its rigs in ROS domains from its own ROS_DOMAIN_ID, one per thread) and bring '
                         'their bags and results back into --out (needs the extra \'dask\')')
+    r.add_argument('--rig', choices=('host', 'processes'), default=None,
+                   help="how each session's nodes run: 'host' = the simulated nodes in one process per job that stays "
+                        "up between sessions (the same bags and numbers, without starting eight processes per "
+                        "session); 'processes' = every node its own process, started anew per session, as ros2 "
+                        "launch does (default: host for the simulated rig on simulated time, else processes)")
     r.add_argument('--quiet', action='store_true', help='no progress bar')
     r.set_defaults(func=_guarded(cmd_run))
     a = sub.add_parser('analyze', help='analyse every session of a campaign directory: Figs. 10 and 13 with the '

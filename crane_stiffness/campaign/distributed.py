@@ -65,11 +65,24 @@ class _WorkerDomains:
 
 
 _DOMAINS = _WorkerDomains()
+#: The rig hosts of this worker process by ROS domain, kept between its tasks (a rig that stays up).
+_HOSTS: dict[int, Any] = {}
+
+
+def _host(domain: int) -> Any:
+    """This worker's rig host in ``domain`` (made at its first session; only the thread holding the domain uses
+    it)."""
+    from crane_stiffness.launcher.rig_host import RigHost
+    host = _HOSTS.get(domain)
+    if host is None:
+        host = _HOSTS[domain] = RigHost(domain)
+    return host
 
 
 def remote_session(campaign: Campaign, plan: SessionPlan, program_text: str, arguments: Mapping[str, str],
-                   ready_timeout_s: float) -> dict[str, Any]:
-    """Run one session on this Dask worker: ``{'result': <result.json>, 'archive': <tar bytes of bags/<id> and
+                   ready_timeout_s: float, rig: str = 'host') -> dict[str, Any]:
+    """Run one session on this Dask worker, on its rig host (``rig`` 'host', kept up between sessions) or with its
+    nodes as processes ('processes'): ``{'result': <result.json>, 'archive': <tar bytes of bags/<id> and
     sessions/<id>>, 'worker': <address>}``. The scratch directory goes when the session ends, however it ends."""
     from crane_stiffness.campaign.parallel import distributed
     from crane_stiffness.campaign.session import SessionRunner
@@ -84,8 +97,12 @@ def remote_session(campaign: Campaign, plan: SessionPlan, program_text: str, arg
     domain = _DOMAINS.take(worker.state.nthreads)
     scratch = Path(tempfile.mkdtemp(prefix=f'session-{plan.id}-', dir=worker.local_directory))
     try:
-        runner = SessionRunner(campaign, scratch, False, arguments, env, share_dir() / 'config',
-                                rosrun.node_executables(), ready_timeout_s, {plan.id: program_text})
+        if rig == 'host':
+            runner = SessionRunner(campaign, scratch, False, arguments, env, share_dir() / 'config', None,
+                                   ready_timeout_s, {plan.id: program_text}, rig='host-here', here=_host(domain))
+        else:
+            runner = SessionRunner(campaign, scratch, False, arguments, env, share_dir() / 'config',
+                                   rosrun.node_executables(), ready_timeout_s, {plan.id: program_text})
         result = runner.run(plan, None, domain, lambda fraction: None)
         buffer = io.BytesIO()
         with tarfile.open(fileobj=buffer, mode='w') as tar:
@@ -148,7 +165,7 @@ def _session_members(tar: tarfile.TarFile, plan: SessionPlan) -> list[tarfile.Ta
 def run_on_cluster(campaign: Campaign, out: Path, todo: list[SessionPlan], program_texts: Mapping[str, str],
                    arguments: Mapping[str, str], scheduler: str, ready_timeout_s: float,
                    on_session: Callable[[SessionPlan], None] | None,
-                   finished: Callable[[SessionPlan, dict[str, Any]], None]) -> None:
+                   finished: Callable[[SessionPlan, dict[str, Any]], None], rig: str = 'host') -> None:
     """Every session of ``todo`` as a task on the cluster at ``scheduler``; each stored as it comes back
     (:func:`store_session`) and passed to ``finished``. A worker lost mid-session: Dask runs its task again on
     another worker (up to the scheduler's ``allowed-failures``); a session that fails on its worker raises here
@@ -163,7 +180,7 @@ def run_on_cluster(campaign: Campaign, out: Path, todo: list[SessionPlan], progr
             if on_session is not None:
                 on_session(plan)
             future = client.submit(remote_session, campaign, plan, program_texts[plan.id], dict(arguments),
-                                   ready_timeout_s, pure=False, key=f'session-{plan.id}-{uuid.uuid4().hex[:8]}')
+                                   ready_timeout_s, rig, pure=False, key=f'session-{plan.id}-{uuid.uuid4().hex[:8]}')
             plans[future.key] = plan
             futures.append(future)
         for future in as_completed(futures):

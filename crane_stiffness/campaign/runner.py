@@ -134,8 +134,8 @@ def default_jobs(arguments: Mapping[str, str], hardware: bool) -> int:
 def run_campaign(campaign: Campaign, out: str | os.PathLike, *, hardware: bool = False,
                  confirm: Confirm | None = None, arguments: Mapping[str, str] | None = None,
                  progress: bool = True, ready_timeout_s: float = 120.0, jobs: int | None = None,
-                 on_session: Callable[[SessionPlan], None] | None = None, scheduler: str | None = None
-                 ) -> CampaignRun:
+                 on_session: Callable[[SessionPlan], None] | None = None, scheduler: str | None = None,
+                 rig: str | None = None) -> CampaignRun:
     """Run every session of ``campaign`` not done yet in ``out`` (see the module docstring).
 
     Args:
@@ -152,6 +152,10 @@ def run_campaign(campaign: Campaign, out: str | os.PathLike, *, hardware: bool =
         scheduler: a Dask scheduler's address (``tcp://host:8786``): the sessions run on its workers, each rig on
             its worker's machine, and come back into ``out`` (crane_stiffness.campaign.distributed); simulated
             rig on simulated time only. ``jobs`` does not apply (the cluster's workers and threads decide).
+        rig: 'host' runs each session's simulated nodes in one process that stays up between sessions (one per
+            job, crane_stiffness.launcher.rig_host: the same bags and numbers, without starting eight processes per
+            session); 'processes' starts them as ``ros2 launch`` does, every session anew. Default
+            :func:`default_rig`.
 
     Raises:
         CampaignError: ``out`` holds another campaign; a true crane with --hardware; jobs without simulated time.
@@ -177,6 +181,12 @@ def run_campaign(campaign: Campaign, out: str | os.PathLike, *, hardware: bool =
     if jobs > 1 and default_jobs(arguments, hardware) == 1:
         raise CampaignError(f'--jobs {jobs}: sessions side by side need the simulated rig on simulated time (on the '
                             'wall clock they would take each other\'s cores and lose samples); use --jobs 1')
+    rig = default_rig(arguments, hardware) if rig is None else rig
+    if rig == 'host' and default_rig(arguments, hardware) != 'host':
+        raise CampaignError('--rig host runs the simulated sensors on simulated time (use_sim_time:=true, '
+                            'transport:=sim, no live view); this campaign needs --rig processes')
+    if rig not in ('host', 'processes'):
+        raise CampaignError(f'--rig {rig}: expected host or processes')
     plans = plan_sessions(campaign)
     prepare_campaign(out, campaign, plans)
     run = CampaignRun(out=out, planned=len(plans))
@@ -187,7 +197,7 @@ def run_campaign(campaign: Campaign, out: str | os.PathLike, *, hardware: bool =
     jobs = max(1, min(jobs, len(todo)))
     domains = session_domains(env, jobs)
     session = SessionRunner(campaign, out, hardware, arguments, env, share_dir() / 'config',
-                             rosrun.node_executables(), ready_timeout_s)
+                             rosrun.node_executables(), ready_timeout_s, rig=rig)
     bar = None
     if progress:
         from tqdm import tqdm
@@ -217,7 +227,8 @@ def run_campaign(campaign: Campaign, out: str | os.PathLike, *, hardware: bool =
         if scheduler:
             from crane_stiffness.campaign.distributed import run_on_cluster
             texts = {plan.id: session_program_text(plan) for plan in todo}
-            run_on_cluster(campaign, out, todo, texts, arguments, scheduler, ready_timeout_s, on_session, finished)
+            run_on_cluster(campaign, out, todo, texts, arguments, scheduler, ready_timeout_s, on_session, finished,
+                           rig)
         elif jobs == 1:
             for plan in todo:
                 if on_session is not None:
@@ -233,9 +244,19 @@ def run_campaign(campaign: Campaign, out: str | os.PathLike, *, hardware: bool =
         raise CampaignInterrupted(f'interrupted: {done_before + len(run.ran)} of {len(plans)} sessions done in '
                                   f'{out}; run the same command again to resume') from None
     finally:
+        session.close()
         if bar is not None:
             bar.close()
     return run
+
+
+def default_rig(arguments: Mapping[str, str], hardware: bool) -> str:
+    """'host' for the simulated rig on simulated time with the simulated sensors and no live view (the nodes a
+    rig host runs); else 'processes'."""
+    sim_time = str(arguments.get('use_sim_time', 'false')).lower() == 'true'
+    plain = (str(arguments.get('transport', 'sim')) == 'sim' and str(arguments.get('sim_sensors', 'true')) == 'true'
+             and str(arguments.get('live_view', 'false')).lower() != 'true')
+    return 'host' if sim_time and plain and not hardware else 'processes'
 
 
 def _tracker(fractions: dict[str, float], session: str, show: Callable[[], None] | None = None

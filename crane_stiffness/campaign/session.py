@@ -7,12 +7,17 @@ import json
 import os
 import shutil
 import sys
+import threading
 import time
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
+from crane_stiffness.campaign.errors import CampaignError
 from crane_stiffness.campaign.spec import Campaign, SessionPlan, scaled_program_text
+
+#: How a session's rig runs (SessionRunner's ``rig``).
+RIGS = ('processes', 'host', 'host-here')
 
 RESULT_FILE = 'result.json'
 
@@ -59,18 +64,59 @@ class SessionRunner:
 
     def __init__(self, campaign: Campaign, out: Path, hardware: bool, arguments: Mapping[str, str],
                  env: Mapping[str, str], share: Path, executables: Path | None, ready_timeout_s: float,
-                 program_texts: Mapping[str, str] | None = None) -> None:
+                 program_texts: Mapping[str, str] | None = None, rig: str = 'processes', here: Any = None) -> None:
         self.campaign, self.out, self.hardware, self.arguments = campaign, out, hardware, dict(arguments)
         self.env, self.share, self.executables, self.ready_timeout_s = dict(env), share, executables, ready_timeout_s
         #: Program files by session id, made where the plan was made (a Dask worker gets them with the task).
         self.program_texts = dict(program_texts or {})
+        if rig not in RIGS:
+            raise CampaignError(f'rig {rig!r}: expected one of {", ".join(RIGS)}')
+        #: 'processes': every session starts the rig's nodes as processes, as ros2 launch does; 'host': the
+        #: simulated nodes of each session in one process that stays up (crane_stiffness.launcher.rig_host), one per
+        #: ROS domain, in its own process (:attr:`hosts`), or with ``rig='host-here'`` on ``here``, a RigHost of this
+        #: process that the caller keeps (a Dask worker's).
+        self.rig = rig
+        self.hosts: dict[int, Any] = {}
+        self._hosts_lock = threading.Lock()
+        self._here = here
+        if rig == 'host-here' and here is None:
+            raise CampaignError("rig 'host-here' needs the RigHost to run on")
+
+    def close(self) -> None:
+        """End the rig hosts this runner started."""
+        with self._hosts_lock:
+            hosts, self.hosts = list(self.hosts.values()), {}
+        for host in hosts:
+            host.close()
+
+    def _outcome(self, folder: Path, program: Path, plan: SessionPlan, domain: int, overrides: dict[str, Any],
+                 progress: Callable[[float], None], should_stop: Callable[[], bool] | None) -> dict[str, Any]:
+        """The rig run of one session, as :func:`crane_stiffness.launcher.host_process.outcome` gives it."""
+        from crane_stiffness.launcher.host_process import HostProcess, outcome
+        from crane_stiffness.launcher.rig import run_rig
+
+        kwargs: dict[str, Any] = dict(share=self.share, out=folder, program=str(program), session=plan.id,
+                      ready_timeout_s=self.ready_timeout_s, overrides=overrides, bags=self.out / 'bags',
+                      arguments=self.arguments)
+        if self.rig == 'processes':
+            summary, observer, startup_s, _ = run_rig(env=self.env, executables=self.executables, progress=progress,
+                                                      domain_id=domain, should_stop=should_stop, **kwargs)
+            return outcome(summary, observer, startup_s)
+        if self.rig == 'host-here':
+            summary, observer, startup_s, _ = self._here.run(progress=progress, should_stop=should_stop, **kwargs)
+            return outcome(summary, observer, startup_s)
+        with self._hosts_lock:
+            host = self.hosts.get(domain)
+            if host is None:
+                host = self.hosts[domain] = HostProcess(domain, self.env)
+        return host.run(progress=progress, should_stop=should_stop, **kwargs)
 
     def run(self, plan: SessionPlan, confirmed: Mapping[str, Any] | None, domain: int,
             progress: Callable[[float], None], should_stop: Callable[[], bool] | None = None,
             attempts: int = 2) -> dict[str, Any]:
         """Run ``plan`` in ROS domain ``domain`` and write its result.json; the result. A rig that did not start
         its program (RigStartError: nothing measured) is started again, ``attempts`` times in all."""
-        from crane_stiffness.launcher.rig import decode_values, run_rig
+        from crane_stiffness.launcher.rig import decode_values
         from crane_stiffness.launcher.rosrun import RigStartError
 
         out = self.out
@@ -89,10 +135,7 @@ class SessionRunner:
                                               'notes': f'campaign {self.campaign.name}, session {plan.id}'}}
             started = time.time()
             try:
-                summary, observer, startup_s, _ = run_rig(
-                    self.share, self.env, folder, str(program), session=plan.id, ready_timeout_s=self.ready_timeout_s,
-                    overrides=overrides, executables=self.executables, bags=out / 'bags', progress=progress,
-                    arguments=self.arguments, domain_id=domain, should_stop=should_stop)
+                ran = self._outcome(folder, program, plan, domain, overrides, progress, should_stop)
             except RigStartError as exc:
                 if attempt == attempts:
                     raise
@@ -104,12 +147,13 @@ class SessionRunner:
                   'time': 'simulated' if self.arguments.get('use_sim_time') == 'true' else 'wall',
                   'wall_s': round(time.time() - started, 3), 'ros_domain_id': domain, 'attempts': attempt,
                   'bag': str(out / 'bags' / plan.id), 'started_utc': utc(started), 'finished_utc': utc(),
-                  'startup_s': startup_s, 'estimate': decode_values(observer.values) if observer.values else None,
-                  'status': summary['status'], 'node_exit_codes': summary['node_exit_codes'],
+                  'rig': 'processes' if self.rig == 'processes' else 'host',
+                  'startup_s': ran['startup_s'], 'estimate': decode_values(ran['values']) if ran['values'] else None,
+                  'status': ran['summary']['status'], 'node_exit_codes': ran['summary']['node_exit_codes'],
                   # The six-axis fit's last K (quantity × row × column, /stiffness6/stiffness) and status, if it ran.
-                  'stiffness6': observer.stiffness6,
-                  'status6': None if observer.status6 is None else
-                  {'level': observer.status6[0], 'message': observer.status6[1], 'values': observer.status6[2]}}
+                  'stiffness6': ran['stiffness6'],
+                  'status6': None if ran['status6'] is None else
+                  {'level': ran['status6'][0], 'message': ran['status6'][1], 'values': ran['status6'][2]}}
         tmp = folder / (RESULT_FILE + '.tmp')
         tmp.write_text(json.dumps(result, indent=1, allow_nan=True))
         os.replace(tmp, folder / RESULT_FILE)

@@ -48,8 +48,14 @@ class Observer(Node):
 
     _executor: SingleThreadedExecutor | None  # created by the first spin_once
 
-    def __init__(self, name: str = 'rig_observer', **kwargs: Any) -> None:
+    def __init__(self, name: str = 'rig_observer', executor: Any = None, **kwargs: Any) -> None:
         super().__init__(name, **kwargs)
+        # An executor given (a rig host's, which spins the rig's nodes too) is used and left running at the end; else
+        # the observer makes its own at the first spin.
+        self._executor = executor
+        self._own_executor = executor is None
+        if executor is not None:
+            executor.add_node(self)
         self.progress = 0.0
         self.state: dict = {}
         self.values: Float64MultiArray | None = None
@@ -95,6 +101,18 @@ class Observer(Node):
         end = time.monotonic() + wall_s
         while time.monotonic() < end:
             self.spin_once(0.05)
+
+    def drain(self) -> None:
+        """Handle every message already queued on the observer's subscriptions, without waiting and without the
+        executor: what the nodes published before they went (a rig host delivers within the process at once) is
+        all seen, however busy the machine was while :meth:`settle` spun."""
+        for subscription in self.subscriptions:
+            while True:
+                with subscription.handle:
+                    taken = subscription.handle.take_message(subscription.msg_type, subscription.raw)
+                if taken is None:
+                    break
+                subscription.callback(taken[0])
 
     def _on_progress(self, msg: Float64) -> None:
         self.progress = msg.data
@@ -157,7 +175,8 @@ class Observer(Node):
         executor = getattr(self, '_executor', None)
         if executor is not None:
             executor.remove_node(self)
-            executor.shutdown()
+            if self._own_executor:
+                executor.shutdown()
             self._executor = None
         super().destroy_node()
 
@@ -208,12 +227,20 @@ def start_nodes(procs: Processes, nodes: Sequence[NodeStart], bags: Path | None,
     if bags is not None:
         bags.mkdir(parents=True, exist_ok=True)
     for node in nodes:
-        extra: dict[str, Any] = {'output_dir': bags} if node.name == 'session_recorder' and bags is not None else {}
-        if node.runs_program:
-            if not start_program:
-                continue
-            extra = {'exit_on_done': True, 'ready_timeout_s': ready_timeout_s}
-        start_node(procs, node, {**extra, **(overrides or {}).get(node.name, {})})
+        if node.runs_program and not start_program:
+            continue
+        start_node(procs, node, start_overrides(node, bags, ready_timeout_s, (overrides or {}).get(node.name)))
+
+
+def start_overrides(node: NodeStart, bags: Path | None, ready_timeout_s: float,
+                    extra: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """The parameters a run of the rig sets on ``node`` beyond the launch file's: the recorder writes to ``bags``
+    (None: its own default), load_program exits when the program is done and waits at most ``ready_timeout_s`` for
+    the rig; ``extra`` on top."""
+    own: dict[str, Any] = {'output_dir': bags} if node.name == 'session_recorder' and bags is not None else {}
+    if node.runs_program:
+        own = {'exit_on_done': True, 'ready_timeout_s': ready_timeout_s}
+    return {**own, **(extra or {})}
 
 
 def wait_for_program_start(observer: Observer, procs: Processes, timeout_s: float) -> None:
@@ -241,10 +268,10 @@ def estimate_fields() -> tuple[str, ...]:
     return tuple(VALUE_FIELDS)
 
 
-def decode_values(msg: Float64MultiArray) -> dict[str, dict[str, float]]:
-    """The estimator's Float64MultiArray as {branch: {field: value}}."""
+def decode_values(msg: Float64MultiArray | Sequence[float]) -> dict[str, dict[str, float]]:
+    """The estimator's Float64MultiArray (or its data) as {branch: {field: value}}."""
     fields = estimate_fields()
-    data = np.asarray(msg.data, dtype=float).reshape(2, len(fields))
+    data = np.asarray(getattr(msg, 'data', msg), dtype=float).reshape(2, len(fields))
     return {branch: dict(zip(fields, row.tolist())) for branch, row in zip(('loading', 'unloading'), data)}
 
 
@@ -356,6 +383,7 @@ def run_rig(share: Path, env: Mapping[str, str], out: Path, program: str, sessio
             wait_for_program_end(procs, observer, prog.duration_s, progress)
             observer.settle()  # the last samples reach the estimator
             codes = procs.stop()
+            observer.drain()  # what reached this process before the nodes went
             logs = {name: procs.log(name) for name in procs.procs}
         summary = summarize(share, program, session, bags, observer, codes)
     finally:

@@ -396,6 +396,10 @@ class CraneModel(Node):
         return level, self.status, pairs
 
 
+#: The node a rig host loads (crane_stiffness.launcher.rig_host), built with its node arguments (``cli_args``).
+COMPONENT = CraneModel
+
+
 def main(args=None) -> int:
     return run(CraneModel, args)
 

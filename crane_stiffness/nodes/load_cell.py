@@ -200,6 +200,10 @@ class LoadCell(Node):
         return OK, f'{self.counters.published} samples published', pairs
 
 
+#: The node a rig host loads (crane_stiffness.launcher.rig_host), built with its node arguments (``cli_args``).
+COMPONENT = LoadCell
+
+
 def main(args=None) -> int:
     return run(LoadCell, args)
 

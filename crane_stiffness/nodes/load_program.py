@@ -434,6 +434,10 @@ class LoadProgramNode(Node):
                                    ('duration_s', f'{self.program.duration_s:.3f}')]
 
 
+#: The node a rig host loads (crane_stiffness.launcher.rig_host), built with its node arguments (``cli_args``).
+COMPONENT = LoadProgramNode
+
+
 def main(args=None) -> int:
     """Runs the node (run.run, which returns its exit_status: 1 when an automatic start gave up waiting)."""
     return run(LoadProgramNode, args)

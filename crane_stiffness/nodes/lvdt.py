@@ -193,6 +193,10 @@ class Lvdt(Node):
         return OK, f'{self.counters.published} samples published', pairs
 
 
+#: The node a rig host loads (crane_stiffness.launcher.rig_host), built with its node arguments (``cli_args``).
+COMPONENT = Lvdt
+
+
 def main(args=None) -> int:
     return run(Lvdt, args)
 

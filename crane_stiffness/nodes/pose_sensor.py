@@ -162,6 +162,10 @@ class PoseSensor(Node):
         return OK, f'{self.counters.published} samples published', pairs
 
 
+#: The node a rig host loads (crane_stiffness.launcher.rig_host), built with its node arguments (``cli_args``).
+COMPONENT = PoseSensor
+
+
 def main(args=None) -> int:
     return run(PoseSensor, args)
 

@@ -117,7 +117,8 @@ class SessionRecorder(Node):
         self.parameter_reader: NodeParameterReader | None = None
         self._flushed_at = 0
         self._lock = threading.Lock()
-        self.params_files = list(params_files)
+        # (the files it records: given, else those of its own node arguments, as a rig host builds it)
+        self.params_files = list(params_files) or params_files_from_args(kwargs.get('cli_args') or [])
         self.built: dict[str, Any] = {}
         self.params = Params(self, PARAMS, validate, self._apply)
         self.create_service(Trigger, '~/start', self._srv_start)
@@ -530,6 +531,10 @@ class SessionRecorder(Node):
         # errors (a topic that cannot be recorded) stay ERROR.
         level = ERROR if self.errors or self.write_failure else OK
         return level, self.status, pairs
+
+
+#: The node a rig host loads (crane_stiffness.launcher.rig_host), built with its node arguments (``cli_args``).
+COMPONENT = SessionRecorder
 
 
 def main(args=None) -> int:

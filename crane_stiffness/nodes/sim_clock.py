@@ -250,6 +250,10 @@ class SimClock(Node):
         return OK, f'simulated time {ls.now_ns * 1e-9:.3f} s', pairs
 
 
+#: The node a rig host loads (crane_stiffness.launcher.rig_host), built with its node arguments (``cli_args``).
+COMPONENT = SimClock
+
+
 def main(args=None) -> int:
     return run(SimClock, args)
 

@@ -43,8 +43,9 @@ def test_an_interrupted_campaign_resumes_where_it_stopped_and_records_true_and_n
     spec = campaign_file(tmp_path, '[50.0, 100.0]', factor=0.92)
     out = tmp_path / 'campaign'
     log = tmp_path / 'first.log'
+    # (simulated time at the wall clock's pace: the second session is still running 3 s after the first ended)
     first = rosrun.start_installed('crane-stiffness', ['campaign', 'run', str(spec), '--out', str(out),
-                                                      '--jobs', '1'], log)
+                                                      '--jobs', '1', '--rig-arg', 'real_time_factor:=1'], log)
     done = out / 'sessions' / 'fy_W50_l0.5_r1' / 'result.json'
     wait_for(done.is_file, 240, 'the first session', first, log)
     time.sleep(3.0)  # the second session's nodes starting: Ctrl-C in the middle of it
@@ -86,9 +87,12 @@ def test_sessions_side_by_side_each_in_its_own_domain_give_the_numbers_of_one_at
     spec = campaign_file(tmp_path, '[50.0, 100.0]')
     side = tmp_path / 'side_by_side'
     log = tmp_path / 'first.log'
+    # (simulated time at the wall clock's pace, so that Ctrl-C finds both running; resumed as fast as it goes: the
+    # same numbers at any pace)
     first = rosrun.start_installed('crane-stiffness', ['campaign', 'run', str(spec), '--out', str(side),
-                                                      '--jobs', '2'], log)
-    running = [side / 'sessions' / s / 'logs' / 'load_program.log' for s in ('fy_W50_l0.5_r1', 'fy_W100_l0.5_r1')]
+                                                      '--jobs', '2', '--rig-arg', 'real_time_factor:=1'], log)
+    # (each session's nodes in the rig host of its job: their lines in the session's logs/rig_host.log)
+    running = [side / 'sessions' / s / 'logs' / 'rig_host.log' for s in ('fy_W50_l0.5_r1', 'fy_W100_l0.5_r1')]
     wait_for(lambda: all(p.is_file() and 'rig ready' in p.read_text() for p in running), 240,
              'both sessions ready', first, log)
     assert rosrun.interrupt(first, timeout_s=60) == 130, log.read_text()[-3000:]
