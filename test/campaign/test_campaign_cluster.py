@@ -107,7 +107,7 @@ def test_a_campaign_on_a_dask_cluster_survives_a_lost_worker(tmp_path, ros_domai
             # w1's machine is lost once its session records: a bag file in its scratch directory.
             wait_until(lambda: any((tmp_path / 'w1').rglob('*.mcap')), 900, 'a session recording on w1', procs,
                        logs)
-            assert len(net.kill('w1')) >= 8  # the worker and its rig's nodes
+            assert len(net.kill('w1')) >= 1  # the worker, with the rig host its session's nodes ran in
             code = client.wait(timeout=1800)
             assert code == 0, (logs / 'client.log').read_text()[-3000:]
             assert scheduler.poll() is None and workers['w2'].poll() is None
