@@ -34,6 +34,11 @@ from crane_stiffness.launcher.rosrun import RigStartError, RosRunError
 
 __all__ = ['RigHost', 'component_class']
 
+#: sim_clock's wall-time wait between every node having joined and time starting [s] (its ``settle_s``, 1 s for a
+#: rig of processes, for DDS to match the readers across processes). Within one process a reader and a writer are
+#: matched as they are created; the wait is kept short rather than nil. A session's own overrides win.
+SETTLE_S = 0.1
+
 
 def component_class(executable: str) -> type:
     """The node class a host loads for ``executable`` (its module's ``COMPONENT``); RosRunError for a node that
@@ -159,9 +164,11 @@ class RigHost:
             try:
                 launched = time.monotonic()
                 for node in nodes:
+                    extra = dict((overrides or {}).get(node.name, {}))
+                    if node.name == 'sim_clock':
+                        extra.setdefault('settle_s', SETTLE_S)
                     loaded.append(self._load(node, classes[node.name],
-                                             start_overrides(node, bags if record else None, ready_timeout_s,
-                                                             (overrides or {}).get(node.name))))
+                                             start_overrides(node, bags if record else None, ready_timeout_s, extra)))
                 program_node = next(n for n, start in zip(loaded, nodes) if start.runs_program)
                 self._wait_for_start(observer, program_node, ready_timeout_s + 30, log)
                 assert observer.running_at is not None
