@@ -16,7 +16,9 @@ from typing import TYPE_CHECKING, Any, Callable, Mapping, Sequence
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
+from rclpy.task import Future
 from std_msgs.msg import Float64, Float64MultiArray, String
 
 from crane_stiffness import __version__
@@ -43,6 +45,10 @@ if TYPE_CHECKING:
     from rclpy.executors import SingleThreadedExecutor
 
 
+#: How long one spin of a rig host's executor lasts at most [s of wall time] (Observer.spin_once).
+TICK_S = 0.05
+
+
 class Observer(Node):
     """Watches the rig: program progress and state, the estimator's numbers, the model's prediction."""
 
@@ -54,7 +60,9 @@ class Observer(Node):
         # the observer makes its own at the first spin.
         self._executor = executor
         self._own_executor = executor is None
+        self._tick = Future()
         if executor is not None:
+            self.create_timer(TICK_S, self._on_tick, clock=Clock(clock_type=ClockType.STEADY_TIME))
             executor.add_node(self)
         self.progress = 0.0
         self.state: dict = {}
@@ -101,6 +109,10 @@ class Observer(Node):
         end = time.monotonic() + wall_s
         while time.monotonic() < end:
             self.spin_once(0.05)
+
+    def _on_tick(self) -> None:
+        if not self._tick.done():
+            self._tick.set_result(None)
 
     def drain(self) -> None:
         """Handle every message already queued on the observer's subscriptions, without waiting and without the
@@ -159,7 +171,15 @@ class Observer(Node):
             from rclpy.executors import SingleThreadedExecutor
             executor = self._executor = SingleThreadedExecutor(context=self.context)
             executor.add_node(self)
-        executor.spin_once(timeout_sec=timeout_sec)
+        if self._own_executor:
+            executor.spin_once(timeout_sec=timeout_sec)
+        else:
+            # A rig host's executor, which runs every node of the rig: what comes until the next tick (TICK_S) handled
+            # in one call (spin_once takes one callback per call: tens of thousands of calls a session). The tick's
+            # timer ends the call: the executor's own timeout is only looked at when no event is waiting, which on
+            # simulated time flat out is never before the program's end.
+            self._tick = Future()
+            executor.spin_until_future_complete(self._tick, timeout_sec=timeout_sec)
 
     def spin_until(self, predicate, timeout_s: float, what: str, procs: Processes | None = None,
                    error: type[RosRunError] = RosRunError) -> None:
