@@ -14,6 +14,7 @@ from __future__ import annotations
 import os
 import signal
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
 from multiprocessing import get_context
 from typing import Any, Callable, Mapping
 
@@ -59,12 +60,15 @@ class HostProcess:
     host's environment (ROS_AUTOMATIC_DISCOVERY_RANGE, AMENT_PREFIX_PATH, ...)."""
 
     def __init__(self, domain: int, env: Mapping[str, str]) -> None:
-        context = get_context('spawn')
-        self.domain = domain
-        self._stop = context.Event()
-        self._progress = context.Value('d', 0.0, lock=False)
-        self._pool = ProcessPoolExecutor(1, mp_context=context, initializer=_start,
-                                         initargs=(domain, dict(env), self._stop, self._progress))
+        self._context = get_context('spawn')
+        self.domain, self._env = domain, dict(env)
+        self._stop = self._context.Event()
+        self._progress = self._context.Value('d', 0.0, lock=False)
+        self._pool = self._start_pool()
+
+    def _start_pool(self) -> ProcessPoolExecutor:
+        return ProcessPoolExecutor(1, mp_context=self._context, initializer=_start,
+                                   initargs=(self.domain, self._env, self._stop, self._progress))
 
     def run(self, progress: Callable[[float], None] | None = None, should_stop: Callable[[], bool] | None = None,
             **kwargs: Any) -> dict[str, Any]:
@@ -94,7 +98,11 @@ class HostProcess:
             if interrupted:
                 raise KeyboardInterrupt from None
             raise
-        except Exception as exc:  # the host process died (BrokenProcessPool), or an error outside the rig
+        except BrokenProcessPool as exc:  # the host process died: the next session gets a new one
+            self._pool.shutdown(wait=False)
+            self._pool = self._start_pool()
+            raise RosRunError(f'the rig host of domain {self.domain} died during the session: {exc}') from exc
+        except Exception as exc:  # an error outside the rig (a result that could not be sent back, ...)
             raise RosRunError(f'the rig host of domain {self.domain} failed: {type(exc).__name__}: {exc}') from exc
         if interrupted:
             raise KeyboardInterrupt

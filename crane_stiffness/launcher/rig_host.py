@@ -233,12 +233,17 @@ class RigHost:
                 sim.leave()
         codes: dict[str, int] = {}
         for node in nodes:
+            name = node.get_name()
             try:
                 close = getattr(node, 'close', None)
                 if close is not None:
                     close()
-                codes[node.get_name()] = int(getattr(node, 'exit_status', 0) or 0)
+                codes[name] = int(getattr(node, 'exit_status', 0) or 0)
                 final_counters(node)
+            except Exception as exc:  # said, and the others are still taken down (a process would exit with 1)
+                print(f'[rig_host] {name} failed while closing: {type(exc).__name__}: {exc}', file=sys.stderr,
+                      flush=True)
+                codes[name] = 1
             finally:
                 self.executor.remove_node(node)
                 node.destroy_node()

@@ -110,3 +110,31 @@ def test_what_a_host_cannot_run_is_refused_by_name(tmp_path):
     with pytest.raises(RosRunError, match="node 'netft' cannot run in a rig host"):
         component_class('netft')
     assert component_class('crane_model').__name__ == 'CraneModel'
+
+
+@pytest.mark.ros
+def test_a_host_process_that_dies_mid_session_says_so_and_the_next_session_gets_a_new_one(install_tree, tmp_path):
+    """A campaign job's host in a process of its own (crane_stiffness.launcher.host_process): SIGKILL in the middle
+    of a session fails that session naming the host, and the same job's next session runs on a new host process."""
+    import signal
+
+    from crane_stiffness.launcher.host_process import HostProcess
+
+    install, env = install_tree
+    share = rosrun.installed_config(install)
+    kwargs = dict(share=share, program='campaign_side_force', overrides=SEEDS, bags=tmp_path / 'bags')
+    killed: list[int] = []
+
+    def kill_once(fraction: float) -> None:
+        if fraction >= 0.2 and not killed:
+            killed.extend(host._pool._processes)  # the one process of the host's pool
+            os.kill(killed[0], signal.SIGKILL)
+    with HostProcess(int(os.environ['ROS_DOMAIN_ID']), env) as host:
+        with pytest.raises(RosRunError, match='died during the session'):
+            host.run(progress=kill_once, out=tmp_path / 'killed', session='killed',
+                     arguments={**SIM, 'real_time_factor': '1.0'}, **kwargs)
+        after = host.run(out=tmp_path / 'next', session='next', arguments=SIM, **kwargs)
+    assert len(killed) == 1
+    summary = after['summary']
+    assert summary['status']['loading']['level'] == 'OK' and set(summary['node_exit_codes'].values()) == {0}
+    assert after['values'] is not None and after['startup_s'] > 0
