@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import shutil
 import sys
 import tempfile
 import time
@@ -31,6 +30,7 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+from crane_stiffness.testing.scratch import keep_or_remove  # noqa: E402
 os.environ.setdefault('AMENT_PREFIX_PATH', sys.prefix)  # the .msg files for the writer's schemas
 os.environ.setdefault('MPLBACKEND', 'Agg')
 
@@ -134,10 +134,7 @@ def main() -> int:
         print('TARGET MISSED: ' + '; '.join(missed) if missed else 'targets met')
         return 1 if missed else 0
     finally:
-        if args.keep:
-            print(f'kept {tmp}')
-        else:
-            shutil.rmtree(tmp, ignore_errors=True)
+        keep_or_remove(tmp, args.keep)
 
 
 if __name__ == '__main__':

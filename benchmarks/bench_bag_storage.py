@@ -14,7 +14,6 @@ the same run. Exits 1 when missed. Usage::
 from __future__ import annotations
 
 import argparse
-import shutil
 import sys
 import tempfile
 import time
@@ -23,6 +22,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / 'test'))  # helpers.rosbag2_copy: the rosbags copy the tests use
+from crane_stiffness.testing.scratch import keep_or_remove  # noqa: E402
 
 from bench_bag_decode import LVDT_TOPIC, WRENCH_TOPIC, generate  # noqa: E402
 from crane_stiffness.bag import BagReader  # noqa: E402
@@ -79,10 +79,7 @@ def main() -> int:
               f'targets met (every storage <= {TARGET_RATIO:g}x the MCAP time per message)')
         return 1 if missed else 0
     finally:
-        if args.keep:
-            print(f'kept {tmp}')
-        else:
-            shutil.rmtree(tmp, ignore_errors=True)
+        keep_or_remove(tmp, args.keep)
 
 
 if __name__ == '__main__':

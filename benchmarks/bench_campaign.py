@@ -23,7 +23,6 @@ import argparse
 import json
 import os
 import random
-import shutil
 import subprocess
 import sys
 import tempfile
@@ -32,6 +31,7 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+from crane_stiffness.testing.scratch import keep_or_remove  # noqa: E402
 CLI = Path(sys.prefix) / 'bin' / 'crane-stiffness'
 TARGET_RTF = 3.0
 TARGET_RTF_BUSY = 2.0
@@ -163,10 +163,7 @@ def main() -> int:
     finally:
         for proc in busy:
             proc.kill()
-        if args.keep:
-            print(f'kept {tmp}')
-        else:
-            shutil.rmtree(tmp, ignore_errors=True)
+        keep_or_remove(tmp, args.keep)
 
 
 if __name__ == '__main__':

@@ -26,6 +26,7 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+from crane_stiffness.testing.scratch import keep_or_remove  # noqa: E402
 os.environ.setdefault('AMENT_PREFIX_PATH', sys.prefix)  # the .msg files for the writer's schemas
 os.environ.setdefault('MPLBACKEND', 'Agg')
 
@@ -87,10 +88,7 @@ def main() -> int:
             plt.close(fig)
         return 0 if ok else 1
     finally:
-        if args.keep:
-            print(f'kept {tmp}')
-        else:
-            shutil.rmtree(tmp, ignore_errors=True)
+        keep_or_remove(tmp, args.keep)
 
 
 if __name__ == '__main__':
