@@ -31,7 +31,7 @@ from crane_stiffness.analysis.sweep import unit
 from crane_stiffness.model import (axis_stiffness, directional_stiffness, paper_stiffness, rest_pose,
                                    tangent_stiffness)
 from crane_stiffness.rosnode.qos import KEPT_QOS, LATCHED_QOS
-from crane_stiffness.rosnode.sim_time import SIM_QOS
+from crane_stiffness.rosnode.sim_time import SIM_QOS, drain
 from crane_stiffness.launcher.rig_description import PACKAGE, NodeStart, rig_nodes
 from crane_stiffness.launcher.rig_description import config_files as rig_config_files
 from crane_stiffness.sim.program import LoadProgram, load_program_file
@@ -119,12 +119,7 @@ class Observer(Node):
         executor: what the nodes published before they went (a rig host delivers within the process at once) is
         all seen, however busy the machine was while :meth:`settle` spun."""
         for subscription in self.subscriptions:
-            while True:
-                with subscription.handle:
-                    taken = subscription.handle.take_message(subscription.msg_type, subscription.raw)
-                if taken is None:
-                    break
-                subscription.callback(taken[0])
+            drain(subscription, subscription.callback)
 
     def _on_progress(self, msg: Float64) -> None:
         self.progress = msg.data
