@@ -102,7 +102,6 @@ class Stiffness6EstimatorNode(Node):
         self.newest = {'wrench': -math.inf, 'pose': -math.inf}  # newest stamp per sensor stream [s]
         self.fit: ComplianceFit | None = None
         self.sim_time = uses_sim_time(self)
-        self._mark_ns: int | None = None  # simulated time: the last watermark handled [ns]
         self.held: list[tuple[float, int, int, str, Any]] = []  # simulated time: (stamp, kind order, seq, kind, data)
         self._seq = 0
         # How far behind the pose stream the fit is: node clock at handling − the pose's stamp, last samples [s]
@@ -180,7 +179,6 @@ class Stiffness6EstimatorNode(Node):
         self.held = [h for h in self.held if h[0] > mark]
         for stamp, _, _, kind, values in now:
             self._handle(stamp, kind, values)
-        self._mark_ns = t_ns
         if self.timer is not None:
             self.timer.at_watermark(t_ns)
         self.sim.report(t_ns)
@@ -217,11 +215,8 @@ class Stiffness6EstimatorNode(Node):
 
     # --- outputs ---
     def _now_ns(self) -> int:
-        """The node's time [ns]: on simulated time the watermark handled last, the same in every run (the node clock
-        is wherever /clock had got to when the callback ran)."""
-        if self.sim_time and self._mark_ns is not None:
-            return self._mark_ns
-        return self.get_clock().now().nanoseconds
+        """The node's time [ns]: on simulated time the last watermark handled (PeriodicOutput.now_ns)."""
+        return self.timer.now_ns() if self.timer is not None else self.get_clock().now().nanoseconds
 
     def _stale(self) -> str:
         """Which flowing stream stopped (no sample within stale_after_s of now), or ''."""

@@ -142,7 +142,6 @@ class StiffnessEstimatorNode(Node):
         # On simulated time the streams are reliable and the clock waits for this node (stage 3): nothing is lost,
         # and what arrives is held until the watermark says every input up to it is in (_drain_all).
         self.sim_time = uses_sim_time(self)
-        self._mark_ns: int | None = None  # simulated time: the last watermark handled [ns]
         self.held: list[tuple[bool, Callable[..., None], Any]] = []  # simulated time: (is a command, handler, msg)
         self.sub_command = self.create_subscription(WrenchStamped, topics.WRENCH_COMMAND,
                                                     self._held_until_watermark(self._on_command, command=True),
@@ -168,7 +167,6 @@ class StiffnessEstimatorNode(Node):
 
     def sim_report(self, t_ns: int) -> None:
         """Simulated time: every input up to ``t_ns`` has been handled (drained before this call)."""
-        self._mark_ns = t_ns
         if self.timer is not None:
             self.timer.at_watermark(t_ns)
         self.sim.report(t_ns)
@@ -186,11 +184,8 @@ class StiffnessEstimatorNode(Node):
         return self.core.accounting()
 
     def _now_ns(self) -> int:
-        """The node's time [ns]: on simulated time the watermark handled last (every input up to it is in), the same
-        in every run; the node clock would be wherever /clock had got to when the callback ran."""
-        if self.sim_time and self._mark_ns is not None:
-            return self._mark_ns
-        return self.get_clock().now().nanoseconds
+        """The node's time [ns]: on simulated time the last watermark handled (PeriodicOutput.now_ns)."""
+        return self.timer.now_ns() if self.timer is not None else self.get_clock().now().nanoseconds
 
     def _now_s(self) -> float:
         return self._now_ns() * 1e-9

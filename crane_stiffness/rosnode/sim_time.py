@@ -200,16 +200,25 @@ class PeriodicOutput:
     """A node's periodic output (a status, a fit): a timer of ``period_s`` on the wall clock; on simulated time
     (``sim_time``) called from the node's watermark handler instead, by :meth:`at_watermark`, each time simulated time
     passes a multiple of the period: after every input up to that time has been handled, so each output holds the
-    same data in every run. (A timer on simulated time fires when /clock moves, before or after the watermark's
-    inputs are handled as the executor happens to order them: the same instant's status then counted 100 samples
-    more in one run than in another.)"""
+    same data in every run; :meth:`now_ns` is the time those outputs are made at. (A timer on simulated time fires
+    when /clock moves, before or after the watermark's inputs are handled as the executor happens to order them: the
+    same instant's status then counted 100 samples more in one run than in another.)"""
 
     def __init__(self, node: Node, period_s: float, callback: Callable[[], None], sim_time: bool) -> None:
         self._node, self._callback, self._sim_time = node, callback, sim_time
         self._timer: Any = None
         self._period_ns = 0
         self._slot: int | None = None  # the last multiple of the period an output went out for (simulated time)
+        self._mark_ns: int | None = None  # simulated time: the last watermark whose inputs were all handled [ns]
         self.set_period(period_s)
+
+    def now_ns(self) -> int:
+        """The node's time for its outputs [ns]: on simulated time the last watermark passed to :meth:`at_watermark`
+        (every input up to it handled), the same in every run; the node clock would read wherever /clock had got to
+        when the callback ran. The node clock on the wall clock, and before the first watermark."""
+        if self._sim_time and self._mark_ns is not None:
+            return self._mark_ns
+        return self._node.get_clock().now().nanoseconds
 
     def set_period(self, period_s: float) -> None:
         """A new period [s] (> 0)."""
@@ -225,6 +234,7 @@ class PeriodicOutput:
         period was reached since the last one (the first watermark sends one)."""
         if not self._sim_time:
             return
+        self._mark_ns = t_ns
         slot = t_ns // self._period_ns
         if self._slot is None or slot > self._slot:
             self._slot = slot
