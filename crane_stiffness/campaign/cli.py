@@ -150,7 +150,7 @@ def add_commands(subparsers: Any) -> None:
     a.add_argument('--quiet', action='store_true', help='no progress lines')
     a.set_defaults(func=_guarded(cmd_analyze))
     c = subparsers.add_parser('calibrate', help="fit the model's uncertain parameters (wire stiffness E·A; "
-                              'optionally W and the height) to an analysed campaign, with 95 % intervals')
+                              'optionally W and the height) to an analysed campaign, with 95 %% intervals')
     c.add_argument('dir', metavar='DIR', help='campaign directory, analysed (campaign analyze DIR)')
     c.add_argument('--weight', choices=('none', 'scale', 'per-weight', 'per-session'), default='none',
                    help='also fit W: one factor for the campaign, one per weight hung, one per session '

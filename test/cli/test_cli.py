@@ -1,6 +1,7 @@
 """The crane-stiffness command line: JSON contract, readable output, config files, exit codes, sweep output."""
 from __future__ import annotations
 
+import argparse
 import csv
 import json
 import subprocess
@@ -110,3 +111,26 @@ def test_sweep_writes_the_paper_studies(tmp_path, capsys):
     assert int(fig9[-1]['slack_wires']) >= 2  # low W, long wires: slack at 2 N
     assert float(fig9[-1]['u_nonlinear_m']) > 1.5 * float(fig9[-1]['u_linear_m'])
     assert (out / 'fig5_force_displacement.png').stat().st_size > 10_000
+
+
+def _parsers(parser: argparse.ArgumentParser) -> list[tuple[str, argparse.ArgumentParser]]:
+    """``parser`` and every subcommand's parser under it, by their command line."""
+    found = [(parser.prog, parser)]
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for sub in dict.fromkeys(action.choices.values()):  # an alias maps to the same parser
+                found += _parsers(sub)
+    return found
+
+
+def test_every_help_page_of_the_command_line_prints():
+    """`crane-stiffness --help` and each subcommand's --help: argparse expands '%' in help strings, so a bare one
+    (say '95 % intervals') breaks the page that lists it, not the subcommand's own."""
+    from crane_stiffness.cli.main import build_parser
+    pages = _parsers(build_parser())
+    assert len(pages) > 15, [prog for prog, _ in pages]
+    for prog, parser in pages:
+        text = parser.format_help()
+        assert text.startswith('usage: '), prog
+    top = pages[0][1].format_help()
+    assert '95 % intervals' in ' '.join(top.split()), top
