@@ -75,14 +75,18 @@ def distributed(scheduler: str) -> Any:
     return dask.distributed
 
 
-def connect(scheduler: str, timeout_s: float = 30.0) -> Any:
+def connect(scheduler: str) -> Any:
     """A dask.distributed Client of the scheduler at ``scheduler`` (``tcp://host:8786``); CampaignError saying why
-    when dask.distributed is not installed or the scheduler cannot be reached."""
-    client = distributed(scheduler).Client
+    when dask.distributed is not installed or the scheduler cannot be reached within Dask's connect timeout (its
+    setting ``distributed.comm.timeouts.connect``, 30 s unless changed, e.g. by the environment variable
+    DASK_DISTRIBUTED__COMM__TIMEOUTS__CONNECT=5s)."""
+    dask_distributed = distributed(scheduler)
+    timeout = dask_distributed.config['distributed']['comm']['timeouts']['connect']  # dask's global settings
     try:
-        return client(scheduler, timeout=f'{timeout_s}s')
+        return dask_distributed.Client(scheduler, timeout=timeout)
     except (OSError, TimeoutError) as exc:
-        raise CampaignError(f'--scheduler {scheduler}: cannot connect: {exc}') from None
+        raise CampaignError(f'--scheduler {scheduler}: cannot connect within {timeout} (Dask\'s '
+                            f'distributed.comm.timeouts.connect): {exc}') from None
 
 
 def _on_dask(func: Callable[..., str], jobs: Sequence[Job], scheduler: str,
