@@ -77,8 +77,15 @@ class SensorMount:
     rotation: NDArray[np.float64] = field(default_factory=lambda: np.eye(3))
     position: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
     reaction: bool = False
+    #: :meth:`matrix`, made once: a live estimator moves every sample (1 kHz) with it.
+    _matrix: NDArray[np.float64] = field(init=False, repr=False, compare=False)
 
     PARAM_NAMES = ('sensor_rotation', 'sensor_position', 'sensor_reaction')
+
+    def __post_init__(self) -> None:
+        # transform_wrench of the six unit wrenches: its rows are T's columns
+        object.__setattr__(self, '_matrix', transform_wrench(np.eye(6), self.rotation, self.position,
+                                                             self.reaction).T.copy())
 
     @classmethod
     def from_params(cls, values: Mapping[str, Any]) -> SensorMount:
@@ -91,8 +98,12 @@ class SensorMount:
                    _vector3(values.get('sensor_position', [0.0, 0.0, 0.0]), 'sensor_position'), reaction)
 
     def apply(self, wrench: ArrayLike) -> NDArray[np.float64]:
-        """:func:`transform_wrench` with this mounting."""
-        return transform_wrench(wrench, self.rotation, self.position, self.reaction)
+        """:func:`transform_wrench` with this mounting, as the product with :meth:`matrix` (shape (6,) or (n, 6)):
+        the rotation is checked once, when the mount is made."""
+        w = np.asarray(wrench, dtype=float)
+        if w.shape[-1:] != (6,) or w.ndim > 2:
+            raise ParameterError('wrench', w.shape, 'must have shape (6,) or (n, 6)')
+        return w @ self._matrix.T
 
     @property
     def is_identity(self) -> bool:
@@ -102,7 +113,7 @@ class SensorMount:
 
     def matrix(self) -> NDArray[np.float64]:
         """The 6×6 matrix T with ``apply(w) == T @ w`` (rows: crane_base components at the platform centre)."""
-        return self.apply(np.eye(6)).T
+        return self._matrix.copy()
 
     def component_row(self, axis_index: int) -> tuple[float, ...]:
         """Row ``axis_index`` of :meth:`matrix` as 6 floats: the one component the estimator fits, as a dot

@@ -48,6 +48,12 @@ def test_random_mounts_round_trip_batches():
                                          'sensor_position': position.tolist(), 'sensor_reaction': False})
         np.testing.assert_allclose(mount.apply(readings), applied, atol=1e-12)
         np.testing.assert_allclose(mount.apply(readings[0]), applied[0], atol=1e-12)
+        # the mount's matrix (made once; the live per-sample form) is the function's, sample by sample and batched
+        for reaction in (False, True):
+            m = SensorMount(rotation, position, reaction)
+            direct = transform_wrench(readings, rotation, position, reaction)
+            np.testing.assert_allclose(m.apply(readings), direct, rtol=1e-14, atol=1e-14)
+            np.testing.assert_allclose([m.apply(w) for w in readings], direct, rtol=1e-14, atol=1e-14)
 
 
 def test_bad_mounts_are_refused_with_the_field_named():
