@@ -226,7 +226,8 @@ def test_colcon_build_copies_the_kernels_compiled_for_the_same_sources(colcon_in
     built = _site(colcon_install) / 'crane_stiffness'
     venv_cache = venv / 'model' / '__pycache__'
     if not list(venv_cache.glob('*.nbi')) or kernel_cache._sources(venv) != kernel_cache._sources(built):
-        pytest.skip(f'{venv} is not the package built here, or has no compiled kernels (run make install)')
+        pytest.fail(f'{venv} is not the package built here, or has no compiled kernels: run make install (make test '
+                    'does it first)')
     installed = {p.name: p.read_bytes() for p in _cache_files(colcon_install)}
     assert installed and set(installed) == {p.name for pattern in KERNEL_CACHE for p in venv_cache.glob(pattern)}
     for name, data in installed.items():
