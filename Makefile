@@ -16,6 +16,8 @@ export AMENT_PREFIX_PATH := $(CURDIR)/$(VENV)$(if $(AMENT_PREFIX_PATH),:$(AMENT_
 export RMW_IMPLEMENTATION := rmw_fastrtps_cpp
 export MPLBACKEND := Agg
 export PYTHONDONTWRITEBYTECODE := 1
+# Test processes `make test` runs side by side (`make test TEST_PROCESSES=1`: one, in collection order).
+TEST_PROCESSES ?= auto
 
 .PHONY: demo test bench install clean
 
@@ -56,7 +58,9 @@ test: $(STAMP)
 	$(BIN)/ruff check crane_stiffness test benchmarks scripts launch setup.py
 	@# Type checks of the package (mypy.ini); its cache (.mypy_cache/) makes a re-run take under a second.
 	$(BIN)/mypy
-	$(BIN)/python -m pytest -q -p no:cacheprovider --durations=15 test
+	@# One test process per core (pytest-xdist), each taking tests as it finishes one (worksteal: the few long rig
+	@# tests do not queue behind each other); conftest.py gives each its own share of the DDS domains.
+	$(BIN)/python -m pytest -q -p no:cacheprovider -n $(TEST_PROCESSES) --dist worksteal --durations=15 test
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/run_all.py

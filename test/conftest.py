@@ -28,16 +28,33 @@ if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
     signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
-def _domain_band() -> list[int]:
-    """The DDS domain ids this run's tests cycle through, starting at ROS_DOMAIN_ID: 1..100, or the band
-    CRANE_STIFFNESS_TEST_DOMAINS="LO-HI" names (two test runs on one machine, each in its own band, never meet)."""
+#: Domains above each band's top that a test may still use: a campaign's sessions side by side take ROS_DOMAIN_ID and
+#: the next ones (one per job), so a band stops short of the domain above it.
+SIDE_BY_SIDE = 4
+
+
+def _domain_band() -> tuple[list[int], int]:
+    """The DDS domain ids this run's tests cycle through, starting at ROS_DOMAIN_ID, and the one domain above them
+    (SIDE_BY_SIDE apart) of the tests' rig host (:func:`rig_host`): from the band 1..100, or the band
+    CRANE_STIFFNESS_TEST_DOMAINS="LO-HI" names (two test runs on one machine, each in its own band, never meet).
+    Under pytest-xdist (`make test` runs the tests in one process per core) each worker takes its own share of the
+    band."""
     lo, hi = (int(v) for v in os.environ.get('CRANE_STIFFNESS_TEST_DOMAINS', '1-100').split('-'))
+    workers = int(os.environ.get('PYTEST_XDIST_WORKER_COUNT', '1'))
+    share = (hi - lo + 1) // workers
+    if share <= 2 * SIDE_BY_SIDE + 1:
+        raise pytest.UsageError(f'CRANE_STIFFNESS_TEST_DOMAINS={lo}-{hi}: too few domains for {workers} test '
+                                f'process(es) (more than {2 * SIDE_BY_SIDE + 1} each)')
+    k = int(os.environ.get('PYTEST_XDIST_WORKER', 'gw0').removeprefix('gw'))
+    lo, host = lo + k * share, lo + (k + 1) * share - 1
+    hi = host - 1 - SIDE_BY_SIDE
     start = int(os.environ['ROS_DOMAIN_ID'])
     start = start if lo <= start <= hi else lo
-    return list(range(start, hi + 1)) + list(range(lo, start))
+    return list(range(start, hi + 1)) + list(range(lo, start)), host
 
 
-_DOMAINS = __import__('itertools').cycle(_domain_band())
+_BAND, HOST_DOMAIN = _domain_band()
+_DOMAINS = __import__('itertools').cycle(_BAND)
 
 
 @pytest.fixture(autouse=True)
@@ -83,16 +100,41 @@ def install_tree(colcon_install, ros_domain):
 
 @pytest.fixture(scope='session')
 def colcon_install(tmp_path_factory):
-    """A colcon build of this package (copied out of the work tree), as a real ROS workspace would have it."""
+    """A colcon build of this package (copied out of the work tree), as a real ROS workspace would have it: one per
+    test run, the first test process to need it builds it while the others wait (pytest-xdist's workers share the
+    parent of their base temporary directories)."""
+    import fcntl
     import shutil
 
     from crane_stiffness.launcher.rosrun import colcon_build
-    ws = tmp_path_factory.mktemp('ws')
-    src = ws / 'src' / 'crane_stiffness'
-    shutil.copytree(REPO, src, ignore=shutil.ignore_patterns('.venv', '.git', 'build', 'install', 'log', 'out',
-                                                             '__pycache__', 'bags', '*.egg-info'))
-    colcon_build(src, ws / 'build', ws / 'install', ws / 'log')
+    root = tmp_path_factory.getbasetemp()
+    if 'PYTEST_XDIST_WORKER' in os.environ:
+        root = root.parent
+    ws = root / 'colcon_ws'
+    with open(root / 'colcon_ws.lock', 'w') as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if not (ws / 'built').exists():
+            shutil.rmtree(ws, ignore_errors=True)  # what a failed build in another process left
+            src = ws / 'src' / 'crane_stiffness'
+            shutil.copytree(REPO, src, ignore=shutil.ignore_patterns('.venv', '.git', 'build', 'install', 'log',
+                                                                     'out', '__pycache__', 'bags', '*.egg-info'))
+            colcon_build(src, ws / 'build', ws / 'install', ws / 'log')
+            (ws / 'built').touch()
     return ws / 'install'
+
+
+@pytest.fixture(scope='session')
+def rig_host(colcon_install):
+    """The simulated rig that stays up between sessions (crane_stiffness.launcher.host_process.HostProcess: every
+    node of the rig in one process of its own, as ``campaign run`` runs sessions) in a domain of its own
+    (HOST_DOMAIN), for the tests about a session's numbers; ``rig_host.run(share=..., out=..., program=..., ...)``
+    gives a session's outcome. The rig of processes, as ``ros2 launch`` starts it, has tests of its own (launcher/),
+    and test_rig_host pins the two to the same numbers and streams."""
+    from crane_stiffness.launcher.host_process import HostProcess
+    from crane_stiffness.launcher.rosrun import install_environment
+    env = {**install_environment(colcon_install), 'ROS_DOMAIN_ID': str(HOST_DOMAIN)}
+    with HostProcess(HOST_DOMAIN, env) as host:
+        yield host
 
 
 # --- Markers ---------------------------------------------------------------------------------------------------
@@ -100,7 +142,7 @@ def colcon_install(tmp_path_factory):
 # line): DDS traffic, seconds to minutes each. `pytest -m "not ros" test` runs the pure tests alone. Every test using
 # one of ROS_FIXTURES is marked here; modules of ROS tests only say so themselves (``pytestmark``), and the few
 # others that start ROS without these fixtures (a node's main() in-process) carry the mark on the test.
-ROS_FIXTURES = {'rclpy_context', 'install_tree', 'colcon_install'}
+ROS_FIXTURES = {'rclpy_context', 'install_tree', 'colcon_install', 'rig_host'}
 
 # Tests that need an outside tool the project does not install drive it the way a user has it; without it they
 # cannot run: they are left out and the run says so in one line per tool.
@@ -139,6 +181,20 @@ def pytest_collection_modifyitems(config, items):
     if left_out:
         config.hook.pytest_deselected(items=left_out)
         items[:] = [item for item in items if item not in left_out]
+
+
+def pytest_sessionfinish(session):
+    """A pytest-xdist worker sends what it left out for want of a tool to the controller, which reports it."""
+    workeroutput = getattr(session.config, 'workeroutput', None)
+    if workeroutput is not None:
+        workeroutput['crane_stiffness_not_run'] = _NOT_RUN
+
+
+@pytest.hookimpl(optionalhook=True)  # a pytest-xdist hook: absent when the tests run in one process
+def pytest_testnodedown(node, error):
+    """(pytest-xdist, in the controller) a worker's tests left out for want of a tool, for the summary."""
+    for marker, ids in getattr(node, 'workeroutput', {}).get('crane_stiffness_not_run', {}).items():
+        _NOT_RUN[marker].extend(i for i in ids if i not in _NOT_RUN[marker])
 
 
 def pytest_terminal_summary(terminalreporter):

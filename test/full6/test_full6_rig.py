@@ -9,7 +9,7 @@ import pytest
 
 from crane_stiffness.analysis.full6 import analyze_full6
 from crane_stiffness.launcher import rosrun
-from crane_stiffness.launcher.rig import config_files, run_rig
+from crane_stiffness.launcher.rig import config_files
 from crane_stiffness.contract import stiffness6_layout
 from crane_stiffness.launcher.summary6 import summarize6, verdict6
 
@@ -17,23 +17,24 @@ pytestmark = pytest.mark.ros
 SEEDS = {'load_cell': {'seed': 21}, 'lvdt': {'seed': 22}, 'pose_sensor': {'seed': 23}}
 
 
-def test_program_full6_measures_the_whole_matrix_live_and_the_bag_gives_it_again(install_tree, tmp_path):
-    install, env = install_tree
-    share = rosrun.installed_config(install)
-    _, observer, _, logs = run_rig(share, env, tmp_path, 'full6', session='s6', overrides=SEEDS,
-                                   arguments={'use_sim_time': 'true', 'real_time_factor': 'max'})
-    assert 'stiffness6_estimator' in logs and 'pose_sensor' in logs
-    summary = summarize6(config_files(share, 'full6')['crane'], observer.stiffness6, observer.status6)
+def test_program_full6_measures_the_whole_matrix_live_and_the_bag_gives_it_again(colcon_install, rig_host, tmp_path):
+    """On the rig host (the rig of processes runs it in scripts/demo.py --program full6)."""
+    share = rosrun.installed_config(colcon_install)
+    run = rig_host.run(share=share, out=tmp_path, program='full6', session='s6', overrides=SEEDS,
+                       arguments={'use_sim_time': 'true', 'real_time_factor': 'max'})
+    codes = run['summary']['node_exit_codes']
+    assert {'stiffness6_estimator', 'pose_sensor'} <= set(codes) and set(codes.values()) == {0}, codes
+    summary = summarize6(config_files(share, 'full6')['crane'], run['stiffness6'], run['status6'])
     assert verdict6(summary) == '', (verdict6(summary), summary['status'])
     assert summary['status']['level'] == 'OK'
     assert all(abs(d['relative_error']) < 0.01 for d in summary['diagonal'].values()), summary['diagonal']
     assert summary['k2']['same_sign'] and abs(summary['k2']['relative_error']) < 0.03
     # the same fit from the bag: the pairs the live estimator fitted, to rounding
     offline = analyze_full6(tmp_path / 'bags' / 's6', tmp_path / 'analysis')
-    live_k, live_low, live_high = stiffness6_layout.decode(observer.stiffness6)
+    live_k, live_low, live_high = stiffness6_layout.decode(run['stiffness6'])
     off = offline.stiffness
     np.testing.assert_allclose(np.array(off['value']), live_k, rtol=1e-9, atol=1e-9 * np.abs(live_k).max())
     np.testing.assert_allclose(np.array(off['low']), live_low, rtol=1e-9, atol=1e-9 * np.abs(live_k).max())
     np.testing.assert_allclose(np.array(off['high']), live_high, rtol=1e-9, atol=1e-9 * np.abs(live_k).max())
-    assert offline.pairs['n'] == int(observer.status6[2]['pairs'])
+    assert offline.pairs['n'] == int(run['status6'][2]['pairs'])
     assert (tmp_path / 'analysis' / 'full6_stiffness.png').stat().st_size > 10_000
