@@ -181,6 +181,34 @@ def pytest_collection_modifyitems(config, items):
     if left_out:
         config.hook.pytest_deselected(items=left_out)
         items[:] = [item for item in items if item not in left_out]
+    items[:] = _long_ones_first(items, int(os.environ.get('PYTEST_XDIST_WORKER_COUNT', '1')))
+
+
+#: Tests that run a rig, a campaign or a cluster: tens of seconds each, where most take a fraction of one.
+LONG_FIXTURES = {'rig_host', 'install_tree', 'colcon_install', 'ros_domains'}
+
+
+def _long(item: pytest.Item) -> bool:
+    return bool(LONG_FIXTURES & set(getattr(item, 'fixturenames', ()))) or 'campaign' in item.path.parts
+
+
+def _long_ones_first(items: list[pytest.Item], workers: int) -> list[pytest.Item]:
+    """``items`` with the long ones first in each of the ``workers`` runs of the order: pytest-xdist's worksteal gives
+    each test process one contiguous share of the order (the first len // workers, ...) and idle processes take tests
+    from the end of the others' shares, so the long tests start early, evenly shared, instead of ending the run one
+    after another. The others keep their order (their module fixtures are made once per share)."""
+    long_ones = [item for item in items if _long(item)]
+    others = [item for item in items if not _long(item)]
+    ordered: list[pytest.Item] = []
+    remaining = len(items)
+    for k in range(workers):
+        size = remaining // (workers - k)  # as worksteal shares them out
+        mine = long_ones[k::workers]
+        take = max(0, size - len(mine))
+        ordered += mine + others[:take]
+        others = others[take:]
+        remaining -= size
+    return ordered + others
 
 
 def pytest_sessionfinish(session):
