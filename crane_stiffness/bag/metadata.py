@@ -15,11 +15,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from .errors import BagPathError, BagWriterError
 from .qos import normalize_qos_profiles
-from .yamlfmt import dump_yaml
+from .yamlfmt import dump_yaml, load_yaml
 
 METADATA_FILENAME = 'metadata.yaml'
 METADATA_VERSION = 9
@@ -160,7 +158,7 @@ def read_metadata_yaml(bag_dir: Path) -> dict[str, Any]:
     Raises:
         OSError, yaml.YAMLError, KeyError or TypeError: missing, not YAML, or not a rosbag2 metadata file.
     """
-    loaded = yaml.safe_load((Path(bag_dir) / METADATA_FILENAME).read_text(encoding='utf-8'))
+    loaded = load_yaml((Path(bag_dir) / METADATA_FILENAME).read_text(encoding='utf-8'))
     info = loaded['rosbag2_bagfile_information']
     if not isinstance(info, dict):
         raise TypeError('rosbag2_bagfile_information is not a mapping')

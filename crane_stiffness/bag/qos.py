@@ -14,7 +14,7 @@ from typing import Any
 import yaml
 
 from .errors import BagWriterError
-from .yamlfmt import dump_yaml
+from .yamlfmt import dump_yaml, load_yaml
 
 DURATION_INFINITE = {'sec': 9223372036, 'nsec': 854775807}
 """rmw's RMW_DURATION_INFINITE as rosbag2 writes it in QoS profiles."""
@@ -55,7 +55,7 @@ def normalize_qos_profiles(profiles: str | Sequence[Mapping[str, Any]] | None) -
         if not profiles.strip():
             return []
         try:
-            loaded = yaml.safe_load(profiles)
+            loaded = load_yaml(profiles)
         except yaml.YAMLError as exc:
             raise BagWriterError(f'offered QoS profiles are not valid YAML: {exc}') from None
         profiles = loaded if loaded is not None else []
@@ -88,7 +88,7 @@ def recorded_qos_profiles(offered: str | Iterable[Mapping[str, Any]] | None) -> 
         return []
     if isinstance(offered, str):
         try:
-            loaded = yaml.safe_load(offered) if offered.strip() else []
+            loaded = load_yaml(offered) if offered.strip() else []
         except yaml.YAMLError:
             return []
         offered = loaded if isinstance(loaded, list) else []

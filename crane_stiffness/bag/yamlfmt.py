@@ -2,7 +2,7 @@
 
 Two-space indent with sequences indented under their key, ``~`` for null, keys in insertion order, no line folding,
 no anchors, and double quotes where a string cannot be plain. metadata.yaml and the ``offered_qos_profiles`` strings
-of the MCAP channels are written with :func:`dump_yaml`.
+of the MCAP channels are written with :func:`dump_yaml` and read with :func:`load_yaml`.
 """
 from __future__ import annotations
 
@@ -35,3 +35,13 @@ def dump_yaml(value: Mapping[str, Any] | Sequence[Any]) -> str:
     text = yaml.dump(value, Dumper=RosbagDumper, default_flow_style=False, sort_keys=False, allow_unicode=True,
                      width=float('inf'))
     return text.rstrip('\n')
+
+
+#: PyYAML's safe loader in C (libyaml) where PyYAML was built with it: a bag's reader and writer parse the QoS
+#: profiles of every channel and metadata.yaml, ten times faster than the pure-Python loader; the same documents.
+_SAFE_LOADER: type = getattr(yaml, 'CSafeLoader', yaml.SafeLoader)
+
+
+def load_yaml(text: str) -> Any:
+    """One YAML document as ``yaml.safe_load`` reads it (yaml.YAMLError when it is not YAML)."""
+    return yaml.load(text, Loader=_SAFE_LOADER)  # noqa: S506 - a safe loader
