@@ -87,7 +87,9 @@ def test_load_cell_rate_stamps_noise_and_applied_wrench(rclpy_context):
     assert spin_until(ex, lambda: len(probe.samples) > 50, 5.0)
     applied = np.array([0.0, 2.0, 0.0, 0.0, 0.0, 0.1])
     t_cmd = probe.command(applied)
-    collect_for(ex, 1.6)
+    # Until a thousand readings of the new load arrived (1 s of samples on the wall clock: longer on a loaded machine)
+    assert spin_until(ex, lambda: len(probe.readings_after(t_cmd)) > 1000, 60.0), len(probe.readings_after(t_cmd))
+    collect_for(ex, 0.1)
     stamps = np.array([s for s, _, _ in probe.samples])
     # Stamps on the 1 ms grid, one sample per grid instant, every one published. (Best-effort delivery to this probe
     # may skip some on a loaded machine: gaps are whole periods, and the node published every instant between.)
