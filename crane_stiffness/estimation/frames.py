@@ -38,6 +38,14 @@ def _rotation(value: ArrayLike, name: str = 'rotation') -> NDArray[np.float64]:
     return m
 
 
+def _wrenches(wrench: ArrayLike) -> NDArray[np.float64]:
+    """``wrench`` as floats of shape (6,) or (n, 6); checked."""
+    w = np.asarray(wrench, dtype=float)
+    if w.shape[-1:] != (6,) or w.ndim > 2:
+        raise ParameterError('wrench', w.shape, 'must have shape (6,) or (n, 6)')
+    return w
+
+
 def _vector3(value: ArrayLike, name: str) -> NDArray[np.float64]:
     a = np.asarray(value, dtype=float)
     if a.shape != (3,) or not np.isfinite(a).all():
@@ -58,9 +66,7 @@ def transform_wrench(wrench: ArrayLike, rotation: ArrayLike, position: ArrayLike
     Returns:
         The wrench about the platform centre in crane_base, same shape as ``wrench``.
     """
-    w = np.asarray(wrench, dtype=float)
-    if w.shape[-1:] != (6,) or w.ndim > 2:
-        raise ParameterError('wrench', w.shape, 'must have shape (6,) or (n, 6)')
+    w = _wrenches(wrench)
     r_mat = _rotation(rotation)
     r = _vector3(position, 'position')
     f = w[..., :3] @ r_mat.T
@@ -100,10 +106,7 @@ class SensorMount:
     def apply(self, wrench: ArrayLike) -> NDArray[np.float64]:
         """:func:`transform_wrench` with this mounting, as the product with :meth:`matrix` (shape (6,) or (n, 6)):
         the rotation is checked once, when the mount is made."""
-        w = np.asarray(wrench, dtype=float)
-        if w.shape[-1:] != (6,) or w.ndim > 2:
-            raise ParameterError('wrench', w.shape, 'must have shape (6,) or (n, 6)')
-        return w @ self._matrix.T
+        return _wrenches(wrench) @ self._matrix.T
 
     @property
     def is_identity(self) -> bool:
