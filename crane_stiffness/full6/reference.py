@@ -19,13 +19,16 @@ centre) eq. (18) equals the exact tangent to rounding error (docs/physics.md); a
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from crane_stiffness.contract.axes import AXES
-from crane_stiffness.model import (CraneGeometry, Equilibrium, PaperCoefficients, paper_coefficients, paper_stiffness,
-                                   rest_pose, tangent_stiffness)
+from crane_stiffness.model import CraneGeometry, PaperCoefficients, paper_coefficients, paper_stiffness
+
+if TYPE_CHECKING:
+    from crane_stiffness.model import Equilibrium
 
 #: The displacement names of K's columns (and C's rows), in order.
 DISPLACEMENTS: tuple[str, ...] = ('u_x', 'u_y', 'u_z', 'θ_x', 'θ_y', 'θ_z')
@@ -87,6 +90,9 @@ def paper_applies(geometry: CraneGeometry) -> bool:
 
 def reference_at_rest(geometry: CraneGeometry) -> Reference:
     """The :class:`Reference` of ``geometry`` at its rest pose under the weight W."""
+    # Imported here: the solver brings numba (~0.4 s of CPU), which the six-axis estimator and the live view, importing
+    # this module for k2_weights and for this function on a six-axis rig only, need not load at start.
+    from crane_stiffness.model import rest_pose, tangent_stiffness
     eq = rest_pose(geometry)
     k = tangent_stiffness(geometry, eq)
     applies = paper_applies(geometry)

@@ -7,16 +7,16 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from crane_stiffness.contract.axes import AXES, axis_index  # noqa: F401 (AXES: re-exported by crane_stiffness.model)
-from crane_stiffness.model.equilibrium import Equilibrium, wrench_jacobian
 from crane_stiffness.model.errors import GeometryError
 from crane_stiffness.model.geometry import CraneGeometry
 
-#: Unit load directions by axis name (a force axis in N, a moment axis in N·m).
-
+if TYPE_CHECKING:
+    from crane_stiffness.model.equilibrium import Equilibrium
 
 
 def tangent_stiffness(geometry: CraneGeometry, equilibrium: Equilibrium) -> np.ndarray:
@@ -26,6 +26,9 @@ def tangent_stiffness(geometry: CraneGeometry, equilibrium: Equilibrium) -> np.n
     moment of the weight about the platform centre when the centre of mass is offset. Rotations are perturbed in the
     fixed frame; the external load is held fixed in space (so a fixed external couple leaves a small asymmetry).
     """
+    # Imported here: the estimators use this module's axis functions, and .equilibrium brings numba (~0.4 s of CPU
+    # at each node's start).
+    from crane_stiffness.model.equilibrium import wrench_jacobian
     _, k = wrench_jacobian(geometry, equilibrium.displacement, equilibrium.rotation, equilibrium.load)
     return k
 
