@@ -53,8 +53,34 @@ def _program() -> LoadProgram:
     return LoadProgram(segs, repeats=1, name='readme_steps', rate_hz=100.0)
 
 
+#: The README lines this test runs, in the README's order.
+RUNNABLE = [line for line in readme_lines() if not line.startswith(NEEDS_ROS)]
+
+
+class Shell:
+    """A plain shell in ``root``, running README lines the way a reader does: in order, each once."""
+
+    def __init__(self, root: Path) -> None:
+        self.root = root
+        self.done: dict[str, subprocess.CompletedProcess] = {}
+
+    def run(self, line: str) -> subprocess.CompletedProcess:
+        """``line``'s outcome, after every README line above it has run here (``calibrate out/paper`` reads what
+        ``campaign analyze out/paper`` wrote; test processes side by side may each get some of the lines)."""
+        for earlier in RUNNABLE[:RUNNABLE.index(line) + 1]:
+            if earlier not in self.done:
+                self.done[earlier] = self._exec(earlier)
+        return self.done[line]
+
+    def _exec(self, line: str) -> subprocess.CompletedProcess:
+        exe = Path(sysconfig.get_path('scripts')) / 'crane-stiffness'
+        argv = [str(exe), *shlex.split(_substituted(line))[1:]]
+        return subprocess.run(argv, cwd=self.root, env=plain_environment(), capture_output=True, text=True,
+                              timeout=600)
+
+
 @pytest.fixture(scope='module')
-def shell_dir(tmp_path_factory) -> Path:
+def shell(tmp_path_factory) -> Shell:
     """A directory like the repository root: ``config/`` (a link to the repository's), two session bags under
     ``bags/`` and a synthetic campaign."""
     root = tmp_path_factory.mktemp('plain_shell')
@@ -67,7 +93,7 @@ def shell_dir(tmp_path_factory) -> Path:
                     '    programs: [campaign_side_force, campaign_force_z, campaign_moment_z]\n'
                     '    weights: [50.0]\n    lengths: [0.5]\n')
     write_synthetic_campaign(root / 'out' / 'paper', load_campaign(spec), seed=5, sample_rate_hz=200)
-    return root
+    return Shell(root)
 
 
 def _substituted(line: str) -> str:
@@ -83,10 +109,8 @@ def test_the_readme_names_the_no_ros_commands():
             'workspace map', 'campaign run', 'campaign analyze', 'calibrate out/paper'} <= commands, commands
 
 
-@pytest.mark.parametrize('line', [line for line in readme_lines() if not line.startswith(NEEDS_ROS)])
-def test_a_readme_line_runs_from_a_plain_shell(line, shell_dir):
-    exe = Path(sysconfig.get_path('scripts')) / 'crane-stiffness'
-    argv = [str(exe), *shlex.split(_substituted(line))[1:]]
-    out = subprocess.run(argv, cwd=shell_dir, env=plain_environment(), capture_output=True, text=True, timeout=600)
+@pytest.mark.parametrize('line', RUNNABLE)
+def test_a_readme_line_runs_from_a_plain_shell(line, shell):
+    out = shell.run(line)
     assert 'Traceback' not in out.stderr, f'{line}:\n{out.stderr[-4000:]}'
     assert out.returncode == 0, f'{line}: exit {out.returncode}\n{out.stderr[-4000:]}'
