@@ -37,6 +37,7 @@ $(REQUIREMENTS): requirements.txt requirements-test.txt
 	@touch $@
 
 $(STAMP): $(REQUIREMENTS) $(SOURCES)
+	@# setuptools reuses build/lib: a module moved or deleted in the tree would stay installed from it.
 	rm -rf build/lib build/bdist.* crane_stiffness.egg-info
 	@# As a wheel, with the venv's pinned setuptools and wheel: the console script and the node executables go to
 	@# .venv/bin with any pip (pip < 23.1 would otherwise run the legacy `setup.py install`, which follows setup.cfg's
