@@ -96,16 +96,17 @@ class RigWatcher(Node):
 
 @contextlib.contextmanager
 def live_rig(env: dict[str, str], share: Path, out: Path, context: Any, overrides: dict[str, dict] | None = None,
+             arguments: dict[str, str] | None = None,
              **view: Any) -> Iterator[tuple[Processes, RigWatcher, dict[str, int]]]:
     """The side-force rig with the live view on free ports (``view``: more live_view parameters; ``overrides``:
-    other nodes' parameters), the watcher subscribed before anything starts; yields (processes, watcher,
-    {'port', 'http_port'}) once the view serves."""
+    other nodes' parameters; ``arguments``: launch arguments, e.g. ``use_sim_time``), the watcher subscribed before
+    anything starts; yields (processes, watcher, {'port', 'http_port'}) once the view serves."""
     ports = {'port': free_port(), 'http_port': free_port()}
     watcher = RigWatcher(context=context)
     try:
         with Processes(env, out / 'logs') as procs:
             start_rig(procs, share, 'side_force', 'live', out / 'bags', record=False, live_view=True,
-                      overrides={**(overrides or {}), 'live_view': {**ports, **view}})
+                      overrides={**(overrides or {}), 'live_view': {**ports, **view}}, arguments=arguments)
             deadline = time.monotonic() + 60
             while 'live view: page http://' not in procs.log('live_view'):
                 procs.check_alive()
