@@ -15,9 +15,15 @@ from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
 from crane_stiffness.rosnode import entry
+from crane_stiffness.rosnode.exit_watchdog import ExitWatchdog
 from crane_stiffness.rosnode import parameters
 from crane_stiffness.rosnode.sim_time import SimTimeParticipant
 from crane_stiffness.params.files import params_files_from_args
+
+
+#: How long the DDS teardown after a node's final counters may take before the process ends without it [s]
+#: (normally well under a second; ``ros2 launch`` escalates to SIGTERM 5 s after Ctrl-C and SIGKILL 5 s later).
+TEARDOWN_LIMIT_S = 5.0
 
 
 def make_executor(kind: str, context: Any):
@@ -193,11 +199,18 @@ def run(node_factory: Callable[[], NodeT], args: Sequence[str] | None = None,
             close()
         status = int(getattr(node, 'exit_status', 0) or 0)
         final_counters(node)
+        # The node's work is done; what follows only says goodbye to DDS, and can deadlock in Fast DDS with the
+        # GIL held (exit_watchdog): then the process ends after TEARDOWN_LIMIT_S with its status and a message.
+        watchdog = ExitWatchdog()
+        watchdog.arm(TEARDOWN_LIMIT_S, status, f'[{node.get_name()}] the DDS teardown after the final counters did '
+                     f'not end within {TEARDOWN_LIMIT_S:g} s (Fast DDS deadlock deleting the participant, '
+                     'eProsima/Fast-DDS#6513): exiting with the node\'s status without it')
         ex.remove_node(node)
         ex.shutdown()
         del ex  # its C++ destructor runs here, on the main thread, not later in the interpreter's finalization
         node.destroy_node()
         rclpy.try_shutdown()
+        watchdog.disarm()
         request.ignore()
     return status
 
