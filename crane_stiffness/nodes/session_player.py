@@ -212,10 +212,14 @@ class _Playback(threading.Thread):
             except BaseException:
                 stats['skipped_publish_error'] += 1
                 raise
-            late = time.monotonic_ns() - due
+            now = time.monotonic_ns()
+            late = now - due
             stats['published'] += 1
             if late > stats['max_late_ms'] * 1e6:
                 stats['max_late_ms'] = late / 1e6
+            if -late > stats['max_early_ms'] * 1e6:
+                stats['max_early_ms'] = -late / 1e6
+            stats['played_s'] = (now - wall0) / 1e9  # this pass's start (pauses left out) to this publish
             stats['bag_time_ns'] = msg.log_time_ns
 
     def _wait_until(self, due: int, bag_rel_ns: int, wall0: int) -> int | None:
@@ -257,8 +261,11 @@ class SessionPlayer(Node):
         self.clock_pub: Publisher | None = None
         self.state = 'idle'
         self.problems: list[str] = []
+        # (max_late_ms, max_early_ms: the most a publish came after / before its due time; played_s: the wall
+        # seconds from the pass's start, pauses left out, to its newest publish)
         self.stats: dict[str, Any] = {'read': 0, 'published': 0, 'skipped_stopped': 0, 'skipped_publish_error': 0,
-                                      'max_late_ms': 0.0, 'loops': 0, 'bag_time_ns': None}
+                                      'max_late_ms': 0.0, 'max_early_ms': 0.0, 'played_s': 0.0, 'loops': 0,
+                                      'bag_time_ns': None}
         self.topic_map: dict[str, str] = {}
         self.finished_at: float | None = None
         self.reader: BagReader | None = None
@@ -361,8 +368,8 @@ class SessionPlayer(Node):
         assert self.reader is not None  # prepare() opened the bag
         p = self.params
         self._check_offset()
-        self.stats.update(read=0, published=0, skipped_stopped=0, skipped_publish_error=0, max_late_ms=0.0, loops=0,
-                          bag_time_ns=None)
+        self.stats.update(read=0, published=0, skipped_stopped=0, skipped_publish_error=0, max_late_ms=0.0,
+                          max_early_ms=0.0, played_s=0.0, loops=0, bag_time_ns=None)
         self.playback = _Playback(self, self.reader, self.playing_topics,
                                   self.clock_pub if p['publish_clock'] else None, float(p['rate']),
                                   int(round(p['start_offset_s'] * 1e9)), bool(p['loop']), 1.0 / p['clock_rate_hz'])
