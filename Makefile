@@ -17,10 +17,11 @@ export AMENT_PREFIX_PATH := $(CURDIR)/$(VENV)$(if $(AMENT_PREFIX_PATH),:$(AMENT_
 export RMW_IMPLEMENTATION := rmw_fastrtps_cpp
 export MPLBACKEND := Agg
 export PYTHONDONTWRITEBYTECODE := 1
-# Test processes `make test` runs side by side, one per core (`make test TEST_PROCESSES=1`: one, in collection order).
-# Three on two cores beside a busy process ran 2 minutes faster, but three tests of nodes on the wall clock failed in
-# one of four runs (docs/development.md).
-TEST_PROCESSES ?= auto
+# Test processes `make test` runs side by side: one more than the cores, since each spends much of its time waiting
+# for node processes and DDS (on two cores beside a busy process three took 9.5 min where two took 12.5-13.5);
+# at most 8, as the tests' DDS domains are shared out among them (`make test TEST_PROCESSES=1`: one, in collection
+# order).
+TEST_PROCESSES ?= $(shell n=$$(nproc); echo $$(( n + 1 < 8 ? n + 1 : 8 )))
 
 .PHONY: demo test bench install clean
 
@@ -68,8 +69,8 @@ test: $(REQUIREMENTS)
 	@# Type checks of the package (mypy.ini; it reads the source tree), beside the install and its kernel compile:
 	@# ~40 s less from a fresh clone. Its cache (.mypy_cache/) makes a re-run take under a second.
 	@$(BIN)/mypy & mypy=$$!; $(MAKE) --no-print-directory install; installed=$$?; wait $$mypy && exit $$installed
-	@# One test process per core (pytest-xdist), each taking tests as it finishes one (worksteal: the few long rig
-	@# tests do not queue behind each other); conftest.py gives each its own share of the DDS domains.
+	@# TEST_PROCESSES test processes (pytest-xdist), each taking tests as it finishes one (worksteal: the few long
+	@# rig tests do not queue behind each other); conftest.py gives each its own share of the DDS domains.
 	$(BIN)/python -m pytest -q -p no:cacheprovider -n $(TEST_PROCESSES) --dist worksteal --durations=15 test
 
 bench: $(STAMP)
