@@ -81,8 +81,8 @@ class ExitWatchdog:
                 self.disarm()
                 return False
             self._timers.append(timer)
-            whole = int(after_s)
-            spec = _Itimerspec(value_s=whole, value_ns=int(round((after_s - whole) * 1e9)))
+            seconds, nanoseconds = divmod(round(after_s * 1e9), 1_000_000_000)
+            spec = _Itimerspec(value_s=seconds, value_ns=nanoseconds)
             if libc.timer_settime(timer, 0, ctypes.byref(spec), None) != 0:
                 self.disarm()
                 return False
