@@ -28,6 +28,8 @@ if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
     signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
+#: The highest DDS domain id Fast DDS maps to ports with its default port base.
+MAX_DOMAIN_ID = 232
 #: Domains above each band's top that a test may still use: a campaign's sessions side by side take ROS_DOMAIN_ID and
 #: the next ones (one per job), so a band stops short of the domain above it.
 SIDE_BY_SIDE = 4
@@ -39,7 +41,11 @@ def _domain_band() -> tuple[list[int], int]:
     CRANE_STIFFNESS_TEST_DOMAINS="LO-HI" names (two test runs on one machine, each in its own band, never meet).
     Under pytest-xdist (`make test` runs the tests in one process per core) each worker takes its own share of the
     band."""
-    lo, hi = (int(v) for v in os.environ.get('CRANE_STIFFNESS_TEST_DOMAINS', '1-100').split('-'))
+    band = os.environ.get('CRANE_STIFFNESS_TEST_DOMAINS', '1-100')
+    lo, hi = (int(v) for v in band.split('-'))
+    if not 0 <= lo <= hi <= MAX_DOMAIN_ID:
+        raise pytest.UsageError(f'CRANE_STIFFNESS_TEST_DOMAINS={band}: DDS domain ids go from 0 to {MAX_DOMAIN_ID} '
+                                '(Fast DDS finds no port for a higher one: every node of such a test exits with 1)')
     workers = int(os.environ.get('PYTEST_XDIST_WORKER_COUNT', '1'))
     share = (hi - lo + 1) // workers
     if share <= 2 * SIDE_BY_SIDE + 1:
