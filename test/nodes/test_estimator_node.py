@@ -62,6 +62,10 @@ def test_known_stiffness_interval_prediction_outputs_and_reset(rclpy_context):
     rig = SyntheticRig(rclpy_context, prefix, rate_hz=500.0, seed=7)
     ex = executor_with(rclpy_context, estimator, probe.node, rig.node)
     run_program(ex, rig, estimator)
+    # The numbers below are those of every sample: the estimate whose newest pair is the rig's last sample (a
+    # loaded machine delivers the last bursts late; an estimate read before them counted 444 pairs of ~500).
+    assert spin_until(ex, lambda: probe.has_estimate_of(rig.burst_newest[-1]), 30.0), \
+        (rig.sent, estimator.core.counters.pairs_fitted)
     assert spin_until(ex, lambda: len(probe.estimates) >= 2, 2.0)
     loading, unloading = probe.last(0), probe.last(1)
     for r in (loading, unloading):
