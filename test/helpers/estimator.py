@@ -111,6 +111,8 @@ class SyntheticRig:
         self.command_on = True
         self.start_ns: int | None = None
         self.sent = 0
+        self.force_published = 0  # the rig's own samples published on each stream (not what ``inject`` adds)
+        self.displacement_published = 0
         self.burst_newest: list[int] = []  # stamp of the newest sample of every burst, ns
         self.done = False
         self.running = False
@@ -185,11 +187,14 @@ class SyntheticRig:
             force_msg = self.wrench_msg(t_ns, measured, wrench if self.sensor is None else self.sensor(wrench))
             if self.force_ok(self.sent):
                 self.pub_force.publish(force_msg)
+                self.force_published += 1
             if self.pub_point is not None:
                 if self.disp_ok(self.sent):
                     self.pub_point.publish(self.point_msg(t_ns + self.disp_late_ns, x))
+                    self.displacement_published += 1
             else:
                 self.pub_volts.publish(Float64(data=(x - self.offset) / self.gain))
+                self.displacement_published += 1
             self.sent += 1
             newest = int(t_ns)
         if newest is not None:
@@ -240,9 +245,12 @@ def run_program(ex, rig: SyntheticRig, estimator: StiffnessEstimatorNode, timeou
                       and (rig.pub_cmd is None or rig.pub_cmd.get_subscription_count() >= 1), 5.0)
     rig.start()
     assert spin_until(ex, lambda: rig.done, timeout_s)
-    sent = rig.sent
-    spin_until(ex, lambda: estimator.core.sync_counters.force.received >= sent
-               and estimator.core.sync_counters.displacement.received >= sent, 2.0)
+    # Until every sample the rig published has arrived: a loaded machine delivers the last bursts late (a 2 s wait
+    # once read an estimate 56 pairs short). A bound, not an assertion: best-effort DDS may lose one, and the test's
+    # own checks then say what is missing. The estimator fits each sample as it arrives.
+    c = estimator.core.counters
+    spin_until(ex, lambda: c.force_received >= rig.force_published
+               and c.displacement_received >= rig.displacement_published, 30.0)
     spin_until(ex, lambda: False, 0.3)
 
 
