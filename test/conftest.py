@@ -39,8 +39,8 @@ def _domain_band() -> tuple[list[int], int]:
     """The DDS domain ids this run's tests cycle through, starting at ROS_DOMAIN_ID, and the one domain above them
     (SIDE_BY_SIDE apart) of the tests' rig host (:func:`rig_host`): from the band 1..100, or the band
     CRANE_STIFFNESS_TEST_DOMAINS="LO-HI" names (two test runs on one machine, each in its own band, never meet).
-    Under pytest-xdist (`make test` runs the tests in one process more than the cores) each worker takes its own share of the
-    band."""
+    Under pytest-xdist (`make test` runs the tests in one process more than the cores) each worker takes its own
+    share of the band."""
     band = os.environ.get('CRANE_STIFFNESS_TEST_DOMAINS', '1-100')
     lo, hi = (int(v) for v in band.split('-'))
     if not 0 <= lo <= hi <= MAX_DOMAIN_ID:
