@@ -141,6 +141,24 @@ def _records(source: Records) -> Mapping[str, Mapping[str, str]]:
     return reader() if callable(reader) else source  # type: ignore[return-value]
 
 
+def session_end_record(reason: str, end_ns: int, message_count: int, recorded: Mapping[str, int],
+                       program_state: Mapping[str, Any], published: Mapping[str, int] | None = None,
+                       published_through_ns: int | None = None, at_end: bool = False) -> dict[str, Any]:
+    """The :data:`SESSION_END_METADATA` record: why and when [ns of the recorder's clock] the recording ended, the
+    messages in the bag (in all and per topic, ``recorded``) and the program's last state. On simulated time also
+    ``published``: what the rig's nodes published per recorded topic through ``published_through_ns`` (their own
+    counters, summed by the clock), ``missing``: what of it the bag lacks, and ``complete``: the session ended at the
+    instant its program fixed (``at_end``) with nothing missing: the same bag at any load."""
+    record: dict[str, Any] = {'stop_reason': reason, 'end_time_ns': str(end_ns), 'message_count': message_count,
+                              'topics': {t: n for t, n in recorded.items() if n}, 'program_state': dict(program_state)}
+    if published:
+        counted = {t: int(n) for t, n in sorted(published.items()) if t in recorded}
+        missing = {t: n - recorded[t] for t, n in counted.items() if recorded[t] < n}
+        record.update(published=counted, published_through_ns=str(published_through_ns), missing=missing,
+                      complete=at_end and not missing)
+    return record
+
+
 def read_session(source: Records) -> dict[str, Any]:
     """The :data:`SESSION_METADATA` record with its JSON objects and arrays decoded ({} when the bag has none)."""
     return decode_metadata(_records(source).get(SESSION_METADATA, {}))
@@ -162,5 +180,5 @@ def read_node_parameters(source: Records) -> dict[str, dict[str, Any]]:
 
 __all__ = [
     'CAMPAIGN_KEY', 'NODE_PARAMETERS_METADATA', 'SESSION_END_METADATA', 'SESSION_METADATA', 'analysis_geometry_params',
-    'read_node_parameters', 'read_session', 'session_metadata', 'session_record',
+    'read_node_parameters', 'read_session', 'session_end_record', 'session_metadata', 'session_record',
 ]

@@ -19,11 +19,13 @@ the files' text, software version, start time and ``notes``. The parameters the 
 (``record_node_parameters``: crane_model, load_program, load_cell, lvdt, stiffness_estimator, and for a six-axis
 test pose_sensor and stiffness6_estimator) are read from them
 over ROS once they appear and stored in ``crane_stiffness/node_parameters``; ``crane_stiffness/session_end`` is
-added on close (stop reason, end time, counts). The offline analysis prefers the nodes' own values.
+added on close (stop reason, end time, counts; on simulated time the rig's own publish counts against the bag's). The
+offline analysis prefers the nodes' own values.
 
 Recording starts by itself (``autostart``) or with ~/start; ~/stop closes the bag and replies with its path and
-message count (both std_srvs/Trigger). With ``stop_on_program_done`` the recording stops ``stop_delay_s`` after
-/load_program/state reports 'done' following a run, so it covers the whole program. Ctrl-C (SIGINT) and SIGTERM
+message count (both std_srvs/Trigger). With ``stop_on_program_done`` the recording stops once the program is done:
+on simulated time at the instant the program fixed, else ``stop_delay_s`` after /load_program/state reports 'done'
+(crane_stiffness.rosnode.program_end). Ctrl-C (SIGINT) and SIGTERM
 close the bag cleanly, also when repeated (they only end the spin loop; see crane_stiffness.rosnode.run.run). After
 SIGKILL every chunk written so far is readable (chunks go to the OS as they are finished, at most
 ``flush_interval_s`` apart) and ``crane-stiffness recover BAG`` rewrites the files and metadata.yaml.
@@ -41,7 +43,6 @@ the chunk a write error cut; ``rejected``: refused by the writer).
 """
 from __future__ import annotations
 
-import json
 import os
 import socket
 import threading
@@ -67,16 +68,17 @@ from crane_stiffness.rosnode.malloc_trim import TRIM_INTERVAL_S, release_free_me
 from crane_stiffness.rosnode.run import run
 from crane_stiffness.rosnode.parameter_reader import NodeParameterReader, plain
 from crane_stiffness.rosnode.parameters import Params
+from crane_stiffness.rosnode.program_end import ProgramEnd
 from crane_stiffness.rosnode.qos import SIM_STREAM_QOS
 from crane_stiffness.rosnode.recorded_channel import NO_EVENTS, SIM_INPUTS, RecordedChannel
 from crane_stiffness.rosnode.sim_time import SimTimeParticipant, drain, uses_sim_time
-from crane_stiffness.rosnode.session_recorder_params import (OWN_SECTIONS, PARAMS, RECORDING_KEYS, utc_session_name,
+from crane_stiffness.rosnode.session_recorder_params import (OWN_SECTIONS, PARAMS, RECORDING_KEYS, session_dir,
                                                           validate)
 from crane_stiffness.rosnode.session_qos import (adapted_qos, contract_qos, offered_profiles, publisher_types)
 from crane_stiffness.params.files import params_files_from_args, read_params_files
 from crane_stiffness.serde import header_stamp_ns
 from crane_stiffness.bag.session_metadata import (NODE_PARAMETERS_METADATA, SESSION_END_METADATA, SESSION_METADATA,
-                                            session_record)
+                                                  session_end_record, session_record)
 from crane_stiffness.sim.log_times import SimLogTimes
 from crane_stiffness.sim.program import PROGRAM_KEYS
 from crane_stiffness.contract.status import ERROR, OK
@@ -107,10 +109,9 @@ class SessionRecorder(Node):
         self.write_failure: str | None = None   # the write error that stopped the last recording (cleared by start)
         self.received = 0                       # every message callback (all recordings)
         self.written = 0                        # on disk, recordings closed so far
-        self.dropped = {'not_recording': 0, 'write_error': 0, 'lost_with_chunk': 0, 'rejected': 0}
+        self.dropped = {'not_recording': 0, 'write_error': 0, 'lost_with_chunk': 0, 'rejected': 0, 'after_end': 0}
         self.state_subscription: Subscription | None = None
-        self.program_ran = False
-        self.program_state: dict[str, Any] = {}
+        self.program = ProgramEnd()  # the program's state, and the session's end (this recording)
         self.stop_timer: Timer | None = None
         self.exit_requested = False
         self.node_parameters: dict[str, dict[str, Any]] = {}
@@ -146,17 +147,9 @@ class SessionRecorder(Node):
         return self.writer is not None
 
     def _session_dir(self) -> Path:
-        p = self.params
         # Named by the wall clock also on simulated time (which starts at the same instant in every run).
-        name = p['session'] or utc_session_name(time.time_ns() if self.sim_time
-                                                else self.get_clock().now().nanoseconds)
-        path = Path(p['output_dir']).expanduser() / name
-        if self.recordings and p['session']:
-            n = 2
-            while path.exists():  # a second recording of this node with a fixed session name: <session>_2, ...
-                path = Path(p['output_dir']).expanduser() / f'{name}_{n}'
-                n += 1
-        return path
+        now_ns = time.time_ns() if self.sim_time else self.get_clock().now().nanoseconds
+        return session_dir(self.params['output_dir'], self.params['session'], self.recordings, now_ns)
 
     def start(self) -> Path:
         """Open a new bag and subscribe; returns its directory. Raises BagError/OSError if it cannot be created."""
@@ -176,8 +169,7 @@ class SessionRecorder(Node):
         self.log_times = SimLogTimes(self.sim.inputs) if self.sim.active else None
         self.recordings += 1
         self.write_failure = None
-        self.program_ran = False
-        self.program_state = {}
+        self.program = ProgramEnd()
         self._flushed_at = 0
         try:
             self.writer.add_metadata(SESSION_METADATA, self._session_record(path.name, start_ns))
@@ -196,11 +188,16 @@ class SessionRecorder(Node):
         self.get_logger().info(f'recording {len(self.channels)} topic(s) to {path}')
         return path
 
-    def stop(self, reason: str = 'service') -> tuple[Path | None, int]:
-        """Close the bag (metadata.yaml written), unsubscribe; returns (bag directory, messages written)."""
+    def stop(self, reason: str = 'service', through_ns: int | None = None) -> tuple[Path | None, int]:
+        """Close the bag (metadata.yaml written), unsubscribe; returns (bag directory, messages written).
+
+        ``through_ns``: simulated time, the session's end [ns]: what is held up to it is written, anything logged
+        later is left out (counted as ``after_end``), so the bag ends at the same instant in every run."""
         if self.writer is not None:  # (outside the lock: a write error in them stops the recording itself)
             self._write_before_time(self.get_clock().now().nanoseconds)  # time never started: logged at 0, not lost
-            self._release(None)  # simulated time: what is held, in log-time order
+            self._release(through_ns)  # simulated time: what is held, in log-time order
+            if through_ns is not None and self.log_times is not None:
+                self.dropped['after_end'] += len(self.log_times.release_all())
         with self._lock:
             writer, self.writer = self.writer, None
             if writer is None:
@@ -217,10 +214,10 @@ class SessionRecorder(Node):
                 self.parameter_reader = None
             count = writer.message_count
             try:
-                writer.add_metadata(SESSION_END_METADATA, {
-                    'stop_reason': reason, 'end_time_ns': str(self.get_clock().now().nanoseconds),
-                    'message_count': count, 'topics': {c.topic: c.count for c in self.channels.values() if c.count},
-                    'program_state': self.program_state})
+                writer.add_metadata(SESSION_END_METADATA, session_end_record(
+                    reason, self.get_clock().now().nanoseconds if through_ns is None else through_ns, count,
+                    {c.topic: c.count for c in self.channels.values()}, self.program.state,
+                    self.sim.published, self.sim.watermark_ns, at_end=through_ns is not None))
             except BagWriteFailedError as exc:
                 self._note_write_failure(exc)
             except BagError:
@@ -303,12 +300,24 @@ class SessionRecorder(Node):
 
     def _sim_report(self, t_ns: int) -> None:
         """Simulated time: everything up to ``t_ns`` is recorded (drained before this call). Not recording (never
-        started, or stopped), the recorder takes no part: time does not wait for it."""
+        started, or stopped), the recorder takes no part: time does not wait for it. At the session's end (see
+        :meth:`_session_end_ns`) the bag is closed with everything through that instant, and nothing after it."""
         if self.writer is None:
             self.sim.leave()
             return
-        self._release(t_ns)
+        end = self._session_end_ns()
+        self._release(t_ns if end is None else min(t_ns, end))
+        end = self._session_end_ns()  # (the program's 'done' may have been among what was just written)
+        if end is not None and t_ns >= end:
+            self._stop_after_program(through_ns=end)
+            return
         self.sim.report(t_ns)
+
+    def _session_end_ns(self) -> int | None:
+        """Simulated time: where the session ends [ns] (crane_stiffness.rosnode.program_end), else None."""
+        if not self.params['stop_on_program_done'] or self.log_times is None:
+            return None
+        return self.program.end_ns(self.sim.watermark_ns >= 0, self.sim.end_ns)
 
     def _release(self, t_ns: int | None) -> None:
         """Simulated time: write the messages held with log times up to ``t_ns`` (None: all), in log-time order."""
@@ -447,23 +456,21 @@ class SessionRecorder(Node):
         self._on_program_state(msg.data)
 
     def _on_program_state(self, text: str) -> None:
-        try:
-            state = json.loads(text)
-        except ValueError:
+        if not (self.program.read(text) and self.params['stop_on_program_done'] and self.writer is not None
+                and self.stop_timer is None):
             return
-        if not isinstance(state, dict):
+        name = self.program.state.get('program')
+        end = self._session_end_ns()
+        if end is not None:  # simulated time: closed at that instant by _sim_report, whatever the load
+            self.get_logger().info(f'program {name!r} done: closing the bag at simulated time {end * 1e-9:.3f} s, '
+                                   'the end of the run')
             return
-        self.program_state = state
-        if state.get('state') in ('running', 'paused'):
-            self.program_ran = True
-        elif (state.get('state') == 'done' and self.program_ran and self.params['stop_on_program_done']
-              and self.writer is not None and self.stop_timer is None):
-            delay = float(self.params['stop_delay_s'])
-            self.get_logger().info(f'program {state.get("program")!r} done: closing the bag in {delay:g} s')
-            self.stop_timer = self.create_timer(max(delay, 1e-3), self._stop_after_program)
+        delay = float(self.params['stop_delay_s'])
+        self.get_logger().info(f'program {name!r} done: closing the bag in {delay:g} s')
+        self.stop_timer = self.create_timer(max(delay, 1e-3), self._stop_after_program)
 
-    def _stop_after_program(self) -> None:
-        self.stop('program done')
+    def _stop_after_program(self, through_ns: int | None = None) -> None:
+        self.stop('program done', through_ns)
         if self.params['exit_on_program_done']:
             self.exit_requested = True  # the spin loop of main() ends (in-process executors are not disturbed)
 
@@ -514,16 +521,8 @@ class SessionRecorder(Node):
 
     def _report(self):
         writer = self.writer
-        counters = self.counters
-        pairs = [('bag', str(self.bag_path or self.last_bag or '')), ('recordings', str(self.recordings)),
-                 ('errors', str(self.errors)), ('write_errors', str(self.write_errors)),
-                 ('received', str(counters['received'])),
-                 ('written', str(counters['written']))]
-        pairs += [(f'dropped_{k}', str(v)) for k, v in self.dropped.items()]
-        if self.write_failure:
-            pairs.append(('write_failure', self.write_failure))
+        pairs = [(k, str(v)) for k, v in self.counters.items() if k != 'messages' or writer is not None]
         if writer is not None:
-            pairs.append(('messages', str(writer.message_count)))
             pairs += [(c.topic, str(c.count)) for c in self.channels.values()]
             if self.pending:
                 pairs.append(('waiting_for', ', '.join(self.pending)))

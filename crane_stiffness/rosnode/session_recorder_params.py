@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 from datetime import datetime, timezone
+from pathlib import Path
 from typing import Any
 
 from crane_stiffness.contract import topics
@@ -94,4 +95,15 @@ def utc_session_name(now_ns: int) -> str:
     return 'session_' + datetime.fromtimestamp(now_ns / 1e9, tz=timezone.utc).strftime('%Y%m%dT%H%M%SZ')
 
 
-__all__ = ['MAX_INTERVAL_S', 'OWN_SECTIONS', 'PARAMS', 'RECORDING_KEYS', 'utc_session_name', 'validate']
+def session_dir(output_dir: str, session: str, recordings: int, now_ns: int) -> Path:
+    """The directory of a new recording: ``output_dir/session``, or named by ``now_ns`` [ns since the epoch]; a
+    later recording (``recordings`` > 0) of the same fixed session name gets ``<session>_2``, ``_3``, ..."""
+    path = Path(output_dir).expanduser() / (session or utc_session_name(now_ns))
+    n = 2
+    while recordings and session and path.exists():
+        path, n = Path(output_dir).expanduser() / f'{session}_{n}', n + 1
+    return path
+
+
+__all__ = ['MAX_INTERVAL_S', 'OWN_SECTIONS', 'PARAMS', 'RECORDING_KEYS', 'session_dir', 'utc_session_name',
+           'validate']

@@ -91,10 +91,16 @@ class SimTimeParticipant:
         self.left = False
         self._counting = False
         self._pending: tuple[int, dict[str, int]] | None = None
+        self._pending_sent: dict[str, int] = {}
         self._pending_since = 0.0
         self._said_at = 0.0
         self._resolved: dict[str, str] = {}
         self._end_ns: int | None = None  # where the run ends, once this node said so (repeated in every report)
+        #: Where the clock says the run ends [ns] (the load program fixed it), once a watermark said so; else None.
+        self.end_ns: int | None = None
+        #: What the stages below had published, per topic, through the last watermark acted on (every topic they
+        #: count, not only this node's inputs): the rig's own publish counters, e.g. for the recorder's session end.
+        self.published: dict[str, int] = {}
         self._on_watermark = on_watermark
         self._drain = drain
         self._name = node.get_fully_qualified_name().lstrip('/')
@@ -137,9 +143,12 @@ class SimTimeParticipant:
         if mark < self.watermark_ns or (mark == self.watermark_ns and self.reported_ns >= 0):
             return  # nothing new (a mark repeated for nodes that join late)
         sent = marks['sent'][self.stage]
+        if marks.get('end') is not None:
+            self.end_ns = int(marks['end'])
         if self._pending is None or self._pending[0] != mark:
             self._pending_since = time.monotonic()  # a repeated mark does not restart the wait
         self._pending = (mark, {t: int(sent.get(t, 0)) for t in self.inputs})
+        self._pending_sent = {t: int(n) for t, n in sent.items()}
         self._try()
 
     def _try(self) -> None:
@@ -166,6 +175,7 @@ class SimTimeParticipant:
         if self._timer is not None:
             self._timer.cancel()
         self._pending = None
+        self.published = self._pending_sent
         self.watermark_ns = max(self.watermark_ns, mark)
         self._counting = True  # from time's start on: what was sent before (to readers not yet matched) is not
         self._on_watermark(mark)
