@@ -97,6 +97,7 @@ def main(argv=None) -> int:
     from tqdm import tqdm
 
     from crane_stiffness.launcher import rosrun
+    from crane_stiffness.launcher.domains import INHERITED_ENV, claim_domain, describe_skipped, with_claim
     from crane_stiffness.launcher.ports import free_port
     from crane_stiffness.launcher.rig import Observer, ProgramWatch, start_rig, summarize, wait_for_program_start
 
@@ -107,6 +108,13 @@ def main(argv=None) -> int:
     for stale in (REPO / 'build' / 'crane_stiffness', REPO / 'install' / 'crane_stiffness'):
         shutil.rmtree(stale, ignore_errors=True)
     env, share = rosrun.build_workspace(REPO, REPO)  # REPO/build, REPO/install, REPO/log
+    # The rig's ROS domain, claimed host-wide (a lock file, and no node of others in its graph): a domain in use is
+    # passed over for the next free one, so this rig never mixes its data with another's.
+    claim = claim_domain(int(env['ROS_DOMAIN_ID']), 'scripts/demo.py', env=env)
+    if claim.skipped:
+        print(f'  {describe_skipped(claim)}', flush=True)
+    env = with_claim(env, claim.domain)
+    os.environ.update({k: env[k] for k in ('ROS_DOMAIN_ID', INHERITED_ENV)})  # (the observer below: rclpy.init())
     session = f'demo_{args.program}_{datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%SZ")}'
     clock = (f'simulated time at real-time factor {args.real_time_factor}' if args.sim_time else 'wall-clock time')
     print(f'[2/3] starting the rig (ROS_DOMAIN_ID={env["ROS_DOMAIN_ID"]}, loopback only), '

@@ -11,6 +11,7 @@ import random
 import signal
 import sys
 import time
+from typing import Any
 
 import pytest
 
@@ -63,25 +64,50 @@ _BAND, HOST_DOMAIN = _domain_band()
 _DOMAINS = __import__('itertools').cycle(_BAND)
 
 
+def _claim_next() -> Any:
+    """The next domain of the band whose host-wide claim is free (crane_stiffness.launcher.domains: a lock file per
+    domain; another test run or rig of this machine in the same band holds its own), claimed."""
+    from crane_stiffness.launcher.domains import try_claim
+    for _ in range(len(_BAND)):
+        claim = try_claim(next(_DOMAINS), f'pytest worker {os.getpid()}')
+        if claim is not None:
+            return claim
+    raise RuntimeError(f'every DDS domain of the band {_BAND[0]}-{_BAND[-1]} is claimed by other processes')
+
+
 @pytest.fixture(autouse=True)
 def ros_domain(monkeypatch):
-    """Every test in a DDS domain of its own (nodes it creates, and processes it starts, inherit it), so nothing a
-    previous test left alive (a latched publisher, a slow process) can reach it."""
-    domain = str(next(_DOMAINS))
-    monkeypatch.setenv('ROS_DOMAIN_ID', domain)
-    return domain
+    """Every test in a DDS domain of its own, claimed host-wide while it runs (nodes it creates, and processes it
+    starts, inherit it and the claim), so nothing a previous test left alive (a latched publisher, a slow process),
+    nor another test run or rig on this machine, can reach it."""
+    from crane_stiffness.launcher.domains import INHERITED_ENV
+    _CLAIMS[:] = [_claim_next()]
+    monkeypatch.setenv('ROS_DOMAIN_ID', str(_CLAIMS[0].domain))
+    monkeypatch.setenv(INHERITED_ENV, str(_CLAIMS[0].domain))
+    yield str(_CLAIMS[0].domain)
+    for claim in _CLAIMS:
+        claim.release()
+    _CLAIMS.clear()
+
+
+_CLAIMS: list[Any] = []  # the claims of the test running (ros_domain's, and ros_domains' more)
 
 
 @pytest.fixture
 def ros_domains(monkeypatch, ros_domain):
-    """``take(n)``: ROS_DOMAIN_ID set to the first of ``n`` consecutive domains of the band, the others taken from the
-    cycle too (for a campaign running sessions side by side in ROS_DOMAIN_ID, ROS_DOMAIN_ID + 1, ...)."""
+    """``take(n)``: ROS_DOMAIN_ID set to the first of ``n`` consecutive domains of the band, all claimed, the others
+    taken from the cycle too (for a campaign running sessions side by side in ROS_DOMAIN_ID, ROS_DOMAIN_ID + 1, ...)."""
+    from crane_stiffness.launcher.domains import INHERITED_ENV
+
     def take(n: int) -> list[int]:
-        domains = [int(ros_domain)]
-        while len(domains) < n:
-            following = next(_DOMAINS)
-            domains = domains + [following] if following == domains[-1] + 1 else [following]
+        claims = [_CLAIMS[0]]
+        while len(claims) < n:
+            following = _claim_next()
+            _CLAIMS.append(following)
+            claims = claims + [following] if following.domain == claims[-1].domain + 1 else [following]
+        domains = [c.domain for c in claims]
         monkeypatch.setenv('ROS_DOMAIN_ID', str(domains[0]))
+        monkeypatch.setenv(INHERITED_ENV, ','.join(map(str, domains)))
         return domains
     return take
 

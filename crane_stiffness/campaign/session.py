@@ -145,7 +145,8 @@ class SessionRunner:
             break
         result = {'session': plan.id, 'plan': plan.to_dict(), 'campaign_entry': entry,
                   'time': 'simulated' if self.arguments.get('use_sim_time') == 'true' else 'wall',
-                  'wall_s': round(time.time() - started, 3), 'ros_domain_id': domain, 'attempts': attempt,
+                  'wall_s': round(time.time() - started, 3), 'attempts': attempt,
+                  'ros_domain_id': ran['summary'].get('ros_domain_id', domain),  # (a domain in use: the next free)
                   'bag': str(out / 'bags' / plan.id), 'started_utc': utc(started), 'finished_utc': utc(),
                   'rig': 'processes' if self.rig == 'processes' else 'host',
                   'startup_s': ran['startup_s'], 'estimate': decode_values(ran['values']) if ran['values'] else None,

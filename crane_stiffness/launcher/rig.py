@@ -32,6 +32,7 @@ from crane_stiffness.model import (axis_stiffness, directional_stiffness, paper_
                                    tangent_stiffness)
 from crane_stiffness.rosnode.qos import KEPT_QOS, LATCHED_QOS
 from crane_stiffness.rosnode.sim_time import SIM_QOS, drain
+from crane_stiffness.launcher.domains import claim_domain, with_claim
 from crane_stiffness.launcher.rig_description import PACKAGE, NodeStart, rig_nodes
 from crane_stiffness.launcher.rig_description import config_files as rig_config_files
 from crane_stiffness.sim.program import LoadProgram, load_program_file
@@ -380,10 +381,12 @@ def run_rig(share: Path, env: Mapping[str, str], out: Path, program: str, sessio
     the nodes and raises RigInterrupted."""
     import rclpy
     bags = out / 'bags' if bags is None else bags
-    if domain_id is not None:
-        env = {**env, 'ROS_DOMAIN_ID': str(domain_id)}
+    # The domain claimed host-wide for the run (crane_stiffness.launcher.domains): one in use is passed over.
+    claim = claim_domain(int(env.get('ROS_DOMAIN_ID', 0) or 0) if domain_id is None else domain_id,
+                         f'rig {session}', env=env)
+    env = with_claim(env, claim.domain)
     ctx = rclpy.Context()
-    rclpy.init(context=ctx, domain_id=int(env.get('ROS_DOMAIN_ID', 0) or 0))
+    rclpy.init(context=ctx, domain_id=claim.domain)
     # (rigs side by side in one process: one observer each, named apart, as rcl's logging keys its publisher by name)
     observer = Observer(f'rig_observer_{domain_id}' if domain_id is not None else 'rig_observer', context=ctx)
     observer.should_stop = should_stop
@@ -401,7 +404,9 @@ def run_rig(share: Path, env: Mapping[str, str], out: Path, program: str, sessio
             observer.drain()  # what reached this process before the nodes went
             logs = {name: procs.log(name) for name in procs.procs}
         summary = summarize(share, program, session, bags, observer, codes)
+        summary['ros_domain_id'] = claim.domain
     finally:
         observer.destroy_node()
         rclpy.shutdown(context=ctx)
+        claim.release()
     return summary, observer, started_after, logs

@@ -29,6 +29,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Callable, Iterator, Mapping
 
+from crane_stiffness.launcher.domains import claim_domain
 from crane_stiffness.launcher.rig_description import NodeStart, rig_nodes
 from crane_stiffness.launcher.rosrun import RigStartError, RosRunError
 
@@ -110,7 +111,10 @@ class RigHost:
         from crane_stiffness.rosnode.discovery import use_quick_discovery
 
         use_quick_discovery()
-        self.domain_id = int(domain_id)
+        # The domain claimed host-wide while the host is up (crane_stiffness.launcher.domains): one in use (another
+        # worker's rig, any ROS program) is passed over for the next free one, so two hosts never mix their data.
+        self.claim = claim_domain(int(domain_id), f'rig host {os.getpid()}')
+        self.domain_id = self.claim.domain
         self.context = rclpy.Context()
         rclpy.init(context=self.context, domain_id=self.domain_id, signal_handler_options=SignalHandlerOptions.NO)
         self.executor: Any = None  # a session's, while it runs
@@ -119,6 +123,7 @@ class RigHost:
     def close(self) -> None:
         import rclpy
         rclpy.try_shutdown(context=self.context)
+        self.claim.release()
 
     def __enter__(self) -> 'RigHost':
         return self
@@ -189,7 +194,9 @@ class RigHost:
                 self.executor.shutdown()
                 self.executor = None
         logs = {'rig_host': log.read_text(errors='replace')}
-        return summarize(share, program, session, bags, observer, codes), observer, started_after, logs
+        summary = summarize(share, program, session, bags, observer, codes)
+        summary['ros_domain_id'] = self.domain_id
+        return summary, observer, started_after, logs
 
     def _load(self, start: NodeStart, cls: type, extra: Mapping[str, Any]) -> Any:
         """``start``'s node built as ``ros2 run`` builds it, from the same arguments, and added to the executor."""
