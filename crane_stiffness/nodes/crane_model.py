@@ -151,6 +151,8 @@ class CraneModel(Node):
                                       drain=lambda: drain(self.sub_command, self._on_command))
         for pub in (self.pub_applied, self.pub_pose, self.pub_wires, self.pub_rejected):
             self.sim.counted(pub)
+        for pub in (self.pub_k, self.pub_axis):  # (the recorder waits for them and logs them in their step)
+            self.sim.counted(pub)
 
     def _on_watermark(self, t_ns: int) -> None:
         if self._sim_start_ns is None:
@@ -165,6 +167,7 @@ class CraneModel(Node):
                 stamp, self.stamp = self.stamp, start
                 self._publish_pose(self.equilibrium)
                 self.stamp = stamp
+                self._publish_prediction(self.equilibrium)  # (held back until now: see _publish_solution)
         self.sim.report(t_ns)
 
     # --- callbacks ---
@@ -342,6 +345,17 @@ class CraneModel(Node):
         self.equilibrium = eq
         self.solved = tuple(self.load.tolist())
         self._publish_pose(eq)
+        if self.sim_time and not self._sim_started:
+            # Simulated time, before it starts: the prediction goes out (counted) once time has started; sent now,
+            # a later one could replace it in the latched history before the recorder matched, in some runs only.
+            self._set_status(self._ok_status(eq))
+            return
+        self._publish_prediction(eq)
+
+    def _publish_prediction(self, eq: Equilibrium) -> None:
+        """The model's tangent stiffness at ``eq`` (6x6) and along the prediction axis, and the status."""
+        g = self.geometry
+        assert g is not None
         k = tangent_stiffness(g, eq)
         km = Float64MultiArray()
         km.layout.dim = [MultiArrayDimension(label='load [fx fy fz mx my mz]', size=6, stride=36),

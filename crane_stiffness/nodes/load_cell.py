@@ -76,13 +76,17 @@ class LoadCell(Node):
         # then the first sample instant is the origin.
         self.t0_ns = self.get_clock().now().nanoseconds
         self.pub = self.create_publisher(WrenchStamped, topics.LOAD_CELL_WRENCH, sensor_qos(self.schedule.sim_time))
-        self.tare_epoch = ZeroEpoch(self, topics.LOAD_CELL_TARE)  # tares since start, latched on /load_cell/tare
+        # Tares since start, latched on /load_cell/tare; on simulated time sent at the first watermark, counted, so the
+        # recorder logs it at the start in every run (not whenever DDS matched it).
+        self.tare_epoch = ZeroEpoch(self, topics.LOAD_CELL_TARE, publish=not self.schedule.sim_time)
         self.params = Params(self, PARAMS, _validate, self._apply)
         self.sub_applied = self.create_subscription(WrenchStamped, topics.APPLIED_WRENCH, self._on_applied,
                                                     stream_qos(RELIABLE_QOS, self.schedule.sim_time))
         self.sim = SimTimeParticipant(self, 2, self._on_watermark, inputs=[topics.APPLIED_WRENCH],
                                       drain=lambda: drain(self.sub_applied, self._on_applied))
         self.sim.counted(self.pub)
+        self.sim.counted(self.tare_epoch.pub)
+        self._epoch_sent = not self.schedule.sim_time
         self.create_service(Trigger, '~/tare', self._srv_tare)
         self.diagnostics = Diagnostics(self, self._report)
         self.get_logger().info(f'{topics.WAITING_FOR_LOAD} before publishing')
@@ -124,6 +128,9 @@ class LoadCell(Node):
 
     def _on_watermark(self, t_ns: int) -> None:
         """Simulated time: every applied wrench up to ``t_ns`` is in: measure and publish the instants up to it."""
+        if not self._epoch_sent:
+            self._epoch_sent = True
+            self.tare_epoch.step(0)
         self._measure(self.schedule.due_until(t_ns))
         self.sim.report(t_ns)
 

@@ -199,6 +199,8 @@ class LoadProgramNode(Node):
         self.params = Params(self, PARAMS, self._validate, self._apply)
         self.sim = SimTimeParticipant(self, 0, self._on_watermark)
         self.sim.counted(self.pub_cmd)
+        self.sim.counted(self.pub_progress)  # (the recorder waits for them and logs them in their step)
+        self.sim.counted(self.pub_state)
         self.create_service(Trigger, '~/start', self._srv_start)
         self.create_service(Trigger, '~/pause', self._srv_pause)
         self.create_service(Trigger, '~/stop', self._srv_stop)

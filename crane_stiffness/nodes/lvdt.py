@@ -70,13 +70,18 @@ class Lvdt(Node):
         self.pub = self.create_publisher(PointStamped, topics.LVDT_DISPLACEMENT, sensor_qos(self.schedule.sim_time))
         self.zero_epoch = ZeroEpoch(self, topics.LVDT_ZERO, publish=False)  # zeros since start, latched
         self.params = Params(self, PARAMS, _validate, self._apply)
-        if not self.settings['zero_on_first_pose']:  # else epoch 1 at the first pose, before any reading
+        # (else epoch 1 at the first pose, before any reading; on simulated time at the first watermark, counted, so
+        # the recorder logs it at the start in every run)
+        self._epoch_due = not self.settings['zero_on_first_pose']
+        if self._epoch_due and not self.schedule.sim_time:
+            self._epoch_due = False
             self.zero_epoch.step(0)
         self.sub_pose = self.create_subscription(PoseStamped, topics.PLATFORM_POSE, self._on_pose,
                                                  stream_qos(RELIABLE_QOS, self.schedule.sim_time))
         self.sim = SimTimeParticipant(self, 2, self._on_watermark, inputs=[topics.PLATFORM_POSE],
                                       drain=lambda: drain(self.sub_pose, self._on_pose))
         self.sim.counted(self.pub)
+        self.sim.counted(self.zero_epoch.pub)
         self.create_service(Trigger, '~/zero', self._srv_zero)
         self.diagnostics = Diagnostics(self, self._report)
 
@@ -127,6 +132,9 @@ class Lvdt(Node):
 
     def _on_watermark(self, t_ns: int) -> None:
         """Simulated time: every pose up to ``t_ns`` is in: measure and publish the instants up to it."""
+        if self._epoch_due:
+            self._epoch_due = False
+            self.zero_epoch.step(0)
         self._measure(self.schedule.due_until(t_ns))
         self.sim.report(t_ns)
 

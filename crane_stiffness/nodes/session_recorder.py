@@ -70,7 +70,7 @@ from crane_stiffness.rosnode.parameter_reader import NodeParameterReader, plain
 from crane_stiffness.rosnode.parameters import Params
 from crane_stiffness.rosnode.program_end import ProgramEnd
 from crane_stiffness.rosnode.qos import SIM_STREAM_QOS
-from crane_stiffness.rosnode.recorded_channel import NO_EVENTS, SIM_INPUTS, RecordedChannel
+from crane_stiffness.rosnode.recorded_channel import NO_EVENTS, SIM_INPUTS, SIM_OUTPUTS, RecordedChannel, deep
 from crane_stiffness.rosnode.sim_time import SimTimeParticipant, drain, uses_sim_time
 from crane_stiffness.rosnode.session_recorder_params import (OWN_SECTIONS, PARAMS, RECORDING_KEYS, session_dir,
                                                           validate)
@@ -90,7 +90,7 @@ class SessionRecorder(Node):
     def __init__(self, params_files: Sequence[str] = (), **kwargs: Any) -> None:
         super().__init__('session_recorder', **kwargs)
         # Simulated time: /clock is recorded too, the sensor streams are taken reliably, and the clock waits for
-        # this node (stage 3), so nothing published is lost at any load.
+        # this node (stage 4, above the estimators: their outputs too), so nothing published is lost at any load.
         self.sim_time = uses_sim_time(self)
         self.before_time: list[tuple[RecordedChannel, bytes]] = []  # received on simulated time before it started
         # Simulated time: the messages held until their simulated time is complete, with their log times (per
@@ -109,7 +109,8 @@ class SessionRecorder(Node):
         self.write_failure: str | None = None   # the write error that stopped the last recording (cleared by start)
         self.received = 0                       # every message callback (all recordings)
         self.written = 0                        # on disk, recordings closed so far
-        self.dropped = {'not_recording': 0, 'write_error': 0, 'lost_with_chunk': 0, 'rejected': 0, 'after_end': 0}
+        self.dropped = {'not_recording': 0, 'write_error': 0, 'lost_with_chunk': 0, 'rejected': 0, 'after_end': 0,
+                        'clock_repeat': 0}
         self.state_subscription: Subscription | None = None
         self.program = ProgramEnd()  # the program's state, and the session's end (this recording)
         self.stop_timer: Timer | None = None
@@ -126,8 +127,9 @@ class SessionRecorder(Node):
         self.create_service(Trigger, '~/stop', self._srv_stop)
         self.diagnostics = Diagnostics(self, self._report)
         recorded = {self.resolve_topic_name(t) for t in self.params['topics']}
-        self.sim = SimTimeParticipant(self, 3, self._sim_report, drain=self._drain_channels,
-                                      inputs=[t for t in SIM_INPUTS if t in recorded])
+        outputs = [t for t in SIM_OUTPUTS if t in recorded]
+        self.sim = SimTimeParticipant(self, 4, self._sim_report, drain=self._drain_channels,
+                                      inputs=[t for t in SIM_INPUTS if t in recorded] + outputs, soft=outputs)
         self.discovery_timer = self.create_timer(0.2, self._discover)
         self.flush_timer: Timer | None = None
         # A recorder runs all day: the pages its allocator freed go back to the system now and then (malloc_trim).
@@ -166,7 +168,10 @@ class SessionRecorder(Node):
             flush_interval_s=float(p['flush_interval_s']) or None, fsync=bool(p['fsync']),
             custom_data={'session': path.name, 'software_version': __version__})
         self.bag_path = path
-        self.log_times = SimLogTimes(self.sim.inputs) if self.sim.active else None
+        # (simulated time: /clock logged at the time it says, like the paced streams at their stamps)
+        self.log_times = SimLogTimes([*self.sim.inputs, topics.CLOCK]) if self.sim.active else None
+        self.clock_ns = -1  # the last /clock time recorded
+        self.joined_ns: int | None = None  # simulated time: the first watermark of this recording
         self.recordings += 1
         self.write_failure = None
         self.program = ProgramEnd()
@@ -305,6 +310,10 @@ class SessionRecorder(Node):
         if self.writer is None:
             self.sim.leave()
             return
+        if self.log_times is not None and self.joined_ns is None:  # the first watermark: joining, before time
+            self.joined_ns = t_ns  # starts, what DDS has delivered differs from run to run: nothing released (at
+            self.sim.report(t_ns)  # the first step instead, each message at its stamp or at that step)
+            return
         end = self._session_end_ns()
         self._release(t_ns if end is None else min(t_ns, end))
         end = self._session_end_ns()  # (the program's 'done' may have been among what was just written)
@@ -336,6 +345,8 @@ class SessionRecorder(Node):
         qos = contract_qos(topic)
         if self.sim_time and topic in SIM_INPUTS:
             qos = SIM_STREAM_QOS
+        elif self.sim_time and qos is not None and topic in SIM_OUTPUTS:
+            qos = deep(qos)
         if qos is None:
             qos = adapted_qos([i.qos_profile for i in self.get_publishers_info_by_topic(topic)])
         try:
@@ -399,12 +410,24 @@ class SessionRecorder(Node):
         if self.writer is None:
             self.dropped['not_recording'] += 1  # delivered after the bag was closed
             return
+        if channel.topic == topics.CLOCK and self._clock_repeat(data):
+            return
         now_ns = self.get_clock().now().nanoseconds
         if self.sim_time and now_ns == 0:  # before simulated time starts (a latched message): logged at its start
             self.before_time.append((channel, data))
             return
         self._write_before_time(now_ns)
         self._take(channel, data, now_ns)
+
+    def _clock_repeat(self, data: bytes) -> bool:
+        """A /clock message that says no later time than the last one recorded (the clock repeats its time for nodes
+        that join late, as often as the wall clock lets it): left out, so the bag's /clock is the same at any load."""
+        t = header_stamp_ns(data)
+        if t is not None and t <= self.clock_ns:
+            self.dropped['clock_repeat'] += 1
+            return True
+        self.clock_ns = max(self.clock_ns, -1 if t is None else t)
+        return False
 
     def _write_before_time(self, now_ns: int) -> None:
         """The messages received before simulated time started, logged at ``now_ns``, in the order received."""
@@ -420,7 +443,7 @@ class SessionRecorder(Node):
         if self.log_times is None or self.sim.watermark_ns < 0:
             self._write(channel, data, now_ns, stamp)
         else:
-            self.log_times.hold(channel.topic, stamp, now_ns, (channel, data, stamp))
+            self.log_times.hold(channel.topic, stamp, (channel, data, stamp))
 
     def _write(self, channel: RecordedChannel, data: bytes, log_ns: int, stamp: int | None) -> None:
         writer = self.writer

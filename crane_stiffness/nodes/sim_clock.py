@@ -44,7 +44,9 @@ PARAMS = (
     ParamSpec('real_time_factor', 1.0, 'simulated seconds per wall second; 0 = as fast as the rig keeps up [-]',
               low=0.0, high=1000.0),
     ParamSpec('step_s', 0.05, 'resolution of simulated time: /clock moves in steps of this [s]', low=1e-4, high=1.0),
-    ParamSpec('max_lead_s', 0.1, 'how far time may run ahead of the slowest participant [s]', low=1e-4, high=10.0,
+    ParamSpec('max_lead_s', 0.05, 'how far time may run ahead of the slowest participant; at step_s every node '
+              'acts on every step in turn and the recording is the same at any load; more lets the stages overlap '
+              '(faster), the estimators then batch their outputs as the load falls [s]', low=1e-4, high=10.0,
               rule='>= step_s'),
     ParamSpec('start_time_s', 1000.0, 'simulated time at start; the same in every run, so runs compare stamp for '
               'stamp [s]', low=1.0, high=2.0e9, rule='a multiple of step_s'),

@@ -123,6 +123,8 @@ class Stiffness6EstimatorNode(Node):
         self.create_service(Trigger, '~/reset', self._srv_reset)
         self.sim = SimTimeParticipant(self, 3, self._on_watermark,
                                       inputs=[topics.WRENCH_COMMAND, topics.LOAD_CELL_WRENCH, topics.POSE_SENSOR_POSE])
+        for pub in (self.pub_k, self.pub_c, self.pub_status):  # (the recorder, a stage above, waits for them)
+            self.sim.counted(pub)
 
     def _apply(self, mount: SensorMount, values: dict[str, Any]) -> None:
         self.mount = mount

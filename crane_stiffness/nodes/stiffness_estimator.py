@@ -164,6 +164,8 @@ class StiffnessEstimatorNode(Node):
         self.sim = SimTimeParticipant(self, 3, self.sim_report, drain=self._drain_all,
                                       inputs=[topics.WRENCH_COMMAND, topics.REJECTED_COMMAND, topics.LOAD_CELL_WRENCH,
                                               topics.LVDT_DISPLACEMENT])
+        for pub in (self.pub_values, self.pub_stiffness, self.pub_estimate, self.pub_pairs, self.pub_lines):
+            self.sim.counted(pub)  # (the recorder, a stage above, waits for them and logs them in their step)
 
     def sim_report(self, t_ns: int) -> None:
         """Simulated time: every input up to ``t_ns`` has been handled (drained before this call)."""

@@ -1,7 +1,8 @@
 """Simulated time that advances only as fast as the simulated rig keeps up (pure Python, no ROS).
 
 The simulated rig is a chain of stages: the load program (stage 0) commands, the crane model (1) turns commands into
-the load in force and the pose, the sensors (2) sample them, the estimator and the recorder (3) consume the samples.
+the load in force and the pose, the sensors (2) sample them, the estimators (3) consume the samples, and the recorder
+(4) records all of it, the estimators' outputs included.
 Each participant reports its *progress*: the simulated time through which it has published everything (its outputs
 acknowledged by every reliable reader). The clock source publishes, with the time itself, one *watermark* per stage:
 the time through which every participant of the stages below has published. A participant of stage s works only up
@@ -25,7 +26,7 @@ from crane_stiffness.sim.errors import ParameterError
 #: ROS stamp holds (int32 seconds).
 LEFT_NS = (2 ** 31 - 1) * 1_000_000_000
 #: Stages of the simulated rig (see the module docstring); a participant reports its stage with its progress.
-STAGES = 4
+STAGES = 5
 
 
 @dataclass

@@ -5,12 +5,16 @@ it received it at would give a 1 kHz stream 20 distinct log times a second, and 
 ``ros2 bag play``, Foxglove) would play it as bursts of 50. Instead the recorder gives each message a log time here:
 
 - A message of a *paced* topic (one the lock-step counts: the load program's commands, the model's outputs, the
-  sensor streams; ``SIM_INPUTS`` of the recorder) with a header stamp later than the last released watermark is
-  logged at its header stamp. The lock-step guarantees that every such message stamped up to a watermark is in before
-  the recorder acts on that watermark, so its stamp lies in the step being recorded, and the log time is the same in
-  every run at any speed and load.
-- Any other message (``/clock``, the estimator's outputs, status, a message without a stamp) is logged at the
-  recorder's clock time, but never before the last released watermark.
+  sensor streams; ``SIM_INPUTS`` of the recorder; and /clock, at the time it says) with a header stamp not before
+  the last released watermark is logged at its header stamp (at the watermark itself it still follows everything
+  written, whose log times are at most that). The lock-step guarantees that every such message stamped up to a
+  watermark is in before the recorder acts on that watermark, so its stamp lies in the step being recorded, and the
+  log time is the same in every run at any speed and load.
+- Any other message (the estimators' outputs, the program's state, a message without a stamp, one stamped before
+  the last released watermark) is logged at the next watermark the recorder releases after it arrived. The recorder
+  is the last stage and counts these too (``SIM_OUTPUTS``); with ``max_lead_s`` = ``step_s`` nothing of a later step
+  is published before it has released this one, so that is the step the message was published in, in every run
+  (the recorder's own clock reading would be wherever /clock happened to be when it arrived).
 - Within a topic a log time never goes back (a stamp earlier than the topic's last log time is logged at that
   time): the messages of a topic keep the order they were received in.
 
@@ -44,37 +48,37 @@ class SimLogTimes(Generic[Item]):
         self.released_ns = -1                 #: the last watermark released: nothing is logged before it any more
         self._last: dict[str, int] = {}       # the last log time per topic
         self._held: list[tuple[int, str, int, Item]] = []
+        self._next: list[tuple[str, int, Item]] = []  # logged at the next watermark released
         self._order = itertools.count()
 
-    def log_time(self, topic: str, stamp_ns: int | None, now_ns: int) -> int:
-        """The log time of a message of ``topic`` with header stamp ``stamp_ns`` (None: no stamp) received at clock
-        time ``now_ns`` [ns]."""
-        if topic in self.paced and stamp_ns is not None and stamp_ns > self.released_ns:
-            t = stamp_ns
-        else:
-            t = max(now_ns, self.released_ns)
-        last = self._last.get(topic)
-        if last is not None and t < last:
-            t = last
+    def _at(self, topic: str, t: int) -> int:
+        """``t``, or the topic's last log time if later (a topic's log times never go back); noted as its last."""
+        t = max(t, self._last.get(topic, t))
         self._last[topic] = t
         return t
 
-    def hold(self, topic: str, stamp_ns: int | None, now_ns: int, item: Item) -> int:
-        """Hold ``item`` (a message of ``topic``) until its log time is released; returns the log time."""
-        t = self.log_time(topic, stamp_ns, now_ns)
-        self._held.append((t, topic, next(self._order), item))
-        return t
+    def hold(self, topic: str, stamp_ns: int | None, item: Item) -> int | None:
+        """Hold ``item`` (a message of ``topic`` with header stamp ``stamp_ns``, None: no stamp) until its log time
+        is released; returns the log time [ns], or None when it is the next watermark released."""
+        if topic in self.paced and stamp_ns is not None and stamp_ns >= self.released_ns:
+            t = self._at(topic, stamp_ns)
+            self._held.append((t, topic, next(self._order), item))
+            return t
+        self._next.append((topic, next(self._order), item))
+        return None
 
     @property
     def held(self) -> int:
         """Messages held."""
-        return len(self._held)
+        return len(self._held) + len(self._next)
 
     def release(self, watermark_ns: int) -> list[tuple[int, Item]]:
         """(log time, item) of the messages logged at or before ``watermark_ns``, in the order to write them: by log
         time, then topic name, then the order received. Nothing later is logged at or before ``watermark_ns``."""
         if watermark_ns > self.released_ns:
             self.released_ns = watermark_ns
+        waiting, self._next = self._next, []
+        self._held += [(self._at(topic, self.released_ns), topic, order, item) for topic, order, item in waiting]
         ready = [h for h in self._held if h[0] <= watermark_ns]
         if not ready:
             return []
@@ -83,7 +87,10 @@ class SimLogTimes(Generic[Item]):
         return [(t, item) for t, _, _, item in ready]
 
     def release_all(self) -> list[tuple[int, Item]]:
-        """Everything held, in the order to write it (the recording stops)."""
+        """Everything held, in the order to write it (the recording stops; what waits for the next watermark is
+        logged at the last one released)."""
+        waiting, self._next = self._next, []
+        self._held += [(self._at(topic, self.released_ns), topic, order, item) for topic, order, item in waiting]
         ready = sorted(self._held, key=lambda h: (h[0], h[1], h[2]))
         self._held = []
         if ready:

@@ -22,8 +22,8 @@ CLI = Path(sys.prefix) / 'bin' / 'crane-stiffness'
 #: machine delays (the look at the free domain after it lasts all of it).
 PATIENCE_LOOK_S = 20.0
 HOLD = ('import sys, time\nfrom crane_stiffness.launcher.domains import try_claim\n'
-        'claim = try_claim(int(sys.argv[1]), "holder of the test")\nprint("claimed" if claim else "refused", flush=True)\n'
-        'time.sleep(600)\n')
+        'claim = try_claim(int(sys.argv[1]), "holder of the test")\n'
+        'print("claimed" if claim else "refused", flush=True)\ntime.sleep(600)\n')
 
 
 def _own_claims(tmp_path: Path, monkeypatch) -> Path:
@@ -85,7 +85,8 @@ def test_a_domain_with_nodes_of_others_is_passed_over(ros_domains, tmp_path, mon
     foreign = rclpy.create_node('someone_elses_node', context=ctx)
     try:
         assert '/someone_elses_node' in foreign_nodes(first)
-        claim = claim_domain(first, 'rig of the test', env={}, look_s=PATIENCE_LOOK_S)  # (a rig started by a user: no claim handed down)
+        # (a rig started by a user: no claim handed down)
+        claim = claim_domain(first, 'rig of the test', env={}, look_s=PATIENCE_LOOK_S)
         assert claim.domain == spare, claim
         assert 'someone_elses_node' in claim.skipped[0][1]
         claim.release()

@@ -184,7 +184,8 @@ def _run_on_small_disk(disk: Path, env: dict, ctx, tmp_path: Path) -> None:
     assert codes['rec'] == 0 and 'Traceback' not in log, log[-3000:]
     counters = final_counters(log, 'session_recorder')
     dropped = {k[len('dropped_'):]: v for k, v in counters.items() if k.startswith('dropped_')}
-    assert set(dropped) == {'not_recording', 'write_error', 'lost_with_chunk', 'rejected', 'after_end'}, counters
+    assert set(dropped) == {'not_recording', 'write_error', 'lost_with_chunk', 'rejected', 'after_end',
+                            'clock_repeat'}, counters
     assert counters['received'] == counters['written'] + sum(dropped.values()), counters
     assert counters['written'] == on_disk + 500 and counters['write_errors'] == 1, counters
     # the failing write lost the message being written or the chunk holding it, unless that chunk went out whole
