@@ -23,9 +23,9 @@ the source tree (``--copy-to``), whose modules the demo's own process and the te
 continuation, path and batch solves, the Jacobian and the tangent stiffness), so nothing is left to compile at run
 time; :func:`cache_report` says, per kernel, how many signatures came from the cache and how many were compiled
 (a kernel only called from other kernels is compiled into them and loaded with them). The kernels of
-``_batch_kernels``, ``_pose_kernels`` and ``_draw_kernels`` call those of ``_kernels``; numba checks each cache against its own file
-only, so this runs after every install, and :func:`seed` copies a cache only between installations whose Python
-files are all the same.
+``_batch_kernels``, ``_pose_kernels`` and ``_draw_kernels`` call those of ``_kernels``; numba checks each cache
+against its own file only, so this runs after every install, and :func:`seed` copies a cache only between
+installations whose Python files are all the same.
 """
 from __future__ import annotations
 

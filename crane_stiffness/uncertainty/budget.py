@@ -166,7 +166,7 @@ def sensitivities(function: Callable[..., Any], inputs: Sequence[InputQuantity],
     return c
 
 
-def combine(value: float, inputs: Sequence[InputQuantity], c: Sequence[float], *,
+def combine(value: float, inputs: Sequence[InputQuantity], c: Sequence[float] | np.ndarray, *,
             correlations: Correlations | None = None, coverage: float = DEFAULT_COVERAGE) -> UncertaintyResult:
     """The result from the output estimate y, the inputs and their sensitivity coefficients c_i (GUM 5.1.2,
     5.2.2). With correlations, ν_eff still uses the uncorrelated W–S formula with the correlated u_c (the GUM gives

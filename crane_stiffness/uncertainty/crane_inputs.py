@@ -8,7 +8,7 @@ that every existing command reads the crane file as before:
 
 .. code-block:: yaml
 
-    /**:
+    crane_uncertainty:           # a section no node reads (nodes refuse parameters they do not know)
       ros__parameters:
         uncertainty:
           wire_diameter: {U: 2.0e-5, k: 2}                          # a micrometer's certificate [m]
