@@ -25,6 +25,8 @@ from crane_stiffness.model.stiffness import tangent_stiffness
 
 _TOP = {'A': 0, 'B': 1, 'C': 2}
 _PLATFORM = {'D': 0, 'E': 1, 'F': 2}
+#: The fields of one row per crane, and their widths.
+_ROWS = {'length_offsets': 6, 'com_offset': 3}
 #: The arrays rest_stiffness_draws takes, and their shapes for N cranes.
 DRAW_FIELDS = {'a': '(N,)', 'b': '(N,)', 'height': '(N,)', 'weight': '(N,)', 'wire_diameter': '(N,)',
                'youngs_modulus': '(N,)', 'wire_stiffness': '(N,)', 'length_offsets': '(N, 6)',
@@ -49,7 +51,8 @@ def _column(name: str, value, n: int, width: int | None = None) -> np.ndarray:
     except ValueError:
         raise GeometryError(name, arr.shape, f'must broadcast to {shape}') from None
     if not np.all(np.isfinite(arr)):
-        raise GeometryError(name, '...', 'every draw must be finite')
+        first = int(np.flatnonzero(~np.isfinite(arr.reshape(len(arr), -1)).any(axis=1))[0])
+        raise GeometryError(name, arr[first].tolist(), f'every draw must be finite (draw {first} is not)')
     return np.ascontiguousarray(arr)
 
 
@@ -80,16 +83,23 @@ def rest_stiffness_draws(nominal: CraneGeometry, *, xtol: float = DEFAULT_XTOL, 
     """
     unknown = sorted(set(inputs) - set(DRAW_FIELDS))
     if unknown:
-        raise GeometryError(unknown[0], '...', f'is not a draw field (known: {", ".join(DRAW_FIELDS)})')
-    lengths = [np.size(v) if np.ndim(v) <= 1 else np.shape(v)[0] for v in inputs.values()]
-    n = max([int(x) for x in lengths if np.ndim(x) == 0] + [1])
+        raise GeometryError(unknown[0], f'array of shape {np.shape(inputs[unknown[0]])}',
+                            f'is not a draw field (known: {", ".join(DRAW_FIELDS)})')
+    # N: the length of the 1-D fields, the first dimension of the 2-D ones (scalars and single rows broadcast)
+    sizes = {np.shape(v)[0] for k, v in inputs.items() if np.ndim(v) == (2 if k in _ROWS else 1)}
+    n = max(sizes | {1})
     base = nominal.to_dict()
     draws: dict[str, np.ndarray] = {}
     for name in ('a', 'b', 'height', 'weight', 'wire_diameter', 'youngs_modulus', 'wire_stiffness'):
-        default = base[name] if base[name] is not None else np.nan
-        draws[name] = _column(name, inputs.get(name, default), n) if base[name] is not None else np.full(n, np.nan)
-    draws['length_offsets'] = _column('length_offsets', inputs.get('length_offsets', base['length_offsets']), n, 6)
-    draws['com_offset'] = _column('com_offset', inputs.get('com_offset', base['com_offset']), n, 3)
+        if base[name] is None:  # the wire the nominal crane does not give (k, or d and E)
+            if name in inputs:
+                raise GeometryError(name, f'array of shape {np.shape(inputs[name])}',
+                                    'the nominal crane gives the wire the other way (k, or d and E)')
+            draws[name] = np.full(n, np.nan)
+        else:
+            draws[name] = _column(name, inputs.get(name, base[name]), n)
+    for name, width in _ROWS.items():
+        draws[name] = _column(name, inputs.get(name, base[name]), n, width)
     for name in ('a', 'b', 'height'):
         if np.any(draws[name] <= 0.0):
             raise GeometryError(name, float(draws[name].min()), 'must be > 0 in every draw')

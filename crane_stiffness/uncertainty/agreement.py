@@ -32,8 +32,8 @@ class Agreement:
         unit = f' {self.unit}' if self.unit else ''
         verdict = ('agree within their expanded uncertainties' if self.agrees
                    else 'do not agree within their expanded uncertainties')
-        return (f'measured {self.measured:.6g} ± {self.U_measured:.2g}{unit} and reference {self.reference:.6g} '
-                f'± {self.U_reference:.2g}{unit} {verdict} (E_n = {self.en:+.2f}, |E_n| <= 1 agrees)')
+        return (f'measured {self.measured:.6g} ± {self.U_measured:.4g}{unit} and reference {self.reference:.6g} '
+                f'± {self.U_reference:.4g}{unit} {verdict} (E_n = {self.en:+.2f}, |E_n| <= 1 agrees)')
 
     def to_dict(self) -> dict[str, Any]:
         return {'measured': self.measured, 'U_measured': self.U_measured, 'reference': self.reference,

@@ -48,3 +48,14 @@ def test_bad_draws_are_refused_naming_the_field():
         rest_stiffness_draws(g, wire_length=np.array([0.5]))
     with pytest.raises(GeometryError, match='a = '):
         rest_stiffness_draws(g, a=np.array([0.1, np.nan]))
+
+
+def test_one_row_broadcasts_to_every_crane():
+    g = lab_model(0.5, 50.0)
+    k = rest_stiffness_draws(g, com_offset=[0.0, 0.0, 2e-3], weight=np.array([50.0, 52.0]))
+    assert k.shape == (2, 6, 6)
+    single = rest_stiffness_draws(g, com_offset=[0.0, 0.0, 2e-3])
+    assert single.shape == (1, 6, 6)
+    moved = g.replace(com_offset=(0.0, 0.0, 2e-3))
+    assert np.allclose(single[0], tangent_stiffness(moved, rest_pose(moved)), rtol=1e-10, atol=1e-9)
+    assert np.allclose(k[0], single[0], rtol=1e-12, atol=1e-12)
