@@ -28,7 +28,7 @@ from typing import Any, Mapping
 from crane_stiffness.model.geometry import CraneGeometry
 from crane_stiffness.params.files import load_params
 from crane_stiffness.uncertainty.errors import InputError
-from crane_stiffness.uncertainty.inputs import InputQuantity, input_from_mapping
+from crane_stiffness.uncertainty.inputs import InputQuantity, entries_from_params, input_from_mapping
 
 #: The section of the uncertainty file (ROS parameters ``uncertainty.<input>.<key>``).
 PREFIX = 'uncertainty.'
@@ -127,19 +127,6 @@ def crane_inputs(geometry: CraneGeometry, uncertainty: Mapping[str, Mapping[str,
     return out
 
 
-def uncertainty_from_params(params: Mapping[str, Any], prefix: str = PREFIX) -> dict[str, dict[str, Any]]:
-    """{input: flat form} from flat parameters ``uncertainty.<input>.<key>`` (what :func:`load_params` gives)."""
-    out: dict[str, dict[str, Any]] = {}
-    for key, value in params.items():
-        if not key.startswith(prefix):
-            continue
-        name, dot, field = key[len(prefix):].partition('.')
-        if not dot or not field or '.' in field:
-            raise InputError(key, value, f'must be {prefix}<input>.<key>, e.g. {prefix}weight.U')
-        out.setdefault(name, {})[field] = value
-    return out
-
-
 def load_uncertainty_file(path: str | os.PathLike) -> dict[str, dict[str, Any]]:
     """The ``uncertainty.*`` entries of a ROS parameter file (every section that applies to any node)."""
-    return uncertainty_from_params(load_params(path))
+    return entries_from_params(load_params(path), PREFIX)

@@ -212,6 +212,22 @@ def input_from_mapping(name: str, entry: Mapping[str, Any], *, value: float | No
                                  dof=dof, unit=unit)
 
 
+def entries_from_params(params: Mapping[str, Any], prefix: str) -> dict[str, dict[str, Any]]:
+    """{input: flat form} from flat ROS parameters ``<prefix><input>.<key>`` (as rclpy and
+    :func:`crane_stiffness.params.files.load_params` flatten ``uncertainty: {weight: {U: 0.1, k: 2}}`` to
+    ``uncertainty.weight.U`` and ``uncertainty.weight.k``); other parameters are left out. ``prefix`` ends with a
+    dot, e.g. 'uncertainty.'."""
+    out: dict[str, dict[str, Any]] = {}
+    for key, value in params.items():
+        if not key.startswith(prefix):
+            continue
+        name, dot, field = key[len(prefix):].partition('.')
+        if not dot or not field or '.' in field:
+            raise InputError(key, value, f'must be {prefix}<input>.<key>, e.g. {prefix}weight.U')
+        out.setdefault(name, {})[field] = value
+    return out
+
+
 def inputs_from_mapping(entries: Mapping[str, Mapping[str, Any]]) -> list[InputQuantity]:
     """Several inputs from a mapping of name → flat form, in the mapping's order."""
     return [input_from_mapping(name, entry) for name, entry in entries.items()]

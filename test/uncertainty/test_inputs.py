@@ -10,7 +10,8 @@ import pytest
 from crane_stiffness.errors import CraneStiffnessError
 from crane_stiffness.uncertainty.budget import correlation_matrix
 from crane_stiffness.uncertainty.errors import InputError
-from crane_stiffness.uncertainty.inputs import InputQuantity, input_from_mapping, inputs_from_mapping
+from crane_stiffness.uncertainty.inputs import (InputQuantity, entries_from_params, input_from_mapping,
+                                                inputs_from_mapping)
 
 
 def test_standard_uncertainty_by_the_gums_rules():
@@ -89,3 +90,14 @@ def test_a_normal_input_with_finite_dof_draws_the_scaled_shifted_t():
     assert np.std(x) == pytest.approx(0.1 * math.sqrt(5 / 3), rel=0.03)
     # the t's 97.5 % quantile is 2.571 u from the value (normal: 1.960 u)
     assert np.quantile(x, 0.975) - 1.0 == pytest.approx(0.2571, rel=0.02)
+
+
+def test_flat_ros_parameters_regroup_into_entries():
+    params = {'uncertainty.gain.U': 2e-5, 'uncertainty.gain.k': 2.0, 'uncertainty.offset.half_width': 1e-6,
+              'uncertainty.offset.distribution': 'triangular', 'displacement_gain': 0.002}
+    entries = entries_from_params(params, 'uncertainty.')
+    assert entries == {'gain': {'U': 2e-5, 'k': 2.0}, 'offset': {'half_width': 1e-6, 'distribution': 'triangular'}}
+    assert input_from_mapping('gain', entries['gain'], value=0.002).u == pytest.approx(1e-5)
+    with pytest.raises(InputError) as info:
+        entries_from_params({'uncertainty.gain': 1.0}, 'uncertainty.')
+    assert info.value.field == 'uncertainty.gain'
