@@ -28,8 +28,8 @@ from crane_stiffness.model.equilibrium import rest_pose
 from crane_stiffness.model.geometry import CraneGeometry
 from crane_stiffness.model.stiffness import axis_index, axis_stiffness, tangent_stiffness
 from crane_stiffness.uncertainty.budget import DEFAULT_COVERAGE, DEFAULT_STEP, UncertaintyResult, combine
-from crane_stiffness.uncertainty.crane_inputs import COM_OFFSETS, LENGTH_OFFSETS, crane_inputs
-from crane_stiffness.uncertainty.errors import UncertaintyError
+from crane_stiffness.uncertainty.crane_inputs import COM_OFFSETS, LENGTH_OFFSETS, crane_inputs, input_names
+from crane_stiffness.uncertainty.errors import InputError, UncertaintyError
 from crane_stiffness.uncertainty.inputs import InputQuantity
 from crane_stiffness.uncertainty.montecarlo import DEFAULT_DIGITS, monte_carlo, with_monte_carlo
 
@@ -41,6 +41,10 @@ def stiffness_function(geometry: CraneGeometry, axis: str, names: Sequence[str])
     direction = np.zeros(6)
     direction[axis_index(axis)] = 1.0
     names = tuple(names)
+    known = input_names(geometry)
+    for name in names:
+        if name not in known:
+            raise InputError('inputs', name, f'is not an input of this crane (inputs: {", ".join(known)})')
 
     def f(*values: Any) -> np.ndarray:
         if len(values) != len(names):

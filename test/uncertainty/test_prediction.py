@@ -117,3 +117,7 @@ def test_bad_uncertainty_entries_are_refused_naming_them():
     with pytest.raises(InputError) as info:
         crane_inputs(LAB, {'a': {'half_width': 1e-3, 'distribution': 'beta'}})
     assert info.value.field == 'a.distribution'
+    from crane_stiffness.uncertainty.inputs import InputQuantity
+    with pytest.raises(InputError) as info:  # an input the model does not have would silently count for nothing
+        predict_stiffness(LAB, 'fy', inputs=[InputQuantity.normal('wire_length', 0.5, 1e-3)])
+    assert info.value.field == 'inputs' and info.value.value == 'wire_length'
