@@ -16,6 +16,7 @@ BENCHMARKS = [
     ('bench_bag_decode.py', [], None),
     ('bench_bag_storage.py', [], None),
     ('bench_sync.py', [], 'bench_sync.json'),
+    ('bench_uncertainty.py', [], 'bench_uncertainty.json'),   # the prediction's Monte Carlo, lab model
     ('bench_analyze.py', [], None),
     ('bench_campaign_analyze.py', [], 'bench_campaign_analyze.json'),   # campaign analyze, 1 and 2 workers
     # campaign run of the paper's campaign: rig hosts against a fresh rig of processes per session, idle and busy

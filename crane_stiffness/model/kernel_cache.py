@@ -23,9 +23,9 @@ the source tree (``--copy-to``), whose modules the demo's own process and the te
 continuation, path and batch solves, the Jacobian and the tangent stiffness), so nothing is left to compile at run
 time; :func:`cache_report` says, per kernel, how many signatures came from the cache and how many were compiled
 (a kernel only called from other kernels is compiled into them and loaded with them). The kernels of
-``_batch_kernels`` and ``_pose_kernels`` call those of ``_kernels``; numba checks each cache against its own file
-only, so this runs after every install, and :func:`seed` copies a cache only between installations whose Python
-files are all the same.
+``_batch_kernels``, ``_pose_kernels`` and ``_draw_kernels`` call those of ``_kernels``; numba checks each cache
+against its own file only, so this runs after every install, and :func:`seed` copies a cache only between
+installations whose Python files are all the same.
 """
 from __future__ import annotations
 
@@ -67,16 +67,19 @@ def exercise() -> None:
     report = at_pose(g, (0.001, 0.0, 0.0))
     slack_margins(report.solution.geometry, report.equilibrium, sphere_directions(4), 'force')
     compute_rows(MapSpec(GridAxis('x', -0.01, 0.01, 2), GridAxis('y', -0.01, 0.01, 2), g, directions=2), range(2))
+    # Many cranes' rest tangents at once (the uncertainty room's Monte Carlo of the prediction).
+    from crane_stiffness.model.draws import rest_stiffness_draws
+    rest_stiffness_draws(g, weight=np.array([50.0, 50.1]))
 
 
 def kernels() -> dict:
     """The compiled dispatchers of _kernels by name (empty without numba)."""
-    from crane_stiffness.model import _batch_kernels, _kernels, _pose_kernels
+    from crane_stiffness.model import _batch_kernels, _draw_kernels, _kernels, _pose_kernels
     if not _kernels.HAVE_NUMBA:
         return {}
     from numba.core.registry import CPUDispatcher
     found: dict = {}
-    for module in (_kernels, _batch_kernels, _pose_kernels):
+    for module in (_kernels, _batch_kernels, _pose_kernels, _draw_kernels):
         for name, obj in vars(module).items():
             # a kernel imported from another module is listed once, under its own module
             if isinstance(obj, CPUDispatcher) and obj.py_func.__module__ == module.__name__:
