@@ -165,8 +165,9 @@ def noise_params(unit: str, channels: int) -> tuple[ParamSpec, ...]:
 
     def level(name: str, default: float, text: str, unit_text: str, positive: bool = False) -> ParamSpec:
         if channels == 1:  # one channel: a number
-            bound = {'above': 0.0} if positive else {'at_least': 0.0}
-            return ParamSpec(name, default, f'{text} [{unit_text}]', **bound)
+            if positive:
+                return ParamSpec(name, default, f'{text} [{unit_text}]', above=0.0)
+            return ParamSpec(name, default, f'{text} [{unit_text}]', at_least=0.0)
         return ParamSpec(name, [default] * channels, f'{text}{per} [{unit_text}]',
                          rule='finite, > 0' if positive else 'finite, >= 0')
 

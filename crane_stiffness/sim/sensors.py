@@ -316,11 +316,11 @@ class LvdtModel:
         d = np.asarray(d, dtype=float)
         if self.truth is None:
             return d
-        shape = 0.0
+        reading = (1.0 + self.truth.sensitivity) * d
         if self.truth.linearity:
             x = d / self._full_scale
-            shape = self.truth.linearity * self._full_scale * (4.0 * x ** 3 - 3.0 * x)
-        return (1.0 + self.truth.sensitivity) * d + shape
+            reading = reading + self.truth.linearity * self._full_scale * (4.0 * x ** 3 - 3.0 * x)
+        return reading
 
     def measure(self, u: ArrayLike, q: ArrayLike, t_s: ArrayLike | None = None) -> tuple[Any, Any]:
         """Reading for the pose ``(u, Q)``.
