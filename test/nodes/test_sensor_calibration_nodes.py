@@ -1,5 +1,6 @@
 """The sensors' declared calibration and true errors on real nodes (real rclpy, DDS on loopback): a load cell with a
-given +1 % sensitivity error on fy publishes readings 1 % high; a bad declaration is refused at start and on change
+given +1 % sensitivity error on fy publishes readings 1 % high; an LVDT with a given sensitivity error and a mains
+line reads both; a bad declaration is refused at start and on change
 (through the node's set_parameters service, as ``ros2 param set`` sends it) with the old value kept; the declaration
 reaches the session's bag (the node's parameters and its parameter-file section).
 
@@ -12,7 +13,7 @@ import json
 import numpy as np
 import pytest
 import yaml
-from geometry_msgs.msg import WrenchStamped
+from geometry_msgs.msg import PointStamped, PoseStamped, WrenchStamped
 from rcl_interfaces.srv import SetParameters
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
@@ -22,7 +23,7 @@ from helpers.probe import ProbeNode
 from crane_stiffness.bag import BagReader
 from crane_stiffness.bag.session_metadata import read_node_parameters, read_session
 from crane_stiffness.contract import topics
-from crane_stiffness.nodes import load_cell
+from crane_stiffness.nodes import load_cell, lvdt
 from crane_stiffness.nodes.session_recorder import SessionRecorder
 from crane_stiffness.rosnode.qos import RELIABLE_QOS, SENSOR_QOS
 
@@ -79,6 +80,39 @@ def test_a_given_sensitivity_error_of_one_percent_on_fy_reads_one_percent_high(r
     t_perfect = node.get_clock().now().nanoseconds + 50_000_000
     assert spin_until(ex, lambda: len(probe.readings_after(t_perfect)) >= 100, PATIENCE_S)
     np.testing.assert_allclose(probe.readings_after(t_perfect)[:, 1], 3.0, rtol=1e-12)
+    ex.shutdown()
+
+
+def test_an_lvdt_with_a_given_sensitivity_error_and_mains_hum_reads_both(rclpy_context):
+    name, prefix, args = isolated('lvdt')
+    node = lvdt.Lvdt(context=rclpy_context, cli_args=args, parameter_overrides=[
+        Parameter('noise_std', value=0.0), Parameter('resolution', value=0.0), Parameter('seed', value=4),
+        Parameter('zero_on_first_pose', value=False), Parameter('truth.mode', value='given'),
+        Parameter('truth.sensitivity', value=0.5), Parameter('noise.mains_amplitude', value=2.0e-7),
+        Parameter('noise.mains_hz', value=60.0)])
+    probe = ProbeNode(rclpy_context, prefix)
+    pose = probe.publisher(topics.PLATFORM_POSE, PoseStamped, RELIABLE_QOS)
+    samples = probe.record(topics.LVDT_DISPLACEMENT, PointStamped, SENSOR_QOS,
+                           lambda m: (stamp_ns(m.header.stamp), m.point.x))
+    ex = SingleThreadedExecutor(context=rclpy_context)
+    ex.add_node(node)
+    ex.add_node(probe.node)
+    assert spin_until(ex, lambda: pose.get_subscription_count() >= 1, PATIENCE_S)
+    msg = PoseStamped()
+    msg.header.stamp = probe.node.get_clock().now().to_msg()
+    msg.header.frame_id = topics.FRAME_BASE
+    msg.pose.position.y = 1.0e-3  # 1 mm along the LVDT's axis (y)
+    msg.pose.orientation.w = 1.0
+    pose.publish(msg)
+    t_pose = stamp_ns(msg.header.stamp)
+    assert spin_until(ex, lambda: sum(s > t_pose + 1_000_000 for s, _ in samples) >= 500, PATIENCE_S)
+    t, x = np.array([(s, v) for s, v in samples if s > t_pose + 1_000_000]).T
+    # reading = 1.005 · 1 mm + 0.2 µm · sin(2π·60 Hz·t + φ): a least-squares fit of the line at 60 Hz on the stamps
+    # (samples a best-effort probe missed do not matter) gives back both, to rounding.
+    phase = 2 * np.pi * 60.0 * (t - t[0]) * 1e-9
+    coefficients = np.linalg.lstsq(np.column_stack([np.ones_like(t), np.sin(phase), np.cos(phase)]), x, rcond=None)[0]
+    assert coefficients[0] == pytest.approx(1.005e-3, rel=1e-9)
+    assert np.hypot(coefficients[1], coefficients[2]) == pytest.approx(2.0e-7, rel=1e-6)
     ex.shutdown()
 
 
