@@ -34,6 +34,8 @@ from crane_stiffness.sim.calibration import LOAD_CELL_COMPONENTS, LVDT_COMPONENT
 from crane_stiffness.sim.errors import ParameterError
 
 MODES = ('perfect', 'given', 'drawn')
+#: A kind of sensor's own stream of a seed: a load cell and an LVDT drawn with one truth.seed get independent errors.
+_LOAD_CELL_STREAM, _LVDT_STREAM = 1, 2
 _MODE = ParamSpec('truth.mode', 'perfect', 'true calibration errors of the simulated sensor: perfect (none), '
                   'given (the truth.* values) or drawn (from the calibration.* declaration with truth.seed) [-]',
                   choices=MODES)
@@ -123,7 +125,7 @@ def load_cell_truth(values: Mapping[str, Any]) -> LoadCellTruth:
         return LoadCellTruth(np.zeros(6), np.zeros(3))
     if mode == 'given':
         return LoadCellTruth(sensitivity, misalignment)
-    rng = np.random.default_rng(int(values['truth.seed']))
+    rng = np.random.default_rng((int(values['truth.seed']), _LOAD_CELL_STREAM))
     drawn = {c.name: stated[c.name].draw(rng) for c in LOAD_CELL_COMPONENTS}  # every component, in a fixed order
     return LoadCellTruth(drawn['sensitivity'] / 100.0, drawn['misalignment'])
 
@@ -140,7 +142,7 @@ def lvdt_truth(values: Mapping[str, Any]) -> LvdtTruth:
         return LvdtTruth(0.0, 0.0)
     if mode == 'given':
         return LvdtTruth(sensitivity, linearity)
-    rng = np.random.default_rng(int(values['truth.seed']))
+    rng = np.random.default_rng((int(values['truth.seed']), _LVDT_STREAM))
     drawn = {c.name: float(stated[c.name].draw(rng)[0]) for c in LVDT_COMPONENTS}
     return LvdtTruth((drawn['sensitivity'] + drawn['daq_gain']) / 100.0, drawn['linearity'] / 100.0)
 

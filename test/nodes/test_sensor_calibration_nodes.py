@@ -23,7 +23,7 @@ from helpers.probe import ProbeNode
 from crane_stiffness.bag import BagReader
 from crane_stiffness.bag.session_metadata import read_node_parameters, read_session
 from crane_stiffness.contract import topics
-from crane_stiffness.nodes import load_cell, lvdt
+from crane_stiffness.nodes import load_cell, lvdt, modbus_emulator, rdt_emulator
 from crane_stiffness.nodes.session_recorder import SessionRecorder
 from crane_stiffness.rosnode.qos import RELIABLE_QOS, SENSOR_QOS
 
@@ -114,6 +114,42 @@ def test_an_lvdt_with_a_given_sensitivity_error_and_mains_hum_reads_both(rclpy_c
     assert coefficients[0] == pytest.approx(1.005e-3, rel=1e-9)
     assert np.hypot(coefficients[1], coefficients[2]) == pytest.approx(2.0e-7, rel=1e-6)
     ex.shutdown()
+
+
+def test_the_driver_emulators_carry_given_errors_too(rclpy_context):
+    """rdt_emulator and modbus_emulator read the load and the pose with the truth they are given, as load_cell and
+    lvdt do (what they serve to the drivers netft and modbus_lvdt)."""
+    _, prefix, args = isolated('rdt_emulator')
+    rdt = rdt_emulator.RdtEmulator(context=rclpy_context, cli_args=args, parameter_overrides=[
+        *QUIET, Parameter('port', value=0), Parameter('http_port', value=-1), Parameter('truth.mode', value='given'),
+        Parameter('truth.sensitivity', value=[0.0, 1.0, 0.0, 0.0, 0.0, 0.0])])
+    _, mb_prefix, mb_args = isolated('modbus_emulator')
+    modbus = modbus_emulator.ModbusEmulator(context=rclpy_context, cli_args=mb_args, parameter_overrides=[
+        Parameter('port', value=0), Parameter('noise_std', value=0.0), Parameter('resolution', value=0.0),
+        Parameter('truth.mode', value='given'), Parameter('truth.sensitivity', value=-2.0)])
+    probe, mb_probe = Probe(rclpy_context, prefix), ProbeNode(rclpy_context, mb_prefix)
+    pose = mb_probe.publisher(topics.PLATFORM_POSE, PoseStamped, RELIABLE_QOS)
+    ex = SingleThreadedExecutor(context=rclpy_context)
+    for node in (rdt, modbus, probe.node, mb_probe.node):
+        ex.add_node(node)
+    try:
+        assert spin_until(ex, lambda: probe.cmd.get_subscription_count() >= 1 and pose.get_subscription_count() >= 1,
+                          PATIENCE_S)
+        publish_wrench_now(probe.node, probe.cmd, [0.0, 2.0, 0.0, 0.0, 0.0, 0.0], topics.FRAME_BASE)
+        for y in (0.0, 4.0e-5):  # the first pose zeroes the LVDT; the second is 40 µm along its axis (y)
+            msg = PoseStamped()
+            msg.header.stamp = mb_probe.node.get_clock().now().to_msg()
+            msg.pose.position.y = y
+            msg.pose.orientation.w = 1.0
+            pose.publish(msg)
+            assert spin_until(ex, lambda: modbus.counters.used == (2 if y else 1), PATIENCE_S)
+        assert spin_until(ex, lambda: rdt.applied is not None, PATIENCE_S)
+        np.testing.assert_allclose(rdt._samples(7), np.tile([0.0, 2.02, 0.0, 0.0, 0.0, 0.0], (7, 1)), rtol=1e-12)
+        assert modbus._reading() == pytest.approx(0.98 * 4.0e-5, rel=1e-12)
+    finally:
+        ex.shutdown()
+        rdt.close()
+        modbus.close()
 
 
 @pytest.mark.parametrize('parameter, field, rule', [

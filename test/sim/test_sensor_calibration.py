@@ -181,3 +181,16 @@ def test_coloured_noise_does_not_change_the_white_noise_stream():
     difference = coloured.measure(wrenches, t)[0] - white.measure(wrenches, t)[0]
     spectrum = np.abs(np.fft.rfft(difference, axis=0)) * 2.0 / 1000
     assert np.argmax(spectrum[:, 1]) == 50 and spectrum[50, 1] == pytest.approx(0.1, rel=1e-9)
+
+
+def test_a_load_cell_and_an_lvdt_drawn_with_one_seed_get_independent_errors():
+    """Each kind of sensor draws from its own stream of truth.seed: the errors of the two are uncorrelated over
+    seeds (both sensitivities rectangular: from one stream, fx's and the LVDT's would be the same first uniform)."""
+    seeds = range(800)
+    cell = load_cell_values(truth__mode='drawn', calibration__sensitivity_distribution='rectangular')
+    lv = lvdt_values(truth__mode='drawn', calibration__sensitivity_distribution='rectangular',
+                     calibration__daq_gain_distribution='not_stated')
+    a = np.array([load_cell_truth({**cell, 'truth.seed': s}).sensitivity[0] for s in seeds])
+    b = np.array([lvdt_truth({**lv, 'truth.seed': s}).sensitivity for s in seeds])
+    r = np.corrcoef(a, b)[0, 1]
+    assert abs(r) < 4.0 / math.sqrt(len(a)), r
