@@ -51,22 +51,26 @@ def ar1_filter(phi: NDArray[np.float64], innovations: NDArray[np.float64], x0: N
         x0: The state before the first sample, shape (c,).
 
     Returns:
-        x, shape (n, c). Evenly spaced samples (one phi per channel) run through ``lfilter`` (bit-identical to the
-        loop: the same products and sums in the same order).
+        x, shape (n, c). Each run of evenly spaced samples (one phi per channel) goes through ``lfilter``: the same
+        products and sums in the same order as the loop ``x = phi·x + e``, so bit-identical to it.
     """
     n, channels = innovations.shape
     out = np.empty((n, channels))
     if n == 0:
         return out
     phi = np.broadcast_to(phi, (n, channels))
-    if (phi == phi[0]).all():
-        for c in range(channels):
-            out[:, c] = lfilter([1.0], [1.0, -phi[0, c]], innovations[:, c], zi=[phi[0, c] * x0[c]])[0]
-        return out
+    changes = np.flatnonzero((phi[1:] != phi[:-1]).any(axis=1)) + 1  # where a run of one spacing ends
     x = np.array(x0, dtype=float)
-    for i in range(n):
-        x = phi[i] * x + innovations[i]
-        out[i] = x
+    if len(changes) > n // 16:  # mostly uneven: the loop is faster than many short filters
+        for i in range(n):
+            x = phi[i] * x + innovations[i]
+            out[i] = x
+        return out
+    for start, stop in zip([0, *changes.tolist()], [*changes.tolist(), n]):
+        for c in range(channels):
+            out[start:stop, c] = lfilter([1.0], [1.0, -phi[start, c]], innovations[start:stop, c],
+                                         zi=[phi[start, c] * x[c]])[0]
+        x = out[stop - 1]
     return out
 
 
@@ -141,7 +145,9 @@ class ColouredNoise:
             dt = np.diff(t, prepend=t[0])
         else:
             dt = np.diff(t, prepend=self._t)
-        dt = np.maximum(dt, 0.0)
+        # Whole picoseconds: instants on a clock grid (k/rate, or ns stamps in s) are evenly spaced to rounding, and
+        # then exactly, so the recursion runs through lfilter.
+        dt = np.round(np.maximum(dt, 0.0), 12)
         processes = np.zeros((n, self.channels))
         new_state = np.empty_like(self._state)
         for p in range(_PROCESSES):

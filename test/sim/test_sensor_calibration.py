@@ -67,8 +67,9 @@ def test_drawn_errors_spread_as_declared_over_many_seeds(distribution):
                               calibration__misalignment_k=2.0)
     stated = calibration_of(values, LOAD_CELL_COMPONENTS)
     u = stated['sensitivity'].standard_uncertainty() / 100.0
-    draws = np.array([load_cell_truth({**values, 'truth.seed': seed}).sensitivity for seed in range(SEEDS)])
-    angles = np.array([load_cell_truth({**values, 'truth.seed': seed}).misalignment for seed in range(SEEDS)])
+    truths = [load_cell_truth({**values, 'truth.seed': seed}) for seed in range(SEEDS)]
+    draws = np.array([t.sensitivity for t in truths])
+    angles = np.array([t.misalignment for t in truths])
     low, high = chi2.ppf([0.0005, 0.9995], SEEDS - 1) / (SEEDS - 1)
     ratio = draws.var(axis=0, ddof=1) / u ** 2
     print(distribution, 'var/u² per axis', ratio.round(3).tolist(), f'99.9 %: {low:.3f} .. {high:.3f}')
