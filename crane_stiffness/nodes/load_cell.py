@@ -5,7 +5,9 @@ Subscribes /crane/applied_wrench (WrenchStamped, reliable) = the load crane_mode
 published before the first applied wrench (crane_model sends the load in force to a reader that joins, so a load
 cell started before crane_model waits for it, says so on /diagnostics and in its log, and starts then). Publishes
 /load_cell/wrench (WrenchStamped [N, N·m], sensor QoS, frame ``frame_id``) sampled at
-``sample_rate_hz`` with noise, bias, drift, cross-talk, quantization and overload saturation; a timer at
+``sample_rate_hz`` with noise, bias, drift, cross-talk, quantization and overload saturation (and, when asked, true
+calibration errors and coloured noise: ``truth.*``, ``noise.*``; its certificate is declared as ``calibration.*``,
+crane_stiffness.sim.calibration); a timer at
 ``publish_rate_hz`` publishes the samples taken since its last tick, each stamped with its own sample instant on the
 grid k/sample_rate_hz of the node clock (like a DAQ delivering buffers; the timer ticks on the grid
 k/publish_rate_hz, see nodes.sensor_timing.create_grid_timer). Service ~/tare (std_srvs/Trigger) zeroes
@@ -43,12 +45,16 @@ from crane_stiffness.rosnode.run import run
 from crane_stiffness.rosnode.parameters import Params
 from crane_stiffness.serde.stamps import split_ns, stamp_ns
 from crane_stiffness.sim.sampling import SampleClock, StampedHold
-from crane_stiffness.sim.sensors import LOAD_CELL_PARAMS, LoadCellModel, load_cell_from_params
+from crane_stiffness.sim.calibration import LOAD_CELL_CALIBRATION_PARAMS
+from crane_stiffness.sim.sensors import (LOAD_CELL_IMPERFECTION_PARAMS, LOAD_CELL_PARAMS, LoadCellModel,
+                                         load_cell_from_params)
 from crane_stiffness.contract.status import ERROR, OK, WARN
 
 PARAMS = (
     *sensor_timing_params('load_cell', 'header.frame_id of the published wrench; axes aligned with crane_base [-]'),
     *LOAD_CELL_PARAMS,
+    *LOAD_CELL_CALIBRATION_PARAMS,
+    *LOAD_CELL_IMPERFECTION_PARAMS,
     ParamSpec('tare_samples', 100, 'readings averaged by the ~/tare service [samples]', low=1),
     STATE_WAIT_PARAM,
 )
@@ -105,6 +111,9 @@ class LoadCell(Node):
     def _apply(self, model: LoadCellModel, values: dict[str, Any]) -> None:
         if self.model is not None and self.model.offset.any():
             model.tare(self.model.offset)  # keep the tare across a parameter change
+        if model.truth is not None and not model.truth.perfect and (
+                self.model is None or self.model.truth is None or model.truth.as_dict() != self.model.truth.as_dict()):
+            self.get_logger().info(f'true calibration errors ({values["truth.mode"]}): {model.truth.as_dict()}')
         self.model = model
         self.schedule.configure(values['sample_rate_hz'], values['publish_rate_hz'])
         self.schedule.gate.wait_ns = round(values['state_wait_s'] * 1e9)

@@ -3,7 +3,9 @@
 Subscribes /crane/platform_pose (PoseStamped, frame crane_base), held from its header stamp on. Publishes
 /lvdt/displacement (PointStamped, sensor QoS, frame ``frame_id``): point.x = the reading [m] along ``axis`` of the
 contact point ``contact_point`` (body frame) relative to the zero, with noise, resolution and a stroke
-``range_m`` outside which the reading saturates (throttled warning, WARN on /diagnostics). Samples at
+``range_m`` outside which the reading saturates (throttled warning, WARN on /diagnostics), and when asked true
+calibration errors and coloured noise (``truth.*``, ``noise.*``; its certificate is declared as ``calibration.*``,
+crane_stiffness.sim.calibration). Samples at
 ``sample_rate_hz`` on the grid k/sample_rate_hz of the node clock, published in bursts at ``publish_rate_hz`` (ticks
 on the grid k/publish_rate_hz, together with the load cell's).
 Nothing is published before the first pose. Service ~/zero (std_srvs/Trigger) zeroes at the current pose;
@@ -37,12 +39,15 @@ from crane_stiffness.rosnode.run import run
 from crane_stiffness.rosnode.parameters import Params
 from crane_stiffness.serde.stamps import split_ns, stamp_ns
 from crane_stiffness.sim.sampling import SampleClock, StampedHold
-from crane_stiffness.sim.sensors import LVDT_PARAMS, LvdtModel, lvdt_from_params
+from crane_stiffness.sim.calibration import LVDT_CALIBRATION_PARAMS
+from crane_stiffness.sim.sensors import LVDT_IMPERFECTION_PARAMS, LVDT_PARAMS, LvdtModel, lvdt_from_params
 from crane_stiffness.contract.status import ERROR, OK, WARN
 
 PARAMS = (
     *sensor_timing_params('lvdt', 'header.frame_id of the published reading [-]'),
     *LVDT_PARAMS,
+    *LVDT_CALIBRATION_PARAMS,
+    *LVDT_IMPERFECTION_PARAMS,
     STATE_WAIT_PARAM,
 )
 
@@ -59,6 +64,7 @@ class Lvdt(Node):
         super().__init__('lvdt', **kwargs)
         self.counters = SensorCounters()
         self.started_at_ns = self.get_clock().now().nanoseconds
+        self.t0_ns = self.started_at_ns  # the coloured noise's time origin (on simulated time: the first instant)
         self.zeroed_at_ns = 0
         self.out_of_range = 0       # saturated samples since start
         self._out_of_range_reported = 0
@@ -152,7 +158,10 @@ class Lvdt(Node):
             if times.size == 0:
                 return
         assert self.model is not None
-        readings, in_range = self.model.measure(poses[:, :3], poses[:, 3:].reshape(-1, 3, 3))
+        if self.t0_ns <= 0:
+            self.t0_ns = int(times[0])
+        readings, in_range = self.model.measure(poses[:, :3], poses[:, 3:].reshape(-1, 3, 3),
+                                                (times - self.t0_ns) * 1e-9)
         if not in_range.all():
             self.out_of_range += int((~in_range).sum())
             self.get_logger().warning(f'displacement outside the stroke {self.model.range_m} m: reading saturated',

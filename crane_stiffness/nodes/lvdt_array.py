@@ -68,6 +68,7 @@ from crane_stiffness.rosnode.sim_time import uses_sim_time
 from crane_stiffness.serde.cdr import CdrError, decode_stamped
 from crane_stiffness.sim.pose_sensor import normalised
 from crane_stiffness.contract.status import OK, WARN
+from crane_stiffness.sim.calibration import LVDT_CALIBRATION_PARAMS, LVDT_COMPONENTS, calibration_of
 
 _LAB = lab_arrangement()
 PARAMS = (
@@ -97,6 +98,7 @@ PARAMS = (
               '[Hz]', low=1.0, high=1000.0),
     ParamSpec('frame_id', topics.FRAME_BASE, 'header.frame_id of the published poses; the pose is in crane_base '
               'whatever it says (a label) [-]'),
+    *LVDT_CALIBRATION_PARAMS,  # one declaration for every LVDT channel of the array
 )
 #: Read at start only: the subscriptions are made once.
 START_ONLY = ('topics',)
@@ -201,6 +203,7 @@ class LvdtArrayNode(Node):
 
     def _validate(self, values: dict[str, Any]) -> tuple[LvdtArray, np.ndarray, np.ndarray]:
         check_start_only(values, self.settings, START_ONLY)
+        calibration_of(values, LVDT_COMPONENTS)  # the declared calibration of its channels: refused when malformed
         names = values['topics']
         check(len(names) > 0 and all(valid_topic_name(t) for t in names), 'topics', names,
               'must be valid topic names, one per LVDT')

@@ -10,10 +10,13 @@ every read answers "server device busy" (Modbus exception 6), as a DAQ channel s
 publishes no reading of a pose nobody measured: a load program that waits for /lvdt/displacement then starts only
 once the whole chain is live, and ``zero_on_first_pose`` zeroes the model at the unloaded pose (had the emulator
 served the rest pose and met the crane's poses only during the first ramp, it zeroed under load: every reading
-offset by the load at that instant, a stiffness several per cent off).
+offset by the load at that instant, a stiffness several per cent off). True calibration errors and coloured noise
+as ``lvdt`` has them (``truth.*``, ``noise.*``; ``truth.mode: drawn`` draws from its own ``calibration.*``), all off
+by default.
 """
 from __future__ import annotations
 
+import time
 from typing import Any
 
 import numpy as np
@@ -31,7 +34,8 @@ from crane_stiffness.rosnode.run import run
 from crane_stiffness.rosnode.parameters import Params, check, positive
 from crane_stiffness.rosnode.device_params import MAX_INPUT_LAG, check_address, check_start_only
 from crane_stiffness.nodes.modbus_lvdt import CHANNEL_PARAMS, channel_from
-from crane_stiffness.sim.sensors import LVDT_PARAMS, LvdtModel, lvdt_from_params
+from crane_stiffness.sim.calibration import LVDT_CALIBRATION_PARAMS
+from crane_stiffness.sim.sensors import LVDT_IMPERFECTION_PARAMS, LVDT_PARAMS, LvdtModel, lvdt_from_params
 from crane_stiffness.contract.status import OK, WARN
 
 PARAMS = (
@@ -42,6 +46,8 @@ PARAMS = (
     *CHANNEL_PARAMS,
     MAX_INPUT_LAG,
     *LVDT_PARAMS,
+    *LVDT_CALIBRATION_PARAMS,
+    *LVDT_IMPERFECTION_PARAMS,
 )
 START_ONLY = ('host', 'port', 'unit_id')
 
@@ -69,6 +75,7 @@ class ModbusEmulator(Node):
         self.model: LvdtModel | None = None  # set by _apply (Params, below): the methods assert it
         self.device: ModbusDevice | None = None
         self.settings: dict[str, Any] = {}
+        self.t0 = time.monotonic()  # the coloured noise's time origin (reads come on the wall clock)
         self.params = Params(self, PARAMS, self._validate, self._apply)
         self.lag = InputLag()
         self.create_subscription(PoseStamped, topics.PLATFORM_POSE, self._on_pose, RELIABLE_QOS)
@@ -104,7 +111,7 @@ class ModbusEmulator(Node):
         if pose is None:
             return None
         assert self.model is not None
-        reading, _ = self.model.measure(pose[:3], pose[3:].reshape(3, 3))
+        reading, _ = self.model.measure(pose[:3], pose[3:].reshape(3, 3), time.monotonic() - self.t0)
         return reading
 
     def _on_pose(self, msg: PoseStamped) -> None:

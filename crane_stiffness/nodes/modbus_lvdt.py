@@ -37,6 +37,7 @@ from crane_stiffness.rosnode.parameters import Params, check, positive
 from crane_stiffness.rosnode.device_params import check_address, check_start_only, wait_for_device
 from crane_stiffness.serde.stamps import split_ns
 from crane_stiffness.contract.status import ERROR, OK, WARN
+from crane_stiffness.sim.calibration import LVDT_CALIBRATION_PARAMS, LVDT_COMPONENTS, calibration_of
 
 #: Parameters of the channel, shared with modbus_emulator so one parameter file describes both sides.
 CHANNEL_PARAMS = (
@@ -65,6 +66,7 @@ PARAMS = (
     ParamSpec('zero_samples', 10, 'readings averaged by the ~/zero service [samples]', low=1),
     ParamSpec('wait_for_device_s', 3.0, 'at start, time to wait for a first answer before stopping with an error; '
               'longer when the DAQ (or its emulator) starts with the driver [s]'),
+    *LVDT_CALIBRATION_PARAMS,
 )
 START_ONLY = ('host', 'port', 'unit_id', 'timeout_s', 'wait_for_device_s')
 CHANNEL_KEYS = ('register', 'register_type', 'data_type', 'word_order', 'gain', 'offset')
@@ -80,6 +82,7 @@ def _validate(values: dict[str, Any]) -> Channel:
     positive(values, 'poll_rate_hz', 'timeout_s', 'reconnect_interval_s', 'wait_for_device_s')
     check(isinstance(values['frame_id'], str) and values['frame_id'] != '', 'frame_id', values['frame_id'],
           'must be a non-empty string')
+    calibration_of(values, LVDT_COMPONENTS)  # the declared calibration: refused when malformed
     try:
         return channel_from(values)
     except ParameterError as exc:

@@ -44,6 +44,7 @@ from crane_stiffness.rosnode.parameters import Params, check, positive
 from crane_stiffness.rosnode.device_params import check_address, check_start_only, wait_for_device
 from crane_stiffness.serde.stamps import split_ns
 from crane_stiffness.contract.status import ERROR, OK, WARN
+from crane_stiffness.sim.calibration import LOAD_CELL_CALIBRATION_PARAMS, LOAD_CELL_COMPONENTS, calibration_of
 
 DEVICES = ('ati', 'onrobot')
 TARE_MODES = ('software', 'hardware')
@@ -76,6 +77,7 @@ PARAMS = (
     ParamSpec('wait_for_device_s', 3.0, "at start, time to wait for the device (the ATI box's /netftapi2.xml, then "
               'the first record) before stopping with an error; longer when the device (or its emulator) starts with '
               'the driver [s]'),
+    *LOAD_CELL_CALIBRATION_PARAMS,
 )
 #: Read at start only: changing them means talking to another device, so the node must be restarted.
 START_ONLY = ('host', 'port', 'device', 'http_port', 'counts_per_force', 'counts_per_torque', 'command',
@@ -84,6 +86,7 @@ START_ONLY = ('host', 'port', 'device', 'http_port', 'counts_per_force', 'counts
 
 def _validate(values: dict[str, Any]) -> dict[str, Any]:
     check_address(values, ports=('port', 'http_port'))
+    calibration_of(values, LOAD_CELL_COMPONENTS)  # the declared calibration: refused when malformed
     check(values['device'] in DEVICES, 'device', values['device'], f'must be one of {", ".join(DEVICES)}')
     check(values['command'] in rdt.STREAM_COMMANDS, 'command', values['command'],
           f'must be one of {", ".join(rdt.STREAM_COMMANDS)}')

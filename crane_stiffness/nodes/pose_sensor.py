@@ -40,6 +40,7 @@ from crane_stiffness.rosnode.sensor_timing import STATE_WAIT_PARAM, SampleSchedu
     sensor_timing_params
 from crane_stiffness.rosnode.sim_time import SimTimeParticipant, drain
 from crane_stiffness.serde.stamps import stamp_ns
+from crane_stiffness.sim.calibration import POSE_SENSOR_CALIBRATION_PARAMS, POSE_SENSOR_COMPONENTS, calibration_of
 from crane_stiffness.sim.pose_sensor import POSE_SENSOR_PARAMS, PoseSensorModel, pose_sensor_from_params
 from crane_stiffness.sim.sampling import ReleaseGate, SampleClock, StampedHold
 from crane_stiffness.contract.status import ERROR, OK, WARN
@@ -53,12 +54,14 @@ PARAMS = (
       sensor_timing_params(topics.FRAME_BASE, 'header.frame_id of the published pose; the pose is in crane_base '
                            'whatever it says (a label, as a tracker names its world frame) [-]')),
     *POSE_SENSOR_PARAMS,
+    *POSE_SENSOR_CALIBRATION_PARAMS,
     STATE_WAIT_PARAM,
 )
 
 
 def _validate(values: dict[str, Any]) -> PoseSensorModel:
     check_sensor_params(values)
+    calibration_of(values, POSE_SENSOR_COMPONENTS)  # the declared accuracy: refused when malformed
     return pose_sensor_from_params(values)  # names a bad field
 
 

@@ -10,6 +10,8 @@ internal counter (``sample_rate_hz``, oscillator error ``clock_ppm``) is the loa
 wrench (noise, bias, drift, cross-talk, quantization, overload: the ``load_cell`` parameters of the same names) in
 counts (``counts_per_force`` [counts/N], ``counts_per_torque`` [counts/(N·m)]). With ``http_port`` >= 0 it also
 serves /netftapi2.xml like an ATI box (0 = a free port). The hardware bias command zeroes it like the real one.
+True calibration errors and coloured noise as ``load_cell`` has them (``truth.*``, ``noise.*``; ``truth.mode: drawn``
+draws from its own ``calibration.*``), all off by default.
 """
 from __future__ import annotations
 
@@ -31,7 +33,9 @@ from crane_stiffness.rosnode.messages import finite
 from crane_stiffness.rosnode.run import run
 from crane_stiffness.rosnode.parameters import Params, check, positive
 from crane_stiffness.rosnode.device_params import MAX_INPUT_LAG, check_address, check_start_only
-from crane_stiffness.sim.sensors import LOAD_CELL_PARAMS, LoadCellModel, load_cell_from_params
+from crane_stiffness.sim.calibration import LOAD_CELL_CALIBRATION_PARAMS
+from crane_stiffness.sim.sensors import (LOAD_CELL_IMPERFECTION_PARAMS, LOAD_CELL_PARAMS, LoadCellModel,
+                                         load_cell_from_params)
 from crane_stiffness.contract.status import ERROR, OK, WARN
 
 #: Status word of the records served before the first applied wrench: bit 31, the summary error bit of an RDT
@@ -51,6 +55,8 @@ PARAMS = (
     ParamSpec('records_per_packet', 10, 'records per datagram when a client asks for a buffered stream [-]'),
     MAX_INPUT_LAG,
     *LOAD_CELL_PARAMS,
+    *LOAD_CELL_CALIBRATION_PARAMS,
+    *LOAD_CELL_IMPERFECTION_PARAMS,
 )
 START_ONLY = ('host', 'port', 'http_port', 'sample_rate_hz', 'clock_ppm', 'counts_per_force', 'counts_per_torque',
               'records_per_packet')
@@ -125,7 +131,9 @@ class RdtEmulator(Node):
             applied = np.zeros(6)
         else:
             self.device.status = 0
-        readings, _ = self.model.measure(np.tile(applied, (n, 1)), time.monotonic() - self.t0)
+        # The burst's instants, the last one now, 1/sample_rate_hz apart (coloured noise evolves within a burst).
+        t = time.monotonic() - self.t0 - np.arange(n - 1, -1, -1) / self.device.sample_rate_hz
+        readings, _ = self.model.measure(np.tile(applied, (n, 1)), t)
         return readings
 
     def _on_applied(self, msg: WrenchStamped) -> None:

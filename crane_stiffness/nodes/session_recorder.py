@@ -16,11 +16,11 @@ parameter, the same crane YAML the model reads) with the derived l0 and k, the t
 name/rate_hz/repeats/segments.* parameters, or else the load_program section of a ``--params-file`` it was started
 with), the sensor parameters of the other nodes' sections of those files (load_cell, lvdt, stiffness_estimator),
 the files' text, software version, start time and ``notes``. The parameters the rig's nodes actually run with
-(``record_node_parameters``: crane_model, load_program, load_cell, lvdt, stiffness_estimator, and for a six-axis
-test pose_sensor and stiffness6_estimator) are read from them
-over ROS once they appear and stored in ``crane_stiffness/node_parameters``; ``crane_stiffness/session_end`` is
-added on close (stop reason, end time, counts; on simulated time the rig's own publish counts against the bag's). The
-offline analysis prefers the nodes' own values.
+(``record_node_parameters``: crane_model, load_program, load_cell, lvdt, stiffness_estimator, for a six-axis test
+pose_sensor and stiffness6_estimator, the drivers netft, modbus_lvdt, lvdt_array; calibration.* among them) are
+read over ROS once they appear and stored in ``crane_stiffness/node_parameters``; ``crane_stiffness/session_end``
+is added on close (stop reason, end time, counts; on simulated time the rig's own publish counts against the
+bag's). The offline analysis prefers the nodes' own values.
 
 Recording starts by itself (``autostart``) or with ~/start; ~/stop closes the bag and replies with its path and
 message count (both std_srvs/Trigger). With ``stop_on_program_done`` the recording stops once the program is done:

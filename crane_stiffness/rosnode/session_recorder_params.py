@@ -54,9 +54,10 @@ PARAMS = GEOMETRY_PARAMS + PROGRAM_PARAMS + (
               "under 'campaign' (series, W, l0, the true crane of a simulated rig, what the operator confirmed; "
               "crane_stiffness.campaign); '' = not part of a campaign [-]", rule="'' or a JSON object"),
     ParamSpec('record_node_parameters', ['/crane_model', '/load_program', '/load_cell', '/lvdt',
-                                         '/stiffness_estimator', '/pose_sensor', '/stiffness6_estimator'],
-              'nodes whose parameters are read over ROS (get_parameters) once they appear and stored with the '
-              "session; [''] = none [-]"),
+                                         '/stiffness_estimator', '/pose_sensor', '/stiffness6_estimator', '/netft',
+                                         '/modbus_lvdt', '/lvdt_array'],
+              'nodes whose parameters (the sensors\' declared calibration.* among them) are read over ROS '
+              "(get_parameters) once they appear and stored with the session; [''] = none [-]"),
 )
 
 #: Settings read when a recording starts; their change applies to the next recording.

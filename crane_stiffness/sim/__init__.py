@@ -2,6 +2,9 @@
 
 - :mod:`.sensors` — six-axis load cell and LVDT models with noise, drift, cross-talk, quantization and saturation.
 - :mod:`.pose_sensor` — a motion-capture pose sensor with position and orientation noise and bias.
+- :mod:`.calibration` — a sensor's calibration as its certificate states it (the ``calibration.*`` parameters).
+- :mod:`.truth` — a simulated sensor's true calibration errors: perfect, given, or drawn from its calibration.
+- :mod:`.noise` — coloured noise (AR(1), 1/f, a mains line) and random-walk zero drift.
 - :mod:`.program` — load programs (ramps, holds, steps) from ROS-parameter-style parallel arrays or YAML files.
 - :mod:`.errors` — the package's exceptions.
 """

@@ -7,6 +7,11 @@ mapping body coordinates to the fixed frame, so a body point p sits at ``u + Q·
 
 Randomness comes from one seeded :class:`numpy.random.Generator` per model, so a seed reproduces a run.
 ``from_params`` builds a model from a flat, ROS-parameter-friendly dict and names the offending field on error.
+
+Beyond white noise, a model may carry true calibration errors (:mod:`crane_stiffness.sim.truth`: sensitivity and
+misalignment of the load cell, sensitivity and linearity of the LVDT) and coloured noise with zero drift
+(:mod:`crane_stiffness.sim.noise`), drawn from a generator of their own; without them (the default) a model reads
+exactly as it did before they existed.
 """
 from __future__ import annotations
 
@@ -17,8 +22,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from crane_stiffness.model.rotation import rotvec_to_matrix
 from crane_stiffness.params.spec import ParamSpec
 from crane_stiffness.sim.errors import ParameterError
+from crane_stiffness.sim.noise import ColouredNoise, noise_params
+from crane_stiffness.sim.truth import (LOAD_CELL_TRUTH_PARAMS, LVDT_TRUTH_PARAMS, LoadCellTruth, LvdtTruth,
+                                      load_cell_truth, lvdt_truth)
 
 RngLike = np.random.Generator | int | None
 
@@ -86,20 +95,24 @@ class LoadCellModel:
 
     One reading, per axis i (vectors over the six wrench components)::
 
-        raw = C·w_true + bias + drift_per_s·t + noise          (noise ~ N(0, noise_std²))
+        raw = C·S·T·w_true + bias + drift_per_s·t + noise + e(t)      (noise ~ N(0, noise_std²))
         saturated_i = |raw_i| > full_scale_i ;  raw_i clipped to ±full_scale_i
         reading = quantize(raw, resolution) − offset            (offset set by tare, on the same grid)
 
     C is the 6×6 cross-talk matrix (identity plus small off-diagonal terms: load on axis j leaking into the
-    reading of axis i). The offset makes the sensor behave like a real F/T driver after a bias/tare command;
-    drift keeps running after a tare, as on a real gauge.
+    reading of axis i); S = diag(1 + s) the true sensitivity errors and T = diag(Rᵀ, Rᵀ) the true misalignment R
+    (:class:`~crane_stiffness.sim.truth.LoadCellTruth`; both identity without one); e(t) the coloured noise and
+    random-walk drift (:class:`~crane_stiffness.sim.noise.ColouredNoise`; zero without one). The offset makes the
+    sensor behave like a real F/T driver after a bias/tare command; drift keeps running after a tare, as on a real
+    gauge.
     """
 
     PARAM_NAMES = ('noise_std', 'bias', 'drift_per_s', 'crosstalk', 'resolution', 'full_scale', 'seed')
 
     def __init__(self, noise_std: ArrayLike = 0.0, bias: ArrayLike = 0.0, drift_per_s: ArrayLike = 0.0,
                  crosstalk: ArrayLike | None = None, resolution: ArrayLike = 0.0, full_scale: ArrayLike = math.inf,
-                 rng: RngLike = None) -> None:
+                 rng: RngLike = None, truth: LoadCellTruth | None = None, noise: ColouredNoise | None = None
+                 ) -> None:
         """Create the model. Per-axis arguments take one number for all six axes or six numbers.
 
         Args:
@@ -110,6 +123,8 @@ class LoadCellModel:
             resolution: Quantization step, N / N·m, ≥ 0 (0: none).
             full_scale: Overload limit, N / N·m, > 0 (inf: none); readings saturate at ±full_scale.
             rng: Seed or Generator.
+            truth: True calibration errors; None: none.
+            noise: Coloured noise and drift of six channels; None: none.
         """
         self._noise_std = _float_vector('noise_std', noise_std, 6, minimum=0.0)
         self._bias = _float_vector('bias', bias, 6)
@@ -127,13 +142,22 @@ class LoadCellModel:
         self._full_scale = _float_vector('full_scale', full_scale, 6, minimum=0.0, strict=True, allow_inf=True)
         self._rng = _rng('rng', rng)
         self._offset = np.zeros(6)
+        self.truth = truth
+        self._gain = self._crosstalk  # the reading's matrix: C without true errors (the same numbers as before)
+        if truth is not None and not truth.perfect:
+            turn = rotvec_to_matrix(truth.misalignment).T  # the sensor reads the wrench in its own axes
+            self._gain = self._crosstalk @ np.diag(1.0 + truth.sensitivity) @ np.kron(np.eye(2), turn)
+        if noise is not None and noise.channels != 6:
+            raise ParameterError('noise', noise.channels, 'must have 6 channels')
+        self._coloured = noise if noise is not None and noise.enabled else None
 
     @classmethod
-    def from_params(cls, params: Mapping[str, Any]) -> LoadCellModel:
+    def from_params(cls, params: Mapping[str, Any], *, truth: LoadCellTruth | None = None,
+                    noise: ColouredNoise | None = None) -> LoadCellModel:
         """Build from a dict with keys from :attr:`PARAM_NAMES` (all optional; ``seed`` an int)."""
         _check_keys(params, cls.PARAM_NAMES)
         kwargs = {key: params[key] for key in cls.PARAM_NAMES if key in params and key != 'seed'}
-        return cls(**kwargs, rng=_rng('seed', params.get('seed')))
+        return cls(**kwargs, rng=_rng('seed', params.get('seed')), truth=truth, noise=noise)
 
     @property
     def offset(self) -> NDArray[np.float64]:
@@ -162,8 +186,11 @@ class LoadCellModel:
         t = np.asarray(t_s, dtype=float)
         if t.ndim == 1:
             t = t[:, None]
-        raw = wrench @ self._crosstalk.T + self._bias + self._drift * t
+        raw = wrench @ self._gain.T + self._bias + self._drift * t
         raw = raw + self._rng.normal(0.0, 1.0, raw.shape) * self._noise_std
+        if self._coloured is not None:
+            n = 1 if raw.ndim == 1 else len(raw)
+            raw = raw + self._coloured.sample(np.broadcast_to(np.asarray(t_s, dtype=float), (n,))).reshape(raw.shape)
         saturated = np.abs(raw) > self._full_scale
         raw = np.clip(raw, -self._full_scale, self._full_scale)
         return _quantize(raw, self._resolution) - self._offset, saturated
@@ -198,19 +225,22 @@ class LvdtModel:
     when the sensor was zeroed::
 
         d = axis · ((u + Q·p) − r_zero)
-        reading = clip(quantize(d + noise, resolution), range_m[0], range_m[1])
+        reading = clip(quantize(g(d) + noise + e(t), resolution), range_m[0], range_m[1])
         in_range = range_m[0] <= d <= range_m[1]        (the core is within its stroke)
 
     with ``axis`` a unit vector in the fixed frame and ``p`` the contact point in the body frame. Until
     :meth:`zero` is called, ``r_zero = p`` (the rest pose u = 0, Q = I). Lateral motion of the contact point
-    (across the axis) is not seen, as with a flat-tipped spring-loaded probe.
+    (across the axis) is not seen, as with a flat-tipped spring-loaded probe. g(d) = d without true calibration
+    errors, else ``(1 + s)·d + L·FS·T3(d/FS)`` (:class:`~crane_stiffness.sim.truth.LvdtTruth`; FS the half stroke
+    max(|range_m|)); e(t) the coloured noise and random-walk drift (:class:`~crane_stiffness.sim.noise.ColouredNoise`;
+    zero without one).
     """
 
     PARAM_NAMES = ('axis', 'contact_point', 'noise_std', 'resolution', 'range_m', 'seed')
 
     def __init__(self, axis: ArrayLike, contact_point: ArrayLike = (0.0, 0.0, 0.0), noise_std: float = 0.0,
                  resolution: float = 0.0, range_m: tuple[float, float] = (-math.inf, math.inf),
-                 rng: RngLike = None) -> None:
+                 rng: RngLike = None, truth: LvdtTruth | None = None, noise: ColouredNoise | None = None) -> None:
         """Create the model.
 
         Args:
@@ -220,6 +250,8 @@ class LvdtModel:
             resolution: Quantization step, m, ≥ 0 (0: none).
             range_m: Stroke (min, max) relative to the zero, m, min < max.
             rng: Seed or Generator.
+            truth: True calibration errors; None: none.
+            noise: Coloured noise and drift of one channel; None: none.
         """
         axis_vector = _float_vector('axis', axis, 3)
         norm = float(np.linalg.norm(axis_vector))
@@ -235,15 +267,24 @@ class LvdtModel:
         self._range = (float(limits[0]), float(limits[1]))
         self._rng = _rng('rng', rng)
         self._reference = self._point.copy()
+        self.truth = truth if truth is not None and not truth.perfect else None
+        self._full_scale = max(abs(self._range[0]), abs(self._range[1]))
+        if self.truth is not None and self.truth.linearity and not math.isfinite(self._full_scale):
+            raise ParameterError('truth.linearity', 100.0 * self.truth.linearity,
+                                 'a linearity error needs a finite range_m (its share of the half stroke)')
+        if noise is not None and noise.channels != 1:
+            raise ParameterError('noise', noise.channels, 'must have 1 channel')
+        self._coloured = noise if noise is not None and noise.enabled else None
 
     @classmethod
-    def from_params(cls, params: Mapping[str, Any]) -> LvdtModel:
+    def from_params(cls, params: Mapping[str, Any], *, truth: LvdtTruth | None = None,
+                    noise: ColouredNoise | None = None) -> LvdtModel:
         """Build from a dict with keys from :attr:`PARAM_NAMES` (``axis`` required; ``seed`` an int)."""
         _check_keys(params, cls.PARAM_NAMES, required=('axis',))
         kwargs = {key: params[key] for key in cls.PARAM_NAMES if key in params and key != 'seed'}
         if 'range_m' in kwargs and np.ndim(kwargs['range_m']) == 1:
             kwargs['range_m'] = tuple(kwargs['range_m'])
-        return cls(**kwargs, rng=_rng('seed', params.get('seed')))
+        return cls(**kwargs, rng=_rng('seed', params.get('seed')), truth=truth, noise=noise)
 
     @property
     def axis(self) -> NDArray[np.float64]:
@@ -269,18 +310,37 @@ class LvdtModel:
         d = (self._contact(u, q) - self._reference) @ self._axis
         return float(d) if np.ndim(d) == 0 else d
 
-    def measure(self, u: ArrayLike, q: ArrayLike) -> tuple[Any, Any]:
+    def indicated(self, d: ArrayLike) -> NDArray[np.float64]:
+        """The displacement ``d`` [m] as the channel indicates it with its true calibration errors (before noise):
+        g(d) of the class docstring; ``d`` itself without errors."""
+        d = np.asarray(d, dtype=float)
+        if self.truth is None:
+            return d
+        reading = (1.0 + self.truth.sensitivity) * d
+        if self.truth.linearity:
+            x = d / self._full_scale
+            reading = reading + self.truth.linearity * self._full_scale * (4.0 * x ** 3 - 3.0 * x)
+        return reading
+
+    def measure(self, u: ArrayLike, q: ArrayLike, t_s: ArrayLike | None = None) -> tuple[Any, Any]:
         """Reading for the pose ``(u, Q)``.
 
         Args:
             u: Platform translation, m, fixed frame; shape (3,) or (n, 3).
             q: Rotation matrix body → fixed; shape (3, 3) or (n, 3, 3).
+            t_s: Sample instants, s, scalar or shape (n,): needed by coloured noise (ignored without it).
 
         Returns:
             ``(reading_m, in_range)``: floats/bools for one pose, arrays of shape (n,) for a batch.
         """
         d = np.asarray(self.true_displacement(u, q))
-        noisy = d + self._rng.normal(0.0, 1.0, d.shape) * self._noise_std
+        noisy = self.indicated(d) + self._rng.normal(0.0, 1.0, d.shape) * self._noise_std
+        if self._coloured is not None:
+            if t_s is None:
+                raise ParameterError('t_s', t_s, 'the sample instants are needed with coloured noise')
+            n = max(d.size, 1)
+            noisy = noisy + self._coloured.sample(np.broadcast_to(np.asarray(t_s, dtype=float), (n,)))[:, 0].reshape(
+                d.shape)
         low, high = self._range
         reading = np.clip(_quantize(noisy, self._resolution), low, high)
         in_range = (d >= low) & (d <= high)
@@ -337,19 +397,40 @@ LVDT_PARAMS: tuple[ParamSpec, ...] = (
 )
 
 
+#: The simulated load cell's imperfections beyond LOAD_CELL_PARAMS (the load_cell node, which declares its
+#: calibration too, crane_stiffness.sim.calibration): true calibration errors and coloured noise, all off by default.
+LOAD_CELL_IMPERFECTION_PARAMS: tuple[ParamSpec, ...] = (
+    *LOAD_CELL_TRUTH_PARAMS, *noise_params('N, N, N, N·m, N·m, N·m', 6))
+#: The simulated LVDT's imperfections beyond LVDT_PARAMS (the lvdt node), all off by default.
+LVDT_IMPERFECTION_PARAMS: tuple[ParamSpec, ...] = (*LVDT_TRUTH_PARAMS, *noise_params('m', 1))
+
+
 def _seed(values: Mapping[str, Any]) -> int | None:
     return None if values['seed'] < 0 else int(values['seed'])
 
 
+def _coloured(values: Mapping[str, Any], channels: int) -> ColouredNoise | None:
+    """The coloured noise of parameter values with ``noise.*`` keys (None without them), from a generator of its own
+    seeded by ``seed`` (-1: random), so the white noise of a seed is the same with it on or off."""
+    if 'noise.ar1_std' not in values:
+        return None
+    seed = _seed(values)
+    return ColouredNoise.from_params(channels, values, rng=None if seed is None else np.random.default_rng((seed, 1)))
+
+
 def load_cell_from_params(values: Mapping[str, Any]) -> LoadCellModel:
-    """The :class:`LoadCellModel` of parameter values (:data:`LOAD_CELL_PARAMS`; other keys ignored; seed -1 =
-    random). Raises ParameterError naming a bad value."""
+    """The :class:`LoadCellModel` of parameter values (:data:`LOAD_CELL_PARAMS`, and when present
+    :data:`LOAD_CELL_IMPERFECTION_PARAMS` with the calibration; other keys ignored; seed -1 = random). Raises
+    ParameterError naming a bad value."""
+    truth = load_cell_truth(values) if 'truth.mode' in values else None
     return LoadCellModel.from_params({**{k: values[k] for k in LoadCellModel.PARAM_NAMES if k != 'seed'},
-                                      'seed': _seed(values)})
+                                      'seed': _seed(values)}, truth=truth, noise=_coloured(values, 6))
 
 
 def lvdt_from_params(values: Mapping[str, Any]) -> LvdtModel:
-    """The :class:`LvdtModel` of parameter values (:data:`LVDT_PARAMS`; other keys ignored; seed -1 = random).
-    Raises ParameterError naming a bad value."""
+    """The :class:`LvdtModel` of parameter values (:data:`LVDT_PARAMS`, and when present
+    :data:`LVDT_IMPERFECTION_PARAMS` with the calibration; other keys ignored; seed -1 = random). Raises
+    ParameterError naming a bad value."""
+    truth = lvdt_truth(values) if 'truth.mode' in values else None
     return LvdtModel.from_params({**{k: values[k] for k in LvdtModel.PARAM_NAMES if k != 'seed'},
-                                  'seed': _seed(values)})
+                                  'seed': _seed(values)}, truth=truth, noise=_coloured(values, 1))
