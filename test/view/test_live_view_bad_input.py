@@ -1,6 +1,7 @@
-"""Bad input to the live view on the running rig: a client with the token sending garbage (not JSON, unknown operations, unknown
-binary opcodes, unknown channels), a call of an unknown service, 20 clients connecting and leaving (some without
-closing): the node keeps running and says so in its log, and the rig's numbers are unchanged (the estimator fits
+"""Bad input to the live view on the running rig: a client with the token sending garbage (not JSON, unknown
+operations, unknown binary opcodes, a truncated service call, unknown channels), a call of an unknown service, 20
+clients connecting and leaving (some without closing): the node keeps running and says so in its log, and the rig's
+numbers are unchanged (the estimator fits
 every pair it pairs, its statuses are OK, the estimate is within 2 % of the prediction, and the plot's points are
 still the fitted pairs)."""
 from __future__ import annotations
