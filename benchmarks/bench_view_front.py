@@ -5,7 +5,8 @@ or straight from the SDK's private port (no front), alternating ``--pairs`` time
 
 Reports per case the process's CPU (user + system, this process: the servers and the client) as a fraction of one
 core, the messages received and their delivery latency (log time to receipt, p50 and p99). Target: the front adds
-at most 10 % of one core per 1,000 messages a second, and its p99 latency stays under 10 ms (median over the pairs).
+at most 10 % of one core per 1,000 messages a second, and at most 10 ms to the p99 latency (medians over the
+pairs).
 Exits 1 when a target is missed.
 
 Run: .venv/bin/python benchmarks/bench_view_front.py [--seconds 20] [--rate 1000] [--size 200] [--pairs 2]
@@ -31,7 +32,7 @@ from crane_stiffness.view.server import FoxgloveServer  # noqa: E402
 
 TOPIC = '/load_cell/wrench'
 ADDED_CPU_PER_KHZ = 0.10
-P99_LIMIT_S = 0.010
+ADDED_P99_LIMIT_S = 0.010
 
 
 def _cpu() -> float:
@@ -115,14 +116,14 @@ def main(argv=None) -> int:
     finally:
         server.stop()
     added = statistics.median(f['cpu'] - d['cpu'] for d, f in zip(runs['direct'], runs['front']))
-    p99 = statistics.median(r['p99_ms'] for r in runs['front']) / 1e3
+    p99 = statistics.median(f['p99_ms'] - d['p99_ms'] for d, f in zip(runs['direct'], runs['front'])) / 1e3
     per_khz = added / (args.rate / 1000.0)
-    ok = per_khz <= ADDED_CPU_PER_KHZ and p99 <= P99_LIMIT_S
+    ok = per_khz <= ADDED_CPU_PER_KHZ and p99 <= ADDED_P99_LIMIT_S
     print(f'the front adds {100 * added:.1f} % of a core at {args.rate:g} messages/s ({100 * per_khz:.1f} % per '
-          f'1,000/s; target <= {100 * ADDED_CPU_PER_KHZ:.0f} %), its p99 latency {1e3 * p99:.2f} ms (target <= '
-          f'{1e3 * P99_LIMIT_S:.0f} ms): {"met" if ok else "MISSED"}; load average {os.getloadavg()[0]:.1f}')
+          f'1,000/s; target <= {100 * ADDED_CPU_PER_KHZ:.0f} %) and {1e3 * p99:.2f} ms to the p99 latency (target <= '
+          f'{1e3 * ADDED_P99_LIMIT_S:.0f} ms): {"met" if ok else "MISSED"}; load average {os.getloadavg()[0]:.1f}')
     if args.json:
-        Path(args.json).write_text(json.dumps({'runs': runs, 'added_cpu': added, 'p99_s': p99, 'met': ok},
+        Path(args.json).write_text(json.dumps({'runs': runs, 'added_cpu': added, 'added_p99_s': p99, 'met': ok},
                                               indent=1))
     return 0 if ok else 1
 

@@ -2,18 +2,22 @@
 
 The ``foxglove-sdk`` server offers no hook into its handshake (its listener hears of subscriptions, not of
 connections, and never sees a request's headers), so it listens on a private loopback port and this front stands
-on the public one (``websockets``, an asyncio server on a thread of its own):
+on the public one (stdlib asyncio, on a thread of its own):
 
 - at the handshake it refuses (HTTP 403) a ``Host`` or ``Origin`` the access policy (``view/access.py``) refuses,
   and (HTTP 401) a client without the token where connecting needs it (a server not on loopback);
-- an accepted connection gets a connection of its own to the SDK's server, and the frames pass both ways as they
-  are, except the service calls: the SDK's server offers none (whoever reaches its private port can only watch),
-  the front advertises the services after the server's ``serverInfo`` (adding the ``services`` capability) and
-  answers the calls (opcode 2) itself: with the token, by calling the handler; without it, with a
-  ``serviceCallFailure`` and a ``status`` saying why, and a log line naming the client (address, Origin).
+- an accepted connection gets a connection of its own to the SDK's server (the client's handshake passed on, its
+  key, version and subprotocols, without extensions: the frames stay uncompressed and readable), and the frames
+  pass both ways as bytes: from the server in whole frames, unread but for their headers (the front costs little
+  however fast the channels are); from the client read, to find the service calls. The SDK's server offers no
+  services (whoever reaches its private port can only watch): the front advertises them after the server's
+  ``serverInfo`` (adding the ``services`` capability) and answers the calls (opcode 2) itself: with the token, by
+  calling the handler; without it, with a ``serviceCallFailure`` and a ``status`` saying why, and a log line naming
+  the client (address, Origin).
 
-Frames are the Foxglove WebSocket protocol's: binary serviceCallRequest (opcode 2: u32 service id, u32 call id,
-u32 encoding length, encoding, payload), serviceCallResponse (opcode 3, the same layout); JSON ``advertiseServices``,
+Frames (RFC 6455): FIN and opcode, a 7, 16 or 64-bit length, a mask on the client's. The Foxglove WebSocket
+protocol's messages: binary serviceCallRequest (opcode 2: u32 service id, u32 call id, u32 encoding length,
+encoding, payload), serviceCallResponse (opcode 3, the same layout); JSON ``advertiseServices``,
 ``serviceCallFailure`` and ``status`` (level 0 info, 1 warning, 2 error).
 """
 from __future__ import annotations
@@ -22,14 +26,8 @@ import asyncio
 import json
 import struct
 import threading
+from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping
-
-from websockets.asyncio.client import ClientConnection, connect
-from websockets.asyncio.server import Server, ServerConnection, serve
-from websockets.datastructures import Headers
-from websockets.exceptions import ConnectionClosed
-from websockets.http11 import Request, Response
-from websockets.typing import Subprotocol
 
 from crane_stiffness.view.access import AccessPolicy
 from crane_stiffness.view.errors import ViewError
@@ -39,14 +37,111 @@ SUBPROTOCOLS = ('foxglove.sdk.v1', 'foxglove.websocket.v1')
 #: A service call's handler: (request encoding, request payload) -> response payload; raising refuses the call
 #: with the exception's text.
 CallHandler = Callable[[str, bytes], bytes]
-_START_TIMEOUT_S = 30.0
+_TIMEOUT_S = 60.0  # for a handshake to arrive or be answered: only a stuck peer takes this long
+_MAX_HEAD = 16 * 1024  # bytes of a handshake request or response
+_MAX_CLIENT_MESSAGE = 1 << 20  # bytes of one client message (subscriptions, calls): a bigger one closes it
+_TEXT, _BINARY, _CONTINUATION = 1, 2, 0
 _ERROR = 2
+_SERVER_INFO = b'{"op":"serverInfo"'
+_REASONS = {400: 'Bad Request', 401: 'Unauthorized', 403: 'Forbidden'}
 
 
-def who(remote: Any, headers: Headers) -> str:
+class _Closed(Exception):
+    """A peer broke the protocol (an unmasked client frame, a message too long): the connection is closed."""
+
+
+def frame(opcode: int, payload: bytes) -> bytes:
+    """One unmasked frame with FIN set (the server's side)."""
+    n = len(payload)
+    if n < 126:
+        head = struct.pack('!BB', 0x80 | opcode, n)
+    elif n < 1 << 16:
+        head = struct.pack('!BBH', 0x80 | opcode, 126, n)
+    else:
+        head = struct.pack('!BBQ', 0x80 | opcode, 127, n)
+    return head + payload
+
+
+def frame_bounds(buf: bytes | bytearray, pos: int) -> tuple[int, int, int, bool, bytes] | None:
+    """The frame at ``pos`` of ``buf``: (opcode, payload start, end, FIN, mask: 4 bytes or empty), or None while it
+    is incomplete."""
+    if len(buf) - pos < 2:
+        return None
+    b0, b1 = buf[pos], buf[pos + 1]
+    length, start = b1 & 0x7F, pos + 2
+    if length == 126:
+        if len(buf) - pos < 4:
+            return None
+        length, start = int.from_bytes(buf[pos + 2:pos + 4], 'big'), pos + 4
+    elif length == 127:
+        if len(buf) - pos < 10:
+            return None
+        length, start = int.from_bytes(buf[pos + 2:pos + 10], 'big'), pos + 10
+    mask = b''
+    if b1 & 0x80:
+        if len(buf) - start < 4:
+            return None
+        mask, start = bytes(buf[start:start + 4]), start + 4
+    if len(buf) < start + length:
+        return None
+    return b0 & 0x0F, start, start + length, bool(b0 & 0x80), mask
+
+
+def unmask(data: bytes | bytearray, mask: bytes) -> bytes:
+    """A client frame's payload unmasked (XOR with the 4-byte mask, repeated)."""
+    n = len(data)
+    key = (mask * (n // 4 + 1))[:n]
+    return (int.from_bytes(data, 'little') ^ int.from_bytes(key, 'little')).to_bytes(n, 'little')
+
+
+def parse_head(head: bytes) -> tuple[str, str, dict[str, list[str]]]:
+    """An HTTP request's head: (method, path, header name in lower case -> values); ValueError if malformed."""
+    lines = head.decode('latin-1').split('\r\n')
+    parts = lines[0].split(' ')
+    if len(parts) != 3 or not parts[2].startswith('HTTP/1.'):
+        raise ValueError(f'not an HTTP/1.x request line: {lines[0][:80]!r}')
+    headers: dict[str, list[str]] = {}
+    for line in lines[1:]:
+        if not line:
+            continue
+        name, sep, value = line.partition(':')
+        if not sep or not name or name != name.strip():
+            raise ValueError(f'malformed header line {line[:80]!r}')
+        headers.setdefault(name.lower(), []).append(value.strip())
+    return parts[0], parts[1], headers
+
+
+def _one(headers: dict[str, list[str]], name: str) -> str | None:
+    """The first value of header ``name`` (lower case), or None."""
+    values = headers.get(name)
+    return values[0] if values else None
+
+
+def who(peer: Any, origin: str | None) -> str:
     """A client as the log names it: its address and the Origin it sent."""
-    address = f'{remote[0]}:{remote[1]}' if isinstance(remote, tuple) and len(remote) >= 2 else str(remote)
-    return f'{address} (Origin {headers.get("Origin", "none")})'
+    address = f'{peer[0]}:{peer[1]}' if isinstance(peer, tuple) and len(peer) >= 2 else str(peer)
+    return f'{address} (Origin {origin or "none"})'
+
+
+@dataclass
+class _Connection:
+    """One client's connection: where its frames go, what the front holds back."""
+
+    writer: asyncio.StreamWriter
+    name: str
+    authenticated: bool
+    info_seen: bool = False  # the server's serverInfo went by (the services advertised after it)
+    down_fragmented: bool = False  # a fragmented message of the server's is being passed on
+    held: list[bytes] = field(default_factory=list)  # the front's frames waiting for it to end
+    parts: list[tuple[bytes, bytes, bytes]] = field(default_factory=list)  # a fragmented client message: (frame,
+    # payload, mask)
+
+    def send(self, data: bytes) -> None:
+        """A frame of the front's own, between two of the server's whole messages."""
+        if self.down_fragmented:
+            self.held.append(data)
+        elif not self.writer.is_closing():
+            self.writer.write(data)
 
 
 class WebSocketFront:
@@ -57,169 +152,260 @@ class WebSocketFront:
                  services: Mapping[str, tuple[dict[str, Any], CallHandler]], info: Callable[[str], Any],
                  warn: Callable[[str], Any]) -> None:
         self.policy = policy
-        self.upstream = f'ws://127.0.0.1:{upstream_port}'
+        self.upstream_port = upstream_port
         self.info, self.warn = info, warn
         self.by_id = {i: (name, entry[1]) for i, (name, entry) in enumerate(services.items(), start=1)}
-        self.advertised = json.dumps({'op': 'advertiseServices', 'services': [
-            {'id': i, 'name': name, **entry[0]} for i, (name, entry) in enumerate(services.items(), start=1)]})
+        advertised = {'op': 'advertiseServices', 'services': [
+            {'id': i, 'name': name, **entry[0]} for i, (name, entry) in enumerate(services.items(), start=1)]}
+        self.advertised = frame(_TEXT, json.dumps(advertised).encode())
         self.service_calls = 0  # answered by a handler (a success or its failure)
         self.refused_calls = 0  # refused for want of the token
         self.refused_connections = 0
+        self.connections: set[asyncio.StreamWriter] = set()
         self.loop = asyncio.new_event_loop()
         self.thread = threading.Thread(target=self.loop.run_forever, name='live_view_ws_front', daemon=True)
         self.thread.start()
         try:
-            self.server: Server = asyncio.run_coroutine_threadsafe(self._start(host, port), self.loop).result(
-                _START_TIMEOUT_S)
+            self.server = asyncio.run_coroutine_threadsafe(
+                asyncio.start_server(self._handle, host, port, limit=_MAX_HEAD), self.loop).result(_TIMEOUT_S)
         except OSError as exc:
             self._stop_loop()
             raise ViewError(f'cannot serve the Foxglove WebSocket on {host}:{port}: {exc.strerror}') from exc
-
-    async def _start(self, host: str, port: int) -> Server:
-        # No compression (the frames pass as they are) nor keepalive pings (a client of a loaded machine that
-        # answers late stays connected, as with the SDK's server); no size limit (a scene may be large).
-        return await serve(self._handle, host, port, process_request=self._check,
-                           subprotocols=[Subprotocol(p) for p in SUBPROTOCOLS], compression=None,
-                           max_size=None, ping_interval=None, server_header=None)
 
     @property
     def port(self) -> int:
         return int(self.server.sockets[0].getsockname()[1])
 
     # --- the handshake ---
-    def _check(self, connection: ServerConnection, request: Request) -> Response | None:
-        """Refuse the handshake (a response) or let it go on (None)."""
-        reason = (self.policy.host_refusal(request.headers.get('Host'))
-                  or self.policy.origin_refusal(request.headers.get('Origin')))
-        status = 403
-        if reason is None and not self.policy.open_to_read and not self._authenticated(request):
-            reason, status = 'the token is needed to connect (the server is not on loopback)', 401
-        if reason is None:
-            return None
-        self.refused_connections += 1
-        self.warn(f'live view: WebSocket from {who(connection.remote_address, request.headers)} refused: {reason}')
-        return connection.respond(status, reason + '\n')
-
-    def _authenticated(self, request: Request) -> bool:
-        return self.policy.token_ok(self.policy.presented_token(request.path, request.headers.get('Authorization')))
-
-    # --- a connection ---
-    async def _handle(self, client: ServerConnection) -> None:
-        request = client.request
-        assert request is not None  # the handshake is done
-        authenticated = self._authenticated(request)
-        name = who(client.remote_address, request.headers)
-        self.info(f'live view: WebSocket client {name} connected '
-                  f'({"with the token" if authenticated else "without the token: watching only"})')
+    async def _handle(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        self.connections.add(writer)
+        up_writer: asyncio.StreamWriter | None = None
         try:
-            async with connect(self.upstream, subprotocols=[client.subprotocol] if client.subprotocol else None,
-                               compression=None, max_size=None, ping_interval=None, open_timeout=60) as upstream:
-                tasks = {asyncio.create_task(self._down(upstream, client)),
-                         asyncio.create_task(self._up(client, upstream, authenticated, name))}
-                _done, pending = await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
-                for task in pending:
-                    task.cancel()
-                await asyncio.gather(*pending, return_exceptions=True)
-        except (OSError, ConnectionClosed, TimeoutError) as exc:
-            self.warn(f'live view: WebSocket client {name}: the view\'s server did not take it: {exc}')
+            try:
+                head = await asyncio.wait_for(reader.readuntil(b'\r\n\r\n'), _TIMEOUT_S)
+                method, path, headers = parse_head(head)
+            except (asyncio.IncompleteReadError, asyncio.LimitOverrunError, TimeoutError, ValueError) as exc:
+                self.refused_connections += 1
+                self.warn(f'live view: WebSocket from {who(writer.get_extra_info("peername"), None)} refused: '
+                          f'no valid handshake ({type(exc).__name__})')
+                await self._refuse(writer, 400, 'no valid WebSocket handshake')
+                return
+            origins = headers.get('origin', [])
+            name = who(writer.get_extra_info('peername'), origins[0] if origins else None)
+            status, reason = self._check(method, path, headers)
+            if status:
+                self.refused_connections += 1
+                self.warn(f'live view: WebSocket from {name} refused: {reason}')
+                await self._refuse(writer, status, reason)
+                return
+            authenticated = self.policy.token_ok(self.policy.presented_token(
+                path, _one(headers, 'authorization')))
+            up_reader, up_writer = await asyncio.open_connection('127.0.0.1', self.upstream_port, limit=1 << 20)
+            up_writer.write(self._upstream_request(headers))
+            answer = await asyncio.wait_for(up_reader.readuntil(b'\r\n\r\n'), _TIMEOUT_S)
+            writer.write(answer)  # 101 with the accept key of the client's key, the subprotocol chosen
+            if not answer.startswith(b'HTTP/1.1 101'):
+                status_line = answer.split(b'\r\n', 1)[0].decode('latin-1')
+                self.warn(f'live view: WebSocket client {name}: the view\'s server refused it: {status_line}')
+                await writer.drain()
+                return
+            self.info(f'live view: WebSocket client {name} connected '
+                      f'({"with the token" if authenticated else "without the token: watching only"})')
+            conn = _Connection(writer, name, authenticated)
+            tasks = {asyncio.create_task(self._down(up_reader, conn)),
+                     asyncio.create_task(self._up(reader, up_writer, conn))}
+            _done, pending = await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
+            for task in pending:
+                task.cancel()
+            # a peer gone mid-write (ConnectionResetError) ends its pump: nothing more to say
+            await asyncio.gather(*tasks, return_exceptions=True)
+        except (OSError, asyncio.IncompleteReadError, asyncio.LimitOverrunError, TimeoutError) as exc:
+            self.warn(f'live view: WebSocket client {who(writer.get_extra_info("peername"), None)}: {exc!r}')
+        finally:
+            self.connections.discard(writer)
+            for w in (writer, up_writer):
+                if w is not None:
+                    w.close()
 
-    async def _down(self, upstream: ClientConnection, client: ServerConnection) -> None:
-        """The SDK server's frames to the client; after ``serverInfo``, the services."""
-        try:
-            async for frame in upstream:
-                if isinstance(frame, str) and frame.startswith('{"op":"serverInfo"') and self.by_id:
-                    info = json.loads(frame)
-                    info['capabilities'] = [*info.get('capabilities', []), 'services']
-                    await client.send(json.dumps(info))
-                    await client.send(self.advertised)
-                    continue
-                await client.send(frame)
-        except ConnectionClosed:
-            pass
+    def _check(self, method: str, path: str, headers: dict[str, list[str]]) -> tuple[int, str]:
+        """(0, '') for a handshake that may go on, else (HTTP status, why)."""
+        for single in ('host', 'origin', 'authorization', 'sec-websocket-key'):
+            if len(headers.get(single, [])) > 1:
+                return 400, f'more than one {single} header'
+        if (method != 'GET' or 'websocket' not in ','.join(headers.get('upgrade', [])).lower()
+                or not headers.get('sec-websocket-key')):
+            return 400, 'not a WebSocket handshake'
+        origin = _one(headers, 'origin')
+        reason = (self.policy.host_refusal(_one(headers, 'host'))
+                  or self.policy.origin_refusal(origin))
+        if reason:
+            return 403, reason
+        if not self.policy.open_to_read and not self.policy.token_ok(self.policy.presented_token(
+                path, _one(headers, 'authorization'))):
+            return 401, 'the token is needed to connect (the server is not on loopback)'
+        return 0, ''
 
-    async def _up(self, client: ServerConnection, upstream: ClientConnection, authenticated: bool,
-                  name: str) -> None:
-        """The client's frames to the SDK's server, but service calls, answered here."""
-        try:
-            async for frame in client:
-                if isinstance(frame, bytes) and frame[:1] == b'\x02':
-                    await self._service_call(client, frame, authenticated, name)
-                else:
-                    await upstream.send(frame)
-        except ConnectionClosed:
-            pass
+    def _upstream_request(self, headers: dict[str, list[str]]) -> bytes:
+        """The client's handshake for the SDK's server: its key, version and subprotocols; no extensions (the frames
+        must stay readable), no token, no Origin."""
+        lines = ['GET / HTTP/1.1', f'Host: 127.0.0.1:{self.upstream_port}', 'Upgrade: websocket',
+                 'Connection: Upgrade', f'Sec-WebSocket-Key: {headers["sec-websocket-key"][0]}',
+                 f'Sec-WebSocket-Version: {(headers.get("sec-websocket-version") or ["13"])[0]}']
+        if headers.get('sec-websocket-protocol'):
+            lines.append(f'Sec-WebSocket-Protocol: {", ".join(headers["sec-websocket-protocol"])}')
+        return ('\r\n'.join(lines) + '\r\n\r\n').encode('latin-1')
 
-    async def _service_call(self, client: ServerConnection, frame: bytes, authenticated: bool, name: str) -> None:
+    @staticmethod
+    async def _refuse(writer: asyncio.StreamWriter, status: int, reason: str) -> None:
+        body = (reason + '\n').encode('utf-8')
+        writer.write(f'HTTP/1.1 {status} {_REASONS[status]}\r\nContent-Type: text/plain; charset=utf-8\r\n'
+                     f'Content-Length: {len(body)}\r\nConnection: close\r\n\r\n'.encode() + body)
+        await writer.drain()
+
+    # --- the frames ---
+    async def _down(self, up_reader: asyncio.StreamReader, conn: _Connection) -> None:
+        """The server's frames to the client, whole frames as read; after ``serverInfo``, the services."""
+        buf = bytearray()
+        while chunk := await up_reader.read(1 << 18):
+            buf += chunk
+            out, pos = [], 0
+            while (found := frame_bounds(buf, pos)) is not None:
+                opcode, start, end, fin, _mask = found
+                if not conn.info_seen and opcode == _TEXT and fin and buf.startswith(_SERVER_INFO, start):
+                    conn.info_seen = True
+                    out.append(self._server_info(bytes(buf[start:end])))
+                elif opcode in (_TEXT, _BINARY, _CONTINUATION):
+                    conn.down_fragmented = not fin
+                    out.append(bytes(buf[pos:end]))
+                else:  # a control frame (ping, pong, close)
+                    out.append(bytes(buf[pos:end]))
+                pos = end
+            del buf[:pos]
+            if not out:
+                continue
+            conn.writer.write(b''.join(out))
+            if conn.held and not conn.down_fragmented:
+                held, conn.held = conn.held, []
+                conn.writer.write(b''.join(held))
+            await conn.writer.drain()
+
+    def _server_info(self, payload: bytes) -> bytes:
+        if not self.by_id:
+            return frame(_TEXT, payload)
+        info = json.loads(payload)
+        info['capabilities'] = [*info.get('capabilities', []), 'services']
+        return frame(_TEXT, json.dumps(info).encode()) + self.advertised
+
+    async def _up(self, reader: asyncio.StreamReader, up_writer: asyncio.StreamWriter, conn: _Connection) -> None:
+        """The client's frames to the server, but the service calls, answered here."""
+        buf = bytearray()
         try:
-            service_id, call_id, length = struct.unpack_from('<III', frame, 1)
-            encoding = frame[13:13 + length].decode('utf-8')
-            if 13 + length > len(frame):
-                raise ValueError('the encoding runs past the frame')
+            while chunk := await reader.read(1 << 16):
+                buf += chunk
+                out, pos = [], 0
+                while (found := frame_bounds(buf, pos)) is not None:
+                    opcode, start, end, fin, mask = found
+                    if not mask:
+                        raise _Closed('an unmasked frame from the client')
+                    if end - start > _MAX_CLIENT_MESSAGE:
+                        raise _Closed(f'a frame of {end - start} bytes from the client')
+                    out.extend(self._from_client(conn, opcode, fin, bytes(buf[pos:end]), buf[start:end], mask))
+                    pos = end
+                if len(buf) - pos > _MAX_CLIENT_MESSAGE + 14:
+                    raise _Closed('a frame too long from the client')
+                del buf[:pos]
+                if out:
+                    up_writer.write(b''.join(out))
+                    await up_writer.drain()
+        except _Closed as exc:
+            self.warn(f'live view: WebSocket client {conn.name} closed: {exc}')
+
+    def _from_client(self, conn: _Connection, opcode: int, fin: bool, raw: bytes, payload: bytearray,
+                     mask: bytes) -> list[bytes]:
+        """What of one client frame goes on to the server (a service call is handled here instead)."""
+        if opcode == _CONTINUATION and conn.parts:
+            conn.parts.append((raw, bytes(payload), mask))
+            if sum(len(p[1]) for p in conn.parts) > _MAX_CLIENT_MESSAGE:
+                raise _Closed('a message too long from the client')
+            if not fin:
+                return []
+            parts, conn.parts = conn.parts, []
+            first = parts[0][0][0] & 0x0F
+            if first == _BINARY:
+                message = b''.join(unmask(p, m) for _raw, p, m in parts)
+                if message[:1] == b'\x02':
+                    self._service_call(conn, message)
+                    return []
+            return [p[0] for p in parts]
+        if opcode in (_TEXT, _BINARY) and not fin:
+            conn.parts = [(raw, bytes(payload), mask)]
+            return []
+        if opcode == _BINARY and payload and payload[0] ^ mask[0] == 2:
+            self._service_call(conn, unmask(payload, mask))
+            return []
+        return [raw]  # any other frame: the server's to read (and to refuse)
+
+    def _service_call(self, conn: _Connection, message: bytes) -> None:
+        try:
+            service_id, call_id, length = struct.unpack_from('<III', message, 1)
+            if 13 + length > len(message):
+                raise ValueError('the encoding runs past the message')
+            encoding = message[13:13 + length].decode('utf-8')
         except (struct.error, UnicodeDecodeError, ValueError) as exc:
-            await self._status(client, f'invalid service call request: {exc}')
+            conn.send(_status(f'invalid service call request: {exc}'))
             return
-        payload = frame[13 + length:]
-        if not authenticated:
+        payload = message[13 + length:]
+        service = self.by_id.get(service_id, (f'#{service_id}',))[0]
+        if not conn.authenticated:
             self.refused_calls += 1
-            service = self.by_id.get(service_id, (f'#{service_id}',))[0]
-            self.warn(f'live view: service call {service} from {name} refused: no token')
+            self.warn(f'live view: service call {service} from {conn.name} refused: no token')
             text = (f'service {service}: refused, this connection has no token (connect with ?token=... as the '
                     f'live view printed it)')
-            await self._failure(client, service_id, call_id, text)
-            await self._status(client, text)
+            conn.send(_failure(service_id, call_id, text) + _status(text))
             return
         if service_id not in self.by_id:
-            await self._failure(client, service_id, call_id, f'no service with id {service_id}')
+            conn.send(_failure(service_id, call_id, f'no service with id {service_id}'))
             return
-        service, handler = self.by_id[service_id]
         if encoding not in ('json', 'cdr'):
-            await self._failure(client, service_id, call_id, f'service {service}: encoding {encoding!r}: expected '
-                                'json or cdr')
+            conn.send(_failure(service_id, call_id, f'service {service}: encoding {encoding!r}: expected json or '
+                                                    'cdr'))
             return
         # the handler waits for the ROS service: on a thread, so the frames keep flowing meanwhile
-        asyncio.create_task(self._answer(client, service_id, call_id, encoding, payload, handler))
+        asyncio.get_running_loop().create_task(self._answer(conn, service_id, call_id, encoding, payload))
 
-    async def _answer(self, client: ServerConnection, service_id: int, call_id: int, encoding: str,
-                      payload: bytes, handler: CallHandler) -> None:
+    async def _answer(self, conn: _Connection, service_id: int, call_id: int, encoding: str, payload: bytes) -> None:
         self.service_calls += 1
         try:
-            response = await asyncio.to_thread(handler, encoding, payload)
+            response = await asyncio.to_thread(self.by_id[service_id][1], encoding, payload)
         except Exception as exc:  # noqa: BLE001 (any failure of the call is the client's to read)
-            await self._failure(client, service_id, call_id, str(exc))
+            conn.send(_failure(service_id, call_id, str(exc)))
             return
         enc = encoding.encode()
-        try:
-            await client.send(struct.pack('<BIII', 3, service_id, call_id, len(enc)) + enc + response)
-        except ConnectionClosed:
-            pass
-
-    @staticmethod
-    async def _failure(client: ServerConnection, service_id: int, call_id: int, message: str) -> None:
-        try:
-            await client.send(json.dumps({'op': 'serviceCallFailure', 'serviceId': service_id, 'callId': call_id,
-                                          'message': message}))
-        except ConnectionClosed:
-            pass
-
-    @staticmethod
-    async def _status(client: ServerConnection, message: str) -> None:
-        try:
-            await client.send(json.dumps({'op': 'status', 'level': _ERROR, 'message': message}))
-        except ConnectionClosed:
-            pass
+        conn.send(frame(_BINARY, struct.pack('<BIII', 3, service_id, call_id, len(enc)) + enc + response))
 
     # --- stop ---
     def stop(self) -> None:
         """Close the server and its connections, then the loop's thread."""
         async def close() -> None:
             self.server.close()
+            for writer in list(self.connections):
+                writer.close()
             await self.server.wait_closed()
         try:
-            asyncio.run_coroutine_threadsafe(close(), self.loop).result(_START_TIMEOUT_S)
+            asyncio.run_coroutine_threadsafe(close(), self.loop).result(_TIMEOUT_S)
         finally:
             self._stop_loop()
 
     def _stop_loop(self) -> None:
         self.loop.call_soon_threadsafe(self.loop.stop)
-        self.thread.join(_START_TIMEOUT_S)
+        self.thread.join(_TIMEOUT_S)
         self.loop.close()
+
+
+def _failure(service_id: int, call_id: int, message: str) -> bytes:
+    return frame(_TEXT, json.dumps({'op': 'serviceCallFailure', 'serviceId': service_id, 'callId': call_id,
+                                    'message': message}).encode())
+
+
+def _status(message: str) -> bytes:
+    return frame(_TEXT, json.dumps({'op': 'status', 'level': _ERROR, 'message': message}).encode())

@@ -41,7 +41,6 @@ PYTHON_DEPENDENCIES = {
     'zstandard': ('zstandard', 'python3-zstandard-pip'),
     'lz4': ('lz4', 'python3-lz4-pip'),
     'foxglove': ('foxglove-sdk', 'python3-foxglove-sdk-pip'),
-    'websockets': ('websockets', 'python3-websockets-pip'),  # PyPI's: Ubuntu's predates its asyncio API
 }
 
 # Imports that are optional: import name -> the setup.py extra that installs it. Imported only inside a

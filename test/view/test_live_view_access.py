@@ -265,12 +265,12 @@ def test_a_page_of_another_origin_cannot_use_the_view_in_chromium(rig, evil_site
     browser = Browser(chromium_path, tmp_path / 'chromium.log')
     try:
         browser.open(f'{evil_site}/?port={rig.ws_port}&http_port={rig.http_port}&token={rig.token}')
-        browser.wait_for("document.body.dataset.done === 'yes'")
+        browser.wait_for("document.body?.dataset.done === 'yes'")
         evil_log = browser.evaluate("document.getElementById('log').textContent")
         # the view's own page at its address with the token still connects and watches
         browser.open(f'http://127.0.0.1:{rig.http_port}/?token={rig.token}')
-        browser.wait_for("document.getElementById('connection').textContent === 'connected'")
-        browser.wait_for("document.body.dataset.run === 'one_axis'")
+        browser.wait_for("document.getElementById('connection')?.textContent === 'connected'")
+        browser.wait_for("document.body?.dataset.run === 'one_axis'")
     finally:
         browser.close()
     lines = evil_log.split('\n')
