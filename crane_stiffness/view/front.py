@@ -40,6 +40,7 @@ CallHandler = Callable[[str, bytes], bytes]
 _TIMEOUT_S = 60.0  # for a handshake to arrive or be answered: only a stuck peer takes this long
 _MAX_HEAD = 16 * 1024  # bytes of a handshake request or response
 _MAX_CLIENT_MESSAGE = 1 << 20  # bytes of one client message (subscriptions, calls): a bigger one closes it
+_HIGH_WATER = 4 << 20  # bytes unsent to a client above which the server's side is not read
 _TEXT, _BINARY, _CONTINUATION = 1, 2, 0
 _ERROR = 2
 _SERVER_INFO = b'{"op":"serverInfo"'
@@ -85,6 +86,18 @@ def frame_bounds(buf: bytes | bytearray, pos: int) -> tuple[int, int, int, bool,
     if len(buf) < start + length:
         return None
     return b0 & 0x0F, start, start + length, bool(b0 & 0x80), mask
+
+
+def announced_length(buf: bytes | bytearray, pos: int) -> int | None:
+    """The payload length the frame at ``pos`` announces, once its header's length bytes are there."""
+    if len(buf) - pos < 2:
+        return None
+    length = buf[pos + 1] & 0x7F
+    if length == 126:
+        return int.from_bytes(buf[pos + 2:pos + 4], 'big') if len(buf) - pos >= 4 else None
+    if length == 127:
+        return int.from_bytes(buf[pos + 2:pos + 10], 'big') if len(buf) - pos >= 10 else None
+    return length
 
 
 def unmask(data: bytes | bytearray, mask: bytes) -> bytes:
@@ -144,6 +157,66 @@ class _Connection:
             self.writer.write(data)
 
 
+class _Downstream(asyncio.Protocol):
+    """The connection to the SDK's server for one client: its handshake answer (``answer``), then its frames to the
+    client as they arrive, from the transport's callback (no task woken per read: the fast channels' path). Reading
+    pauses while the client's socket has more than ``_HIGH_WATER`` bytes unsent (a slow client: the SDK's server
+    then drops its oldest data messages, as it does for a slow client of its own)."""
+
+    def __init__(self, front: WebSocketFront) -> None:
+        loop = asyncio.get_running_loop()
+        self.front = front
+        self.answer: asyncio.Future[bytes] = loop.create_future()
+        self.closed: asyncio.Future[None] = loop.create_future()
+        self.buf = bytearray()
+        self.conn: _Connection | None = None
+        self.transport: asyncio.Transport | None = None
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        assert isinstance(transport, asyncio.Transport)
+        self.transport = transport
+
+    def data_received(self, data: bytes) -> None:
+        self.buf += data
+        if self.conn is not None:
+            self._pass()
+        elif not self.answer.done():
+            end = self.buf.find(b'\r\n\r\n')
+            if end >= 0:
+                self.answer.set_result(bytes(self.buf[:end + 4]))
+                del self.buf[:end + 4]  # frames sent right after it wait here for attach()
+            elif len(self.buf) > _MAX_HEAD:
+                self.answer.set_exception(ConnectionError('no handshake answer from the view\'s server'))
+
+    def attach(self, conn: _Connection) -> None:
+        """From now on the frames go to ``conn``."""
+        self.conn = conn
+        self._pass()
+
+    def _pass(self) -> None:
+        assert self.conn is not None and self.transport is not None
+        self.front._pass_down(self.buf, self.conn)
+        client = self.conn.writer.transport
+        if client.get_write_buffer_size() > _HIGH_WATER and not self.transport.is_closing():
+            self.transport.pause_reading()
+            asyncio.get_running_loop().call_later(0.005, self._resume)
+
+    def _resume(self) -> None:
+        assert self.conn is not None and self.transport is not None
+        if self.transport.is_closing() or self.conn.writer.is_closing():
+            return
+        if self.conn.writer.transport.get_write_buffer_size() > _HIGH_WATER // 2:
+            asyncio.get_running_loop().call_later(0.005, self._resume)
+        else:
+            self.transport.resume_reading()
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        if not self.answer.done():
+            self.answer.set_exception(ConnectionError('the view\'s server closed the connection'))
+        if not self.closed.done():
+            self.closed.set_result(None)
+
+
 class WebSocketFront:
     """The front on ``host:port`` before the SDK's server on ``127.0.0.1:upstream_port``. ``services``: name ->
     (advertised service as the protocol's JSON without ``id``, handler); ``info``/``warn``: the node's log."""
@@ -179,7 +252,7 @@ class WebSocketFront:
     # --- the handshake ---
     async def _handle(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         self.connections.add(writer)
-        up_writer: asyncio.StreamWriter | None = None
+        upstream: asyncio.Transport | None = None
         try:
             try:
                 head = await asyncio.wait_for(reader.readuntil(b'\r\n\r\n'), _TIMEOUT_S)
@@ -200,9 +273,11 @@ class WebSocketFront:
                 return
             authenticated = self.policy.token_ok(self.policy.presented_token(
                 path, _one(headers, 'authorization')))
-            up_reader, up_writer = await asyncio.open_connection('127.0.0.1', self.upstream_port, limit=1 << 20)
-            up_writer.write(self._upstream_request(headers))
-            answer = await asyncio.wait_for(up_reader.readuntil(b'\r\n\r\n'), _TIMEOUT_S)
+            up, down = await asyncio.get_running_loop().create_connection(
+                lambda: _Downstream(self), '127.0.0.1', self.upstream_port)
+            upstream = up
+            up.write(self._upstream_request(headers))
+            answer = await asyncio.wait_for(asyncio.shield(down.answer), _TIMEOUT_S)
             writer.write(answer)  # 101 with the accept key of the client's key, the subprotocol chosen
             if not answer.startswith(b'HTTP/1.1 101'):
                 status_line = answer.split(b'\r\n', 1)[0].decode('latin-1')
@@ -212,20 +287,19 @@ class WebSocketFront:
             self.info(f'live view: WebSocket client {name} connected '
                       f'({"with the token" if authenticated else "without the token: watching only"})')
             conn = _Connection(writer, name, authenticated)
-            tasks = {asyncio.create_task(self._down(up_reader, conn)),
-                     asyncio.create_task(self._up(reader, up_writer, conn))}
-            _done, pending = await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
-            for task in pending:
-                task.cancel()
-            # a peer gone mid-write (ConnectionResetError) ends its pump: nothing more to say
-            await asyncio.gather(*tasks, return_exceptions=True)
+            down.attach(conn)
+            pump = asyncio.create_task(self._up(reader, up, conn))
+            await asyncio.wait({pump, down.closed}, return_when=asyncio.FIRST_COMPLETED)
+            pump.cancel()
+            # a peer gone mid-write (ConnectionResetError) ends the pump: nothing more to say
+            await asyncio.gather(pump, return_exceptions=True)
         except (OSError, asyncio.IncompleteReadError, asyncio.LimitOverrunError, TimeoutError) as exc:
             self.warn(f'live view: WebSocket client {who(writer.get_extra_info("peername"), None)}: {exc!r}')
         finally:
             self.connections.discard(writer)
-            for w in (writer, up_writer):
-                if w is not None:
-                    w.close()
+            writer.close()
+            if upstream is not None:
+                upstream.close()
 
     def _check(self, method: str, path: str, headers: dict[str, list[str]]) -> tuple[int, str]:
         """(0, '') for a handshake that may go on, else (HTTP status, why)."""
@@ -263,31 +337,27 @@ class WebSocketFront:
         await writer.drain()
 
     # --- the frames ---
-    async def _down(self, up_reader: asyncio.StreamReader, conn: _Connection) -> None:
-        """The server's frames to the client, whole frames as read; after ``serverInfo``, the services."""
-        buf = bytearray()
-        while chunk := await up_reader.read(1 << 18):
-            buf += chunk
-            out, pos = [], 0
-            while (found := frame_bounds(buf, pos)) is not None:
-                opcode, start, end, fin, _mask = found
-                if not conn.info_seen and opcode == _TEXT and fin and buf.startswith(_SERVER_INFO, start):
-                    conn.info_seen = True
-                    out.append(self._server_info(bytes(buf[start:end])))
-                elif opcode in (_TEXT, _BINARY, _CONTINUATION):
+    def _pass_down(self, buf: bytearray, conn: _Connection) -> None:
+        """The server's whole frames in ``buf`` to the client (taken out of ``buf``); after ``serverInfo``, the
+        services."""
+        out, pos = [], 0
+        while (found := frame_bounds(buf, pos)) is not None:
+            opcode, start, end, fin, _mask = found
+            if not conn.info_seen and opcode == _TEXT and fin and buf.startswith(_SERVER_INFO, start):
+                conn.info_seen = True
+                out.append(self._server_info(bytes(buf[start:end])))
+            else:
+                if opcode in (_TEXT, _BINARY, _CONTINUATION):
                     conn.down_fragmented = not fin
-                    out.append(bytes(buf[pos:end]))
-                else:  # a control frame (ping, pong, close)
-                    out.append(bytes(buf[pos:end]))
-                pos = end
-            del buf[:pos]
-            if not out:
-                continue
-            conn.writer.write(b''.join(out))
-            if conn.held and not conn.down_fragmented:
-                held, conn.held = conn.held, []
-                conn.writer.write(b''.join(held))
-            await conn.writer.drain()
+                out.append(bytes(buf[pos:end]))  # a data or a control frame (ping, pong, close), as it came
+            pos = end
+        del buf[:pos]
+        if not out or conn.writer.is_closing():
+            return
+        conn.writer.write(b''.join(out))
+        if conn.held and not conn.down_fragmented:
+            held, conn.held = conn.held, []
+            conn.writer.write(b''.join(held))
 
     def _server_info(self, payload: bytes) -> bytes:
         if not self.by_id:
@@ -296,7 +366,7 @@ class WebSocketFront:
         info['capabilities'] = [*info.get('capabilities', []), 'services']
         return frame(_TEXT, json.dumps(info).encode()) + self.advertised
 
-    async def _up(self, reader: asyncio.StreamReader, up_writer: asyncio.StreamWriter, conn: _Connection) -> None:
+    async def _up(self, reader: asyncio.StreamReader, upstream: asyncio.Transport, conn: _Connection) -> None:
         """The client's frames to the server, but the service calls, answered here."""
         buf = bytearray()
         try:
@@ -311,12 +381,12 @@ class WebSocketFront:
                         raise _Closed(f'a frame of {end - start} bytes from the client')
                     out.extend(self._from_client(conn, opcode, fin, bytes(buf[pos:end]), buf[start:end], mask))
                     pos = end
-                if len(buf) - pos > _MAX_CLIENT_MESSAGE + 14:
-                    raise _Closed('a frame too long from the client')
+                announced = announced_length(buf, pos)
+                if announced is not None and announced > _MAX_CLIENT_MESSAGE:  # refused before it is read
+                    raise _Closed(f'a frame of {announced} bytes from the client')
                 del buf[:pos]
-                if out:
-                    up_writer.write(b''.join(out))
-                    await up_writer.drain()
+                if out and not upstream.is_closing():
+                    upstream.write(b''.join(out))  # a client's few messages: the server reads them at once
         except _Closed as exc:
             self.warn(f'live view: WebSocket client {conn.name} closed: {exc}')
 
