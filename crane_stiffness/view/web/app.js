@@ -72,7 +72,12 @@ function connect(config) {
   const bySubscription = {};
   let nextId = 1;
   ws.onopen = () => setConnection(0, 'connected');
-  ws.onclose = () => { setConnection(2, 'disconnected, retrying'); setTimeout(() => connect(config), 1000); };
+  ws.onclose = () => {
+    // off loopback the server refuses a page without the token: say where it comes from
+    setConnection(2, TOKEN ? 'disconnected, retrying'
+      : 'disconnected, retrying (open the address with ?token=… as the live view printed it)');
+    setTimeout(() => connect(config), 1000);
+  };
   ws.onmessage = (event) => {
     if (typeof event.data === 'string') {
       const msg = JSON.parse(event.data);
