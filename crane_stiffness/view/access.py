@@ -129,7 +129,9 @@ class AccessPolicy:
         elif len(self.token) < 16 or not self.token.isprintable() or ' ' in self.token:
             raise ViewError('token = (hidden): must be at least 16 printable characters without spaces (empty: '
                             'a new random one)')
-        names = {'localhost', socket.gethostname().lower(), socket.getfqdn().lower()}
+        # the host name only: its fully qualified form would need a DNS lookup (seconds where DNS is down); a lab's
+        # DNS name goes in allowed_hosts
+        names = {'localhost', socket.gethostname().lower()}
         if is_wildcard(self.bind):
             names |= interface_addresses()
         else:
