@@ -4,5 +4,6 @@
 their 95 % band, the prediction line, the estimate and the status; ``scene``: the crane as a ``foxglove.SceneUpdate``;
 ``msgdefs``: ROS 2 message definitions as Foxglove clients want them; ``server``: the Foxglove WebSocket server and
 the page's HTTP server; ``access``: who may use them (Origin, Host, the token); ``front``: the WebSocket front on the
-public port that checks each handshake and answers the service calls; ``web/``: the page the node serves.
+public port that checks each handshake and answers the service calls (``wsframes``: the WebSocket frames it reads);
+``web/``: the page the node serves.
 """

@@ -15,10 +15,10 @@ on the public one (stdlib asyncio, on a thread of its own):
   calling the handler; without it, with a ``serviceCallFailure`` and a ``status`` saying why, and a log line naming
   the client (address, Origin).
 
-Frames (RFC 6455): FIN and opcode, a 7, 16 or 64-bit length, a mask on the client's. The Foxglove WebSocket
-protocol's messages: binary serviceCallRequest (opcode 2: u32 service id, u32 call id, u32 encoding length,
-encoding, payload), serviceCallResponse (opcode 3, the same layout); JSON ``advertiseServices``,
-``serviceCallFailure`` and ``status`` (level 0 info, 1 warning, 2 error).
+Frames (RFC 6455) are read and made by ``view/wsframes.py``. The Foxglove WebSocket protocol's messages: binary
+serviceCallRequest (opcode 2: u32 service id, u32 call id, u32 encoding length, encoding, payload),
+serviceCallResponse (opcode 3, the same layout); JSON ``advertiseServices``, ``serviceCallFailure`` and ``status``
+(level 0 info, 1 warning, 2 error).
 """
 from __future__ import annotations
 
@@ -31,6 +31,7 @@ from typing import Any, Callable, Mapping
 
 from crane_stiffness.view.access import AccessPolicy
 from crane_stiffness.view.errors import ViewError
+from crane_stiffness.view.wsframes import announced_length, frame, frame_bounds, parse_head, unmask
 
 #: The WebSocket subprotocols the SDK's server speaks (the page asks for the first; Lichtblick for the second).
 SUBPROTOCOLS = ('foxglove.sdk.v1', 'foxglove.websocket.v1')
@@ -49,79 +50,6 @@ _REASONS = {400: 'Bad Request', 401: 'Unauthorized', 403: 'Forbidden'}
 
 class _Closed(Exception):
     """A peer broke the protocol (an unmasked client frame, a message too long): the connection is closed."""
-
-
-def frame(opcode: int, payload: bytes) -> bytes:
-    """One unmasked frame with FIN set (the server's side)."""
-    n = len(payload)
-    if n < 126:
-        head = struct.pack('!BB', 0x80 | opcode, n)
-    elif n < 1 << 16:
-        head = struct.pack('!BBH', 0x80 | opcode, 126, n)
-    else:
-        head = struct.pack('!BBQ', 0x80 | opcode, 127, n)
-    return head + payload
-
-
-def frame_bounds(buf: bytes | bytearray, pos: int) -> tuple[int, int, int, bool, bytes] | None:
-    """The frame at ``pos`` of ``buf``: (opcode, payload start, end, FIN, mask: 4 bytes or empty), or None while it
-    is incomplete."""
-    if len(buf) - pos < 2:
-        return None
-    b0, b1 = buf[pos], buf[pos + 1]
-    length, start = b1 & 0x7F, pos + 2
-    if length == 126:
-        if len(buf) - pos < 4:
-            return None
-        length, start = int.from_bytes(buf[pos + 2:pos + 4], 'big'), pos + 4
-    elif length == 127:
-        if len(buf) - pos < 10:
-            return None
-        length, start = int.from_bytes(buf[pos + 2:pos + 10], 'big'), pos + 10
-    mask = b''
-    if b1 & 0x80:
-        if len(buf) - start < 4:
-            return None
-        mask, start = bytes(buf[start:start + 4]), start + 4
-    if len(buf) < start + length:
-        return None
-    return b0 & 0x0F, start, start + length, bool(b0 & 0x80), mask
-
-
-def announced_length(buf: bytes | bytearray, pos: int) -> int | None:
-    """The payload length the frame at ``pos`` announces, once its header's length bytes are there."""
-    if len(buf) - pos < 2:
-        return None
-    length = buf[pos + 1] & 0x7F
-    if length == 126:
-        return int.from_bytes(buf[pos + 2:pos + 4], 'big') if len(buf) - pos >= 4 else None
-    if length == 127:
-        return int.from_bytes(buf[pos + 2:pos + 10], 'big') if len(buf) - pos >= 10 else None
-    return length
-
-
-def unmask(data: bytes | bytearray, mask: bytes) -> bytes:
-    """A client frame's payload unmasked (XOR with the 4-byte mask, repeated)."""
-    n = len(data)
-    key = (mask * (n // 4 + 1))[:n]
-    return (int.from_bytes(data, 'little') ^ int.from_bytes(key, 'little')).to_bytes(n, 'little')
-
-
-def parse_head(head: bytes) -> tuple[str, str, dict[str, list[str]]]:
-    """An HTTP request's head: (method, path, header name in lower case -> values); ValueError if malformed."""
-    lines = head.decode('latin-1').split('\r\n')
-    parts = lines[0].split(' ')
-    if len(parts) != 3 or not parts[2].startswith('HTTP/1.'):
-        raise ValueError(f'not an HTTP/1.x request line: {lines[0][:80]!r}')
-    headers: dict[str, list[str]] = {}
-    for line in lines[1:]:
-        if not line:
-            continue
-        name, sep, value = line.partition(':')
-        if not sep or not name or name != name.strip():
-            raise ValueError(f'malformed header line {line[:80]!r}')
-        headers.setdefault(name.lower(), []).append(value.strip())
-    return parts[0], parts[1], headers
 
 
 def _one(headers: dict[str, list[str]], name: str) -> str | None:

@@ -13,7 +13,7 @@ from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import connect
 
 from crane_stiffness.view.access import AccessPolicy
-from crane_stiffness.view.front import frame, frame_bounds, parse_head, unmask
+from crane_stiffness.view.wsframes import frame, frame_bounds, parse_head, unmask
 from crane_stiffness.view.server import FoxgloveServer
 from helpers.foxglove_client import PATIENCE_S, FoxgloveClient
 
