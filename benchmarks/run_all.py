@@ -28,6 +28,8 @@ BENCHMARKS = [
     ('bench_rig.py', ['--rates', '1000', '--transports', 'sim', 'drivers'], 'bench_rig_drivers.json'),
     # The rig at 1 kHz without and with the live view and two clients: the cost of watching.
     ('bench_live_view.py', [], 'bench_live_view.json'),
+    # The live view's WebSocket front (Origin, Host, token) against the SDK's server straight: its own cost.
+    ('bench_view_front.py', [], 'bench_view_front.json'),
     ('bench_netft.py', [], 'bench_netft.json'),
     ('bench_startup.py', [], 'bench_startup.json'),
     ('bench_sim_time.py', [], 'bench_sim_time.json'),   # the simulated rig flat out, idle and beside busy processes

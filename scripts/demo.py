@@ -99,6 +99,7 @@ def main(argv=None) -> int:
     from crane_stiffness.launcher import rosrun
     from crane_stiffness.launcher.domains import INHERITED_ENV, claim_domain, describe_skipped, with_claim
     from crane_stiffness.launcher.ports import free_port
+    from crane_stiffness.view.access import new_token
     from crane_stiffness.launcher.rig import Observer, ProgramWatch, start_rig, summarize, wait_for_program_start
 
     out = Path(args.out)
@@ -124,15 +125,17 @@ def main(argv=None) -> int:
     observer = Observer()
     with rosrun.Processes(env, out / 'logs') as procs:
         launched = time.monotonic()
-        view = {'port': free_port(8765), 'http_port': free_port(8080)}  # the defaults unless taken
+        # the defaults unless taken; the token made here, to print the page's address with it at once (the node
+        # would make one too and log it); a ROS parameter reveals nothing DDS does not: its services are DDS's too
+        view = {'port': free_port(8765), 'http_port': free_port(8080), 'token': new_token()}
         program = start_rig(procs, share, args.program, session, Path(args.bags), live_view=args.live_view,
                             overrides={'live_view': view, **seeds}, arguments=arguments)
         six_axis = 'stiffness6_estimator' in procs.procs  # a six-axis program (program:=full6): the 6x6 result
         print(f'  started {len(procs.procs)} nodes at once; load_program waits for the rig ...', flush=True)
         if args.live_view:
-            print(f"  live view: open http://127.0.0.1:{view['http_port']}/ in a browser; Foxglove or Lichtblick: "
-                  f"ws://127.0.0.1:{view['port']} (layouts in install/crane_stiffness/share/crane_stiffness/"
-                  'foxglove/)', flush=True)
+            print(f"  live view: open http://127.0.0.1:{view['http_port']}/?token={view['token']} in a browser; "
+                  f"Foxglove or Lichtblick: ws://127.0.0.1:{view['port']}/?token={view['token']} (layouts in "
+                  'install/crane_stiffness/share/crane_stiffness/foxglove/)', flush=True)
         wait_for_program_start(observer, procs, 90)
         print(f'  program started {observer.running_at - launched:.1f} s after launch', flush=True)
         bar = tqdm(total=100, desc=f'program {program.name}', unit='%', mininterval=0.5,

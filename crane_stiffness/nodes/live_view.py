@@ -20,13 +20,19 @@ statuses, the fitted axis and its unit), /crane/wire_states,
 /crane/platform_pose and /crane/applied_wrench, /stiffness6/stiffness, /stiffness6/compliance and
 /stiffness6/status (latched); the geometry from the geometry.* parameters (the crane file).
 The high-rate inputs are taken serialized and only the newest is decoded, at ``rate_hz``. Port 0 takes a free port;
-the addresses are logged at start (``live view: page http://…, Foxglove ws://…``).
+the addresses are logged at start (``live view: page http://…/?token=…, Foxglove ws://…``).
+
+Access (crane_stiffness.view.access; docs/live_view.md, "Security"): both servers refuse a foreign ``Host`` or
+``Origin`` (the page's own origin and ``allowed_origins`` pass); every service call needs the token (``token``, or a
+new one at each start), and so does connecting at all when ``host`` is not a loopback address. The token is in the
+page's logged address and written (0600) to ``token_file``.
 """
 from __future__ import annotations
 
 import math
 import os
 import threading
+from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
@@ -53,6 +59,7 @@ from crane_stiffness.params.geometry import GEOMETRY_PARAMS, geometry_from_param
 from crane_stiffness.params.spec import ParamSpec
 from crane_stiffness.full6.reference import reference_at_rest
 from crane_stiffness.view import plot, stiffness6
+from crane_stiffness.view.access import AccessPolicy, default_token_file, write_token_file
 from crane_stiffness.view.msgdefs import definition
 from crane_stiffness.view.scene import SCENE_SCHEMA, SLACK_TENSION_N, CraneState, scene_update
 from crane_stiffness.view.server import FoxgloveServer, PageServer
@@ -71,6 +78,9 @@ DERIVED_CHANNELS: dict[str, tuple[str, dict[str, Any]]] = {
     PREFIX + 'scene': ('foxglove.SceneUpdate', SCENE_SCHEMA),
     PREFIX + 'stiffness6': (stiffness6.SCHEMA['title'], stiffness6.SCHEMA),
 }
+#: The parameters read once, at start.
+_AT_START = ('host', 'port', 'http_port', 'topics', 'services', 'six_axis_program', 'token', 'token_file',
+             'allowed_origins', 'allowed_hosts')
 _NO_EVENTS = SubscriptionEventCallbacks(use_default_callbacks=False)
 #: Every derived channel is sent at least this often (ns), changed or not.
 RESEND_NS = 1_000_000_000
@@ -91,6 +101,18 @@ PARAMS = (
               'it also does once a 6x6 fit is published [-]'),
     ParamSpec('topics', DEFAULT_TOPICS, 'ROS topics offered to Foxglove clients (types from the rig contract) [-]'),
     ParamSpec('services', DEFAULT_SERVICES, 'std_srvs/Trigger services offered through the WebSocket [-]'),
+    ParamSpec('token', '', 'secret every service call through the WebSocket must present (and every connection, '
+              'when host is not a loopback address); empty: a new random one at each start, shown in the page\'s '
+              'logged address and written to token_file [-]', rule='empty or at least 16 printable characters '
+              'without spaces'),
+    ParamSpec('token_file', '', 'file the token is written to, readable by its owner only (0600), for tools; empty: '
+              '$ROS_HOME (else ~/.ros)/crane_stiffness/live_view_<port>.token, removed at exit [-]'),
+    ParamSpec('allowed_origins', '', 'web origins besides the page\'s own that may open the WebSocket and fetch '
+              'the page, comma-separated (e.g. https://app.foxglove.dev for the Foxglove web app) [-]',
+              rule='each scheme://host[:port], http or https, no path'),
+    ParamSpec('allowed_hosts', '', 'host names a request\'s Host header may name besides localhost, this '
+              'machine\'s name and the addresses the servers listen on, comma-separated (a DNS name of the lab PC) '
+              '[-]', rule='each a host name or address'),
     ParamSpec('service_timeout_s', 5.0, 'longest wait for a forwarded service call [s]', above=0.0),
     *GEOMETRY_PARAMS,
 )
@@ -101,6 +123,8 @@ def _validate(values: dict[str, Any]) -> CraneGeometry:
         check(topic in _TYPES, 'topics', topic, f'must be one of {", ".join(sorted(_TYPES))}')
     for name in values['services']:
         check(name.startswith('/'), 'services', name, 'must be an absolute service name')
+    AccessPolicy(values['host'], token=values['token'] or 'x' * 16, allowed_origins=values['allowed_origins'],
+                 allowed_hosts=values['allowed_hosts'])  # raises ViewError (a ValueError) naming the field
     return geometry_from_params(values)  # raises GeometryError (a ValueError) naming the field
 
 
@@ -112,9 +136,12 @@ class LiveViewNode(Node):
         self.lock = threading.Lock()  # the wanted ROS topics, set on the server's threads
         self.wanted: dict[str, bool] = {}
         self.ros_subs: dict[str, Subscription] = {}
-        self.counters = {'forwarded': 0, 'derived_sent': 0, 'service_calls': 0, 'subscriptions_changed': 0}
+        self.counters = {'forwarded': 0, 'derived_sent': 0, 'service_calls': 0, 'subscriptions_changed': 0,
+                         'service_calls_refused': 0, 'connections_refused': 0}
         self.foxglove: FoxgloveServer | None = None
         self.page: PageServer | None = None
+        self.token_file: Path | None = None
+        self.token_removable = False
         self.timer: Timer | None = None
         self.settings: dict[str, Any] = {}
         self.points: plot.PointBuffer | None = None
@@ -158,9 +185,8 @@ class LiveViewNode(Node):
                 self.trigger_clients[name] = self.create_client(Trigger, name)
         if self.foxglove is None:
             self._start_servers(values)
-        elif any(values[k] != self.settings[k] for k in ('host', 'port', 'http_port', 'topics', 'services',
-                                                           'six_axis_program')):
-            self.get_logger().warn('host, ports, topics, services and six_axis_program take effect at the next start')
+        elif any(values[k] != self.settings[k] for k in _AT_START):
+            self.get_logger().warn(f'{", ".join(_AT_START)} take effect at the next start')
         self.dirty.update(('xy', 'scene', 'stiffness6'))
         self.settings = values
 
@@ -170,27 +196,42 @@ class LiveViewNode(Node):
         derived = dict(DERIVED_CHANNELS)
         services = {name: self._caller(name) for name in values['services']}
         logger = self.get_logger()
-        self.foxglove = FoxgloveServer(values['host'], values['port'], ros, derived, services, self._want,
-                                       logger.info, logger.warn)
-        try:
-            self.page = PageServer(values['host'], values['http_port'], self.foxglove.port,
-                                   'six_axis' if values['six_axis_program'] else 'one_axis')
-        except ValueError:
-            self.foxglove.stop()
-            raise
         host = values['host']
-        shown = '127.0.0.1' if host in ('0.0.0.0', '') else host
-        logger.info(f'live view: page http://{shown}:{self.page.port}/ , Foxglove ws://{shown}:{self.foxglove.port}'
-                    f' ({len(ros)} ROS topics, {len(derived)} derived channels, {len(services)} services; listening '
-                    f'on {host})')
+        policy = AccessPolicy(host, page_port=values['http_port'], token=values['token'],
+                              allowed_origins=values['allowed_origins'], allowed_hosts=values['allowed_hosts'])
+        self.foxglove = FoxgloveServer(host, values['port'], ros, derived, services, self._want, logger.info,
+                                       logger.warn, policy)
+        try:
+            self.page = PageServer(host, values['http_port'], self.foxglove.port,
+                                   'six_axis' if values['six_axis_program'] else 'one_axis', policy, logger.warn)
+            self.token_file = (Path(values['token_file']) if values['token_file']
+                               else default_token_file(self.foxglove.port))
+            write_token_file(self.token_file, policy.token)
+        except (ValueError, OSError):
+            self.close()
+            raise
+        self.token_removable = not values['token_file']
+        shown = '127.0.0.1' if host in ('0.0.0.0', '::', '') else host
+        ws_shown = f'[{shown}]' if ':' in shown else shown
+        access = ('watching open on loopback, service calls need the token' if policy.open_to_read
+                  else 'every connection needs the token')
+        logger.info(f'live view: page {policy.page_url(shown, self.page.port)} , Foxglove ws://{ws_shown}:'
+                    f'{self.foxglove.port}/?token={policy.token} ({len(ros)} ROS topics, {len(derived)} derived '
+                    f'channels, {len(services)} services; listening on {host}; {access}; token in {self.token_file})')
 
     def close(self) -> None:
-        """Stop both servers (run() calls it at exit)."""
+        """Stop both servers and remove a token file of our naming (run() calls it at exit; twice does no harm)."""
         if self.page is not None:
             self.page.stop()
+            self.page = None
         if self.foxglove is not None:
             self.counters['service_calls'] = self.foxglove.service_calls
+            self.counters['service_calls_refused'] = self.foxglove.front.refused_calls
+            self.counters['connections_refused'] = self.foxglove.front.refused_connections
             self.foxglove.stop()
+            self.foxglove = None
+        if self.token_file is not None and self.token_removable:
+            self.token_file.unlink(missing_ok=True)
 
     # --- ROS topics offered, subscribed while a client listens ---
     def _want(self, topic: str, wanted: bool) -> None:

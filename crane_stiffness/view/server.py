@@ -6,6 +6,10 @@ Channels: the ROS topics as foxglove_bridge offers them (schema encoding ``ros2m
 serialized message as received) and the derived channels (JSON). Services: ``std_srvs/srv/Trigger`` calls with a
 JSON (``{}``) or CDR request; the response has the request's encoding (JSON ``{"success", "message"}``).
 The page is plain files served from ``web/`` with ``config.json`` telling it the WebSocket port.
+
+Who may use them is the access policy's to say (``view/access.py``): the SDK's server listens on a private loopback
+port without services, behind the front (``view/front.py``) on the public port, which checks each handshake and
+answers the service calls; the page's server refuses a foreign ``Host`` or ``Origin`` (HTTP 403).
 """
 from __future__ import annotations
 
@@ -18,14 +22,16 @@ from pathlib import Path
 from typing import Any, Callable
 
 import foxglove
-from foxglove import Channel, Context, MessageSchema, Schema, Service, ServiceSchema
-from foxglove.websocket import Capability, ChannelView, Client, ServerListener
+from foxglove import Channel, Context, Schema
+from foxglove.websocket import ChannelView, Client, ServerListener
 
+from crane_stiffness.view.access import AccessPolicy
 from crane_stiffness.view.errors import ViewError
+from crane_stiffness.view.front import SUBPROTOCOLS, WebSocketFront
 
 WEB_DIR = Path(__file__).with_name('web')
-#: The WebSocket subprotocol the SDK's server speaks (the page and clients ask for it).
-SUBPROTOCOL = 'foxglove.sdk.v1'
+#: The WebSocket subprotocol the page asks for.
+SUBPROTOCOL = SUBPROTOCOLS[0]
 TRIGGER = 'std_srvs/srv/Trigger'
 #: What a Trigger call returns to the server: (success, message).
 TriggerHandler = Callable[[], tuple[bool, str]]
@@ -86,16 +92,27 @@ def _trigger_response(encoding: str, success: bool, message: str) -> bytes:
     return json.dumps({'success': success, 'message': message}).encode('utf-8')
 
 
+def _advertised(name: str) -> dict[str, Any]:
+    """A Trigger service as the protocol advertises it (without its id)."""
+    return {'type': TRIGGER,
+            'request': {'encoding': 'cdr', 'schemaName': f'{TRIGGER}_Request', 'schemaEncoding': 'ros2msg',
+                        'schema': ''},
+            'response': {'encoding': 'cdr', 'schemaName': f'{TRIGGER}_Response', 'schemaEncoding': 'ros2msg',
+                         'schema': 'bool success\nstring message\n'}}
+
+
 class FoxgloveServer:
-    """The WebSocket server, its channels and services. ``subscribe(topic, wanted)`` is called when the first
-    client subscribes to a ROS channel and when the last one leaves it (on a server thread)."""
+    """The WebSocket server, its channels and services: the SDK's server on a private loopback port, the front
+    (:class:`WebSocketFront`) on ``host:port``, both under ``policy``. ``subscribe(topic, wanted)`` is called when
+    the first client subscribes to a ROS channel and when the last one leaves it (on a server thread)."""
 
     def __init__(self, host: str, port: int, ros_topics: dict[str, tuple[str, str]],
                  derived: dict[str, tuple[str, dict[str, Any]]], services: dict[str, TriggerHandler],
                  subscribe: Callable[[str, bool], None], info: Callable[[str], Any],
-                 warn: Callable[[str], Any]) -> None:
+                 warn: Callable[[str], Any], policy: AccessPolicy | None = None) -> None:
         """``ros_topics``: topic -> (type 'pkg/msg/Type', ros2msg definition); ``derived``: topic -> (schema
-        name, JSON schema)."""
+        name, JSON schema); ``policy``: who may connect and call (None: a new one for ``host``, a new token)."""
+        self.policy = policy if policy is not None else AccessPolicy(host)
         self.context = Context()
         self.listener = _Listener(subscribe)
         self._log_forward = _LogForward(info, warn)
@@ -113,31 +130,36 @@ class FoxgloveServer:
                                                             data=json.dumps(schema).encode('utf-8')),
                                        message_encoding='json', context=self.context)
                         for topic, (name, schema) in derived.items()}
-        request = MessageSchema(encoding='cdr', schema=Schema(name=f'{TRIGGER}_Request', encoding='ros2msg',
-                                                              data=b''))
-        response = MessageSchema(encoding='cdr', schema=Schema(name=f'{TRIGGER}_Response', encoding='ros2msg',
-                                                               data=b'bool success\nstring message\n'))
-        self.service_calls = 0
-        service_list = [Service(name, schema=ServiceSchema(TRIGGER, request=request, response=response),
-                                handler=functools.partial(self._call, handler))
-                        for name, handler in services.items()]
         try:
+            # no services here: whoever reaches this private port can only watch; the front answers the calls
             self.server = foxglove.start_server(
-                name='crane_stiffness live_view', host=host, port=port, context=self.context,
-                capabilities=[Capability.Services], supported_encodings=['json', 'cdr'], services=service_list,
-                server_listener=self.listener)
+                name='crane_stiffness live_view', host='127.0.0.1', port=0, context=self.context,
+                supported_encodings=['json', 'cdr'], server_listener=self.listener)
         except Exception as exc:  # the SDK raises its own error type: say which address
             logger.removeHandler(self._log_forward)
-            raise ViewError(f'cannot serve Foxglove WebSocket on {host}:{port}: {exc}') from exc
+            raise ViewError(f'cannot serve Foxglove WebSocket on 127.0.0.1 (private port): {exc}') from exc
+        calls = {name: (_advertised(name), functools.partial(self._call, handler))
+                 for name, handler in services.items()}
+        try:
+            self.front = WebSocketFront(host, port, self.server.port, self.policy, calls, info, warn)
+        except ViewError:
+            self.server.stop()
+            logger.removeHandler(self._log_forward)
+            raise
 
     @property
     def port(self) -> int:
-        return self.server.port
+        """The public port (the front's)."""
+        return self.front.port
 
-    def _call(self, handler: TriggerHandler, request: Any) -> bytes:
-        self.service_calls += 1
+    @property
+    def service_calls(self) -> int:
+        return self.front.service_calls
+
+    @staticmethod
+    def _call(handler: TriggerHandler, encoding: str, _payload: bytes) -> bytes:
         success, message = handler()  # an exception becomes the client's serviceCallFailure
-        return _trigger_response('cdr' if request.encoding == 'cdr' else 'json', success, message)
+        return _trigger_response(encoding, success, message)
 
     def log_json(self, topic: str, message: dict[str, Any], log_time_ns: int) -> bool:
         """Send ``message`` on a derived channel if a client listens; True if sent."""
@@ -152,6 +174,7 @@ class FoxgloveServer:
         return self.derived[topic].has_sinks()
 
     def stop(self) -> None:
+        self.front.stop()
         self.server.stop()
         logging.getLogger('foxglove').removeHandler(self._log_forward)
 
@@ -164,9 +187,12 @@ RUNS = ('one_axis', 'six_axis')
 class _PageHandler(http.server.SimpleHTTPRequestHandler):
     ws_port = 0
     run = 'one_axis'
-    log_error_fn: Callable[[str], Any] = print
+    policy: AccessPolicy
+    warn: Callable[[str], Any] = print
 
     def do_GET(self) -> None:  # noqa: N802 (the http.server name)
+        if self._refused():
+            return
         if self.path.split('?')[0] == '/config.json':
             body = json.dumps({'ws_port': self.ws_port, 'subprotocol': SUBPROTOCOL, 'run': self.run}).encode()
             self.send_response(200)
@@ -176,6 +202,21 @@ class _PageHandler(http.server.SimpleHTTPRequestHandler):
             self.wfile.write(body)
             return
         super().do_GET()
+
+    def do_HEAD(self) -> None:  # noqa: N802 (the http.server name)
+        if not self._refused():
+            super().do_HEAD()
+
+    def _refused(self) -> bool:
+        """Refuse (403) a request whose Host or Origin the policy refuses; whether it was."""
+        reason = self.policy.host_refusal(self.headers.get('Host')) or self.policy.origin_refusal(
+            self.headers.get('Origin'))
+        if reason is None:
+            return False
+        self.warn(f'live view: page request from {self.client_address[0]}:{self.client_address[1]} (Origin '
+                  f'{self.headers.get("Origin", "none")}) refused: {reason}')
+        self.send_error(403, 'Forbidden', reason)
+        return True
 
     def end_headers(self) -> None:
         self.send_header('Cache-Control', 'no-store')
@@ -189,16 +230,22 @@ class PageServer:
     """The page (``web/``) on ``http://host:port/`` in a thread of its own; ``config.json`` names ``ws_port`` and
     the kind of ``run`` (one of :data:`RUNS`: the page lays itself out for it from its first frame)."""
 
-    def __init__(self, host: str, port: int, ws_port: int, run: str = 'one_axis') -> None:
+    def __init__(self, host: str, port: int, ws_port: int, run: str = 'one_axis', policy: AccessPolicy | None = None,
+                 warn: Callable[[str], Any] = print) -> None:
+        """``policy``: the Host and Origin checks (None: a new one for ``host``, allowing this page's origin)."""
         if run not in RUNS:
             raise ViewError(f'run {run!r}: expected one of {", ".join(RUNS)}')
-        handler = type('Handler', (_PageHandler,), {'ws_port': ws_port, 'run': run})
+        self.policy = policy if policy is not None else AccessPolicy(host)
+        handler = type('Handler', (_PageHandler,), {'ws_port': ws_port, 'run': run, 'policy': self.policy,
+                                                    'warn': staticmethod(warn)})
         try:
             self.httpd = http.server.ThreadingHTTPServer((host, port), functools.partial(handler,
                                                                                          directory=str(WEB_DIR)))
         except OSError as exc:
             raise ViewError(f'cannot serve the page on {host}:{port}: {exc.strerror}') from exc
         self.httpd.daemon_threads = True
+        if not self.policy.page_port:  # port 0: the page's origin is known once bound
+            self.policy.page_port = self.port
         self.thread = threading.Thread(target=self.httpd.serve_forever, name='live_view_http', daemon=True)
         self.thread.start()
 

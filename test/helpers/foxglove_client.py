@@ -16,6 +16,7 @@ import time
 from typing import Any, Callable
 
 from websockets.sync.client import ClientConnection, connect
+from websockets.typing import Origin
 
 SUBPROTOCOL = 'foxglove.sdk.v1'
 #: How long a test waits for something the server must send: far beyond any answer of a working server on a
@@ -26,10 +27,15 @@ PATIENCE_S = 120.0
 class FoxgloveClient:
     """One connection: what the server advertised, and the messages of the subscribed channels by topic."""
 
-    def __init__(self, port: int, host: str = '127.0.0.1', timeout_s: float = PATIENCE_S) -> None:
+    def __init__(self, port: int, host: str = '127.0.0.1', timeout_s: float = PATIENCE_S, *, token: str | None = None,
+                 origin: str | None = None) -> None:
+        """``token``: sent as ``?token=`` (the view's service calls need it); ``origin``: an Origin header, as a
+        browser's page sends it (None: none, as a tool's client)."""
+        query = f'/?token={token}' if token is not None else ''
         # no keepalive pings (ping_interval=None), and the receiving thread buffers every frame (max_queue=None)
         # instead of pausing until the test reads: the connection stays up however long the test looks away
-        self.ws: ClientConnection = connect(f'ws://{host}:{port}', subprotocols=[SUBPROTOCOL],
+        self.ws: ClientConnection = connect(f'ws://{host}:{port}{query}', subprotocols=[SUBPROTOCOL],
+                                            origin=Origin(origin) if origin else None,
                                             open_timeout=timeout_s, max_size=None, max_queue=None,
                                             ping_interval=None, legacy=True)
         self.server_info: dict[str, Any] = {}

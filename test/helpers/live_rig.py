@@ -6,6 +6,7 @@ thread of its own, to compare with what the view serves.
 from __future__ import annotations
 
 import contextlib
+import re
 import threading
 import time
 from pathlib import Path
@@ -97,11 +98,12 @@ class RigWatcher(Node):
 @contextlib.contextmanager
 def live_rig(env: dict[str, str], share: Path, out: Path, context: Any, overrides: dict[str, dict] | None = None,
              arguments: dict[str, str] | None = None,
-             **view: Any) -> Iterator[tuple[Processes, RigWatcher, dict[str, int]]]:
+             **view: Any) -> Iterator[tuple[Processes, RigWatcher, dict[str, Any]]]:
     """The side-force rig with the live view on free ports (``view``: more live_view parameters; ``overrides``:
     other nodes' parameters; ``arguments``: launch arguments, e.g. ``use_sim_time``), the watcher subscribed before
-    anything starts; yields (processes, watcher, {'port', 'http_port'}) once the view serves."""
-    ports = {'port': free_port(), 'http_port': free_port()}
+    anything starts; yields (processes, watcher, {'port', 'http_port', 'url', 'token'}) once the view serves: the
+    ports, and the page's address with its token and the token as the node logged them."""
+    ports: dict[str, Any] = {'port': free_port(), 'http_port': free_port()}
     watcher = RigWatcher(context=context)
     try:
         with Processes(env, out / 'logs') as procs:
@@ -112,9 +114,16 @@ def live_rig(env: dict[str, str], share: Path, out: Path, context: Any, override
                 procs.check_alive()
                 assert time.monotonic() < deadline, procs.log('live_view')
                 time.sleep(0.1)
-            yield procs, watcher, ports
+            yield procs, watcher, {**ports, **page_address(procs.log('live_view'))}
     finally:
         watcher.stop()
+
+
+def page_address(log: str) -> dict[str, str]:
+    """The page's address with the token (``url``) and the token, from the live view's start line."""
+    found = re.search(r'live view: page (http://\S+\?token=(\S+)) ', log)
+    assert found, log[-2000:]
+    return {'url': found.group(1), 'token': found.group(2)}
 
 
 def watched(watcher: RigWatcher, stamps: Iterable[float]) -> set[float]:

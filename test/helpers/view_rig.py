@@ -22,10 +22,11 @@ class ViewRig:
     """``view``: a LiveViewNode on free ports at 20 Hz (``six_axis_program`` as given); ``pub``: a node with the
     publishers of the six-axis estimator (``k``, ``c``, ``status6``: latched), the one-axis estimate (``estimate``,
     latched) and the crane's state (``wires``, ``pose``, ``wrench``). Close with :meth:`close` (or use as a context
-    manager)."""
+    manager). ``params``: more live_view parameters (e.g. ``allowed_origins``, ``token``)."""
 
-    def __init__(self, ctx: Any, publisher_name: str, *, six_axis_program: bool | None = None) -> None:
-        overrides = [Parameter('port', value=0), Parameter('http_port', value=0), Parameter('rate_hz', value=20.0)]
+    def __init__(self, ctx: Any, publisher_name: str, *, six_axis_program: bool | None = None, **params: Any) -> None:
+        overrides = [Parameter('port', value=0), Parameter('http_port', value=0), Parameter('rate_hz', value=20.0),
+                     *(Parameter(name, value=value) for name, value in params.items())]
         if six_axis_program is not None:
             overrides.append(Parameter('six_axis_program', value=six_axis_program))
         self.view = LiveViewNode(context=ctx, parameter_overrides=overrides)

@@ -1,7 +1,7 @@
 """The live view over the Foxglove WebSocket protocol, on the running simulated rig: the channels and schemas it
 advertises, subscribing, decoding, and the values checked against what the rig published (the plot's points are
 the estimator's fitted pairs, the scene's wire tensions are /crane/wire_states), and a service call through the
-bridge that tares the load cell."""
+bridge that tares the load cell: refused to a client without the token (the rig untouched), done for one with it."""
 from __future__ import annotations
 
 import json
@@ -28,7 +28,7 @@ DERIVED = ('xy', 'fit_lines', 'prediction', 'estimate', 'status', 'wires', 'scen
 def test_protocol_channels_values_and_tare(install_tree, rclpy_context, tmp_path):
     install, env = install_tree
     with live_rig(env, installed_config(install), tmp_path, rclpy_context) as (procs, watcher, ports):
-        client = FoxgloveClient(ports['port'])
+        client = FoxgloveClient(ports['port'], token=ports['token'])
         try:
             # The rig's topics as foxglove_bridge offers them: ROS 2 schemas, CDR messages.
             for topic in DEFAULT_TOPICS:
@@ -52,8 +52,26 @@ def test_protocol_channels_values_and_tare(install_tree, rclpy_context, tmp_path
             _check_crane(client, watcher)
             _check_estimate(client, watcher)
 
-            # tare through the bridge (CDR, as Foxglove's service call panel sends for ros2msg services)
+            # without the token (a page of the page's own origin, opened without ?token=): it may watch, not tare
             epochs_before = list(watcher.tare_epochs)
+            page_origin = f'http://127.0.0.1:{ports["http_port"]}'
+            watcher_only = FoxgloveClient(ports['port'], origin=page_origin)
+            try:
+                assert '/load_cell/tare' in watcher_only.services
+                watcher_only.call_raw(watcher_only.services['/load_cell/tare']['id'], 'cdr',
+                                      serialize_message(Trigger.Request()), 5)
+                assert watcher_only.poll_until(lambda: 5 in watcher_only.failures and watcher_only.statuses)
+            finally:
+                watcher_only.close()
+            assert 'no token' in watcher_only.failures[5], watcher_only.failures
+            assert 'no token' in watcher_only.statuses[-1]['message'] and watcher_only.statuses[-1]['level'] == 2
+            _wait_for(lambda: 'service call /load_cell/tare from 127.0.0.1:' in procs.log('live_view'))
+            refusal = [line for line in procs.log('live_view').splitlines()
+                       if 'service call /load_cell/tare from 127.0.0.1:' in line]
+            assert refusal and f'(Origin {page_origin}) refused: no token' in refusal[0], refusal
+
+            # tare through the bridge with the token (CDR, as Foxglove's service call panel sends for ros2msg
+            # services): the first tare of the run, the refused call did none
             encoding, payload = client.call('/load_cell/tare', 'cdr', serialize_message(Trigger.Request()), 1)
             response = deserialize_message(payload, Trigger.Response)
             assert encoding == 'cdr' and response.success, response.message
@@ -71,6 +89,7 @@ def test_protocol_channels_values_and_tare(install_tree, rclpy_context, tmp_path
     assert not any(sign in log for sign in UNCLEAN), log[-3000:]
     counters = final_counters(log, 'live_view')
     assert counters['derived_sent'] > 0 and counters['forwarded'] > 0 and counters['service_calls'] == 1
+    assert counters['service_calls_refused'] == 1 and counters['connections_refused'] == 0
 
 
 class _Enough:

@@ -1,6 +1,7 @@
-"""Bad input to the live view on the running rig: a client sending garbage (not JSON, unknown operations, unknown
-binary opcodes, unknown channels), a call of an unknown service, 20 clients connecting and leaving (some without
-closing): the node keeps running and says so in its log, and the rig's numbers are unchanged (the estimator fits
+"""Bad input to the live view on the running rig: a client with the token sending garbage (not JSON, unknown
+operations, unknown binary opcodes, a truncated service call, unknown channels), a call of an unknown service, 20
+clients connecting and leaving (some without closing): the node keeps running and says so in its log, and the rig's
+numbers are unchanged (the estimator fits
 every pair it pairs, its statuses are OK, the estimate is within 2 % of the prediction, and the plot's points are
 still the fitted pairs)."""
 from __future__ import annotations
@@ -22,7 +23,7 @@ def test_garbage_unknown_service_and_many_clients(install_tree, rclpy_context, t
     with live_rig(env, installed_config(install), tmp_path, rclpy_context,
                   arguments={'use_sim_time': 'true', 'real_time_factor': '1.0'}) as (procs, watcher, ports):
         wait_for_pairs(procs, watcher, 1000)
-        client = FoxgloveClient(ports['port'])
+        client = FoxgloveClient(ports['port'], token=ports['token'])
         try:
             client.subscribe('/live_view/xy', '/live_view/estimate')
             for text in ('not json at all', '{"op": "bogus"}', json.dumps({'op': 'subscribe', 'subscriptions': [

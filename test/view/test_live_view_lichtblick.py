@@ -103,8 +103,9 @@ def test_layouts_open_in_lichtblick_every_channel_parsed_and_the_crane_drawn(ins
     install, env = install_tree
     path = chromium()
     # Three times the side-force program (63 s): the app takes tens of seconds to load in software rendering.
-    with live_rig(env, installed_config(install), tmp_path, rclpy_context,
-                  overrides={'load_program': {'repeats': 3}}) as (procs, watcher, ports):
+    # The app is served from an origin of its own: allowed as a lab allows the Foxglove or Lichtblick web app.
+    with live_rig(env, installed_config(install), tmp_path, rclpy_context, overrides={'load_program': {'repeats': 3}},
+                  allowed_origins=lichtblick) as (procs, watcher, ports):
         wait_for_pairs(procs, watcher, 500)
         shots = {}
         for layout, titles in (('stiffness_test', ['3D crane (deflection exaggerated)', 'Estimator status',

@@ -61,13 +61,23 @@ function buildTables() {
     [1, 2, 3, 4, 5, 6].map((i) => `<tr><td>wire_${i}</td><td>–</td><td>–</td></tr>`).join('');
 }
 
+// The token of the page's address (?token=..., as the live view prints it) goes with the WebSocket's: without it
+// the page may only watch (on loopback), or not connect at all (a server on the lab network).
+const TOKEN = new URLSearchParams(location.search).get('token');
+
 function connect(config) {
-  const ws = new WebSocket(`ws://${location.hostname}:${config.ws_port}`, [config.subprotocol]);
+  const query = TOKEN ? `/?token=${encodeURIComponent(TOKEN)}` : '/';
+  const ws = new WebSocket(`ws://${location.hostname}:${config.ws_port}${query}`, [config.subprotocol]);
   ws.binaryType = 'arraybuffer';
   const bySubscription = {};
   let nextId = 1;
   ws.onopen = () => setConnection(0, 'connected');
-  ws.onclose = () => { setConnection(2, 'disconnected, retrying'); setTimeout(() => connect(config), 1000); };
+  ws.onclose = () => {
+    // off loopback the server refuses a page without the token: say where it comes from
+    setConnection(2, TOKEN ? 'disconnected, retrying'
+      : 'disconnected, retrying (open the address with ?token=… as the live view printed it)');
+    setTimeout(() => connect(config), 1000);
+  };
   ws.onmessage = (event) => {
     if (typeof event.data === 'string') {
       const msg = JSON.parse(event.data);
