@@ -23,9 +23,7 @@ import numpy as np
 from matplotlib import image
 from websockets.sync.client import connect
 
-#: How long a test waits for a page to show what it must: far beyond the time a working page takes on a loaded
-#: machine; only a page that never gets there takes this long.
-PATIENCE_S = 120.0
+from helpers import PATIENCE_S  # re-exported: the view tests import it from here
 
 
 def chromium() -> str:
