@@ -26,7 +26,7 @@ from crane_stiffness.bag.session_metadata import read_session
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
-from helpers import REPO, run_without_ros
+from helpers import PATIENCE_S, REPO, run_without_ros
 from helpers.bags import (JOINTS, RIG, T0, decoded, expected_by_topic, read_with_mcap_ros2, read_with_rosbags,
                           serialize)
 
@@ -102,7 +102,7 @@ def test_real_sigkill_then_read_and_recover(tmp_path):
         time.sleep(0.3)
     finally:
         proc.send_signal(signal.SIGKILL)
-        proc.wait(timeout=10)
+        proc.wait(timeout=PATIENCE_S)
         proc.stdout.close()
     assert proc.returncode == -signal.SIGKILL
     assert not (bag_dir / 'metadata.yaml').exists()
@@ -118,7 +118,7 @@ def test_real_sigkill_then_read_and_recover(tmp_path):
     assert np.array_equal(arr['stamp_nanosec'], (np.arange(n) % 1000) * 1_000_000)
 
     result = subprocess.run([sys.executable, '-m', 'crane_stiffness.bag.recover', str(bag_dir)],
-                            capture_output=True, text=True, env=env, timeout=60)
+                            capture_output=True, text=True, env=env, timeout=PATIENCE_S)
     assert result.returncode == 0, result.stderr
     info = yaml.safe_load((bag_dir / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
     saved = info['message_count']

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import pytest
 
+from helpers import PATIENCE_S
 from crane_stiffness.bag import BagReader
 from crane_stiffness.campaign.analyze import analyze_campaign
 from crane_stiffness.launcher import rosrun
@@ -49,7 +50,7 @@ def test_an_interrupted_campaign_resumes_where_it_stopped_and_records_true_and_n
     done = out / 'sessions' / 'fy_W50_l0.5_r1' / 'result.json'
     wait_for(done.is_file, 240, 'the first session', first, log)
     time.sleep(3.0)  # the second session's nodes starting: Ctrl-C in the middle of it
-    assert rosrun.interrupt(first, timeout_s=60) == 130, log.read_text()[-3000:]
+    assert rosrun.interrupt(first, timeout_s=PATIENCE_S) == 130, log.read_text()[-3000:]
     assert 'run the same command again to resume' in log.read_text()
     assert done.is_file() and not (out / 'sessions' / 'fy_W100_l0.5_r1' / 'result.json').exists()
     again = subprocess.run([str(CLI), 'campaign', 'run', str(spec), '--out', str(out), '--quiet', '--jobs', '1'],
@@ -95,7 +96,7 @@ def test_sessions_side_by_side_each_in_its_own_domain_give_the_numbers_of_one_at
     running = [side / 'sessions' / s / 'logs' / 'rig_host.log' for s in ('fy_W50_l0.5_r1', 'fy_W100_l0.5_r1')]
     wait_for(lambda: all(p.is_file() and 'rig ready' in p.read_text() for p in running), 240,
              'both sessions ready', first, log)
-    assert rosrun.interrupt(first, timeout_s=60) == 130, log.read_text()[-3000:]
+    assert rosrun.interrupt(first, timeout_s=PATIENCE_S) == 130, log.read_text()[-3000:]
     assert 'run the same command again to resume' in log.read_text()
     again = subprocess.run([str(CLI), 'campaign', 'run', str(spec), '--out', str(side), '--quiet', '--jobs', '2'],
                            capture_output=True, text=True, timeout=400)
@@ -147,12 +148,13 @@ def test_hardware_confirmed_by_a_service_call_from_another_node(tmp_path, rclpy_
     node = rclpy.create_node('operator', context=rclpy_context)
     try:
         client = node.create_client(Trigger, '/campaign/continue')
-        wait_for(lambda: client.wait_for_service(timeout_sec=0.2), 120, 'the /campaign/continue service', proc, log)
+        wait_for(lambda: client.wait_for_service(timeout_sec=0.2), PATIENCE_S, 'the /campaign/continue service', proc,
+                 log)
         assert not (out / 'bags' / 'fy_W40_l0.5_r1').exists()  # nothing runs before the operator confirms
         future = client.call_async(Trigger.Request())
         executor = SingleThreadedExecutor(context=rclpy_context)
         executor.add_node(node)
-        executor.spin_until_future_complete(future, timeout_sec=30)
+        executor.spin_until_future_complete(future, timeout_sec=PATIENCE_S)
         executor.shutdown()
         answer = future.result()
         assert answer is not None and answer.success and 'hang W = 40 N' in answer.message

@@ -20,7 +20,7 @@ from geometry_msgs.msg import PointStamped, PoseStamped, WrenchStamped
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 
-from helpers import call_trigger, isolated, publish_wrench_now, spin_until, stamp_ns, wrench_vector
+from helpers import PATIENCE_S, call_trigger, isolated, publish_wrench_now, spin_until, stamp_ns, wrench_vector
 from helpers.probe import ProbeNode
 from helpers.processes import final_counters, start_node_process, stop_node_process
 from crane_stiffness.contract import topics
@@ -92,24 +92,25 @@ def test_netft_reads_the_rdt_emulator_across_processes(rclpy_context, tmp_path):
     t_start = time.time_ns()
     ft = None
     try:
-        assert spin_until(ex, lambda: probe.cmd.get_subscription_count() >= 1, 20.0), (tmp_path / 'emu.log').read_text()
+        assert spin_until(ex, lambda: probe.cmd.get_subscription_count() >= 1, PATIENCE_S), \
+            (tmp_path / 'emu.log').read_text()
         probe.command(np.zeros(6))  # the load in force at rest (crane_model sends it to a reader that joins)
         # netft starts once the emulator holds it (its diagnostics count it used): records streamed before that are
         # rightly marked not ready, and the status checked below must be that of a device that never was.
-        assert spin_until(ex, lambda: (probe.status(emu_name) or (None, {}))[1].get('used') == '1', 20.0), \
+        assert spin_until(ex, lambda: (probe.status(emu_name) or (None, {}))[1].get('used') == '1', PATIENCE_S), \
             (tmp_path / 'emu.log').read_text()
         ft = start_node_process('netft', ft_args + [
             '-p', 'host:=127.0.0.1', '-p', f'port:={port}', '-p', 'counts_per_force:=1000000.0', '-p',
             'counts_per_torque:=1000000.0', '-p', 'publish_rate_hz:=1000.0', '-p', 'frame_id:=ft_test',
             '-p', 'tare_samples:=200'], tmp_path / 'netft.log')
-        assert spin_until(ex, lambda: len(probe.wrenches) > 500, 20.0), (tmp_path / 'netft.log').read_text()
+        assert spin_until(ex, lambda: len(probe.wrenches) > 500, PATIENCE_S), (tmp_path / 'netft.log').read_text()
         # No command yet: the sensor reads its bias.
         np.testing.assert_allclose(probe.wrench_after(0)[-100:], np.tile(BIAS, (100, 1)), atol=1e-6)
         applied = np.array([0.5, 2.0, 50.0, 0.01, -0.02, 0.1])
         probe.command(applied)
-        assert spin_until(ex, lambda: np.abs(probe.wrench_after(0)[-1] - (applied + BIAS)).max() < 1e-6, 10.0)
+        assert spin_until(ex, lambda: np.abs(probe.wrench_after(0)[-1] - (applied + BIAS)).max() < 1e-6, PATIENCE_S)
         t_cmd = probe.wrenches[-1][0]
-        spin_until(ex, lambda: len(probe.wrench_after(t_cmd)) >= 300, 10.0)
+        spin_until(ex, lambda: len(probe.wrench_after(t_cmd)) >= 300, PATIENCE_S)
         np.testing.assert_allclose(probe.wrench_after(t_cmd), np.tile(applied + BIAS, (len(probe.wrench_after(t_cmd)),
                                                                                       1)), atol=1e-6)
         stamps = np.array([s for s, _, _ in probe.wrenches])
@@ -118,16 +119,17 @@ def test_netft_reads_the_rdt_emulator_across_processes(rclpy_context, tmp_path):
         assert np.median(np.diff(stamps)) == pytest.approx(1e6, abs=5e4)   # 1 kHz out of 7 kHz
         assert t_start < stamps[0] and stamps[-1] < time.time_ns()         # on the host clock
         # Software tare at the load: the reading becomes zero.
-        assert spin_until(ex, lambda: probe.epochs[topics.LOAD_CELL_TARE] == [0.0], 5.0)  # latched at start
+        assert spin_until(ex, lambda: probe.epochs[topics.LOAD_CELL_TARE] == [0.0], PATIENCE_S)  # latched at start
         reply = call_trigger(ex, probe.node, f'/{ft_name}/tare')
         assert reply.success and 'tared on 200 samples' in reply.message
-        assert spin_until(ex, lambda: probe.epochs[topics.LOAD_CELL_TARE] == [0.0, 1.0], 5.0)  # the estimator segments
+        # the estimator segments on it
+        assert spin_until(ex, lambda: probe.epochs[topics.LOAD_CELL_TARE] == [0.0, 1.0], PATIENCE_S)
         # Samples stamped after the reply were sampled, so received and processed, after the tare.
         t_tare = time.time_ns() + 5_000_000
-        assert spin_until(ex, lambda: len(probe.wrench_after(t_tare)) >= 100, 10.0)
+        assert spin_until(ex, lambda: len(probe.wrench_after(t_tare)) >= 100, PATIENCE_S)
         assert np.abs(probe.wrench_after(t_tare)).max() < 1e-6
         # Diagnostics: records counted, nothing lost on loopback.
-        assert spin_until(ex, lambda: probe.status(ft_name) is not None, 5.0)
+        assert spin_until(ex, lambda: probe.status(ft_name) is not None, PATIENCE_S)
         status, values = probe.status(ft_name)
         assert int(values['received']) > 1000 and values['streaming'] == 'true'
         assert values['last_status'] == '0x00000000'
@@ -160,7 +162,7 @@ def test_modbus_lvdt_reads_the_modbus_emulator_across_processes(rclpy_context, t
     ex.add_node(probe.node)
     lv = None
     try:
-        assert spin_until(ex, lambda: probe.pose.get_subscription_count() >= 1, 20.0), \
+        assert spin_until(ex, lambda: probe.pose.get_subscription_count() >= 1, PATIENCE_S), \
             (tmp_path / 'emu.log').read_text()
         lv = start_node_process('modbus_lvdt', lv_args + channel + [
             '-p', 'host:=127.0.0.1', '-p', f'port:={port}', '-p', 'poll_rate_hz:=200.0', '-p', 'frame_id:=lvdt_mb'],
@@ -168,27 +170,30 @@ def test_modbus_lvdt_reads_the_modbus_emulator_across_processes(rclpy_context, t
         # No pose yet: the emulator answers "server device busy" and the driver publishes nothing (a reading of a
         # pose nobody measured would let a load program start before the chain is live).
         lv_log = tmp_path / 'lvdt.log'
-        assert spin_until(ex, lambda: 'server device busy' in lv_log.read_text(), 30.0), lv_log.read_text()
-        assert not spin_until(ex, lambda: len(probe.points) > 0, 1.0), probe.points[:3]
+        assert spin_until(ex, lambda: 'server device busy' in lv_log.read_text(), PATIENCE_S), lv_log.read_text()
+        assert probe.points == []
         rest = np.array([0.0, 0.0, 2.4e-5])
         probe.publish_pose(rest)  # the first pose: the emulator's LVDT zeroes on it
-        assert spin_until(ex, lambda: len(probe.points) > 50, 20.0), (tmp_path / 'lvdt.log').read_text()
+        assert spin_until(ex, lambda: len(probe.points) > 50, PATIENCE_S), (tmp_path / 'lvdt.log').read_text()
+        # Every reading, the first included, is of the zeroed rest pose: none was made up before the first pose (a
+        # register read while busy would read the channel's offset, -1 mm), however late it would have arrived.
         assert np.abs(probe.points_after(0)).max() < 1e-9
         probe.publish_pose(rest + [0.0, 5e-5, 0.0])  # 50 µm along the LVDT's axis (y)
-        assert spin_until(ex, lambda: abs(probe.points[-1][2] - 5e-5) < 1e-9, 10.0)
+        assert spin_until(ex, lambda: abs(probe.points[-1][2] - 5e-5) < 1e-9, PATIENCE_S)
         t_move = probe.points[-1][0]
-        spin_until(ex, lambda: len(probe.points_after(t_move)) >= 20, 5.0)
+        spin_until(ex, lambda: len(probe.points_after(t_move)) >= 20, PATIENCE_S)
         np.testing.assert_allclose(probe.points_after(t_move), 5e-5, atol=1e-9)  # float32 volts: ~1e-10 m
         stamps = np.array([s for s, _, _ in probe.points])
         assert np.all(np.diff(stamps) > 0) and {f for _, f, _ in probe.points} == {'lvdt_mb'}
-        assert spin_until(ex, lambda: probe.epochs[topics.LVDT_ZERO] == [0.0], 5.0)  # latched at start
+        assert spin_until(ex, lambda: probe.epochs[topics.LVDT_ZERO] == [0.0], PATIENCE_S)  # latched at start
         reply = call_trigger(ex, probe.node, f'/{lv_name}/zero')
         assert reply.success and 'zeroed on 10 readings' in reply.message
-        assert spin_until(ex, lambda: probe.epochs[topics.LVDT_ZERO] == [0.0, 1.0], 5.0)  # the estimator segments
+        # the estimator segments on it
+        assert spin_until(ex, lambda: probe.epochs[topics.LVDT_ZERO] == [0.0, 1.0], PATIENCE_S)
         t_zero = time.time_ns() + 5_000_000  # polled after the reply
-        assert spin_until(ex, lambda: len(probe.points_after(t_zero)) >= 10, 5.0)
+        assert spin_until(ex, lambda: len(probe.points_after(t_zero)) >= 10, PATIENCE_S)
         assert np.abs(probe.points_after(t_zero)).max() < 1e-9
-        assert spin_until(ex, lambda: probe.status(lv_name) is not None, 5.0)
+        assert spin_until(ex, lambda: probe.status(lv_name) is not None, PATIENCE_S)
         status, values = probe.status(lv_name)
         assert status.level == b'\x00' and values['failures'] == '0'
         assert math.isfinite(float(values['poll_jitter_p99_us']))
@@ -225,34 +230,35 @@ def test_netft_reports_lost_records_status_word_and_a_device_that_goes_away(rclp
     probe, ex = spin_node(rclpy_context, node, prefix)
     try:
         # Calibration from the box's netftapi2.xml (2e5 counts/N, 5e6 counts/N·m).
-        assert spin_until(ex, lambda: len(probe.wrenches) > 200, 10.0)
+        assert spin_until(ex, lambda: len(probe.wrenches) > 200, PATIENCE_S)
         np.testing.assert_allclose(probe.wrenches[-1][2], wrench, atol=1e-5)
         # Lost records → WARN with the count.
         dev.drop = lambda seq: seq % 100 == 0
         assert spin_until(ex, lambda: (s := probe.status(name, b'\x01')) is not None and 'records lost' in
-                          s[0].message, 5.0)
+                          s[0].message, PATIENCE_S)
         assert node.counters.records_lost > 0
         dev.drop = None
         # A status word → ERROR naming it; those records are not published.
         dev.status = 0x80000000
         assert spin_until(ex, lambda: (s := probe.status(name, b'\x02')) is not None and '0x80000000' in
-                          s[0].message, 5.0)
+                          s[0].message, PATIENCE_S)
         assert node.counters.status_dropped > 0
         dev.status = 0
         # Hardware tare: the bias command reaches the device, readings become zero.
         reply = call_trigger(ex, probe.node, f'/{name}/tare')
         assert reply.success and '0x0042' in reply.message
-        assert spin_until(ex, lambda: probe.epochs[topics.LOAD_CELL_TARE] == [0.0, 1.0], 5.0)  # a bias is a tare too
-        assert spin_until(ex, lambda: np.abs(probe.wrenches[-1][2]).max() < 1e-5, 5.0)
+        # a bias is a tare too
+        assert spin_until(ex, lambda: probe.epochs[topics.LOAD_CELL_TARE] == [0.0, 1.0], PATIENCE_S)
+        assert spin_until(ex, lambda: np.abs(probe.wrenches[-1][2]).max() < 1e-5, PATIENCE_S)
         assert (rdt.CMD_BIAS, 0) in dev.requests
         # The device goes away: ERROR while silent, then it comes back and the stream is requested again.
         dev.stop()
         assert spin_until(ex, lambda: (s := probe.status(name, b'\x02')) is not None and 'no record' in
-                          s[0].message, 5.0)
+                          s[0].message, PATIENCE_S)
         dev.start()
         # The bias went with the power: the readings are the wrench again (the probe may still be working through
         # zeros published before the device went away: wait for the newest).
-        assert spin_until(ex, lambda: np.abs(probe.wrenches[-1][2] - wrench).max() < 1e-5, 10.0)
+        assert spin_until(ex, lambda: np.abs(probe.wrenches[-1][2] - wrench).max() < 1e-5, PATIENCE_S)
         assert node.counters.reconnects >= 1 and node.receiver.streaming
     finally:
         ex.shutdown()
@@ -283,15 +289,15 @@ def test_netft_after_a_power_cycle_publishes_nothing_from_before_it(rclpy_contex
         done['held'] = dev.power_cycle(2.0, in_flight=2)
         done['up_ns'] = time.time_ns()
     try:
-        assert spin_until(ex, lambda: len(probe.wrenches) > 200, 10.0)
+        assert spin_until(ex, lambda: len(probe.wrenches) > 200, PATIENCE_S)
         thread = threading.Thread(target=cycle)
         thread.start()
         assert spin_until(ex, lambda: (s := probe.status(name, b'\x02')) is not None and 'no record' in
-                          s[0].message, 10.0)
-        assert spin_until(ex, lambda: not thread.is_alive(), 10.0) and done['held'] == 2
-        assert spin_until(ex, lambda: sum(t > done['up_ns'] for t, _, _ in published) >= 500, 20.0)
+                          s[0].message, PATIENCE_S)
+        assert spin_until(ex, lambda: not thread.is_alive(), PATIENCE_S) and done['held'] == 2
+        assert spin_until(ex, lambda: sum(t > done['up_ns'] for t, _, _ in published) >= 500, PATIENCE_S)
         assert spin_until(ex, lambda: (s := probe.status(name, b'\x01')) is not None and 'device restarted' in
-                          s[0].message, 10.0)
+                          s[0].message, PATIENCE_S)
         late = [(s, w) for t, s, w in published if t > done['up_ns']]
         np.testing.assert_allclose([w for _, w in late], np.tile(after, (len(late), 1)), atol=1e-9)
         last_before = max(s for t, s, _ in published if t <= done['up_ns'])
@@ -366,20 +372,20 @@ def test_modbus_lvdt_reports_failures_and_recovers(rclpy_context):
             Parameter('poll_rate_hz', value=100.0)])
         probe, ex = spin_node(rclpy_context, node, prefix)
         try:
-            assert spin_until(ex, lambda: len(probe.points) > 10, 5.0)
+            assert spin_until(ex, lambda: len(probe.points) > 10, PATIENCE_S)
             assert probe.points[-1][2] == pytest.approx(0.00123, abs=1e-12)
             dev.fail_with = 4
             assert spin_until(ex, lambda: (s := probe.status(name, b'\x02')) is not None and
-                              'exception 4 (server device failure)' in s[0].message, 5.0)
+                              'exception 4 (server device failure)' in s[0].message, PATIENCE_S)
             assert node.counters.exception_responses > 0
             dev.fail_with = 0
             reading['m'] = -0.0005
-            assert spin_until(ex, lambda: probe.points[-1][2] == pytest.approx(-0.0005, abs=1e-12), 5.0)
-            assert spin_until(ex, lambda: (s := probe.status(name)) is not None and s[0].level == b'\x00', 5.0)
+            assert spin_until(ex, lambda: probe.points[-1][2] == pytest.approx(-0.0005, abs=1e-12), PATIENCE_S)
+            assert spin_until(ex, lambda: (s := probe.status(name)) is not None and s[0].level == b'\x00', PATIENCE_S)
             # Runtime change of the scaling: accepted (the device still sends -500 counts, now read as 2 µm each);
             # of the address: refused with the reason.
             assert node.set_parameters([Parameter('gain', value=2e-6)])[0].successful
-            assert spin_until(ex, lambda: probe.points[-1][2] == pytest.approx(-0.001, abs=1e-12), 5.0)
+            assert spin_until(ex, lambda: probe.points[-1][2] == pytest.approx(-0.001, abs=1e-12), PATIENCE_S)
             bad = node.set_parameters([Parameter('port', value=1)])[0]
             assert not bad.successful and 'restart the node' in bad.reason
         finally:

@@ -12,6 +12,7 @@ import time
 
 import numpy as np
 
+from helpers import PATIENCE_S
 from crane_stiffness.devices.modbus_device import ModbusDevice
 from crane_stiffness.devices.rdt_device import RdtDevice
 from crane_stiffness.drivers import rdt
@@ -23,6 +24,9 @@ from crane_stiffness.drivers.rdt_pipeline import RdtPipeline
 BEFORE = np.array([1.5, -2.25, 30.0, 0.125, -0.0625, 0.01])   # served until the outage [N, N·m]
 AFTER = np.array([-4.0, 7.5, 12.0, -0.25, 0.5, -0.03])       # served after it
 CAL = rdt.Calibration(1e6, 1e6)
+#: The receiver's silence limit and the pause before it asks for the stream again [s]: shorter than the outages it
+#: must notice (the outages last until it has: see :func:`pause`).
+SILENT_AFTER_S, ASK_AGAIN_AFTER_S = 0.5, 0.25
 
 
 def run_outage(outage, *, publish_rate_hz: float, command: str = 'realtime', after_records: int = 700):
@@ -37,8 +41,9 @@ def run_outage(outage, *, publish_rate_hz: float, command: str = 'realtime', aft
     batches: list[tuple[int, np.ndarray, np.ndarray]] = []
     result: dict[str, object] = {}
     try:
-        with RdtReceiver('127.0.0.1', dev.port, command=command, timeout_s=0.5, reconnect_interval_s=0.25) as rx:
-            rx.start()
+        with RdtReceiver('127.0.0.1', dev.port, command=command, timeout_s=SILENT_AFTER_S,
+                         reconnect_interval_s=ASK_AGAIN_AFTER_S) as rx:
+            rx.start(wait_s=PATIENCE_S)
             pipe = RdtPipeline(CAL, 7000.0, publish_rate_hz=publish_rate_hz)
 
             def cycle() -> None:
@@ -56,7 +61,7 @@ def run_outage(outage, *, publish_rate_hz: float, command: str = 'realtime', aft
             thread.start()
             while thread.is_alive():
                 drain()
-            deadline = time.monotonic() + 30.0
+            deadline = time.monotonic() + PATIENCE_S
             after = 0
             while after < after_records and time.monotonic() < deadline:
                 drain()
@@ -113,9 +118,14 @@ def test_power_cycle_with_records_in_flight_publishes_nothing_from_before_it():
 
 
 def pause(dev: RdtDevice, switched: threading.Event) -> None:
-    """The stream stops for 1 s without a power cycle (cable, switch): the counters run on."""
+    """The stream stops without a power cycle (cable, switch) for 1 s, and on until the receiver has noticed and
+    asked for it again (a starved receiver notices late): the counters run on."""
+    asked = len(dev.requests)
     dev.silent = True
     time.sleep(1.0)
+    deadline = time.monotonic() + PATIENCE_S
+    while len(dev.requests) == asked and time.monotonic() < deadline:
+        time.sleep(0.01)
     switched.set()
     dev.silent = False
 
@@ -135,7 +145,8 @@ def test_modbus_device_gone_and_back_is_a_counted_restart():
     channel = Channel(data_type='float32', gain=1.0)
     value = [0.25]
     dev = ModbusDevice(lambda: value[0], channel=channel).start()
-    poller = ModbusPoller('127.0.0.1', dev.port, channel=channel, timeout_s=0.2)
+    # A stopped device refuses at once: the timeout only bounds the answers of a running one (on the patience).
+    poller = ModbusPoller('127.0.0.1', dev.port, channel=channel, timeout_s=PATIENCE_S)
     try:
         assert poller.read().metres == 0.25
         assert poller.restarts == 0
@@ -149,7 +160,7 @@ def test_modbus_device_gone_and_back_is_a_counted_restart():
                 failed += 1
         assert failed == 3 and poller.restarts == 0
         dev.start()
-        deadline = time.monotonic() + 10.0
+        deadline = time.monotonic() + PATIENCE_S
         while True:
             try:
                 reading = poller.read()

@@ -23,6 +23,7 @@ from crane_stiffness.params.geometry import geometry_from_params
 from crane_stiffness.params.files import load_params
 from crane_stiffness.model import axis_stiffness, rest_pose, tangent_stiffness
 from crane_stiffness.launcher.rig_description import rig_nodes
+from helpers import PATIENCE_S
 from helpers.processes import final_counters
 
 pytestmark = pytest.mark.ros  # every test here starts ROS (conftest)
@@ -90,7 +91,7 @@ def test_drivers_on_one_pc_estimator_and_recorder_on_another(install_tree, tmp_p
                 time.sleep(0.2)
             assert finished in procs.log('load_program'), procs.log('load_program')[-3000:]
             recorder = procs.procs['session_recorder']
-            end = time.monotonic() + 40  # the recorder closes the bag by itself when the program is done
+            end = time.monotonic() + PATIENCE_S  # the recorder closes the bag by itself when the program is done
             while recorder.poll() is None and 'closed ' not in procs.log('session_recorder') and \
                     time.monotonic() < end:
                 time.sleep(0.2)

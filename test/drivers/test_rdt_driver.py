@@ -9,6 +9,7 @@ import time
 import numpy as np
 import pytest
 
+from helpers import PATIENCE_S
 from crane_stiffness.devices.rdt_device import RdtDevice
 from crane_stiffness.drivers import rdt
 from crane_stiffness.drivers.errors import DeviceAddressError, DeviceSilentError
@@ -17,9 +18,11 @@ from crane_stiffness.drivers.rdt_pipeline import RdtPipeline
 
 WRENCH = np.array([1.5, -2.25, 30.0, 0.125, -0.0625, 0.01])
 CAL = rdt.Calibration(1e6, 1e6)
+#: The receiver's silence limit (and pause before asking again) in the restart test [s]: what it must notice.
+SILENT_AFTER_S = 0.2
 
 
-def collect(receiver: RdtReceiver, pipeline: RdtPipeline, until, timeout_s: float = 10.0):
+def collect(receiver: RdtReceiver, pipeline: RdtPipeline, until, timeout_s: float = PATIENCE_S):
     """Drain and process until ``until(stamps)`` holds; returns all stamps and wrenches."""
     stamps, wrench = [], []
     deadline = time.monotonic() + timeout_s
@@ -44,7 +47,7 @@ def test_stream_values_and_stamps_from_the_sample_counter():
     with RdtDevice(lambda: WRENCH, sample_rate_hz=7000.0, start_counter=2**32 - 3000) as dev:
         t_before = time.time_ns()
         with RdtReceiver('127.0.0.1', dev.port) as rx:
-            rx.start(wait_s=2.0)
+            rx.start(wait_s=PATIENCE_S)
             pipe = RdtPipeline(CAL, 7000.0)
             stamps, wrench = collect(rx, pipe, lambda s: s.size >= 3500)
         t_after = time.time_ns()
@@ -66,11 +69,11 @@ def test_dropped_and_reordered_records_are_counted():
         return seq % 50 == 0
     with RdtDevice(lambda: WRENCH, sample_rate_hz=5000.0, drop=drop, reorder_every=7) as dev:
         with RdtReceiver('127.0.0.1', dev.port) as rx:
-            rx.start()
+            rx.start(wait_s=PATIENCE_S)
             pipe = RdtPipeline(CAL, 5000.0)
             stamps, _ = collect(rx, pipe, lambda s: s.size >= 3000)
             rx.stop()  # ends the stream; what was received is drained below
-            stamps2, _ = collect(rx, pipe, lambda s: True, timeout_s=0.2)
+            stamps2, _ = collect(rx, pipe, lambda s: True)  # one drain
     c = pipe.counters()
     highest = c['records_received'] + c['records_lost'] - c['records_duplicate']  # the highest rdt_sequence seen
     expected_lost = sum(drop(s) for s in range(1, highest + 1))
@@ -86,7 +89,7 @@ def test_dropped_and_reordered_records_are_counted():
 def test_status_word_is_reported_and_the_records_dropped():
     with RdtDevice(lambda: WRENCH, sample_rate_hz=2000.0, status=0x80010000) as dev:
         with RdtReceiver('127.0.0.1', dev.port) as rx:
-            rx.start()
+            rx.start(wait_s=PATIENCE_S)
             pipe = RdtPipeline(CAL, 2000.0)
             collect(rx, pipe, lambda s: pipe.status_records >= 200)
             assert pipe.last_status == 0x80010000 and pipe.delivered_records == 0
@@ -100,7 +103,7 @@ def test_hardware_bias_and_software_tare():
     load = {'w': WRENCH.copy()}
     with RdtDevice(lambda: load['w'], sample_rate_hz=2000.0) as dev:
         with RdtReceiver('127.0.0.1', dev.port) as rx:
-            rx.start()
+            rx.start(wait_s=PATIENCE_S)
             pipe = RdtPipeline(CAL, 2000.0, tare_samples=50)
             collect(rx, pipe, lambda s: pipe.tare_count >= 50)
             offset = pipe.tare()
@@ -122,7 +125,7 @@ def test_averaging_7_khz_to_1_khz_and_buffered_datagrams():
     with RdtDevice(lambda n: WRENCH + rng.normal(0, 0.01, (n, 6)), sample_rate_hz=7000.0, records_per_packet=10,
                    batch=True) as dev:
         with RdtReceiver('127.0.0.1', dev.port, command='buffered') as rx:
-            rx.start()
+            rx.start(wait_s=PATIENCE_S)
             pipe = RdtPipeline(CAL, 7000.0, publish_rate_hz=1000.0)
             stamps, w = collect(rx, pipe, lambda s: s.size >= 500)
     assert dev.requests[0] == (rdt.CMD_BUFFERED, 0)
@@ -162,12 +165,14 @@ def test_wrong_address_and_silent_device_are_clear_errors():
 def test_reconnects_after_the_device_restarts():
     dev = RdtDevice(lambda: WRENCH, sample_rate_hz=2000.0).start()
     try:
-        with RdtReceiver('127.0.0.1', dev.port, timeout_s=0.2, reconnect_interval_s=0.2) as rx:
-            rx.start()
+        with RdtReceiver('127.0.0.1', dev.port, timeout_s=SILENT_AFTER_S, reconnect_interval_s=SILENT_AFTER_S) as rx:
+            rx.start(wait_s=PATIENCE_S)
             pipe = RdtPipeline(CAL, 2000.0)
             before, _ = collect(rx, pipe, lambda s: s.size >= 400)
             dev.stop()                                     # unplugged
-            time.sleep(0.6)
+            deadline = time.monotonic() + PATIENCE_S       # until the receiver notices (a starved one late)
+            while rx.streaming and time.monotonic() < deadline:
+                time.sleep(0.01)
             assert not rx.streaming
             dev.start()                                    # back, on the same port, counter from 0, no client
             after, w = collect(rx, pipe, lambda s: s.size >= 400)

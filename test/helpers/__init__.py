@@ -24,6 +24,12 @@ from crane_stiffness.contract import topics
 #: The repository (the work tree the tests run from).
 REPO = Path(__file__).resolve().parents[2]
 NS = 1_000_000_000
+#: The suite's patience [s]: how long a test waits for an event before it calls the program under test hung. Only a
+#: hung program takes this long: a loaded machine (two cores, a build beside the tests, load average 10) delays
+#: discovery, a node's start and a burst of samples by seconds, never by minutes. Every wait for something a loaded
+#: machine may delay is bounded by this, by name; a test waits for the event it needs, then asserts. A check that
+#: something does NOT happen waits for a later event that proves it instead of sleeping.
+PATIENCE_S = 120.0
 _ids = itertools.count()
 
 
@@ -51,8 +57,9 @@ def isolated(base: str) -> tuple[str, str, list[str]]:
     return name, prefix, args
 
 
-def spin_until(executor, predicate: Callable[[], bool], timeout_s: float) -> bool:
-    """Spin ``executor`` until ``predicate()`` holds or the timeout passes; returns the predicate's last value."""
+def spin_until(executor, predicate: Callable[[], bool], timeout_s: float = PATIENCE_S) -> bool:
+    """Spin ``executor`` until ``predicate()`` holds or ``timeout_s`` [s] of wall time pass (the suite's patience
+    unless given); returns the predicate's last value."""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
         if predicate():
@@ -68,7 +75,7 @@ def collect_for(executor, seconds: float) -> None:
         executor.spin_once(timeout_sec=0.01)
 
 
-def call_trigger(executor, node, service: str, timeout_s: float = 5.0):
+def call_trigger(executor, node, service: str, timeout_s: float = PATIENCE_S):
     """Call the std_srvs/Trigger ``service`` from ``node``, spinning ``executor``; returns the response."""
     from std_srvs.srv import Trigger
     client = node.create_client(Trigger, service)
@@ -92,7 +99,7 @@ def publish_wrench_now(node, publisher, wrench, frame_id: str = 'crane_base') ->
     return now.nanoseconds
 
 
-def run_without_ros(body: str, blocked: tuple[str, ...] = ('rclpy',), timeout_s: float = 120.0):
+def run_without_ros(body: str, blocked: tuple[str, ...] = ('rclpy',), timeout_s: float = PATIENCE_S):
     """Run ``body`` (Python statements) in a fresh interpreter where importing any of ``blocked`` fails and no ROS
     environment is set, from the repository's source; then check that no ROS module got imported. Returns the
     CompletedProcess (its stdout for the caller); asserts exit 0 with stderr shown."""

@@ -23,9 +23,7 @@ import numpy as np
 from matplotlib import image
 from websockets.sync.client import connect
 
-#: How long a test waits for a page to show what it must: far beyond the time a working page takes on a loaded
-#: machine; only a page that never gets there takes this long.
-PATIENCE_S = 120.0
+from helpers import PATIENCE_S  # re-exported: the view tests import it from here
 
 
 def chromium() -> str:
@@ -76,7 +74,7 @@ class Browser:
         url = self._devtools_url(60.0)
         # as the Foxglove test client: no keepalive pings, and events (console, page) buffered between commands
         # instead of a paused socket, however long a test goes between two commands
-        self.ws = connect(url, max_size=None, max_queue=None, ping_interval=None, open_timeout=30, legacy=True)
+        self.ws = connect(url, max_size=None, max_queue=None, ping_interval=None, open_timeout=PATIENCE_S, legacy=True)
         self._ids = itertools.count(1)
         target = self.send('Target.createTarget', url='about:blank')['targetId']
         self.session = self.send('Target.attachToTarget', targetId=target, flatten=True)['sessionId']
@@ -95,7 +93,7 @@ class Browser:
             time.sleep(0.1)
         raise RuntimeError(f'chromium did not start its DevTools server:\n{self.log.read_text(errors="replace")}')
 
-    def send(self, method: str, session: bool = False, timeout_s: float = 30.0, **params: Any) -> dict[str, Any]:
+    def send(self, method: str, session: bool = False, timeout_s: float = PATIENCE_S, **params: Any) -> dict[str, Any]:
         """A DevTools command; its result (RuntimeError on an error)."""
         call_id = next(self._ids)
         msg: dict[str, Any] = {'id': call_id, 'method': method, 'params': params}

@@ -25,7 +25,7 @@ from crane_stiffness.estimation.sync import DISPLACEMENT, FORCE
 from crane_stiffness.rosnode.qos import LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS
 from crane_stiffness.nodes.stiffness_estimator import VALUE_FIELDS, StiffnessEstimatorNode
 from crane_stiffness.sim.sampling import SampleClock
-from helpers import NS, spin_until
+from helpers import NS, PATIENCE_S, spin_until
 from helpers.probe import ProbeNode
 
 K = 1875.0   # N/m, true stiffness of the synthetic spring
@@ -72,7 +72,7 @@ class SyntheticRig:
                  force_topic: str | None = None, force_qos=SENSOR_QOS, volts_topic: str | None = None,
                  volts_gain: float = 1.0, volts_offset: float = 0.0, command: bool = True, inject=None,
                  burst_hz: float = 100.0, stamp_on_publish: bool = False, paced_by=None,
-                 pace_timeout_s: float = 30.0):
+                 pace_timeout_s: float = PATIENCE_S):
         self.node = Node(f'rig{prefix.replace("/", "_")}', context=ctx)
         self.rng = np.random.default_rng(seed)
         self.peak, self.ramp_s, self.lead_s = peak, ramp_s, lead_s
@@ -113,6 +113,11 @@ class SyntheticRig:
         self.sent = 0
         self.force_published = 0  # the rig's own samples published on each stream (not what ``inject`` adds)
         self.displacement_published = 0
+        # Every message published on each stream (what ``inject`` adds too), counted by the publishers made here.
+        self.force_sent = 0
+        self.displacement_sent = 0
+        self._count_publishes(self.pub_force, 'force_sent')
+        self._count_publishes(self.pub_point or self.pub_volts, 'displacement_sent')
         self.burst_newest: list[int] = []  # stamp of the newest sample of every burst, ns
         self.done = False
         self.running = False
@@ -120,6 +125,14 @@ class SyntheticRig:
 
     def start(self) -> None:
         self.running = True
+
+    def _count_publishes(self, publisher, counter: str) -> None:
+        publish = publisher.publish
+
+        def counted(msg) -> None:
+            setattr(self, counter, getattr(self, counter) + 1)
+            publish(msg)
+        publisher.publish = counted
 
     def load(self, t_s: float) -> float | None:
         t = t_s - self.lead_s
@@ -226,6 +239,12 @@ class EstimatorProbe(ProbeNode):
         of whole ms; the stamp travels as float64 seconds)."""
         return round(t_ns * 1e-3) in self.sample_stamps_us
 
+    def has_newest_values_of(self, estimator: StiffnessEstimatorNode) -> bool:
+        """Whether the newest /stiffness/estimate_values received is the newest ``estimator`` published (NaN fields
+        equal)."""
+        return bool(self.values) and np.array_equal(np.asarray(self.values[-1][1]),
+                                                     np.asarray(estimator.values_msg.data), equal_nan=True)
+
     def last(self, branch: int) -> dict[str, float]:
         return row(self.values[-1][1], branch)
 
@@ -238,20 +257,30 @@ def executor_with(ctx, *nodes) -> SingleThreadedExecutor:
     return ex
 
 
-def run_program(ex, rig: SyntheticRig, estimator: StiffnessEstimatorNode, timeout_s: float = 60.0) -> None:
-    """Wait for the connections, play the program, then let the estimator drain its queue."""
+def run_program(ex, rig: SyntheticRig, estimator: StiffnessEstimatorNode, timeout_s: float = PATIENCE_S,
+                probe: EstimatorProbe | None = None) -> None:
+    """Wait for the connections, play the program, then let the estimator drain its queue; with ``probe``, until the
+    probe has received the newest estimate the estimator published (``timeout_s``: the wait for the program) [s]."""
     assert spin_until(ex, lambda: rig.pub_force.get_subscription_count() >= 1
                       and (rig.pub_point or rig.pub_volts).get_subscription_count() >= 1
-                      and (rig.pub_cmd is None or rig.pub_cmd.get_subscription_count() >= 1), 5.0)
+                      and (rig.pub_cmd is None or rig.pub_cmd.get_subscription_count() >= 1), PATIENCE_S)
     rig.start()
     assert spin_until(ex, lambda: rig.done, timeout_s)
-    # Until every sample the rig published has arrived: a loaded machine delivers the last bursts late (a 2 s wait
-    # once read an estimate 56 pairs short). A bound, not an assertion: best-effort DDS may lose one, and the test's
-    # own checks then say what is missing. The estimator fits each sample as it arrives.
+    wait_drained(ex, rig, estimator, probe)
+
+
+def wait_drained(ex, rig: SyntheticRig, estimator: StiffnessEstimatorNode, probe: EstimatorProbe | None = None) -> None:
+    """After the rig's program: until every message the rig published (its samples and what ``inject`` added) has
+    reached the in-process estimator and, with ``probe``, the probe has the newest estimate the estimator published.
+
+    A loaded machine delivers the last bursts late (a 2 s wait once read an estimate 56 pairs short). Not asserted:
+    best-effort DDS may lose one, and the test's own checks then say what is missing. The estimator fits each sample
+    as it arrives and publishes its values as it fits."""
     c = estimator.core.counters
-    spin_until(ex, lambda: c.force_received >= rig.force_published
-               and c.displacement_received >= rig.displacement_published, 30.0)
-    spin_until(ex, lambda: False, 0.3)
+    spin_until(ex, lambda: c.force_received >= max(rig.force_published, rig.force_sent)
+               and c.displacement_received >= max(rig.displacement_published, rig.displacement_sent), PATIENCE_S)
+    if probe is not None:
+        spin_until(ex, lambda: probe.has_newest_values_of(estimator), PATIENCE_S)
 
 
 def assert_refused(node, param: str, value, words: str) -> None:
@@ -268,11 +297,11 @@ def assert_refused(node, param: str, value, words: str) -> None:
 
 
 def run_in_own_process(ctx, rig: SyntheticRig, args: list[str], nodes=(), ready=lambda: True,
-                       run_timeout_s: float = 60.0, settle_s: float = 0.5,
-                       stop_timeout_s: float = 10.0) -> subprocess.CompletedProcess:
+                       settled=lambda: True) -> subprocess.CompletedProcess:
     """The estimator as deployed, in its own process (``python -m``), fed by ``rig`` (and watched by ``nodes``):
-    wait for the rig's connections and ``ready``, play the program, settle, then SIGINT. Returns the process's exit
-    status, stdout and stderr (bytes)."""
+    wait for the rig's connections and ``ready``, play the program, wait for ``settled`` (what the estimator must
+    have done before it is stopped, seen by ``nodes``), then SIGINT. Every wait has the suite's patience. Returns the
+    process's exit status, stdout and stderr (bytes)."""
     proc = subprocess.Popen([sys.executable, '-m', 'crane_stiffness.nodes.stiffness_estimator'] + args,
                             env=dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path)),
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE)
@@ -280,16 +309,16 @@ def run_in_own_process(ctx, rig: SyntheticRig, args: list[str], nodes=(), ready=
     try:
         assert spin_until(ex, lambda: rig.pub_force.get_subscription_count() >= 1
                           and rig.pub_point.get_subscription_count() >= 1 and rig.pub_cmd.get_subscription_count() >= 1
-                          and ready(), 60.0)
+                          and ready(), PATIENCE_S)
         rig.start()
-        assert spin_until(ex, lambda: rig.done, run_timeout_s)
+        assert spin_until(ex, lambda: rig.done, PATIENCE_S)
         if rig.paced_by is not None:  # the last burst's estimate, before the estimator is stopped
             spin_until(ex, lambda: rig.paced_by(rig.burst_newest[-1]), rig.pace_timeout_s)
-        spin_until(ex, lambda: False, settle_s)
+        spin_until(ex, settled, PATIENCE_S)  # not asserted: the test's own checks say what is missing
     finally:
         proc.send_signal(signal.SIGINT)
         try:
-            out, err = proc.communicate(timeout=stop_timeout_s)
+            out, err = proc.communicate(timeout=PATIENCE_S)
         except subprocess.TimeoutExpired:
             proc.kill()
             out, err = proc.communicate()

@@ -19,6 +19,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, Float64MultiArray
 
+from helpers import PATIENCE_S
 from crane_stiffness.contract import topics
 from crane_stiffness.estimation.live import PAIR_FIELDS, VALUE_FIELDS
 from crane_stiffness.rosnode.qos import KEPT_QOS, LATCHED_QOS, RELIABLE_QOS
@@ -109,7 +110,7 @@ def live_rig(env: dict[str, str], share: Path, out: Path, context: Any, override
         with Processes(env, out / 'logs') as procs:
             start_rig(procs, share, 'side_force', 'live', out / 'bags', record=False, live_view=True,
                       overrides={**(overrides or {}), 'live_view': {**ports, **view}}, arguments=arguments)
-            deadline = time.monotonic() + 60
+            deadline = time.monotonic() + PATIENCE_S
             while 'live view: page http://' not in procs.log('live_view'):
                 procs.check_alive()
                 assert time.monotonic() < deadline, procs.log('live_view')
@@ -132,7 +133,7 @@ def watched(watcher: RigWatcher, stamps: Iterable[float]) -> set[float]:
     return set() if first is None else {t for t in stamps if t >= first}
 
 
-def wait_for_pairs(procs: Processes, watcher: RigWatcher, count: int, timeout_s: float = 120.0) -> None:
+def wait_for_pairs(procs: Processes, watcher: RigWatcher, count: int, timeout_s: float = PATIENCE_S) -> None:
     """Until the estimator has published ``count`` fitted pairs (the program is running)."""
     deadline = time.monotonic() + timeout_s
     while len(watcher.pairs) < count:

@@ -19,20 +19,19 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.serialization import serialize_message
 from std_msgs.msg import Float64, String
 
-from helpers import spin_until
+from helpers import PATIENCE_S, collect_for, spin_until
 from helpers.processes import UNCLEAN, assert_bag_complete
 from crane_stiffness.bag import BagWriter, dump_qos_profiles, qos_profile
 from crane_stiffness.launcher.rig_description import PACKAGE, rig_nodes
 from crane_stiffness.launcher import rosrun
-from crane_stiffness.launcher.rig import Observer, start_node
+from crane_stiffness.launcher.rig import Observer, decode_values, start_node
 
 pytestmark = pytest.mark.ros  # every test here starts ROS (conftest)
 
 SESSION = 'shutdown'
-#: How long the rig runs (program playing, recording on) before the signal [s].
+#: How long the rig runs (program playing, recording on) before the signal [s], at least: on until the estimator has
+#: fitted pairs.
 RUN_S = 3.0
-#: How long a node may take to end after the signal [s].
-EXIT_TIMEOUT_S = 30.0
 
 
 def assert_clean_exit(name: str, code: int | None, log: str) -> dict:
@@ -51,9 +50,9 @@ def start_rig_at_once(procs: rosrun.Processes, share: Path, bags: Path) -> None:
         start_node(procs, node, {'output_dir': bags} if node.name == 'session_recorder' else None)
 
 
-def wait_until_running(ctx, procs: rosrun.Processes, timeout_s: float = 90.0) -> Observer:
+def wait_until_running(ctx, procs: rosrun.Processes, timeout_s: float = PATIENCE_S) -> Observer:
     """Until every node is up (in the ROS graph) and the program plays, then RUN_S more (the sensors stream, the
-    estimator fits, the recorder records)."""
+    estimator fits, the recorder records) and on until the estimator has published a fit of the loading."""
     observer = Observer(context=ctx)
     ex = SingleThreadedExecutor(context=ctx)
     ex.add_node(observer)
@@ -61,8 +60,10 @@ def wait_until_running(ctx, procs: rosrun.Processes, timeout_s: float = 90.0) ->
     while not (observer.progress > 0 and set(procs.procs) <= set(observer.get_node_names())):
         assert time.monotonic() < deadline, {n: procs.log(n)[-1500:] for n in procs.procs}
         procs.check_alive()
-        spin_until(ex, lambda: False, 0.1)
-    spin_until(ex, lambda: False, RUN_S)
+        collect_for(ex, 0.1)
+    collect_for(ex, RUN_S)
+    assert spin_until(ex, lambda: observer.values is not None and decode_values(observer.values)['loading']['n'] > 0,
+                      PATIENCE_S), {n: procs.log(n)[-1500:] for n in procs.procs}
     procs.check_alive()
     ex.shutdown()
     observer.destroy_node()
@@ -70,7 +71,7 @@ def wait_until_running(ctx, procs: rosrun.Processes, timeout_s: float = 90.0) ->
 
 
 def wait_all(procs: rosrun.Processes, names=None) -> dict[str, int | None]:
-    deadline = time.monotonic() + EXIT_TIMEOUT_S
+    deadline = time.monotonic() + PATIENCE_S  # how long a node may take to end after the signal
     chosen = {n: p for n, p in procs.procs.items() if names is None or n in names}
     while any(p.poll() is None for p in chosen.values()) and time.monotonic() < deadline:
         time.sleep(0.05)
@@ -196,7 +197,7 @@ def test_a_signal_while_the_node_still_imports_ends_it_cleanly(install_tree, tmp
         for name in names:  # one at a time: a node's import (0.3–1 s) is the window to hit
             proc = procs.start(name, PACKAGE, name, ['--ros-args', '-p', f'output_dir:={tmp_path}']
                                if name == 'session_recorder' else [])
-            deadline = time.monotonic() + 30.0
+            deadline = time.monotonic() + PATIENCE_S
             while not signal_caught(proc.pid, signal.SIGTERM):
                 assert proc.poll() is None and time.monotonic() < deadline, procs.log(name)
                 time.sleep(0.001)
@@ -223,7 +224,7 @@ def test_signals_while_the_node_initialises_end_it_cleanly(install_tree, tmp_pat
         for name in names:  # one at a time: each node's initialisation is the window to hit
             proc = procs.start(name, PACKAGE, name, ['--ros-args', '-p', f'output_dir:={tmp_path}']
                                if name == 'session_recorder' else [])
-            deadline = time.monotonic() + 60.0
+            deadline = time.monotonic() + PATIENCE_S
             while '_rclpy_pybind11' not in Path(f'/proc/{proc.pid}/maps').read_text():
                 assert proc.poll() is None and time.monotonic() < deadline, procs.log(name)
                 time.sleep(0.001)

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from helpers import REPO as _REPO
+from helpers import PATIENCE_S, REPO as _REPO
 from helpers.processes import final_counters
 
 from crane_stiffness.contract import topics
@@ -124,8 +124,8 @@ def test_ros2_run_in_any_order_model_last(install_tree, tmp_path):
                     while time.monotonic() < end:
                         observer.spin_once(0.05)
                     assert observer.running_at is None and not observer.state
-            wait_for_program_start(observer, procs, 90)
-            deadline = time.monotonic() + 60
+            wait_for_program_start(observer, procs, PATIENCE_S)
+            deadline = time.monotonic() + PATIENCE_S
             while procs.procs['load_program'].poll() is None and time.monotonic() < deadline:
                 observer.spin_once(0.1)
             codes = procs.stop()
@@ -155,7 +155,7 @@ def test_load_program_gives_up_naming_what_never_came(install_tree, tmp_path):
                 start_node(procs, node)
         # The estimator up first (on a loaded machine it can take longer than the timeout to start), so that the
         # program's give-up line must leave it out.
-        deadline = time.monotonic() + 90
+        deadline = time.monotonic() + PATIENCE_S
         while 'fitting' not in procs.log('stiffness_estimator'):
             assert time.monotonic() < deadline, procs.log('stiffness_estimator')
             procs.check_alive()
@@ -165,14 +165,16 @@ def test_load_program_gives_up_naming_what_never_came(install_tree, tmp_path):
             if node.runs_program:
                 start_node(procs, node, {'ready_timeout_s': 6.0, 'ready_log_period_s': 2.0})
         program = procs.procs['load_program']
-        while program.poll() is None and time.monotonic() < t0 + 60:
+        while program.poll() is None and time.monotonic() < t0 + PATIENCE_S:
             time.sleep(0.1)
         waited = time.monotonic() - t0
         procs.stop()
         log = procs.log('load_program')
     assert program.returncode == 1, log
-    assert 6.0 <= waited < 40, waited
     gave_up = next(line for line in log.splitlines() if 'gave up' in line)
+    # Not before ready_timeout_s; and by its own clock (its start-up, slow on a loaded machine, not counted) soon after.
+    assert waited >= 6.0, waited
+    assert 6 <= int(re.search(r'gave up after (\d+) s', gave_up).group(1)) < 40, gave_up
     assert 'crane_model subscribed to /crane/wrench_command' in gave_up
     assert f"{topics.PREDICTED_AXIS_STIFFNESS} (crane_model's prediction)" in gave_up
     assert 'stiffness_estimator' not in gave_up  # it was there
@@ -186,7 +188,7 @@ def test_load_program_rejects_a_malformed_wait_entry(install_tree, tmp_path):
     argv = rosrun.command('crane_stiffness', 'load_program',
                           ['--ros-args', '-p', 'wait_for_subscribers:=["/crane/wrench_command crane_model"]'],
                           env, use_ros2_cli=False)
-    out = subprocess.run(argv, env=env, capture_output=True, text=True, timeout=60)
+    out = subprocess.run(argv, env=env, capture_output=True, text=True, timeout=PATIENCE_S)
     assert out.returncode == 2 and 'wait_for_subscribers' in out.stderr and 'TOPIC: NODE' in out.stderr
 
 

@@ -13,8 +13,8 @@ import pytest
 from geometry_msgs.msg import PointStamped, WrenchStamped
 from rclpy.parameter import Parameter
 
-from helpers import call_trigger as call
-from helpers import NS, spin_until
+from helpers import PATIENCE_S, call_trigger as call
+from helpers import NS, collect_for, spin_until
 from crane_stiffness.contract import topics
 from crane_stiffness.estimation.live import VALUE_FIELDS, LiveStiffness
 from crane_stiffness.estimation.settings import LiveSettings
@@ -23,7 +23,7 @@ from crane_stiffness.rosnode.qos import RELIABLE_QOS, SENSOR_QOS
 from crane_stiffness.nodes.stiffness_estimator import StiffnessEstimatorNode
 from crane_stiffness.contract.status import ERROR, OK, STALE, WARN
 from helpers.estimator import (C, K, EstimatorProbe, SyntheticRig, executor_with, identity, isolated_estimator, row,
-                               run_in_own_process, run_program, statuses)
+                               run_in_own_process, run_program, statuses, wait_drained)
 
 LEVEL = {OK: b'\x00', WARN: b'\x01', ERROR: b'\x02', STALE: b'\x03'}
 
@@ -51,7 +51,7 @@ def test_stamp_an_hour_ahead_is_dropped_pairing_goes_on_and_reset_restarts_every
         Parameter('window', value=600), Parameter('diagnostics_rate_hz', value=20.0)])
     rig = SyntheticRig(rclpy_context, prefix, rate_hz=500.0, inject=inject, seed=21)
     ex = executor_with(rclpy_context, estimator, probe.node, rig.node)
-    run_program(ex, rig, estimator)
+    run_program(ex, rig, estimator, probe=probe)
     c = estimator.core.counters
     sc = estimator.core.sync_counters
     print(f'skewed {skewed["n"]}: dropped_clock_skew {c.dropped_clock_skew}, out_of_order '
@@ -61,7 +61,8 @@ def test_stamp_an_hour_ahead_is_dropped_pairing_goes_on_and_reset_restarts_every
     assert c.pairs_fitted >= rig.sent - 2
     for branch in ('loading', 'unloading'):
         assert estimator.core.estimate(branch).stiffness == pytest.approx(K, rel=0.01)
-    assert any(s.level == LEVEL[WARN] and 'dropped' in s.message for a in probe.estimates for s in a.status[2:])
+    assert spin_until(ex, lambda: any(s.level == LEVEL[WARN] and 'dropped' in s.message
+                                      for a in probe.estimates for s in a.status[2:]), PATIENCE_S)
     # The tolerance is a parameter, validated against max_age_s (the longest a passing sample can hold pairing up).
     result = estimator.set_parameters([Parameter('max_clock_skew_s', value=0.5)])[0]
     assert not result.successful and 'max_clock_skew_s = 0.5' in result.reason and 'max_age_s' in result.reason
@@ -74,7 +75,8 @@ def test_stamp_an_hour_ahead_is_dropped_pairing_goes_on_and_reset_restarts_every
     rig.pub_force.publish(rig.wrench_msg(now_ns + 40_000_000, 1.0))
     rig.pub_point.publish(rig.point_msg(now_ns + 45_000_000, 1e-4))  # queued: no force partner yet
     assert spin_until(ex, lambda: estimator.core.sync_counters.force.received == sc.force.received + 1
-                      and estimator.core.sync_counters.displacement.received == sc.displacement.received + 1, 2.0)
+                      and estimator.core.sync_counters.displacement.received == sc.displacement.received + 1,
+                      PATIENCE_S)
     assert estimator.core.settings.max_clock_skew_s == 0.05
     assert estimator.core._sync.pending(DISPLACEMENT) == 1
     segments = estimator.core.counters.segments
@@ -90,7 +92,7 @@ def test_stamp_an_hour_ahead_is_dropped_pairing_goes_on_and_reset_restarts_every
         t = now_ns + j * 2_000_000
         rig.pub_force.publish(rig.wrench_msg(t, 1.0 + 0.1 * j))
         rig.pub_point.publish(rig.point_msg(t, (1.0 + 0.1 * j - C) / K))
-    assert spin_until(ex, lambda: core.sync_counters.pairs >= before.pairs + 5, 2.0)
+    assert spin_until(ex, lambda: core.sync_counters.pairs >= before.pairs + 5, PATIENCE_S)
     assert core.sync_counters.total('out_of_order') == before.total('out_of_order')
     identity(core.accounting())
     ex.shutdown()
@@ -111,22 +113,25 @@ def test_dead_lvdt_makes_estimates_stale_and_its_restart_starts_a_new_segment(rc
     rig.disp_ok = lambda i: not dead['on']
     ex = executor_with(rclpy_context, estimator, probe.node, rig.node)
     assert spin_until(ex, lambda: rig.pub_force.get_subscription_count() >= 1
-                      and rig.pub_point.get_subscription_count() >= 1 and rig.pub_cmd.get_subscription_count() >= 1, 5)
+                      and rig.pub_point.get_subscription_count() >= 1 and rig.pub_cmd.get_subscription_count() >= 1,
+                      PATIENCE_S)
     rig.start()
-    assert spin_until(ex, lambda: rig.sent >= 300, 10.0)
+    assert spin_until(ex, lambda: rig.sent >= 300, PATIENCE_S)
     now = rig.node.get_clock().now
     dead['on'] = True  # the LVDT process dies
     rig.node.destroy_publisher(rig.pub_point)
     stop = now().nanoseconds
-    spin_until(ex, lambda: False, 1.0)
+    collect_for(ex, 1.0)  # dead for a second, and until the estimator has reported on its silence (checked below)
+    assert spin_until(ex, lambda: any(a.header.stamp.sec * NS + a.header.stamp.nanosec >= stop + 500_000_000
+                                      for a in probe.estimates), PATIENCE_S)
     # It is started again: a new publisher, zeroed where the platform is now.
     rig.x_offset = (rig.load((now().nanoseconds - rig.start_ns) / NS) - C) / K
     rig.pub_point = rig.node.create_publisher(PointStamped, prefix + topics.LVDT_DISPLACEMENT, SENSOR_QOS)
-    assert spin_until(ex, lambda: rig.pub_point.get_subscription_count() >= 1, 5.0)
+    assert spin_until(ex, lambda: rig.pub_point.get_subscription_count() >= 1, PATIENCE_S)
     resume = now().nanoseconds
     dead['on'] = False
-    assert spin_until(ex, lambda: rig.done, 15.0)
-    spin_until(ex, lambda: False, 0.5)
+    assert spin_until(ex, lambda: rig.done, PATIENCE_S)
+    wait_drained(ex, rig, estimator, probe)
     core = estimator.core
     print(f'segments {core.counters.segments} ({core.segment_reason}); offset {rig.x_offset * 1e3:.4f} mm; '
           f'loading {probe.last(0)["stiffness"]:.1f}, unloading {probe.last(1)["stiffness"]:.1f} N/m')
@@ -146,8 +151,8 @@ def test_dead_lvdt_makes_estimates_stale_and_its_restart_starts_a_new_segment(rc
     # The restarted LVDT started a new segment: its new zero never mixed with the old one.
     assert core.counters.segments >= 2  # the start, then the restart (start-up parameters are segment 1)
     assert 'displacement' in core.segment_reason
-    assert any('new fit segment' in b.message and 'displacement' in b.message
-               for a in probe.estimates for b in statuses(a)[0])
+    assert spin_until(ex, lambda: any('new fit segment' in b.message and 'displacement' in b.message
+                                      for a in probe.estimates for b in statuses(a)[0]), PATIENCE_S)
     for branch in (0, 1):
         r = probe.last(branch)
         assert r['stiffness'] == pytest.approx(K, rel=0.02)
@@ -169,7 +174,7 @@ def test_lost_samples_are_reported_per_stream_and_warned_above_max_loss_fraction
     rig = SyntheticRig(rclpy_context, prefix, rate_hz=500.0, seed=23, inject=lambda rig, i, t: stamps.append(t))
     rig.force_ok = lambda i: not lose[i]
     ex = executor_with(rclpy_context, estimator, probe.node, rig.node)
-    run_program(ex, rig, estimator)
+    run_program(ex, rig, estimator, probe=probe)
     core = estimator.core
     sent_force = int((~lose[:rig.sent]).sum())
     f_frac = core.health[FORCE].received_fraction()
@@ -180,8 +185,9 @@ def test_lost_samples_are_reported_per_stream_and_warned_above_max_loss_fraction
     span = round((stamps[-1] - stamps[0]) / 2_000_000) + 1
     assert f_frac == pytest.approx(core.counters.force_received / span, abs=0.003)
     assert f_frac < 0.97 and f_frac < d_frac - 0.02
+    assert spin_until(ex, lambda: any('force: received' in statuses(a)[1].message for a in probe.estimates),
+                      PATIENCE_S), 'the loss was never reported'
     warned = [a for a in probe.estimates if 'force: received' in statuses(a)[1].message]
-    assert warned, 'the loss was never reported'
     for a in probe.estimates:
         branches, inputs = statuses(a)
         fraction = float(kv(inputs)['force.received_fraction'])
@@ -277,8 +283,8 @@ def test_rejected_and_absurd_commands_excluded_over_dds(rclpy_context):
     rig.pub_cmd = Recorded(rig.pub_cmd)
     rig.force_map = lambda i, f: {'absurd': 40.0, 'model': 2.0}.get(state['phase'], f)
     ex = executor_with(rclpy_context, estimator, probe.node, rig.node)
-    assert spin_until(ex, lambda: rig.pub_rejected.get_subscription_count() >= 1, 5.0)
-    run_program(ex, rig, estimator)
+    assert spin_until(ex, lambda: rig.pub_rejected.get_subscription_count() >= 1, PATIENCE_S)
+    run_program(ex, rig, estimator, probe=probe)
     c = estimator.core.counters
     print(f'rejected: own {c.command_rejected}, model {c.rejected_received}; pairs not fitted '
           f'{c.pairs_rejected_command}; loading {estimator.core.estimate("loading").stiffness:.1f}, unloading '
@@ -329,7 +335,17 @@ def test_final_counters_account_for_every_message(rclpy_context):
 
     name, prefix, args = isolated_estimator()
     rig = SyntheticRig(rclpy_context, prefix, rate_hz=500.0, inject=inject, seed=25)
-    done = run_in_own_process(rclpy_context, rig, args, run_timeout_s=15.0, settle_s=1.0, stop_timeout_s=20.0)
+    probe = EstimatorProbe(rclpy_context, prefix)
+
+    def settled() -> bool:
+        """The estimator's newest input report says the rig went silent (it took everything queued before it
+        reported) and counts both bad commands: it has had every message that will reach it."""
+        if not probe.estimates:
+            return False
+        inputs = statuses(probe.estimates[-1])[1]
+        kv = {k.key: k.value for k in inputs.values}
+        return 'silent' in inputs.message and kv.get('command_rejected') == '1' and kv.get('command_dropped') == '1'
+    done = run_in_own_process(rclpy_context, rig, args, nodes=[probe.node], settled=settled)
     assert done.returncode == 0, done.stderr.decode()[-2000:]
     out = done.stdout
     line = [ln for ln in out.decode().splitlines() if ln.startswith('FINAL_COUNTERS')]

@@ -11,7 +11,7 @@ from geometry_msgs.msg import PointStamped, PoseStamped, PoseWithCovarianceStamp
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 
-from helpers import REPO, isolated, spin_until, stamp_ns
+from helpers import PATIENCE_S, REPO, isolated, spin_until, stamp_ns
 from helpers.probe import ProbeNode
 from crane_stiffness.contract import topics
 from crane_stiffness.full6.deflection import pose_deflection
@@ -123,13 +123,14 @@ def test_the_pose_is_the_solution_of_each_complete_instant_and_an_incomplete_one
     ex.add_node(node)
     ex.add_node(probe.node)
     assert spin_until(ex, lambda: all(p.get_subscription_count() >= 1 for p in pubs)
-                      and node.pub.get_subscription_count() >= 1 and node.pub_cov.get_subscription_count() >= 1, 30.0)
+                      and node.pub.get_subscription_count() >= 1 and node.pub_cov.get_subscription_count() >= 1,
+                      PATIENCE_S)
     for k, t in enumerate(stamps):
         for i, pub in enumerate(pubs):
             if not (k == 1 and i == 5):
                 pub.publish(_reading(t, readings[k, i]))
     # The machine's speed decides when, never what: wait for the last instant's pose.
-    assert spin_until(ex, lambda: len(poses) >= 2 and len(covs) >= 2, 60.0), (len(poses), node.counters)
+    assert spin_until(ex, lambda: len(poses) >= 2 and len(covs) >= 2, PATIENCE_S), (len(poses), node.counters)
     ex.shutdown()
 
     assert [p[0] for p in poses] == [stamps[0], stamps[2]] and [c[0] for c in covs] == [stamps[0], stamps[2]]
@@ -259,7 +260,7 @@ def test_six_simulated_lvdts_of_the_lab_config_give_the_pose_back(rclpy_context)
     for n in (node, probe.node, *lvdts):
         ex.add_node(n)
     assert spin_until(ex, lambda: platform.get_subscription_count() >= 6 and node.pub.get_subscription_count() >= 1
-                      and all(n.pub.get_subscription_count() >= 1 for n in lvdts), 30.0)
+                      and all(n.pub.get_subscription_count() >= 1 for n in lvdts), PATIENCE_S)
     rest_u, rest_q = np.array([0.0, 0.0, 2.4e-5]), np.array([0.0, 0.0, 0.0, 1.0])
     d = np.array([2e-4, -1e-4, 3e-4, 1.5e-3, -1e-3, 5e-4])
     moved_u, moved_q = rest_u + d[:3], quaternion_multiply(rotvec_to_quaternion(d[3:]), rest_q)
@@ -276,7 +277,7 @@ def test_six_simulated_lvdts_of_the_lab_config_give_the_pose_back(rclpy_context)
         o.x, o.y, o.z, o.w = (float(v) for v in q)
         platform.publish(msg)
     timer = probe.node.create_timer(0.02, send)
-    assert spin_until(ex, lambda: len(poses) >= 20, 120.0), node.counters
+    assert spin_until(ex, lambda: len(poses) >= 20, PATIENCE_S), node.counters
     current[0] = (moved_u, moved_q)
     moved_from = clock.now().nanoseconds
 
@@ -284,7 +285,7 @@ def test_six_simulated_lvdts_of_the_lab_config_give_the_pose_back(rclpy_context)
         first = poses[0]
         return np.array([pose_deflection(u, quaternion_to_matrix(q), first[2], quaternion_to_matrix(first[3]))
                          for _, _, u, q in poses])
-    assert spin_until(ex, lambda: sum(p[0] > moved_from + 100 * MS for p in poses) >= 20, 120.0), node.counters
+    assert spin_until(ex, lambda: sum(p[0] > moved_from + 100 * MS for p in poses) >= 20, PATIENCE_S), node.counters
     probe.node.destroy_timer(timer)
     ex.shutdown()
     got = deflections()

@@ -22,8 +22,8 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from std_msgs.msg import String
 
-from helpers import publish_wrench_now, call_trigger as call
-from helpers import collect_for, isolated, spin_until, stamp_ns, wrench_vector
+from helpers import PATIENCE_S, call_trigger as call, publish_wrench_now
+from helpers import isolated, spin_until, stamp_ns, wrench_vector
 from helpers.probe import ProbeNode
 from helpers.processes import final_counters, start_node_process, stop_node_process
 from crane_stiffness.contract import topics
@@ -77,7 +77,7 @@ class Probe(ProbeNode):
         first = next((i for i, (_, w) in enumerate(later) if np.array_equal(w, value)), len(later))
         return np.array([w for _, w in later[first:]]).reshape(-1, 6)
 
-    def wait_diag(self, ex, hardware_id: str, pred, timeout_s: float = 5.0) -> dict:
+    def wait_diag(self, ex, hardware_id: str, pred, timeout_s: float = PATIENCE_S) -> dict:
         """The first report of ``hardware_id`` from now on for which ``pred(report)`` holds."""
         self.diagnostics.clear()
         assert spin_until(ex, lambda: self.diag(hardware_id) is not None and pred(self.diag(hardware_id)),
@@ -98,36 +98,37 @@ def test_commands_the_model_rejects_reach_no_sensor(rclpy_context):
     ex.add_node(probe.node)
     # Before crane_model runs the load cell knows no load: it publishes nothing and says what it waits for.
     assert spin_until(ex, lambda: (probe.diag(lc_name) or {}).get('message', '').startswith(
-        'waiting for /crane/applied_wrench'), 5.0)
+        'waiting for /crane/applied_wrench'), PATIENCE_S)
     assert probe.samples == [] and cell.counters.waiting_samples > 0
     model = CraneModel(context=ctx, cli_args=model_args, parameter_overrides=[
         Parameter('geometry.height', value=0.5), Parameter('geometry.weight', value=50.0)])
     ex.add_node(model)
     # crane_model sends the load in force (rest: zero) to the load cell when it matches it: readings start at 0.
-    assert spin_until(ex, lambda: len(probe.samples) > 50, 10.0)
+    assert spin_until(ex, lambda: len(probe.samples) > 50, PATIENCE_S)
     assert np.all(np.array([w for _, w in probe.samples]) == 0.0)
     # Both directions matched: the model hears the probe, and the probe has heard the model (the load in force it
     # sends a reader on matching); a reply sent before the probe's reader matched would be lost, not late.
-    assert spin_until(ex, lambda: probe.cmd.get_subscription_count() >= 1 and probe.applied, 5.0)
+    assert spin_until(ex, lambda: probe.cmd.get_subscription_count() >= 1 and probe.applied, PATIENCE_S)
     t_hold = probe.command(HELD)
     assert spin_until(ex, lambda: probe.applied_at(t_hold) is not None and len(probe.held_from(t_hold, HELD)) > 50,
-                      5.0)
+                      PATIENCE_S)
     assert wrench_vector(probe.applied_at(t_hold)).tolist() == HELD.tolist()
     assert np.all(probe.held_from(t_hold, HELD) == HELD)
     # An absurd command: rejected (republished unchanged, same stamp); the load in force stays the 1 N hold.
     t_absurd = probe.command(ABSURD)
-    assert spin_until(ex, lambda: probe.applied_at(t_absurd) is not None and probe.rejected, 5.0)
+    assert spin_until(ex, lambda: probe.applied_at(t_absurd) is not None and probe.rejected, PATIENCE_S)
     assert wrench_vector(probe.applied_at(t_absurd)).tolist() == HELD.tolist()
     assert wrench_vector(probe.rejected[-1]).tolist() == ABSURD.tolist()
     assert stamp_ns(probe.rejected[-1].header.stamp) == t_absurd
     # A command without an equilibrium: the same, and the status says why.
     t_none = probe.command(NO_EQUILIBRIUM)
-    assert spin_until(ex, lambda: probe.applied_at(t_none) is not None and len(probe.rejected) == 2, 10.0)
+    assert spin_until(ex, lambda: probe.applied_at(t_none) is not None and len(probe.rejected) == 2, PATIENCE_S)
     assert wrench_vector(probe.applied_at(t_none)).tolist() == HELD.tolist()
     assert wrench_vector(probe.rejected[-1]).tolist() == NO_EQUILIBRIUM.tolist()
     assert stamp_ns(probe.rejected[-1].header.stamp) == t_none
-    assert spin_until(ex, lambda: probe.model_status and probe.model_status[-1].startswith('no_equilibrium'), 5.0)
-    assert spin_until(ex, lambda: len(probe.held_from(t_hold, HELD)) > 400, 10.0)
+    assert spin_until(ex, lambda: probe.model_status and probe.model_status[-1].startswith('no_equilibrium'),
+                      PATIENCE_S)
+    assert spin_until(ex, lambda: len(probe.held_from(t_hold, HELD)) > 400, PATIENCE_S)
     # The load cell never measured either: every reading since the hold is exactly the held load, nothing
     # saturated (fy full scale 40 N, mz 2 N·m), and its tare at the current load zeroes the held load.
     after = probe.held_from(t_hold, HELD)
@@ -142,7 +143,7 @@ def test_commands_the_model_rejects_reach_no_sensor(rclpy_context):
     assert (c.received, c.used, c.dropped_absurd, c.dropped_no_equilibrium) == (3, 1, 1, 1)
     assert accounted(c.__dict__) and accounted(cell.counters.__dict__)
     # The load cell and the probe are two readers of the applied wrench: one may be a message ahead of the other.
-    assert spin_until(ex, lambda: cell.counters.received == cell.counters.used == len(probe.applied), 10.0), \
+    assert spin_until(ex, lambda: cell.counters.received == cell.counters.used == len(probe.applied), PATIENCE_S), \
         (cell.counters.received, cell.counters.used, len(probe.applied))
     ex.shutdown()
 
@@ -161,10 +162,10 @@ def test_a_repeated_failing_command_is_answered_from_the_cache(rclpy_context, tm
     try:
         # Both directions matched (see the test above): the probe has heard the model's applied wrench.
         assert spin_until(ex, lambda: probe.cmd.get_subscription_count() >= 1 and len(probe.samples) > 10
-                          and probe.applied, 30.0), \
+                          and probe.applied, PATIENCE_S), \
             (tmp_path / 'model.log').read_text() + (tmp_path / 'cell.log').read_text()
         t_hold = probe.command(HELD)
-        assert spin_until(ex, lambda: probe.applied_at(t_hold) is not None, 10.0)
+        assert spin_until(ex, lambda: probe.applied_at(t_hold) is not None, PATIENCE_S)
         sent = []
         next_t = time.monotonic()
         while len(sent) < n:  # the program holding an impossible load at 100 Hz
@@ -174,12 +175,14 @@ def test_a_repeated_failing_command_is_answered_from_the_cache(rclpy_context, tm
                 ex.spin_once(timeout_sec=max(0.0, next_t - time.monotonic()))
         t_after = probe.command(HELD)
         # Every command is answered (applied wrench with its stamp), the failing ones with the held load.
-        assert spin_until(ex, lambda: probe.applied_at(t_after) is not None, 20.0)
+        assert spin_until(ex, lambda: probe.applied_at(t_after) is not None, PATIENCE_S)
         answers = {stamp_ns(m.header.stamp): wrench_vector(m) for m in probe.applied}
         assert all(answers[t].tolist() == HELD.tolist() for t in sent)
         # The rejections come from another writer, not ordered with the applied wrenches: wait for all of them.
-        assert spin_until(ex, lambda: len(probe.rejected) == n, 10.0), (len(probe.rejected), n)
-        collect_for(ex, 0.3)
+        assert spin_until(ex, lambda: len(probe.rejected) == n, PATIENCE_S), (len(probe.rejected), n)
+        # A reading stamped after the last command covers every failing one: had one reached the load cell, a
+        # reading since the hold would show it.
+        assert spin_until(ex, lambda: len(probe.readings_after(t_after)) > 0, PATIENCE_S)
         assert np.all(probe.readings_after(t_hold)[:, 5] < 0.1)  # mz = 50 N·m never reached the load cell
     finally:
         model_code, model_log = stop_node_process(model, tmp_path / 'model.log')
@@ -208,7 +211,7 @@ def test_rdt_emulator_serves_no_reading_before_the_applied_wrench(rclpy_context)
     sock.settimeout(0.05)
     port = emu.device.port
 
-    def records(enough, timeout_s: float = 10.0) -> np.ndarray:
+    def records(enough, timeout_s: float = PATIENCE_S) -> np.ndarray:
         """Stream records until ``enough(records)`` holds (or the timeout), then stop the stream."""
         sock.sendto(rdt.encode_request(rdt.CMD_REALTIME, 0), ('127.0.0.1', port))
         out, end = [np.zeros(0, dtype=rdt.RECORD_DTYPE)], time.monotonic() + timeout_s
@@ -225,11 +228,11 @@ def test_rdt_emulator_serves_no_reading_before_the_applied_wrench(rclpy_context)
         before = records(lambda r: len(r) > 100)
         assert len(before) > 50 and np.all(before['status'] == STATUS_NOT_READY)
         assert emu.counters.not_ready_records >= len(before)
-        assert spin_until(ex, lambda: pub.get_subscription_count() >= 1, 5.0)
+        assert spin_until(ex, lambda: pub.get_subscription_count() >= 1, PATIENCE_S)
         msg = WrenchStamped()
         msg.wrench.force.y = 2.0
         pub.publish(msg)
-        assert spin_until(ex, lambda: emu.applied is not None, 5.0)
+        assert spin_until(ex, lambda: emu.applied is not None, PATIENCE_S)
         after = records(lambda r: np.count_nonzero(r['status'] == 0) > 100)
         ready = np.nonzero(after['status'] == 0)[0]  # (a burst being sent as the wrench came may be not ready)
         assert len(ready) > 50 and np.all(after['status'][ready[0]:] == 0)
@@ -263,13 +266,13 @@ def test_zero_tare_and_restart_are_visible_on_diagnostics(rclpy_context):
 
     first = Lvdt(context=ctx, cli_args=args, parameter_overrides=[Parameter('noise_std', value=0.0)])
     ex.add_node(first)
-    assert spin_until(ex, lambda: pose_pub.get_subscription_count() >= 1, 5.0)
+    assert spin_until(ex, lambda: pose_pub.get_subscription_count() >= 1, PATIENCE_S)
     publish_pose(1e-5)  # zero_on_first_pose: zeroed at the first pose, 10 µm along y from the rest pose
     d = wait_diag(lambda d: d['zero_count'] == '1')
     assert float(d['zero_offset_m']) == pytest.approx(1e-5, abs=1e-15) and int(d['zeroed_at']) > 0
     started = int(d['started_at'])
     publish_pose(3e-5)
-    assert spin_until(ex, lambda: first.pose.latest is not None and first.pose.latest[1] == 3e-5, 5.0)
+    assert spin_until(ex, lambda: first.pose.latest is not None and first.pose.latest[1] == 3e-5, PATIENCE_S)
     reply = call(ex, probe.node, f'/{name}/zero')
     assert reply.success and 'zero offset 3e-05 m' in reply.message
     d = wait_diag(lambda d: d['zero_count'] == '2')
@@ -280,7 +283,7 @@ def test_zero_tare_and_restart_are_visible_on_diagnostics(rclpy_context):
     first.destroy_node()
     second = Lvdt(context=ctx, cli_args=args, parameter_overrides=[Parameter('noise_std', value=0.0)])
     ex.add_node(second)
-    assert spin_until(ex, lambda: pose_pub.get_subscription_count() >= 1, 5.0)
+    assert spin_until(ex, lambda: pose_pub.get_subscription_count() >= 1, PATIENCE_S)
     publish_pose(3e-5)
     d = wait_diag(lambda d: d['zero_count'] == '1' and int(d['started_at']) != started)
     assert int(d['started_at']) > started and float(d['zero_offset_m']) == pytest.approx(3e-5, abs=1e-15)
@@ -292,12 +295,12 @@ def test_zero_tare_and_restart_are_visible_on_diagnostics(rclpy_context):
     applied = lc_probe.node.create_publisher(WrenchStamped, lc_prefix + topics.APPLIED_WRENCH, RELIABLE_QOS)
     ex.add_node(cell)
     ex.add_node(lc_probe.node)
-    assert spin_until(ex, lambda: applied.get_subscription_count() >= 1, 5.0)
+    assert spin_until(ex, lambda: applied.get_subscription_count() >= 1, PATIENCE_S)
     applied.publish(WrenchStamped())
-    assert spin_until(ex, lambda: (lc_probe.diag(lc_name) or {}).get('tare_count') == '0', 5.0)
+    assert spin_until(ex, lambda: (lc_probe.diag(lc_name) or {}).get('tare_count') == '0', PATIENCE_S)
     assert call(ex, lc_probe.node, f'/{lc_name}/tare').success
     lc_probe.diagnostics.clear()
-    assert spin_until(ex, lambda: (lc_probe.diag(lc_name) or {}).get('tare_count') == '1', 5.0)
+    assert spin_until(ex, lambda: (lc_probe.diag(lc_name) or {}).get('tare_count') == '1', PATIENCE_S)
     d = lc_probe.diag(lc_name)
     assert int(d['tared_at']) > int(d['started_at']) > 0 and d['offset'].startswith('[0.5, 0.0, 0.0')
     ex.shutdown()
@@ -310,7 +313,9 @@ def test_an_emulator_serving_late_physics_says_so(rclpy_context, kind):
     is OK again from the next report."""
     from crane_stiffness.nodes.modbus_emulator import ModbusEmulator
     name, prefix, args = isolated(kind)
-    LIMIT = Parameter('max_input_lag_s', value=0.3)  # timely messages in this busy test process stay well below
+    # Timely messages stay far below the limit even on a starved machine; the late one is far above it.
+    LIMIT = Parameter('max_input_lag_s', value=5.0)
+    LATE_S = 20.0
     if kind == 'rdt_emulator':
         emu = RdtEmulator(context=rclpy_context, cli_args=args, parameter_overrides=[
             Parameter('port', value=0), Parameter('sample_rate_hz', value=1000.0), LIMIT])
@@ -333,19 +338,22 @@ def test_an_emulator_serving_late_physics_says_so(rclpy_context, kind):
         pub.publish(msg)
 
     try:
-        assert spin_until(ex, lambda: pub.get_subscription_count() >= 1, 5.0)
+        assert spin_until(ex, lambda: pub.get_subscription_count() >= 1, PATIENCE_S)
         send(0.0)
-        probe.wait_diag(ex, name, lambda d: d['late_inputs'] == '0' and float(d['input_lag_max_ms']) < 300.0
+        probe.wait_diag(ex, name, lambda d: d['late_inputs'] == '0' and float(d['input_lag_max_ms']) < 5000.0
                         and 'serving' in d['message'])
-        send(2.0)  # two seconds late
+        sent_at = time.monotonic()
+        send(LATE_S)  # twenty seconds late
         late = probe.wait_diag(ex, name, lambda d: d['late_inputs'] == '1')
+        # The lag reported is the age it was sent with plus at most the time it took to reach the report.
+        since_sent_ms = (time.monotonic() - sent_at) * 1e3
         levels = [s.level for s in probe.diagnostics if s.hardware_id == name]
         assert levels and levels[-1] == bytes([WARN]), levels
-        assert 'after its stamp (> max_input_lag_s 300 ms)' in late['message'] and 'stale' in late['message']
-        assert 2000.0 <= float(late['input_lag_max_ms']) < 5000.0
+        assert 'after its stamp (> max_input_lag_s 5000 ms)' in late['message'] and 'stale' in late['message']
+        assert LATE_S * 1e3 <= float(late['input_lag_max_ms']) <= LATE_S * 1e3 + since_sent_ms, since_sent_ms
         send(0.0)
-        ok = probe.wait_diag(ex, name, lambda d: float(d['input_lag_max_ms']) < 300.0)  # next period: timely again
-        assert 'serving' in ok['message'] and float(ok['input_lag_run_max_ms']) >= 2000.0
+        ok = probe.wait_diag(ex, name, lambda d: float(d['input_lag_max_ms']) < 5000.0)  # next period: timely again
+        assert 'serving' in ok['message'] and float(ok['input_lag_run_max_ms']) >= LATE_S * 1e3
         levels = [s.level for s in probe.diagnostics if s.hardware_id == name]
         assert levels[-1] == bytes([OK]), levels
     finally:

@@ -23,7 +23,7 @@ from rclpy.serialization import serialize_message
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64, String
 
-from helpers import spin_until
+from helpers import PATIENCE_S, spin_until
 from crane_stiffness.contract import topics
 from crane_stiffness.analysis.analyze import analyze_session
 from crane_stiffness.bag import BagReader, BagWriter, dump_qos_profiles, qos_profile
@@ -85,6 +85,11 @@ class Sink:
                                       qos)
 
 
+def stamp_of(t) -> int:
+    """A builtin_interfaces/Time in ns."""
+    return t.sec * NS + t.nanosec
+
+
 def make_player(ctx, bag, **params):
     overrides = [Parameter('bag', value=str(bag)), Parameter('autostart', value=False),
                  Parameter('exit_on_end', value=False)]
@@ -92,15 +97,16 @@ def make_player(ctx, bag, **params):
     return SessionPlayer(context=ctx, parameter_overrides=overrides, cli_args=params.get('cli_args'))
 
 
-def play(ex, player, timeout=10.0, wait=None):
-    """Wait until the played topics (or those of ``wait``) have a subscriber, play to the end, let the last
-    messages arrive."""
+def play(ex, player, wait=None, arrived=lambda: True):
+    """Wait until the played topics (or those of ``wait``) have a subscriber, play to the end, then until
+    ``arrived()`` says the last messages the test needs have arrived (not asserted: the test's checks say what is
+    missing). Every wait has the suite's patience."""
     pubs = [p for t, p in player.playing_topics.items() if wait is None or t in wait]
-    assert spin_until(ex, lambda: all(p.get_subscription_count() >= 1 for p in pubs), 10), \
+    assert spin_until(ex, lambda: all(p.get_subscription_count() >= 1 for p in pubs), PATIENCE_S), \
         {t: p.get_subscription_count() for t, p in player.playing_topics.items()}
     player.start()
-    assert spin_until(ex, lambda: player.finished, timeout), player.state
-    spin_until(ex, lambda: False, 0.2)
+    assert spin_until(ex, lambda: player.finished, PATIENCE_S), player.state
+    spin_until(ex, arrived, PATIENCE_S)
 
 
 def test_replay_timing_rate_and_offset(rclpy_context, small_bag):
@@ -113,7 +119,7 @@ def test_replay_timing_rate_and_offset(rclpy_context, small_bag):
         sink.got['/a'].clear()
         player = make_player(ctx, small_bag, rate=rate, start_offset_s=offset, topics_include=['/a'])
         ex.add_node(player)
-        play(ex, player)
+        play(ex, player, arrived=lambda: len(sink.got['/a']) >= player.stats['published'])
         got = sink.got['/a']
         first = round(offset * 100)
         assert [m.wrench.force.y for _, m in got] == [float(i) for i in range(first, 101)], (rate, offset)
@@ -158,8 +164,8 @@ def test_every_message_in_order_through_the_read_ahead(rclpy_context, tmp_path, 
     ex.add_node(sink.node)
     player = make_player(ctx, bag, rate=2.0)
     ex.add_node(player)
-    play(ex, player, timeout=60)
-    assert spin_until(ex, lambda: len(got) >= n, 20), len(got)
+    play(ex, player)
+    assert spin_until(ex, lambda: len(got) >= n, PATIENCE_S), len(got)
     assert got == sent  # every message, in order, byte for byte
     assert player.stats['read'] == player.stats['published'] == n
     ex.shutdown()
@@ -178,7 +184,7 @@ def test_include_exclude_remap_and_recorded_qos(rclpy_context, small_bag):
     player = make_player(ctx, small_bag, topics_include=['/a', '/b'], topics_exclude=['/b'],
                          remap=['/a:=/renamed'])
     ex.add_node(player)
-    play(ex, player)
+    play(ex, player, arrived=lambda: len(sink.got['/renamed']) >= player.stats['published'])
     assert player.topic_map == {'/a': '/renamed'}
     assert len(sink.got['/renamed']) == 101 and sink.got['/a'] == [] and sink.got['/b'] == []
     ex.remove_node(player)
@@ -186,14 +192,14 @@ def test_include_exclude_remap_and_recorded_qos(rclpy_context, small_bag):
     # ordinary ROS remapping applies to the player's publishers; patterns select topics
     player = make_player(ctx, small_bag, topics_include=['/[bc]'], cli_args=['--ros-args', '-r', '/b:=/b_by_ros'])
     ex.add_node(player)
-    play(ex, player, wait=['/b'])  # nobody listens to /c yet
+    play(ex, player, wait=['/b'], arrived=lambda: len(sink.got['/b_by_ros']) >= 11)  # nobody listens to /c yet
     assert [m.data for _, m in sink.got['/b_by_ros']] == [f'b{i}' for i in range(0, 101, 10)]
     assert player.topic_map == {'/b': '/b_by_ros', '/c': '/c'}
     # /c was recorded transient local: a subscriber created after the replay still gets its value
     late = Sink(ctx, 'late')
     late.listen('/c', Float64, LATCHED_QOS)
     ex.add_node(late.node)
-    assert spin_until(ex, lambda: late.got['/c'], 10)
+    assert spin_until(ex, lambda: late.got['/c'], PATIENCE_S)
     assert late.got['/c'][0][1].data == 2.5
     ex.shutdown()
 
@@ -209,8 +215,10 @@ def test_clock_loop_and_exit_on_end(rclpy_context, small_bag):
     ex.add_node(sim)
     player = make_player(ctx, small_bag, publish_clock=True, clock_rate_hz=50.0, topics_include=['/a'])
     ex.add_node(player)
-    assert spin_until(ex, lambda: player.clock_pub.get_subscription_count() >= 2, 10)
-    play(ex, player)
+    assert spin_until(ex, lambda: player.clock_pub.get_subscription_count() >= 2, PATIENCE_S)
+    end = T0 + 100 * 10_000_000  # the last message's log time
+    play(ex, player, arrived=lambda: sink.got['/clock'] and stamp_of(sink.got['/clock'][-1][1].clock) == end
+         and sim.get_clock().now().nanoseconds == end)
     clock = [m.clock.sec * NS + m.clock.nanosec for _, m in sink.got['/clock']]
     assert len(clock) >= 30 and clock == sorted(clock)
     assert T0 <= clock[0] and clock[-1] == T0 + 100 * 10_000_000  # ends at the last message's log time
@@ -222,7 +230,7 @@ def test_clock_loop_and_exit_on_end(rclpy_context, small_bag):
     player = make_player(ctx, small_bag, loop=True, rate=4.0, topics_include=['/a'])
     ex.add_node(player)
     player.start()
-    assert spin_until(ex, lambda: len(sink.got['/a']) > 250, 10)
+    assert spin_until(ex, lambda: len(sink.got['/a']) > 250, PATIENCE_S)
     assert player.stats['loops'] >= 2 and player.stop() and player.state == 'stopped'
     ex.remove_node(player)
     player.destroy_node()
@@ -232,7 +240,7 @@ def test_clock_loop_and_exit_on_end(rclpy_context, small_bag):
         Parameter('bag', value=str(small_bag)), Parameter('rate', value=10.0), Parameter('start_delay_s', value=0.1)])
     ex.add_node(player)
     assert not player.exit_requested
-    assert spin_until(ex, lambda: player.exit_requested, 10)
+    assert spin_until(ex, lambda: player.exit_requested, PATIENCE_S)
     assert player.exit_status == 0 and player.finished
     ex.shutdown()
 
@@ -291,7 +299,7 @@ def test_replay_through_the_estimator_reproduces_the_live_estimates(rclpy_contex
     loader = LoadProgramNode(context=ctx, parameter_overrides=program + sim)
     ex.add_node(loader)
     assert recorder.recording
-    assert spin_until(ex, lambda: not recorder.recording, 120), recorder.status
+    assert spin_until(ex, lambda: not recorder.recording, PATIENCE_S), recorder.status
     # What the live estimator received, to compare with what the bag holds.
     live_received = (rig[3].core.counters.force_received, rig[3].core.counters.displacement_received)
     for node in rig + [loader, clock]:
@@ -351,7 +359,8 @@ def test_replay_through_the_estimator_reproduces_the_live_estimates(rclpy_contex
     player = make_player(ctx, bag, topics_include=inputs)
     ex.add_node(estimator)
     ex.add_node(player)
-    play(ex, player, timeout=30)
+    play(ex, player, arrived=lambda: estimator.core.counters.force_received == counts[topics.LOAD_CELL_WRENCH]
+         and estimator.core.counters.displacement_received == counts[topics.LVDT_DISPLACEMENT])
     assert estimator.core.counters.force_received == counts[topics.LOAD_CELL_WRENCH]
     assert estimator.core.counters.displacement_received == counts[topics.LVDT_DISPLACEMENT]
     same = [_values(v) for v in computed if v[VALUE_FIELDS.index('sample_stamp')] == stamp]

@@ -25,7 +25,7 @@ from geometry_msgs.msg import WrenchStamped
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 
-from helpers import call_trigger, spin_until
+from helpers import PATIENCE_S, call_trigger, collect_for, spin_until
 from helpers.processes import final_counters
 from crane_stiffness.contract import topics
 from crane_stiffness.bag import BagDamageWarning, BagReader
@@ -113,15 +113,15 @@ def _run_on_small_disk(disk: Path, env: dict, ctx, tmp_path: Path) -> None:
             '--ros-args', '-p', f'output_dir:={out}', '-p', 'session:=full', '-p', 'compression:=none',
             '-p', 'chunk_size:=16384', '-p', 'flush_interval_s:=0.2', '-p', f'topics:=[{topics.WRENCH_COMMAND}]',
             '-p', 'stop_on_program_done:=false', '-p', "record_node_parameters:=['']"])
-        assert spin_until(ex, lambda: pub.get_subscription_count() >= 1, 45), procs.log('rec')[-2000:]
+        assert spin_until(ex, lambda: pub.get_subscription_count() >= 1, PATIENCE_S), procs.log('rec')[-2000:]
         t0 = 1_700_000_000 * NS
         sent = 0
-        deadline = time.monotonic() + 60
+        deadline = time.monotonic() + PATIENCE_S
         while not any(r.level[0] == ERROR for r in reports) and time.monotonic() < deadline:
             for _ in range(20):
                 pub.publish(_wrench(t0 + sent * 1_000_000, float(sent)))
                 sent += 1
-            spin_until(ex, lambda: False, 0.01)
+            collect_for(ex, 0.01)  # the pace of the commands
         procs.check_alive()  # the recorder lives on
         error = next((r for r in reports if r.level[0] == ERROR), None)
         assert error is not None, procs.log('rec')[-3000:]
@@ -154,10 +154,10 @@ def _run_on_small_disk(disk: Path, env: dict, ctx, tmp_path: Path) -> None:
         filler.unlink()
         # The stopped recording unsubscribed: wait until this publisher has seen that reader go, or the count
         # below could still be the old reader's and the new bag's first commands go to nobody.
-        assert spin_until(ex, lambda: pub.get_subscription_count() == 0, 30), pub.get_subscription_count()
+        assert spin_until(ex, lambda: pub.get_subscription_count() == 0, PATIENCE_S), pub.get_subscription_count()
         res = call_trigger(ex, node, '/session_recorder/start', 10)
         assert res.success and res.message == f'recording to {out / "full_2"}', res.message
-        assert spin_until(ex, lambda: pub.get_subscription_count() >= 1, 10)
+        assert spin_until(ex, lambda: pub.get_subscription_count() >= 1, PATIENCE_S)
         for i in range(500):
             pub.publish(_wrench(t0 + (sent + i) * 1_000_000, -float(i)))
 
@@ -170,11 +170,11 @@ def _run_on_small_disk(disk: Path, env: dict, ctx, tmp_path: Path) -> None:
             return None
 
         # Stop once the recorder says it has all 500 (not after a fixed time: a starved recorder lags).
-        assert spin_until(ex, lambda: new_bag_count() == '500', 30), (new_bag_count(), procs.log('rec')[-2000:])
-        res = call_trigger(ex, node, '/session_recorder/stop', 10)
+        assert spin_until(ex, lambda: new_bag_count() == '500', PATIENCE_S), (new_bag_count(), procs.log('rec')[-2000:])
+        res = call_trigger(ex, node, '/session_recorder/stop')
         assert res.success and res.message == f'closed {out / "full_2"}: 500 messages', res.message
         n = len(reports)
-        assert spin_until(ex, lambda: len(reports) > n + 1, 5)
+        assert spin_until(ex, lambda: len(reports) > n + 1, PATIENCE_S)
         assert reports[-1].level[0] == 0, reports[-1].message  # the new recording closed well: OK again
         with BagReader(out / 'full_2') as reader:
             assert reader.complete and reader.decode(topics.WRENCH_COMMAND)['fy'].tolist() == \
@@ -342,14 +342,14 @@ def test_the_recorder_counts_a_message_its_chunk_saved_as_written_not_refused(rc
     ex.add_node(recorder)
     ex.add_node(node)
     try:
-        assert spin_until(ex, lambda: pub.get_subscription_count() >= 1, 10)
+        assert spin_until(ex, lambda: pub.get_subscription_count() >= 1, PATIENCE_S)
         sent = 0
         while full.refused == 0 and sent < 5000:
             pub.publish(_wrench(time.time_ns(), float(sent)))
             sent += 1
             ex.spin_once(timeout_sec=0.0)
-        assert spin_until(ex, lambda: recorder.writer is None, 10)  # the write error stopped the recording
-        spin_until(ex, lambda: False, 0.5)  # what was on its way (the recording unsubscribed when it stopped)
+        assert spin_until(ex, lambda: recorder.writer is None, PATIENCE_S)  # the write error stopped the recording
+        # (the recording unsubscribed when it stopped: its counters are final, and every check below is on them)
         c = recorder.counters
     finally:
         ex.shutdown()

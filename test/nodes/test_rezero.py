@@ -10,13 +10,14 @@ import pytest
 from rclpy.parameter import Parameter
 from std_msgs.msg import Float64
 
-from helpers import spin_until
+from helpers import PATIENCE_S, spin_until
 from crane_stiffness.contract import topics
 from crane_stiffness.estimation.live import LiveStiffness
 from crane_stiffness.estimation.sync import DISPLACEMENT, FORCE
 from crane_stiffness.rosnode.qos import LATCHED_QOS
 from crane_stiffness.nodes.stiffness_estimator import StiffnessEstimatorNode
-from helpers.estimator import C, K, EstimatorProbe, SyntheticRig, executor_with, identity, isolated_estimator, statuses
+from helpers.estimator import (C, K, EstimatorProbe, SyntheticRig, executor_with, identity, isolated_estimator,
+                               statuses, wait_drained)
 
 RATE_HZ = 500.0
 WINDOW = 600
@@ -36,9 +37,10 @@ def test_lvdt_rezero_without_restart_starts_a_new_segment(rclpy_context):
     zero.publish(Float64(data=0.0))  # the LVDT's epoch at start, latched
     ex = executor_with(rclpy_context, estimator, probe.node, rig.node)
     assert spin_until(ex, lambda: rig.pub_force.get_subscription_count() >= 1 and zero.get_subscription_count() >= 1
-                      and rig.pub_point.get_subscription_count() >= 1 and rig.pub_cmd.get_subscription_count() >= 1, 5)
+                      and rig.pub_point.get_subscription_count() >= 1 and rig.pub_cmd.get_subscription_count() >= 1,
+                      PATIENCE_S)
     rig.start()
-    assert spin_until(ex, lambda: rig.sent >= 1000, 10.0)  # 0.6 s before the peak (sample 1300)
+    assert spin_until(ex, lambda: rig.sent >= 1000, PATIENCE_S)  # 0.6 s before the peak (sample 1300)
     # The latched first epoch started nothing: still the start-up segment.
     assert estimator.core.counters.segments == 1 and estimator.core.segment_reason == 'start'
     # Re-zero between two bursts, at the current load: no restart, same publisher, readings step by -x here.
@@ -46,16 +48,16 @@ def test_lvdt_rezero_without_restart_starts_a_new_segment(rclpy_context):
     t_s = rezero_at / RATE_HZ  # the rig's time of the next sample from its start
     rig.x_offset = (rig.load(t_s) - C) / K
     zero.publish(Float64(data=1.0))
-    assert spin_until(ex, lambda: rig.done, 15.0)
-    spin_until(ex, lambda: False, 0.5)
+    assert spin_until(ex, lambda: rig.done, PATIENCE_S)
+    wait_drained(ex, rig, estimator, probe)
     core = estimator.core
     loading, unloading = probe.last(0), probe.last(1)
     print(f'segments {core.counters.segments} ({core.segment_reason}); re-zero at sample {rezero_at}, offset '
           f'{rig.x_offset * 1e3:.4f} mm; loading {loading["stiffness"]:.1f}, unloading {unloading["stiffness"]:.1f} '
           f'N/m (true {K})')
     assert core.counters.segments == 2 and core.segment_reason == 'lvdt re-zeroed'
-    assert any('new fit segment' in b.message and 'lvdt re-zeroed' in b.message
-               for a in probe.estimates for b in statuses(a)[0])
+    assert spin_until(ex, lambda: any('new fit segment' in b.message and 'lvdt re-zeroed' in b.message
+                                      for a in probe.estimates for b in statuses(a)[0]), PATIENCE_S)
     assert loading['stiffness'] == pytest.approx(K, rel=0.01)
     assert loading['intercept'] == pytest.approx(C + K * rig.x_offset, abs=0.03)  # the new zero: F = C + K·offset at 0
     assert unloading['stiffness'] == pytest.approx(K, rel=0.01)

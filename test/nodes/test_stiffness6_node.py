@@ -9,6 +9,7 @@ import time
 import numpy as np
 import pytest
 
+from helpers import PATIENCE_S
 from crane_stiffness.contract import stiffness6_layout
 from crane_stiffness.full6.design import d_optimal_design
 from crane_stiffness.full6.identify import identify
@@ -79,7 +80,7 @@ def test_the_live_6x6_fit_equals_the_offline_one_and_a_stopped_pose_stream_is_st
     executor.add_node(node)
     executor.add_node(feeder)
     try:
-        deadline = time.monotonic() + 30
+        deadline = time.monotonic() + PATIENCE_S
         while not all(pub.get_subscription_count() for pub in (pub_c, pub_w, pub_p)):
             assert time.monotonic() < deadline, 'the node never matched the feeder'
             executor.spin_once(timeout_sec=0.05)
@@ -130,7 +131,7 @@ def test_the_live_6x6_fit_equals_the_offline_one_and_a_stopped_pose_stream_is_st
         assert np.all(np.abs(np.diag(fit.stiffness) / np.diag(tangent) - 1) < 0.02)
         # what the node published: the fit, laid out quantity x row x column
         # (crane_stiffness.contract.stiffness6_layout)
-        deadline = time.monotonic() + 30
+        deadline = time.monotonic() + PATIENCE_S
         while not got['k'] or not np.allclose(stiffness6_layout.decode(got['k'][-1].data)[0], fit.stiffness,
                                               rtol=1e-12):
             assert time.monotonic() < deadline, 'no /stiffness6/stiffness with the fit'
@@ -144,7 +145,7 @@ def test_the_live_6x6_fit_equals_the_offline_one_and_a_stopped_pose_stream_is_st
         pairs_before, waiting = node.counters['pairs'], node.pairing.waiting
         last_pose = tp[-1]
         got['status'].clear()
-        deadline = time.monotonic() + 60
+        deadline = time.monotonic() + PATIENCE_S
         def pose_stale(s) -> bool:  # STALE for the pose stream alone (the load cell is fresh again)
             st = s.status[0]
             return st.level == bytes([STALE]) and topics.LOAD_CELL_WRENCH not in st.message

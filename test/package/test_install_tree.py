@@ -13,7 +13,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
-from helpers import REPO, spin_until
+from helpers import PATIENCE_S, REPO, spin_until
 from crane_stiffness.contract import topics
 from crane_stiffness.launcher.rig_description import rig_nodes
 from crane_stiffness.launcher import rosrun
@@ -82,11 +82,11 @@ def test_node_started_like_ros2_run_answers_over_dds(install_tree, rclpy_context
         pub = node.create_publisher(WrenchStamped, topics.WRENCH_COMMAND, RELIABLE_QOS)
         ex = SingleThreadedExecutor(context=rclpy_context)
         ex.add_node(node)
-        assert spin_until(ex, lambda: pub.get_subscription_count() >= 1, 30), procs.log('crane_model')
+        assert spin_until(ex, lambda: pub.get_subscription_count() >= 1, PATIENCE_S), procs.log('crane_model')
         msg = WrenchStamped()
         msg.wrench.force.y = 2.0
         pub.publish(msg)
-        assert spin_until(ex, lambda: poses and poses[-1].pose.position.y > 0, 15), procs.log('crane_model')
+        assert spin_until(ex, lambda: poses and poses[-1].pose.position.y > 0, PATIENCE_S), procs.log('crane_model')
         assert poses[-1].pose.position.y == pytest.approx(2.0 / 53793.5, rel=2e-3)
         procs.check_alive()
         codes = procs.stop()
@@ -136,14 +136,14 @@ def test_every_rig_node_runs_from_the_install_tree_and_its_topics_echo(install_t
     with rosrun.Processes(env, tmp_path) as procs:
         for name, rig_node in params.items():
             start_node(procs, rig_node, {'start_delay_s': 0.5, 'min_subscribers': 3} if rig_node.runs_program else None)
-        assert spin_until(ex, lambda: set(params) <= set(node.get_node_names()), 60), procs.log('load_program')
+        assert spin_until(ex, lambda: set(params) <= set(node.get_node_names()), PATIENCE_S), procs.log('load_program')
         # A node's name is discovered apart from its publishers (which can take longer on a busy machine).
-        spin_until(ex, lambda: expected <= set(advertised_now()), 30)
+        spin_until(ex, lambda: expected <= set(advertised_now()), PATIENCE_S)
         advertised = advertised_now()
         for topic, type_name in advertised.items():
             node.create_subscription(_message_class(type_name), topic,
                                      lambda msg, t=topic: received.setdefault(t, msg), _echo_qos(node, topic))
-        deadline = time.monotonic() + 60
+        deadline = time.monotonic() + PATIENCE_S
         while set(received) < set(advertised) - {topics.REJECTED_COMMAND} and time.monotonic() < deadline:
             procs.check_alive()
             ex.spin_once(timeout_sec=0.05)

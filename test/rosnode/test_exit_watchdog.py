@@ -12,12 +12,10 @@ import textwrap
 
 import pytest
 
-from helpers import REPO
+from helpers import PATIENCE_S, REPO  # a process that should end by itself: 600 s if the watchdog failed
 
 #: A hang with the GIL held: ``sleep`` called through PyDLL, which keeps the GIL [s].
 HANG = 'import ctypes; ctypes.PyDLL(None).sleep(600)'
-#: How long a test waits for a process that should end by itself [s] (600 if the watchdog failed).
-PATIENCE_S = 120
 
 
 def run_python(code: str) -> subprocess.CompletedProcess:

@@ -19,7 +19,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from std_srvs.srv import Trigger
 
-from helpers import REPO, spin_until
+from helpers import PATIENCE_S, REPO, spin_until
 from crane_stiffness.bag import BagWriter, dump_qos_profiles, qos_profile
 from crane_stiffness.nodes.crane_model import CraneModel
 from crane_stiffness.nodes.session_player import SessionPlayer
@@ -31,7 +31,7 @@ PKG = 'crane_stiffness'
 
 # ---------------------------------------------------------------------------------------- at start, as processes --
 
-def run_node(env, executable: str, *args: str, timeout: float = 60.0) -> subprocess.CompletedProcess:
+def run_node(env, executable: str, *args: str, timeout: float = PATIENCE_S) -> subprocess.CompletedProcess:
     """A node started like ``ros2 run crane_stiffness <executable> <args>`` that is expected to stop by itself."""
     return subprocess.run(rosrun.command(PKG, executable, list(args), env), env=env, capture_output=True, text=True,
                           timeout=timeout, stdin=subprocess.DEVNULL)
@@ -104,9 +104,9 @@ class ParamClient:
 
     def _call(self, srv_type, service: str, request):
         client = self.node.create_client(srv_type, f'{self.target}/{service}')
-        assert client.wait_for_service(timeout_sec=10.0), service
+        assert client.wait_for_service(timeout_sec=PATIENCE_S), service
         future = client.call_async(request)
-        assert spin_until(self.ex, future.done, 10.0), service
+        assert spin_until(self.ex, future.done, PATIENCE_S), service
         self.node.destroy_client(client)
         return future.result()
 

@@ -10,6 +10,7 @@ import time
 
 import pytest
 
+from helpers import PATIENCE_S
 from crane_stiffness.rosnode.replay_timing import ReadAhead, fine_timer_slack, quiet_interpreter
 
 
@@ -27,7 +28,7 @@ def _take_all(ahead: ReadAhead) -> list:
     out = []
     while True:
         try:
-            got, item = ahead.take(1.0)
+            got, item = ahead.take(PATIENCE_S)
         except StopIteration:
             return out
         if got:
@@ -37,7 +38,7 @@ def _take_all(ahead: ReadAhead) -> list:
 @pytest.mark.parametrize('high, low', [(10, 5), (1, 0), (1000, 999)])
 def test_every_item_in_order_through_a_small_buffer(high, low):
     ahead = ReadAhead(_slow_source(2500), high=high, low=low)
-    assert ahead.wait_filled(10.0)
+    assert ahead.wait_filled(PATIENCE_S)
     assert _take_all(ahead) == list(range(2500))
     ahead.close()
 
@@ -47,7 +48,7 @@ def test_an_error_of_the_source_comes_where_it_happened():
     got = []
     with pytest.raises(OSError, match='unreadable at 200'):
         while True:
-            ok, item = ahead.take(1.0)
+            ok, item = ahead.take(PATIENCE_S)
             if ok:
                 got.append(item)
     assert got == list(range(200))
@@ -64,8 +65,8 @@ def test_close_stops_the_reader_early():
             yield i
             i += 1
     ahead = ReadAhead(endless(), high=100, low=50)
-    assert ahead.wait_filled(10.0)
-    assert [ahead.take(1.0)[1] for _ in range(10)] == list(range(10))
+    assert ahead.wait_filled(PATIENCE_S)
+    assert [ahead.take(PATIENCE_S)[1] for _ in range(10)] == list(range(10))
     ahead.close()
     assert not any(t.name == 'read_ahead' for t in threading.enumerate())
     assert len(produced) <= 101 + 1  # full buffer, then waiting; nothing read after close

@@ -10,6 +10,7 @@ import pytest
 
 from crane_stiffness.estimation.estimator import StiffnessEstimator
 from crane_stiffness.estimation.fit import fit_line, t_quantile
+from helpers import PATIENCE_S
 from crane_stiffness.estimation.fit_lines import FIT_LINE_FIELDS, band, fit_line_rows
 from crane_stiffness.model.geometry import lab_model
 from crane_stiffness.view import plot
@@ -172,7 +173,7 @@ def test_the_page_is_told_the_kind_of_run_in_its_config_and_a_status_names_the_f
     for run in ('one_axis', 'six_axis'):
         page = PageServer('127.0.0.1', 0, 4321, run)
         try:
-            with urllib.request.urlopen(f'http://127.0.0.1:{page.port}/config.json', timeout=30) as reply:
+            with urllib.request.urlopen(f'http://127.0.0.1:{page.port}/config.json', timeout=PATIENCE_S) as reply:
                 config = json.loads(reply.read())
         finally:
             page.stop()
