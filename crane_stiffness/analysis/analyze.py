@@ -35,6 +35,9 @@ decode):
    live estimate.
 5. **Model** from the recorded geometry (crane_stiffness.analysis.sweep.force_displacement): the nonlinear model,
    the linearized eq. (18), the W = 0 elastic model and a single wire carrying W/6, as in the paper's Figs. 5–9.
+6. **Uncertainty** (:mod:`crane_stiffness.analysis.stiffness_uncertainty`, in the 'model' stage): each branch's k
+   with its GUM budget (the hold means' fit as Type A, the sensors' declared calibrations as Type B) and E_n
+   against the model's prediction with its own uncertainty.
 
 A damaged bag (truncated, bad chunk) is analysed from its readable part, with the damage listed in the report; a
 missing sensor topic raises :class:`~crane_stiffness.bag.TopicNotFoundError` naming it and the topics present;
@@ -63,6 +66,7 @@ from crane_stiffness.analysis.mapping import SensorMapping
 from crane_stiffness.analysis.model_summary import accepted_commands, model_summary
 from crane_stiffness.analysis.progress import Progress
 from crane_stiffness.analysis.results import (CycleFits, SessionAnalysis, Step)
+from crane_stiffness.analysis.stiffness_uncertainty import session_uncertainty
 from crane_stiffness.bag import BagDamageWarning
 from crane_stiffness.contract.command_limits import command_faults
 from crane_stiffness.params.geometry import geometry_from_params
@@ -264,7 +268,8 @@ def _default_out(bag: Path) -> Path:
 def analyze_session(bag_path: str | Path, out_dir: str | Path | None = None, *, formats: Sequence[str] = ('png',),
                     reports: Sequence[str] = ('md',), write_json: bool = True, axis: str | None = None,
                     settle_fraction: float = 0.3, model_points: int = 41, progress: bool = False,
-                    write_files: bool = True, mapping: SensorMapping | None = None) -> SessionAnalysis:
+                    write_files: bool = True, mapping: SensorMapping | None = None,
+                    uncertainty_file: str | Path | None = None) -> SessionAnalysis:
     """Analyse one recorded session (see the module docstring) and write its figures, report and JSON.
 
     Args:
@@ -281,6 +286,8 @@ def analyze_session(bag_path: str | Path, out_dir: str | Path | None = None, *, 
         mapping: the sensor topics, the displacement's type and conversion, estimator parameters from a file and
             the geometry (:class:`~crane_stiffness.analysis.mapping.SensorMapping`; default: the rig's topics, as
             recorded); the result's ``mapping`` says what was used.
+        uncertainty_file: the crane inputs' uncertainties for the model's prediction and E_n (default
+            config/uncertainty_lab.yaml; :mod:`crane_stiffness.analysis.stiffness_uncertainty`).
 
     Returns:
         the :class:`SessionAnalysis` (its ``files`` lists what was written).
@@ -323,6 +330,9 @@ def analyze_session(bag_path: str | Path, out_dir: str | Path | None = None, *, 
             bar.done()
             bar.stage('model')
             model = model_summary(data, steps, commands, model_points, problems)
+            uncertainty = session_uncertainty(data, pairs, *_program_span(pairs, commands), steps,
+                                              fits['branch_fits'], fits['hold_fits'], model, problems,
+                                              uncertainty_file)
             bar.done()
         bar.stage('summary')
         problems[:0] = _rewarn(caught)
@@ -337,7 +347,8 @@ def analyze_session(bag_path: str | Path, out_dir: str | Path | None = None, *, 
             unit=data.settings.stiffness_unit, program=_program_summary(data),
             geometry=_geometry_summary(data, problems), settings=asdict(data.settings), counts=data.counts,
             pairing=counters, steps=steps, model=model, problems=problems, missing_topics=missing,
-            stream_delay=dict(delay_values), mapping=data.mapping.to_dict() if data.mapping else {}, **fits)
+            stream_delay=dict(delay_values), mapping=data.mapping.to_dict() if data.mapping else {},
+            uncertainty=uncertainty, **fits)
         bar.done()
         if write_files:
             out = Path(out_dir) if out_dir is not None else _default_out(path)
@@ -370,15 +381,19 @@ def _check_options(formats: Sequence[str], reports: Sequence[str], settle_fracti
         raise ValueError(f'settle_fraction = {settle_fraction!r}: must be in [0, 1)')
 
 
+def _program_span(pairs: LivePairs, commands: CommandSeries | None) -> tuple[int, int]:
+    """The pairs fitted over the program: indices lo:hi from its first command to its last (all without commands)."""
+    if commands is None:
+        return 0, int(pairs.stamp.size)
+    return (int(np.searchsorted(pairs.stamp, commands.stamp[0], side='left')),
+            int(np.searchsorted(pairs.stamp, commands.stamp[-1], side='right')))
+
+
 def _fits(data: SessionData, pairs: LivePairs, commands: CommandSeries | None, steps: list[Step], t0: float,
           problems: list[str]) -> dict[str, Any]:
     """The 'fits' stage: each branch over the program, the hold means of each approach, each repeat's branches, and
     the live estimate checked (SessionAnalysis fields)."""
-    if commands is not None:
-        lo = int(np.searchsorted(pairs.stamp, commands.stamp[0], side='left'))
-        hi = int(np.searchsorted(pairs.stamp, commands.stamp[-1], side='right'))
-    else:
-        lo, hi = 0, int(pairs.stamp.size)
+    lo, hi = _program_span(pairs, commands)
     branch_fits = _branch_fits(data.settings, pairs, lo, hi)
     _fit_quality(data, pairs, lo, hi, branch_fits, problems)
     hold_fits = {}

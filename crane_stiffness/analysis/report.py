@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any, Sequence
 
 from crane_stiffness.analysis.results import SessionAnalysis, SessionComparison
+from crane_stiffness.analysis.stiffness_uncertainty import uncertainty_lines
 from crane_stiffness.estimation.fit import LineFit
 from crane_stiffness.estimation.settings import noise_text, pairing_text
 
@@ -121,6 +122,9 @@ def session_blocks(a: SessionAnalysis, images: Sequence[str] = ()) -> list[Block
             rows.append(['relative error of the loading fit vs the tangent',
                          f'{100 * (loading.stiffness - m.tangent_at_rest * sc) / (m.tangent_at_rest * sc):+.3f} %'])
         blocks.append(('table', ['model', f'k [{unit}]'], rows))
+    if a.uncertainty:
+        blocks.append(('p', 'Measurement uncertainty (GUM; docs/uncertainty.md, "The measured stiffness"):'))
+        blocks.append(('ul', uncertainty_lines(a.uncertainty, unit)))
     if a.live is not None:
         live = a.live
         blocks.append(('h2', 'Live estimate reproduced'))

@@ -131,6 +131,9 @@ class SessionAnalysis:
     #: What was read and how (analysis.mapping.MappingUsed): the load and displacement topics and their types, the
     #: displacement type, gain and offset, where the sample instants and the geometry came from.
     mapping: dict[str, Any] = field(default_factory=dict)
+    #: Each branch's measured stiffness with its GUM uncertainty and E_n against the model's prediction with its own
+    #: (analysis.stiffness_uncertainty.session_uncertainty): {'prediction': …, 'loading': …, 'unloading': …}.
+    uncertainty: dict[str, Any] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         return json_safe(self)

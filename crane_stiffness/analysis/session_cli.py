@@ -71,6 +71,10 @@ def _print_summary(a: Any) -> None:
             ref = m.tangent_at_rest * m.lvdt_scale
             line += f'; loading fit {100 * (fit.stiffness - ref) / ref:+.3f} % from the tangent'
         print(line)
+    if a.uncertainty:
+        from crane_stiffness.analysis.stiffness_uncertainty import uncertainty_lines
+        for line in uncertainty_lines(a.uncertainty, a.unit):
+            print(f'uncertainty: {line}')
     if a.live is not None:
         parts = [f'{b} live {a.live.live[b]["stiffness"]:.10g} vs offline {a.live.offline[b]["stiffness"]:.10g} '
                  f'(largest relative difference {a.live.max_rel_diff[b]:.2g})' for b in ('loading', 'unloading')]
@@ -144,7 +148,8 @@ def cmd_analyze(args: argparse.Namespace) -> int:
         return _analyze_full6(args)
     analysis = analyze_session(args.bag, args.out, formats=(args.format,), reports=(args.report,),
                                write_json=args.json, axis=args.axis, settle_fraction=args.settle,
-                               progress=not args.quiet and not args.json, mapping=_mapping(args))
+                               progress=not args.quiet and not args.json, mapping=_mapping(args),
+                               uncertainty_file=args.uncertainty)
     if args.json:
         json.dump(analysis.to_dict(), sys.stdout, indent=1, allow_nan=False)
         print()
@@ -240,6 +245,9 @@ def add_commands(subparsers: Any) -> None:
     _add_output_options(p, 'out/analysis/<bag name>')
     p.add_argument('--settle', type=float, default=0.3, metavar='FRACTION',
                    help='part of each hold skipped before averaging (default 0.3)')
+    p.add_argument('--uncertainty', metavar='FILE', default=None,
+                   help="the crane inputs' uncertainties for the model's prediction and E_n (default "
+                        'config/uncertainty_lab.yaml; docs/uncertainty.md)')
     _add_mapping_options(p)
     p.set_defaults(func=_guarded(cmd_analyze))
     p = subparsers.add_parser('compare', help='sessions side by side: table and overlay figure')

@@ -83,7 +83,8 @@ def write_synthetic_session(path: str | Path, program: LoadProgram, *, geometry:
                             lvdt: dict[str, Any] | None = None, live_tail_s: float | None = None,
                             sensor: Callable[[np.ndarray], np.ndarray] | None = None,
                             displacement_late_s: float = 0.0, recorded_geometry: CraneGeometry | None = None,
-                            campaign: dict[str, Any] | None = None) -> SyntheticSession:
+                            campaign: dict[str, Any] | None = None,
+                            load_cell: dict[str, Any] | None = None) -> SyntheticSession:
     """Write a synthetic session bag (see the module docstring) and return its truth.
 
     Args:
@@ -107,6 +108,8 @@ def write_synthetic_session(path: str | Path, program: LoadProgram, *, geometry:
         recorded_geometry: the crane the session records (the nominal one of a campaign) when it is not the one
             the displacements are made with (``geometry``, the true crane).
         campaign: a campaign entry to record (crane_stiffness.bag.session_metadata.CAMPAIGN_KEY).
+        load_cell: the load_cell parameters to record (e.g. its full_scale and declared calibration.*); none by
+            default.
     """
     if geometry is None and stiffness is None:
         raise ValueError('give a geometry (nonlinear model) or a stiffness (linear truth)')
@@ -204,6 +207,8 @@ def write_synthetic_session(path: str | Path, program: LoadProgram, *, geometry:
     sensors: dict[str, Any] = {'stiffness_estimator': est_params}
     if lvdt is not None:
         sensors['lvdt'] = lvdt
+    if load_cell is not None:
+        sensors['load_cell'] = load_cell
     extra: dict[str, Any] = {CAMPAIGN_KEY: campaign} if campaign else {}
     meta = session_metadata(rig=rig, program={**program.to_params(), 'duration_s': program.duration_s,
                                               'source': 'synthetic'},
