@@ -56,6 +56,37 @@ def verdict(summary: dict, tolerance: float) -> str:
     return ''
 
 
+def measurement_uncertainty(bag: str | None) -> dict | str:
+    """The loading and unloading stiffness with their GUM uncertainty and E_n against the model, from the offline
+    analysis of the recorded bag (crane_stiffness.analysis.stiffness_uncertainty); why not, as a string."""
+    if not bag:
+        return 'no session recorded'
+    from crane_stiffness.analysis.analyze import analyze_session
+    from crane_stiffness.errors import CraneStiffnessError
+    try:
+        return analyze_session(bag, write_files=False).uncertainty
+    except (CraneStiffnessError, OSError, ValueError) as exc:
+        return f'the analysis of {bag} failed: {exc}'
+
+
+def uncertainty_lines(gum: dict | str, unit: str) -> list[str]:
+    """Two lines: the loading estimate's U (k = …) from the bag, and its E_n with the model's prediction."""
+    if isinstance(gum, str) or 'loading' not in gum:
+        return [f'  measurement uncertainty: none ({gum if isinstance(gum, str) else "no loading fit"})']
+    loading = gum['loading']
+    u, low, high = loading['uncertainty'], *loading['ci95']
+    lines = [f"  GUM (bag, loading {loading['fit']}): k = {u['value']:.1f} {unit}, U = {u['U']:.1f} {unit} "
+             f"(k = {u['k']:.2f}, 95 %), statistical 95 % CI [{low:.1f}, {high:.1f}]"
+             + ('; statistical only' if loading['statistical_only'] else '')]
+    en = loading.get('En')
+    if en is None:
+        lines.append("  E_n with the model: none (no model prediction with its uncertainty)")
+    else:
+        lines.append(f"  model {en['reference']:.1f} ± {en['U_reference']:.1f} {unit} (U, 95 %): E_n = "
+                     f"{en['en']:+.2f}: {'agree' if en['agrees'] else 'disagree'} (|E_n| <= 1 agrees)")
+    return lines
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     ap.add_argument('--program', default='side_force', help='program name in config/ (program_<name>.yaml)')
@@ -171,6 +202,9 @@ def main(argv=None) -> int:
         return 1
     summary['time'] = {'mode': 'simulated' if args.sim_time else 'wall'}
     summary['seed'] = args.seed
+    gum = measurement_uncertainty(summary.get('bag'))
+    if isinstance(gum, dict):
+        summary['uncertainty'] = gum
     if args.sim_time:
         counters = next((json.loads(line.split(' ', 2)[2]) for line in reversed(clock_log.splitlines())
                          if line.startswith('FINAL_COUNTERS sim_clock ')), {})
@@ -203,6 +237,8 @@ def main(argv=None) -> int:
     print(f"  relative error (loading) {100 * summary['relative_error']:+.2f} %   -> {out / 'summary.json'}")
     if summary.get('bag'):
         print(f"  session recorded: {summary['bag']}")
+    for line in uncertainty_lines(gum, k_unit):
+        print(line)
     why = verdict(summary, args.tolerance)
     if why:
         print(f'the estimate cannot be signed: {why}', file=sys.stderr)
