@@ -127,7 +127,8 @@ def _bound(stated: Stated, index: int) -> float:
     return float(stated.value[index])
 
 
-def _positive(field: str, value: float | None) -> float | None:
+def _positive(value: float | None) -> float | None:
+    """A usable span or scale: finite and > 0, else None (the component it converts is then left out)."""
     if value is None or not math.isfinite(value) or value <= 0.0:
         return None
     return float(value)
@@ -175,8 +176,8 @@ def measured_stiffness(slope: SlopeStatistics, axis: str, *, load_cell: Mapping[
     add('load_cell_sensitivity', None if sens is None else _relative('load_cell_sensitivity', sens, i, 1e-2))
     nonlin = stated_component(load_cell, 'nonlinearity', 6, '% FS')
     full_scale = np.atleast_1d(np.asarray((load_cell or {}).get('full_scale', [math.inf] * 6), dtype=float))
-    fs = _positive('full_scale', float(full_scale[i if full_scale.size == 6 else 0]))
-    span = _positive('force_span', force_span)
+    fs = _positive(float(full_scale[i if full_scale.size == 6 else 0]))
+    span = _positive(force_span)
     add('load_cell_nonlinearity', None if nonlin is None or fs is None or span is None else
         _relative('load_cell_nonlinearity', nonlin, i, 1e-2 * fs / span))
     misalignment = stated_component(load_cell, 'misalignment', 3, 'rad')
@@ -197,8 +198,8 @@ def measured_stiffness(slope: SlopeStatistics, axis: str, *, load_cell: Mapping[
         add(f'lvdt_{name}', None if stated is None else _relative(f'lvdt_{name}', stated, 0, 1e-2))
     linearity = stated_component(lvdt, 'linearity', 1, '% FS')
     stroke = np.asarray((lvdt or {}).get('range_m', [-math.inf, math.inf]), dtype=float)
-    half_stroke = _positive('range_m', float(np.max(np.abs(stroke))) if stroke.size else None)
-    x_span = _positive('displacement_span', displacement_span)
+    half_stroke = _positive(float(np.max(np.abs(stroke))) if stroke.size else None)
+    x_span = _positive(displacement_span)
     add('lvdt_linearity', None if linearity is None or half_stroke is None or x_span is None else
         _relative('lvdt_linearity', linearity, 0, 1e-2 * half_stroke / x_span))
     names = [q.name for q in inputs]

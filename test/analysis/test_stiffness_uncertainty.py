@@ -112,3 +112,21 @@ def test_a_session_without_declarations_says_statistical_only(tmp_path):
         assert entry['statistical_only'] and entry['calibration'].startswith('statistical only')
         assert [row['name'] for row in entry['uncertainty']['budget']] == ['stiffness_fit']
     assert 'statistical only: no calibration declared' in (tmp_path / 'out' / 'report.md').read_text()
+
+
+def test_the_uncertainty_file_option_sets_the_prediction_uncertainty(tmp_path, capsys):
+    from crane_stiffness.cli.main import main as cli_main
+    session(tmp_path / 'inside', *errors(1.0, bound=False))
+    wide = tmp_path / 'wide.yaml'  # Young's modulus known to ±10 % instead of ±5 %: the prediction's U nearly doubles
+    wide.write_text('crane_uncertainty:\n  ros__parameters:\n    uncertainty:\n'
+                    '      youngs_modulus: {half_width: 20.6831e9, distribution: rectangular}\n')
+    assert cli_main(['analyze', str(tmp_path / 'inside'), '--out', str(tmp_path / 'o'), '--json',
+                     '--uncertainty', str(wide)]) == 0
+    data = json.loads(capsys.readouterr().out)
+    prediction = data['uncertainty']['prediction']
+    assert prediction['uncertainty_file'] == str(wide)
+    # docs/uncertainty.md's budget along fy with E's contribution doubled: u_c = √(3100² + 574² + 258² + 87²)
+    u_c = math.sqrt((2 * 1550.0) ** 2 + 574.0 ** 2 + 258.0 ** 2 + 87.0 ** 2)
+    assert prediction['uncertainty']['U'] == pytest.approx(1.96 * u_c, rel=0.01)
+    en = data['uncertainty']['loading']['En']
+    assert en['U_reference'] == prediction['uncertainty']['U'] and en['agrees']
