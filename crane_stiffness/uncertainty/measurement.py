@@ -17,11 +17,16 @@ function, so the budget's rows are real.
   else the fit of the samples.
 - **Type B** from the certificates the sensor nodes declare (``calibration.*``, :mod:`crane_stiffness.sim.calibration`):
   the load cell's sensitivity on the fitted axis [% of reading]; the LVDT's sensitivity and its DAQ's gain [% of
-  reading]; the load cell's nonlinearity and the LVDT's linearity [% FS], converted to the test: an error bounded by
-  ±e (e = % FS × full scale) is taken to change by at most e across the range R the fit spans, a slope error of at
-  most ±e/R; the load cell's mounting misalignment [rad]: the two angles that tilt the fitted axis scale its reading
-  by cos θ (an error up to 1 − cos θ_max, taken as ±(1 − cos θ_max) without correcting it), and a cross load (its
-  ratio to the axis' load, 0 in a one-axis test) couples in by sin θ_max.
+  reading]; the load cell's nonlinearity and the LVDT's linearity [% FS], converted to the test's slope: the
+  deviation from the best straight line, bounded by ±e (e = L × full scale, L the stated fraction), cannot change
+  the slope over the range R the fit spans by more than e/R; and a smooth deviation curve (a sensor's
+  characteristic: a cubic bounded by L over the stroke, Chebyshev's T3, has a slope of at most 3L in its middle
+  half) changes the local sensitivity by at most :data:`SMOOTH_SLOPE_FACTOR` × L. The bound taken is the smaller,
+  ±min(e/R, 3L): over the 74 µm a side-force test spans of a ±2.5 mm LVDT, e/R alone would be 8 % of k for a
+  0.25 % linearity, which no smooth characteristic gives; the load cell's mounting misalignment [rad]: the two
+  angles that tilt the fitted axis scale its reading by cos θ (an error up to 1 − cos θ_max, taken as
+  ±(1 − cos θ_max) without correcting it), and a cross load (its ratio to the axis' load, 0 in a one-axis test)
+  couples in by sin θ_max.
   Not counted: the load cell's cross-talk (acts on cross loads, absent in a one-axis test; the cross-coupling row
   covers them when given), hysteresis (the loading and unloading branches are fitted apart), zero drift and the
   DAQ's offset (a constant offset moves the intercept, not the slope; drift shows in the Type A of the hold means).
@@ -44,6 +49,10 @@ from crane_stiffness.uncertainty.errors import InputError
 from crane_stiffness.uncertainty.inputs import InputQuantity
 
 #: The inputs acting on the force (sensitivity +k), in the order of the measurement function.
+#: How many times the stated (non)linearity [fraction of full scale] a smooth characteristic's local sensitivity
+#: can depart from the best straight line's (a cubic bounded by 1 on [-1, 1], T3 = 4u³ − 3u, has |T3'| <= 3 on the
+#: middle half of the stroke, where a test at rest works).
+SMOOTH_SLOPE_FACTOR = 3.0
 FORCE_INPUTS = ('load_cell_sensitivity', 'load_cell_nonlinearity', 'load_cell_misalignment', 'load_cell_cross_load')
 #: The inputs acting on the displacement (sensitivity −k).
 DISPLACEMENT_INPUTS = ('lvdt_sensitivity', 'lvdt_daq_gain', 'lvdt_linearity')
@@ -179,7 +188,7 @@ def measured_stiffness(slope: SlopeStatistics, axis: str, *, load_cell: Mapping[
     fs = _positive(float(full_scale[i if full_scale.size == 6 else 0]))
     span = _positive(force_span)
     add('load_cell_nonlinearity', None if nonlin is None or fs is None or span is None else
-        _relative('load_cell_nonlinearity', nonlin, i, 1e-2 * fs / span))
+        _relative('load_cell_nonlinearity', nonlin, i, 1e-2 * min(fs / span, SMOOTH_SLOPE_FACTOR)))
     misalignment = stated_component(load_cell, 'misalignment', 3, 'rad')
     if misalignment is None:
         add('load_cell_misalignment', None)
@@ -201,7 +210,7 @@ def measured_stiffness(slope: SlopeStatistics, axis: str, *, load_cell: Mapping[
     half_stroke = _positive(float(np.max(np.abs(stroke))) if stroke.size else None)
     x_span = _positive(displacement_span)
     add('lvdt_linearity', None if linearity is None or half_stroke is None or x_span is None else
-        _relative('lvdt_linearity', linearity, 0, 1e-2 * half_stroke / x_span))
+        _relative('lvdt_linearity', linearity, 0, 1e-2 * min(half_stroke / x_span, SMOOTH_SLOPE_FACTOR)))
     names = [q.name for q in inputs]
     result = propagate(stiffness_function(names), inputs, coverage=coverage)
     return MeasuredStiffness(result, slope.source, tuple(left_out), tuple(counted))
@@ -228,5 +237,6 @@ def stiffness_function(names: Sequence[str]) -> Any:
     return k
 
 
-__all__ = ['DISPLACEMENT_INPUTS', 'FORCE_INPUTS', 'MeasuredStiffness', 'SlopeStatistics', 'measured_stiffness',
+__all__ = ['DISPLACEMENT_INPUTS', 'FORCE_INPUTS', 'MeasuredStiffness', 'SMOOTH_SLOPE_FACTOR', 'SlopeStatistics',
+           'measured_stiffness',
            'stated_component', 'stiffness_function']

@@ -18,6 +18,7 @@ from crane_stiffness.model import axis_stiffness, lab_model, rest_pose, tangent_
 from crane_stiffness.sim.calibration import LOAD_CELL_COMPONENTS, LVDT_COMPONENTS
 from crane_stiffness.sim.program import LoadProgram, Segment
 from crane_stiffness.testing.synthetic import write_synthetic_session
+from crane_stiffness.uncertainty.measurement import SMOOTH_SLOPE_FACTOR
 
 GEOMETRY = lab_model(0.5, 50.0)
 K_TRUE = axis_stiffness(tangent_stiffness(GEOMETRY, rest_pose(GEOMETRY)), 'fy')  # 53793.5 N/m
@@ -50,8 +51,9 @@ def errors(times: float, bound: bool) -> tuple[float, float]:
 
     def size(value: float, divisor: float) -> float:
         return times * value / (1.0 if bound else divisor)
-    e_f = size(1.0e-2, 2.0) + size(0.2e-2 * FULL_SCALE / PEAK, math.sqrt(3.0))
-    e_x = -(size(0.25e-2, 2.0) + size(0.05e-2, math.sqrt(3.0)) + size(0.25e-2 * HALF_STROKE / x_span, math.sqrt(3.0)))
+    e_f = size(1.0e-2, 2.0) + size(0.2e-2 * min(FULL_SCALE / PEAK, SMOOTH_SLOPE_FACTOR), math.sqrt(3.0))
+    e_x = -(size(0.25e-2, 2.0) + size(0.05e-2, math.sqrt(3.0))
+            + size(0.25e-2 * min(HALF_STROKE / x_span, SMOOTH_SLOPE_FACTOR), math.sqrt(3.0)))
     return e_f, e_x
 
 

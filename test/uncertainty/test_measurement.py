@@ -34,12 +34,12 @@ def test_budget_matches_the_hand_computation():
     # By hand, each relative standard uncertainty (fy: index 1; the tilt of y: the angles about x and z).
     theta = math.hypot(0.01, 0.03)
     relative = {'load_cell_sensitivity': 2.0e-2 / 2.0,
-                'load_cell_nonlinearity': 0.2e-2 * 40.0 / force_span / math.sqrt(3.0),
+                'load_cell_nonlinearity': 0.2e-2 * 3.0 / math.sqrt(3.0),  # min(40 N / 10 N, 3) x 0.2 %
                 'load_cell_misalignment': (1.0 - math.cos(theta)) / math.sqrt(3.0),
                 'load_cell_cross_load': 0.1 * math.sin(theta) / math.sqrt(3.0),
                 'lvdt_sensitivity': 0.3e-2 / 3.0,
                 'lvdt_daq_gain': 0.05e-2 / math.sqrt(6.0),
-                'lvdt_linearity': 0.25e-2 * 2.5e-3 / x_span / math.sqrt(2.0)}
+                'lvdt_linearity': 0.25e-2 * 3.0 / math.sqrt(2.0)}  # min(2.5 mm / 0.19 mm, 3) x 0.25 %
     rows = {row.name: row for row in m.result.budget}
     assert set(rows) == {'stiffness_fit', *relative}
     assert rows['stiffness_fit'].contribution == pytest.approx(SE, rel=1e-9)
