@@ -1,45 +1,30 @@
 """session_recorder: records a test session of the rig to a rosbag2 bag (MCAP) with the session's description.
 
-Subscribes to ``topics`` (default: every rig topic of crane_stiffness.contract.topics.RIG_TOPICS) as serialized
-messages (no
-deserialization), each with the QoS that matches its publishers (sensor streams best effort, latched topics transient
-local, the rest reliable; topics outside the contract adapt to the publishers in the graph), and writes them with
-crane_stiffness.bag.BagWriter to ``<output_dir>/<session>/`` (metadata.yaml + ``<session>_<n>.mcap``, chunked,
-zstd by default, optionally split). Per message: log time = receive time (node clock), publish time = the header
-stamp for stamped types, else the log time. Each channel carries its publishers' offered QoS (YAML). On simulated
-time the streams the lock-step counts (``SIM_INPUTS``) are logged at their header stamps, the rest at the clock time,
-each message held until its simulated time is complete and written in log-time order (crane_stiffness.sim.log_times:
-the bag keeps each stream's pacing for a player, and the same log times in every run).
+Subscribes to ``topics`` (default: every rig topic, crane_stiffness.contract.topics.RIG_TOPICS) as serialized
+messages, each with the QoS that matches its publishers, and writes them with crane_stiffness.bag.BagWriter to
+``<output_dir>/<session>/`` (metadata.yaml + ``<session>_<n>.mcap``, chunked, zstd, optionally split), each channel
+with its publishers' offered QoS. Log time = receive time, publish time = the header stamp (else the log time). On
+simulated time each message is held until its step is complete and logged at its stamp or at that step, the same in
+every run (crane_stiffness.sim.log_times; the recorder is the lock-step's last stage, see docs/simulated_time.md).
 
-The session is described in the MCAP metadata record ``crane_stiffness/session``: rig geometry (every geometry.*
-parameter, the same crane YAML the model reads) with the derived l0 and k, the test program (the recorder's own
-name/rate_hz/repeats/segments.* parameters, or else the load_program section of a ``--params-file`` it was started
-with), the sensor parameters of the other nodes' sections of those files (load_cell, lvdt, stiffness_estimator),
-the files' text, software version, start time and ``notes``. The parameters the rig's nodes actually run with
-(``record_node_parameters``: crane_model, load_program, load_cell, lvdt, stiffness_estimator, for a six-axis test
-pose_sensor and stiffness6_estimator, the drivers netft, modbus_lvdt, lvdt_array; calibration.* among them) are
-read over ROS once they appear and stored in ``crane_stiffness/node_parameters``; ``crane_stiffness/session_end``
-is added on close (stop reason, end time, counts; on simulated time the rig's own publish counts against the
-bag's). The offline analysis prefers the nodes' own values.
+The session record (MCAP metadata ``crane_stiffness/session``, crane_stiffness.bag.session_metadata): the rig's
+geometry with the derived l0 and k, the test program, the sensor sections and text of the parameter files it was
+started with, software version, start time and ``notes``; the parameters the rig's nodes actually run with
+(``record_node_parameters``, the drivers' too, read over ROS once they appear, calibration.* among them) in
+``crane_stiffness/node_parameters``; on close ``crane_stiffness/session_end`` (stop reason, end time, counts; on
+simulated time the rig's own publish counts against the bag's). The offline analysis prefers the nodes' own values.
 
-Recording starts by itself (``autostart``) or with ~/start; ~/stop closes the bag and replies with its path and
-message count (both std_srvs/Trigger). With ``stop_on_program_done`` the recording stops once the program is done:
-on simulated time at the instant the program fixed, else ``stop_delay_s`` after /load_program/state reports 'done'
-(crane_stiffness.rosnode.program_end). Ctrl-C (SIGINT) and SIGTERM
-close the bag cleanly, also when repeated (they only end the spin loop; see crane_stiffness.rosnode.run.run). After
-SIGKILL every chunk written so far is readable (chunks go to the OS as they are finished, at most
-``flush_interval_s`` apart) and ``crane-stiffness recover BAG`` rewrites the files and metadata.yaml.
+Recording starts by itself (``autostart``) or with ~/start; ~/stop closes the bag (both std_srvs/Trigger). With
+``stop_on_program_done`` it stops once the program is done: on simulated time at the instant the program fixed, else
+``stop_delay_s`` after /load_program/state says 'done' (crane_stiffness.rosnode.program_end). Ctrl-C and SIGTERM close
+the bag cleanly, also when repeated; after SIGKILL every chunk written so far (at most ``flush_interval_s`` old) is
+readable and ``crane-stiffness recover BAG`` rewrites the files. It runs all day: its freed memory goes back to the
+system every ``TRIM_INTERVAL_S`` (crane_stiffness.rosnode.malloc_trim).
 
-It runs all day: every ``TRIM_INTERVAL_S`` it hands the pages its allocator freed back to the system
-(crane_stiffness.rosnode.malloc_trim), so its resident memory stays flat.
-
-A write the operating system refuses (disk full, I/O error) stops the recording, not the node: ERROR in the log and
-on /diagnostics with the error, the file cut after its last complete chunk, metadata.yaml written from what is on
-disk or its absence reported; ~/start opens a new bag once there is room. Every message received is accounted for
-(FINAL_COUNTERS and /diagnostics): ``received = written + dropped_*``, one counter per reason (``not_recording``:
-arrived after the bag was closed; ``write_error``: refused by the disk (the message whose write failed, unless its
-chunk reached the disk whole before the error); ``lost_with_chunk``: accepted, then lost with
-the chunk a write error cut; ``rejected``: refused by the writer).
+A write the system refuses (disk full, I/O error) stops the recording, not the node (ERROR, the file cut after its
+last complete chunk, metadata.yaml from what is on disk; ~/start opens a new bag). Every message received is
+accounted for (FINAL_COUNTERS, /diagnostics): ``received = written + dropped_*``, one counter per reason
+(docs/recording.md).
 """
 from __future__ import annotations
 
@@ -168,9 +153,8 @@ class SessionRecorder(Node):
             flush_interval_s=float(p['flush_interval_s']) or None, fsync=bool(p['fsync']),
             custom_data={'session': path.name, 'software_version': __version__})
         self.bag_path = path
-        # (simulated time: /clock logged at the time it says, like the paced streams at their stamps)
-        self.log_times = SimLogTimes([*self.sim.inputs, topics.CLOCK]) if self.sim.active else None
-        self.clock_ns = -1  # the last /clock time recorded
+        # (simulated time: /clock logged at the time it says, once, like the paced streams at their stamps)
+        self.log_times = SimLogTimes(self.sim.inputs, distinct=[topics.CLOCK]) if self.sim.active else None
         self.joined_ns: int | None = None  # simulated time: the first watermark of this recording
         self.recordings += 1
         self.write_failure = None
@@ -410,7 +394,8 @@ class SessionRecorder(Node):
         if self.writer is None:
             self.dropped['not_recording'] += 1  # delivered after the bag was closed
             return
-        if channel.topic == topics.CLOCK and self._clock_repeat(data):
+        if self.log_times is not None and self.log_times.repeat(channel.topic, header_stamp_ns(data)):
+            self.dropped['clock_repeat'] += 1  # (the clock saying its time again, for nodes that join late)
             return
         now_ns = self.get_clock().now().nanoseconds
         if self.sim_time and now_ns == 0:  # before simulated time starts (a latched message): logged at its start
@@ -418,16 +403,6 @@ class SessionRecorder(Node):
             return
         self._write_before_time(now_ns)
         self._take(channel, data, now_ns)
-
-    def _clock_repeat(self, data: bytes) -> bool:
-        """A /clock message that says no later time than the last one recorded (the clock repeats its time for nodes
-        that join late, as often as the wall clock lets it): left out, so the bag's /clock is the same at any load."""
-        t = header_stamp_ns(data)
-        if t is not None and t <= self.clock_ns:
-            self.dropped['clock_repeat'] += 1
-            return True
-        self.clock_ns = max(self.clock_ns, -1 if t is None else t)
-        return False
 
     def _write_before_time(self, now_ns: int) -> None:
         """The messages received before simulated time started, logged at ``now_ns``, in the order received."""

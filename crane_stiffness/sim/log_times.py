@@ -41,10 +41,12 @@ class SimLogTimes(Generic[Item]):
 
     Args:
         paced: Topics logged at their header stamp (resolved names): those whose messages the lock-step counts.
+        distinct: Of those, topics whose repeats of a time already logged are left out (:meth:`repeat`: /clock).
     """
 
-    def __init__(self, paced: Collection[str]) -> None:
-        self.paced = frozenset(paced)
+    def __init__(self, paced: Collection[str], distinct: Collection[str] = ()) -> None:
+        self.paced = frozenset(paced) | frozenset(distinct)
+        self._distinct = {topic: -1 for topic in distinct}  # the last time logged of each
         self.released_ns = -1                 #: the last watermark released: nothing is logged before it any more
         self._last: dict[str, int] = {}       # the last log time per topic
         self._held: list[tuple[int, str, int, Item]] = []
@@ -56,6 +58,18 @@ class SimLogTimes(Generic[Item]):
         t = max(t, self._last.get(topic, t))
         self._last[topic] = t
         return t
+
+    def repeat(self, topic: str, stamp_ns: int | None) -> bool:
+        """Whether a message of a *distinct* topic says no later time than the last one taken (the clock repeats its
+        time for nodes that join late, as often as the wall clock lets it): left out, the bag is the same at any load.
+        Else it is noted as the last."""
+        last = self._distinct.get(topic)
+        if last is None or stamp_ns is None:
+            return False
+        if stamp_ns <= last:
+            return True
+        self._distinct[topic] = stamp_ns
+        return False
 
     def hold(self, topic: str, stamp_ns: int | None, item: Item) -> int | None:
         """Hold ``item`` (a message of ``topic`` with header stamp ``stamp_ns``, None: no stamp) until its log time

@@ -75,3 +75,11 @@ def test_a_stamp_going_back_or_too_old_keeps_the_topic_in_order():
     assert times.hold(ESTIMATE, None, 6) is None
     assert times.release_all() == [(T0 + 100 * MS, 6)]  # the recording stops: at the last watermark released
     assert times.held == 0
+
+
+def test_a_distinct_topic_is_logged_once_per_time_at_the_time_it_says():
+    times: SimLogTimes[int] = SimLogTimes([WRENCH], distinct=[CLOCK])
+    assert not times.repeat(CLOCK, T0) and times.repeat(CLOCK, T0)  # the clock saying its time again: left out
+    assert times.hold(CLOCK, T0, 1) == T0                            # logged at the time it says
+    assert not times.repeat(CLOCK, T0 + STEP) and times.repeat(CLOCK, T0)  # a later time; an earlier one again
+    assert not times.repeat(WRENCH, T0) and not times.repeat(WRENCH, T0)   # other topics: never repeats
