@@ -50,6 +50,9 @@ def verdict(summary: dict, tolerance: float) -> str:
     bad = {part: st['level'] for part, st in summary['status'].items() if st['level'] in ('ERROR', 'STALE')}
     if bad:
         return f'estimator statuses {bad}'
+    recording = summary.get('recording') or {}
+    if recording.get('problem'):  # the numbers may be right, but the session's record of them is not the whole run
+        return f"the session's bag: {recording['problem']}"
     error = summary['relative_error']
     if not math.isfinite(error) or abs(error) > tolerance:
         return f'the loading estimate differs from the prediction by {100 * error:+.2f} % (> {100 * tolerance:g} %)'

@@ -159,6 +159,31 @@ def session_end_record(reason: str, end_ns: int, message_count: int, recorded: M
     return record
 
 
+def read_session_end(source: Records) -> dict[str, Any]:
+    """The :data:`SESSION_END_METADATA` record with its JSON values decoded ({} when the bag has none: the recorder
+    did not close it)."""
+    return decode_metadata(_records(source).get(SESSION_END_METADATA, {}))
+
+
+def cut_short(end: Mapping[str, Any]) -> str:
+    """'' when a session's end record says its bag holds the whole run, else why not, for people: no end record
+    (the recorder never closed the bag), a recording stopped from outside (~/stop) or by a write error, the node shut
+    down before the program was done, or (simulated time) messages the rig published missing from the bag."""
+    if not end:
+        return 'the bag has no session end: the recorder did not close it (killed?)'
+    reason = end.get('stop_reason', '?')
+    program = end.get('program_state')
+    state = program.get('state') if isinstance(program, dict) else None
+    if reason == 'service':
+        return ('the recording was stopped from outside (a ~/stop service call) before the run\'s end, at '
+                f'{int(end.get("end_time_ns", 0)) * 1e-9:.3f} s: the bag is not the whole run')
+    if reason not in ('program done', 'shutdown') or (reason == 'shutdown' and state != 'done'):
+        return f'the recording ended before the program did ({reason}): the bag is not the whole run'
+    if str(end.get('complete', '')).lower() == 'false':  # (simulated time; the record keeps it as JSON text)
+        return f'the bag lacks messages the rig published: {end.get("missing")}'
+    return ''
+
+
 def read_session(source: Records) -> dict[str, Any]:
     """The :data:`SESSION_METADATA` record with its JSON objects and arrays decoded ({} when the bag has none)."""
     return decode_metadata(_records(source).get(SESSION_METADATA, {}))
@@ -180,5 +205,6 @@ def read_node_parameters(source: Records) -> dict[str, dict[str, Any]]:
 
 __all__ = [
     'CAMPAIGN_KEY', 'NODE_PARAMETERS_METADATA', 'SESSION_END_METADATA', 'SESSION_METADATA', 'analysis_geometry_params',
-    'read_node_parameters', 'read_session', 'session_end_record', 'session_metadata', 'session_record',
+    'cut_short', 'read_node_parameters', 'read_session', 'read_session_end', 'session_end_record', 'session_metadata',
+    'session_record',
 ]

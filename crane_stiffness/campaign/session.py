@@ -151,6 +151,7 @@ class SessionRunner:
                   'rig': 'processes' if self.rig == 'processes' else 'host',
                   'startup_s': ran['startup_s'], 'estimate': decode_values(ran['values']) if ran['values'] else None,
                   'status': ran['summary']['status'], 'node_exit_codes': ran['summary']['node_exit_codes'],
+                  'recording': ran['summary'].get('recording'),
                   # The six-axis fit's last K (quantity × row × column, /stiffness6/stiffness) and status, if it ran.
                   'stiffness6': ran['stiffness6'],
                   'status6': None if ran['status6'] is None else

@@ -32,6 +32,8 @@ from crane_stiffness.model import (axis_stiffness, directional_stiffness, paper_
                                    tangent_stiffness)
 from crane_stiffness.rosnode.qos import KEPT_QOS, LATCHED_QOS
 from crane_stiffness.rosnode.sim_time import SIM_QOS, drain
+from crane_stiffness.bag import BagReader
+from crane_stiffness.bag.session_metadata import cut_short, read_session_end
 from crane_stiffness.launcher.domains import claim_domain, with_claim
 from crane_stiffness.launcher.rig_description import PACKAGE, NodeStart, rig_nodes
 from crane_stiffness.launcher.rig_description import config_files as rig_config_files
@@ -322,8 +324,21 @@ def summarize(share: Path, program: str, session: str, bags: Path, observer: Obs
         'relative_error': (loading - predicted) / predicted,
         'estimates_received': observer.values_count,
         'bag': str(bag) if bag.exists() else None,
+        'recording': recording_check(bag),
         'node_exit_codes': exit_codes,
     }
+
+
+def recording_check(bag: Path) -> dict[str, Any] | None:
+    """What the session record's end says of a recorded bag (``None``: nothing recorded): why the recording stopped,
+    and ``problem``: '' when the bag holds the whole run, else why not (crane_stiffness.bag.session_metadata.cut_short:
+    stopped from outside, cut, incomplete). The demo and the campaign read it: a bag that is not the whole run is
+    never kept as if it were."""
+    if not bag.exists():
+        return None
+    with BagReader(bag) as reader:
+        end = read_session_end(reader)
+    return {'stop_reason': end.get('stop_reason'), 'complete': end.get('complete'), 'problem': cut_short(end)}
 
 
 class ProgramWatch:
