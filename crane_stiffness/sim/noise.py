@@ -30,7 +30,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.signal import lfilter
 
 from crane_stiffness.params.spec import ParamSpec
 from crane_stiffness.sim.errors import ParameterError
@@ -66,6 +65,8 @@ def ar1_filter(phi: NDArray[np.float64], innovations: NDArray[np.float64], x0: N
             x = phi[i] * x + innovations[i]
             out[i] = x
         return out
+    # (imported here: scipy.signal costs a sensor node ~2 s of CPU at start, and only coloured noise needs it)
+    from scipy.signal import lfilter
     for start, stop in zip([0, *changes.tolist()], [*changes.tolist(), n]):
         for c in range(channels):
             out[start:stop, c] = lfilter([1.0], [1.0, -phi[start, c]], innovations[start:stop, c],
