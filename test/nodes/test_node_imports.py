@@ -35,3 +35,17 @@ def test_crane_model_does_import_it():
     out = subprocess.run([sys.executable, '-c', code], cwd=REPO, capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == 'True'
+
+
+#: The nodes that sample, command, keep time, record or drive hardware: none of them needs SciPy at start (its
+#: signal package alone cost a sensor process ~2 s of CPU; coloured noise imports it when it filters).
+WITHOUT_SCIPY = ('load_cell', 'lvdt', 'lvdt_array', 'pose_sensor', 'load_program', 'sim_clock', 'session_recorder',
+                 'session_player', 'netft', 'modbus_lvdt', 'rdt_emulator', 'modbus_emulator')
+
+
+@pytest.mark.parametrize('node', WITHOUT_SCIPY)
+def test_a_node_that_only_samples_or_records_does_not_import_scipy(node):
+    code = f'import sys\nimport crane_stiffness.nodes.{node}\nprint("scipy" in sys.modules)\n'
+    out = subprocess.run([sys.executable, '-c', code], cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == 'False', f'crane_stiffness.nodes.{node} imports scipy'
