@@ -284,8 +284,8 @@ class SessionRecorder(Node):
         if self.params['stop_on_program_done'] and topics.PROGRAM_STATE not in self.channels:
             qos = contract_qos(topics.PROGRAM_STATE)
             assert qos is not None  # a rig topic: in the contract
-            self.state_subscription = self.create_subscription(String, topics.PROGRAM_STATE,
-                                                               self._on_program_state_msg, qos)
+            self.state_subscription = self.create_subscription(
+                String, topics.PROGRAM_STATE, lambda msg: self._on_program_state(str(getattr(msg, 'data'))), qos)
 
     def _sim_report(self, t_ns: int) -> None:
         """Simulated time: everything up to ``t_ns`` is recorded (drained before this call). Not recording (never
@@ -294,9 +294,12 @@ class SessionRecorder(Node):
         if self.writer is None:
             self.sim.leave()
             return
-        if self.log_times is not None and self.joined_ns is None:  # the first watermark: joining, before time
-            self.joined_ns = t_ns  # starts, what DDS has delivered differs from run to run: nothing released (at
-            self.sim.report(t_ns)  # the first step instead, each message at its stamp or at that step)
+        if self.log_times is not None and self.joined_ns is None:  # joining, before time starts: what DDS has
+            self.joined_ns = t_ns  # delivered differs from run to run, so nothing is released; it is held, at
+            for channel, data in self.before_time:  # its stamp or at the first step
+                self._take(channel, data, t_ns)
+            self.before_time = []
+            self.sim.report(t_ns)
             return
         end = self._session_end_ns()
         self._release(t_ns if end is None else min(t_ns, end))
@@ -398,7 +401,9 @@ class SessionRecorder(Node):
             self.dropped['clock_repeat'] += 1  # (the clock saying its time again, for nodes that join late)
             return
         now_ns = self.get_clock().now().nanoseconds
-        if self.sim_time and now_ns == 0:  # before simulated time starts (a latched message): logged at its start
+        # Before time starts, or before this recorder joined the lock-step: held, logged as decided at the join.
+        if self.sim_time and (now_ns == 0 or (self.sim.watermark_ns < 0 and self.log_times is not None
+                                              and self.count_publishers(topics.SIM_WATERMARKS) > 0)):
             self.before_time.append((channel, data))
             return
         self._write_before_time(now_ns)
@@ -449,9 +454,6 @@ class SessionRecorder(Node):
                 self._on_program_state(deserialize_message(data, String).data)
             except Exception as exc:  # a malformed state must not stop the recording
                 self.get_logger().warning(f'unreadable program state: {exc}', throttle_duration_sec=5.0)
-
-    def _on_program_state_msg(self, msg: String) -> None:
-        self._on_program_state(msg.data)
 
     def _on_program_state(self, text: str) -> None:
         if not (self.program.read(text) and self.params['stop_on_program_done'] and self.writer is not None

@@ -28,7 +28,8 @@ NOT_COMPARED = ('bag', 'session', 'timings_s', 'files')
 #: the model curves, notes) and a copy has not, or says it has not (problems), beside the NOT_COMPARED keys. All the
 #: rest (branch and hold fits, pairing, counts, the live estimate's comparison, stream delays) is identical.
 SESSION_RECORD_KEYS = {'bag', 'cycle_fits', 'files', 'geometry', 'mapping', 'model', 'notes', 'problems', 'program',
-                       'recorded_with', 'session', 'steps', 'timings_s'}
+                       'recorded_with', 'session', 'steps', 'timings_s',
+                       'uncertainty'}  # (the sensors' declared calibrations are in the session record)
 
 
 def side_force_program() -> LoadProgram:
