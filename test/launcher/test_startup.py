@@ -138,9 +138,9 @@ def test_ros2_run_in_any_order_model_last(install_tree, tmp_path):
         logs['load_program']
     sent = final_counters(logs['load_program'])['published']
     received = final_counters(logs['crane_model'])['received']
-    # 3 s at 100 Hz is 300 ticks, but the timer skips missed periods under CPU starvation (up to ~21 %, see
-    # _check_run): half of them proves the program ran; the real check is that the model got every one sent.
-    assert sent > 150 and received == sent, (sent, received)
+    # The program ran to its end (how many of its 300 ticks a starved timer sent is a speed question, benchmarks/'s);
+    # the model got every command sent.
+    assert "' finished" in logs['load_program'] and sent > 0 and received == sent, (sent, received)
     # Nothing started while the model was missing (checked above); load_program says when it found the rig ready.
     assert 'rig ready after' in logs['load_program'] and observer.predicted_at is not None
 
