@@ -451,7 +451,7 @@ def _session_parameters(campaign: Campaign, seeds: Mapping[str, int] | None) -> 
         params = dict(params)
         if params.get('truth.mode') == 'drawn':
             import numpy as np
-            params['truth.seed'] = (seeds or {}).get(node, int(np.random.SeedSequence().entropy % 2 ** 31))
+            params['truth.seed'] = (seeds or {}).get(node, int(np.random.default_rng().integers(2 ** 31)))
         out[node] = params
     return out
 
