@@ -219,12 +219,12 @@ def _figure(coverage: Sequence[Coverage], target: Path, formats: Sequence[str]) 
     ax.scatter(x, fractions, c=colours, s=14, zorder=3)
     ax.axhline(NOMINAL, color='k', lw=0.8, ls='--', label='nominal 0.95')
     ax.set_xticks(x, [c.quantity for c in coverage], rotation=90, fontsize=6 if n > 20 else 8)
-    ax.set_ylabel('fraction of 95 % intervals covering the model')
+    ax.set_ylabel('fraction covering the truth')
     ax.set_ylim(max(0.0, min(c.interval[0] for c in coverage) - 0.05), 1.01)
     sessions = sorted({c.total for c in coverage})
     ax.set_title(f'coverage over {sessions[0]}' + (f'–{sessions[-1]}' if len(sessions) > 1 else '')
                  + ' sessions (Clopper–Pearson 95 % interval; red: 0.95 outside it)', fontsize=9)
-    ax.legend(loc='lower left', fontsize=8)
+    ax.legend(loc='best', fontsize=8)
     files = []
     for fmt in formats:
         path = target / f'coverage.{fmt}'
