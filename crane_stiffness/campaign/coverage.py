@@ -14,12 +14,13 @@ analysis read. The quantities of a one-axis series, per branch (loading, unloadi
 - ``k <series> <branch>, GUM U``: the expanded interval k ± U (the fit and the sensors' declared calibrations,
   :mod:`crane_stiffness.uncertainty.measurement`);
 
-and per session ``prediction <series>, GUM U`` (the model's prediction of the nominal crane ± its U, as E_n uses
-it) and ``prediction <series>, Monte Carlo`` (the prediction's JCGM 101 95 % interval): how often the model's
-interval holds the true crane's tangent. For the series full: each of the 36 entries of K against the tangent and
-of C = K⁻¹ against the tangent's inverse, and the coupling K2 against the tangent's. Each session counts once per
-quantity: a session without that interval (no fit) is left out of its total. The fraction's interval is
-Clopper–Pearson's (exact, two-sided 95 %): a fraction whose interval leaves out 0.95 is a departure to explain.
+and per session ``prediction <series>, GUM U`` (the model's prediction of the nominal crane ± its U, as E_n uses it)
+and ``prediction <series>, Monte Carlo`` (the prediction's JCGM 101 95 % interval, for a set-up of
+:data:`MONTE_CARLO_SESSIONS` sessions or more): how often the model's interval holds the true crane's tangent. For
+the series full: each of the 36 entries of K against the tangent and of C = K⁻¹ against the tangent's inverse, and
+the coupling K2 against the tangent's. Each session counts once per quantity: a session without that interval (no
+fit) is left out of its total. The fraction's interval is Clopper–Pearson's (exact, two-sided 95 %): a fraction
+whose interval leaves out 0.95 is a departure to explain.
 Reads the analyses ``campaign analyze`` wrote; no ROS.
 """
 from __future__ import annotations
@@ -36,6 +37,8 @@ from crane_stiffness.campaign.rows import Full6Row, SessionRow
 
 #: The intervals' nominal coverage.
 NOMINAL = 0.95
+#: Sessions of one set-up from which the prediction's Monte Carlo interval (~1 s per set-up) is computed and counted.
+MONTE_CARLO_SESSIONS = 10
 #: The deflections the columns of K (and rows of C) stand for.
 DEFLECTIONS = ('ux', 'uy', 'uz', 'thx', 'thy', 'thz')
 
@@ -118,12 +121,17 @@ def prediction_intervals(analysis: dict[str, Any], nominal: dict[str, Any], cach
     gum = sorted([(value - big_u) * scale, (value + big_u) * scale])
     mc = (result.get('monte_carlo') or {}).get('interval')
     if mc is None:
-        key = json.dumps([nominal, prediction.get('axis'), prediction.get('uncertainty_file')], sort_keys=True,
-                         default=str)
+        key = set_up_key(nominal, prediction)
         if key not in cache:
             cache[key] = _monte_carlo_interval(nominal, prediction)
         mc = cache[key]
     return {'GUM U': gum, 'Monte Carlo': None if mc is None else sorted(_float(v) * scale for v in mc)}
+
+
+def set_up_key(nominal: dict[str, Any], prediction: dict[str, Any]) -> str:
+    """The prediction's set-up: the crane modelled, the axis and the uncertainty file."""
+    return json.dumps([nominal, prediction.get('axis'), prediction.get('uncertainty_file')], sort_keys=True,
+                      default=str)
 
 
 def _monte_carlo_interval(nominal: dict[str, Any], prediction: dict[str, Any]) -> list[float] | None:
@@ -148,10 +156,19 @@ def campaign_coverage(rows: Sequence[SessionRow], full: Sequence[Full6Row]) -> l
     analysis file is read for its intervals, the row's true crane for the truth)."""
     counts: dict[str, list[int]] = {}
     cache: dict[str, Any] = {}
-    for row in rows:
-        analysis = json.loads((Path(row.analysis) / 'analysis.json').read_text())
+    analyses = [json.loads((Path(row.analysis) / 'analysis.json').read_text()) for row in rows]
+    sessions: dict[str, int] = {}  # per set-up of the prediction
+    for row, analysis in zip(rows, analyses):
+        prediction = (analysis.get('uncertainty') or {}).get('prediction') or {}
+        if prediction:
+            key = set_up_key(row.nominal, prediction)
+            sessions[key] = sessions.get(key, 0) + 1
+    for row, analysis in zip(rows, analyses):
         model = analysis.get('model') or {}
         truth = true_tangent(row, model)
+        prediction = (analysis.get('uncertainty') or {}).get('prediction') or {}
+        if prediction and sessions.get(set_up_key(row.nominal, prediction), 0) < MONTE_CARLO_SESSIONS:
+            cache.setdefault(set_up_key(row.nominal, prediction), None)  # a set-up of a few sessions: no study
         uncertainty = analysis.get('uncertainty') or {}
         for branch in ('loading', 'unloading'):
             fit = (analysis.get('branch_fits') or {}).get(branch) or {}
@@ -163,6 +180,9 @@ def campaign_coverage(rows: Sequence[SessionRow], full: Sequence[Full6Row]) -> l
         if uncertainty.get('prediction'):
             for method, interval in prediction_intervals(analysis, row.nominal, cache).items():
                 _count(counts, f'prediction {row.series}, {method}', _covers(interval, truth))
+    for quantity in [q for q in counts if q.endswith(', Monte Carlo')]:
+        if counts[quantity][1] < MONTE_CARLO_SESSIONS:  # no study: not worth its Monte Carlo runs
+            del counts[quantity]
     for frow in full:
         analysis = json.loads((Path(frow.analysis) / 'full6.json').read_text())
         comparison = analysis.get('comparison') or {}
