@@ -30,7 +30,7 @@ from typing import Any, Callable, Sequence
 from crane_stiffness import __version__
 from crane_stiffness.campaign.errors import CampaignError
 from crane_stiffness.campaign.full_series import FULL
-from crane_stiffness.campaign.rows import CampaignAnalysis, Full6Row, SessionRow
+from crane_stiffness.campaign.rows import CampaignAnalysis, Full6Row, SessionRow, uncertainty_fields
 from crane_stiffness.campaign.runner import read_plan
 from crane_stiffness.campaign.session import RESULT_FILE
 
@@ -116,7 +116,7 @@ def session_row(plan: dict[str, Any], analysis: dict[str, Any], result: dict[str
         model_eq18=_number(model.get('eq18')) * scale, model_elastic_w0=_number(model.get('elastic_w0')) * scale,
         model_single_wire=_number(model.get('single_wire_w6')) * scale,
         relative_error=(k - tangent) / tangent if tangent else math.nan, n=int(fit.get('n') or 0),
-        analysis=str(analysis_dir), nominal=plan['nominal'], true=plan['true'])
+        analysis=str(analysis_dir), nominal=plan['nominal'], true=plan['true'], **uncertainty_fields(analysis))
 
 
 def _live_difference(offline: Any, live: Any) -> float:

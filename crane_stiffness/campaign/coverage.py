@@ -1,13 +1,27 @@
-"""How often a campaign's 95 % intervals cover the model's value, quantity by quantity, with a binomial interval on
-that fraction: the check that the intervals the rig publishes mean what they say (a coverage study is a campaign
-of many seeded sessions of one set-up: ``config/campaign_coverage.yaml``, ``config/campaign_coverage_full.yaml``).
+"""How often a campaign's 95 % intervals cover the truth, quantity by quantity, with a binomial interval on that
+fraction: the check that the intervals the rig and ``analyze`` state mean what they say (a coverage study is a
+campaign of many seeded sessions of one set-up: ``config/campaign_coverage.yaml``, ``campaign_coverage_gum.yaml``,
+``campaign_coverage_full.yaml``).
 
-The quantities: for the one-axis series, the loading and the unloading stiffness of each series against the model's
-exact tangent at rest (in the LVDT's reading units, as the campaign's rows); for the series full, each of the 36
-entries of K against the tangent and of C = K⁻¹ against the tangent's inverse, and the coupling K2 against the
-tangent's. Each session counts once per quantity: a session without that interval (no fit) is left out of its total.
-The fraction's interval is Clopper–Pearson's (exact, two-sided 95 %): a fraction whose interval leaves out 0.95 is
-a departure to explain. Reads the analyses ``campaign analyze`` wrote; no ROS.
+The truth of a session is the **true** crane's exact tangent at rest along the series' axis (in the LVDT's reading
+units, as the campaign's rows): the crane the simulated rig ran (the plan's ``true``, recorded as the session's
+campaign entry ``true_geometry``; the nominal crane's tangent when the two are the same), never anything the
+analysis read. The quantities of a one-axis series, per branch (loading, unloading):
+
+- ``k <series> <branch>``: the samples' fit's 95 % interval (the live estimator's, statistical only);
+- ``k <series> <branch>, repeatability``: the 95 % interval of the fit the measurement uncertainty starts from
+  (the hold means' when there are holds: ``analyze``'s "statistical 95 % CI (repeatability)"), statistical only;
+- ``k <series> <branch>, GUM U``: the expanded interval k ± U (the fit and the sensors' declared calibrations,
+  :mod:`crane_stiffness.uncertainty.measurement`);
+
+and per session ``prediction <series>, GUM U`` (the model's prediction of the nominal crane ± its U, as E_n uses it)
+and ``prediction <series>, Monte Carlo`` (the prediction's JCGM 101 95 % interval, for a set-up of
+:data:`MONTE_CARLO_SESSIONS` sessions or more): how often the model's interval holds the true crane's tangent. For
+the series full: each of the 36 entries of K against the tangent and of C = K⁻¹ against the tangent's inverse, and
+the coupling K2 against the tangent's. Each session counts once per quantity: a session without that interval (no
+fit) is left out of its total. The fraction's interval is Clopper–Pearson's (exact, two-sided 95 %): a fraction
+whose interval leaves out 0.95 is a departure to explain.
+Reads the analyses ``campaign analyze`` wrote; no ROS.
 """
 from __future__ import annotations
 
@@ -23,6 +37,8 @@ from crane_stiffness.campaign.rows import Full6Row, SessionRow
 
 #: The intervals' nominal coverage.
 NOMINAL = 0.95
+#: Sessions of one set-up from which the prediction's Monte Carlo interval (~1 s per set-up) is computed and counted.
+MONTE_CARLO_SESSIONS = 10
 #: The deflections the columns of K (and rows of C) stand for.
 DEFLECTIONS = ('ux', 'uy', 'uz', 'thx', 'thy', 'thz')
 
@@ -70,20 +86,103 @@ def _count(counts: dict[str, list[int]], quantity: str, covers: Any) -> None:
     tally[1] += 1
 
 
+def true_tangent(row: SessionRow, model: dict[str, Any]) -> float:
+    """The truth of a one-axis session: the true crane's exact tangent at rest along the series' axis, in the LVDT's
+    reading units (the analysis' own nominal tangent when the true crane is the nominal one)."""
+    scale = _float(model.get('lvdt_scale', 1.0))
+    if not row.true or row.true == row.nominal:
+        return _float(model.get('tangent_at_rest')) * scale
+    from crane_stiffness.params.geometry import geometry_from_params
+    from crane_stiffness.uncertainty.prediction import point_prediction
+    return point_prediction(geometry_from_params(row.true), row.series) * scale
+
+
+def _covers(interval: Any, truth: float) -> bool | None:
+    """Whether ``interval`` ([low, high], finite) holds ``truth``; None without an interval or a truth."""
+    if not isinstance(interval, (list, tuple)) or len(interval) != 2:
+        return None
+    low, high = _float(interval[0]), _float(interval[1])
+    if not (math.isfinite(low) and math.isfinite(high) and math.isfinite(truth)):
+        return None
+    return low <= truth <= high
+
+
+def prediction_intervals(analysis: dict[str, Any], nominal: dict[str, Any], cache: dict[str, Any]
+                         ) -> dict[str, list[float] | None]:
+    """The prediction's intervals in the LVDT's reading units: 'GUM U' (value ± U, as E_n uses it) and 'Monte Carlo'
+    (JCGM 101's 95 % interval: the analysis' own when it ran one, else computed here, seed 0, once per crane
+    ``nominal`` (the ``geometry.*`` parameters the analysis modelled) and uncertainty file)."""
+    prediction = ((analysis.get('uncertainty') or {}).get('prediction')) or {}
+    result = prediction.get('uncertainty') or {}
+    scale = _float(prediction.get('lvdt_scale', 1.0))
+    if not result:
+        return {'GUM U': None, 'Monte Carlo': None}
+    value, big_u = _float(result.get('value')), _float(result.get('U'))
+    gum = sorted([(value - big_u) * scale, (value + big_u) * scale])
+    mc = (result.get('monte_carlo') or {}).get('interval')
+    if mc is None:
+        key = set_up_key(nominal, prediction)
+        if key not in cache:
+            cache[key] = _monte_carlo_interval(nominal, prediction)
+        mc = cache[key]
+    return {'GUM U': gum, 'Monte Carlo': None if mc is None else sorted(_float(v) * scale for v in mc)}
+
+
+def set_up_key(nominal: dict[str, Any], prediction: dict[str, Any]) -> str:
+    """The prediction's set-up: the crane modelled, the axis and the uncertainty file."""
+    return json.dumps([nominal, prediction.get('axis'), prediction.get('uncertainty_file')], sort_keys=True,
+                      default=str)
+
+
+def _monte_carlo_interval(nominal: dict[str, Any], prediction: dict[str, Any]) -> list[float] | None:
+    """The prediction's Monte Carlo 95 % interval for the crane ``nominal`` (None when it cannot be had)."""
+    from crane_stiffness.errors import CraneStiffnessError
+    from crane_stiffness.params.geometry import geometry_from_params
+    from crane_stiffness.campaign.true_draw import uncertainty_entries
+    from crane_stiffness.uncertainty.prediction import predict_stiffness
+    if not nominal or not prediction.get('uncertainty_file'):
+        return None
+    try:
+        geometry = geometry_from_params(nominal)
+        entries = uncertainty_entries(prediction['uncertainty_file'], geometry)
+        mc = predict_stiffness(geometry, prediction['axis'], uncertainty=entries, seed=0).monte_carlo
+    except (CraneStiffnessError, OSError, ValueError):
+        return None
+    return None if mc is None else [float(v) for v in mc['interval']]
+
+
 def campaign_coverage(rows: Sequence[SessionRow], full: Sequence[Full6Row]) -> list[Coverage]:
     """Every quantity's coverage over the analysed sessions (the rows ``campaign analyze`` made; each row's
-    analysis file is read for its intervals)."""
+    analysis file is read for its intervals, the row's true crane for the truth)."""
     counts: dict[str, list[int]] = {}
-    for row in rows:
-        analysis = json.loads((Path(row.analysis) / 'analysis.json').read_text())
+    cache: dict[str, Any] = {}
+    analyses = [json.loads((Path(row.analysis) / 'analysis.json').read_text()) for row in rows]
+    sessions: dict[str, int] = {}  # per set-up of the prediction
+    for row, analysis in zip(rows, analyses):
+        prediction = (analysis.get('uncertainty') or {}).get('prediction') or {}
+        if prediction:
+            key = set_up_key(row.nominal, prediction)
+            sessions[key] = sessions.get(key, 0) + 1
+    for row, analysis in zip(rows, analyses):
         model = analysis.get('model') or {}
-        tangent = _float(model.get('tangent_at_rest')) * _float(model.get('lvdt_scale', 1.0))
+        truth = true_tangent(row, model)
+        prediction = (analysis.get('uncertainty') or {}).get('prediction') or {}
+        if prediction and sessions.get(set_up_key(row.nominal, prediction), 0) < MONTE_CARLO_SESSIONS:
+            cache.setdefault(set_up_key(row.nominal, prediction), None)  # a set-up of a few sessions: no study
+        uncertainty = analysis.get('uncertainty') or {}
         for branch in ('loading', 'unloading'):
             fit = (analysis.get('branch_fits') or {}).get(branch) or {}
-            low, high = _float(fit.get('ci95_low')), _float(fit.get('ci95_high'))
-            covers = None if not (math.isfinite(low) and math.isfinite(high) and math.isfinite(tangent)) else \
-                low <= tangent <= high
-            _count(counts, f'k {row.series} {branch}', covers)
+            _count(counts, f'k {row.series} {branch}', _covers([fit.get('ci95_low'), fit.get('ci95_high')], truth))
+            entry = uncertainty.get(branch) or {}
+            _count(counts, f'k {row.series} {branch}, repeatability', _covers(entry.get('ci95'), truth))
+            _count(counts, f'k {row.series} {branch}, GUM U',
+                   _covers((entry.get('uncertainty') or {}).get('interval'), truth))
+        if uncertainty.get('prediction'):
+            for method, interval in prediction_intervals(analysis, row.nominal, cache).items():
+                _count(counts, f'prediction {row.series}, {method}', _covers(interval, truth))
+    for quantity in [q for q in counts if q.endswith(', Monte Carlo')]:
+        if counts[quantity][1] < MONTE_CARLO_SESSIONS:  # no study: not worth its Monte Carlo runs
+            del counts[quantity]
     for frow in full:
         analysis = json.loads((Path(frow.analysis) / 'full6.json').read_text())
         comparison = analysis.get('comparison') or {}
@@ -140,12 +239,12 @@ def _figure(coverage: Sequence[Coverage], target: Path, formats: Sequence[str]) 
     ax.scatter(x, fractions, c=colours, s=14, zorder=3)
     ax.axhline(NOMINAL, color='k', lw=0.8, ls='--', label='nominal 0.95')
     ax.set_xticks(x, [c.quantity for c in coverage], rotation=90, fontsize=6 if n > 20 else 8)
-    ax.set_ylabel('fraction of 95 % intervals covering the model')
+    ax.set_ylabel('fraction covering the truth')
     ax.set_ylim(max(0.0, min(c.interval[0] for c in coverage) - 0.05), 1.01)
     sessions = sorted({c.total for c in coverage})
     ax.set_title(f'coverage over {sessions[0]}' + (f'–{sessions[-1]}' if len(sessions) > 1 else '')
                  + ' sessions (Clopper–Pearson 95 % interval; red: 0.95 outside it)', fontsize=9)
-    ax.legend(loc='lower left', fontsize=8)
+    ax.legend(loc='best', fontsize=8)
     files = []
     for fmt in formats:
         path = target / f'coverage.{fmt}'

@@ -20,13 +20,38 @@ def _pct(value: float) -> str:
     return '–' if not math.isfinite(value) else f'{100 * value:+.3f} %'
 
 
+def _en(row: SessionRow) -> str:
+    return '–' if not math.isfinite(row.en) else f'{row.en:+.2f}: {row.agreement}'
+
+
+def _u(row: SessionRow) -> str:
+    if not math.isfinite(row.U):
+        return '–'
+    return f'{fmt(row.U, 4)} (k = {row.coverage_factor:.2f})' + (' statistical only' if row.statistical_only else '')
+
+
 def session_table(rows: Sequence[SessionRow]) -> Block:
-    headers = ['session', 'series', 'W [N]', 'l0 [m]', 'measured k', '95 % interval', 'holds k', 'model tangent',
-               'eq. (18)/(19)', 'W = 0', 'single wire W/6', 'measured vs tangent', 'status']
+    """Per session: the samples' fit and its statistical interval, the stiffness as the GUM states it with U (k)
+    and the repeatability it starts from, E_n against the model, the models, the status."""
+    headers = ['session', 'series', 'W [N]', 'l0 [m]', 'measured k', '95 % interval (statistical)', 'holds k',
+               'k (GUM)', 'U (k)', 'repeatability (95 %)', 'E_n vs model', 'model tangent', 'eq. (18)/(19)',
+               'W = 0', 'single wire W/6', 'measured vs tangent', 'status']
     body = [[r.session, r.series, fmt(r.weight, 4), fmt(r.l0, 4), fmt(r.k), f'{fmt(r.ci95_low)} … {fmt(r.ci95_high)}',
-             fmt(r.k_holds), fmt(r.model_tangent), fmt(r.model_eq18), fmt(r.model_elastic_w0),
+             fmt(r.k_holds), fmt(r.k_gum) if math.isfinite(r.k_gum) else '–', _u(r),
+             f'{fmt(r.repeatability_low)} … {fmt(r.repeatability_high)}' if math.isfinite(r.repeatability_low)
+             else '–', _en(r), fmt(r.model_tangent), fmt(r.model_eq18), fmt(r.model_elastic_w0),
              fmt(r.model_single_wire), _pct(r.relative_error), r.status] for r in rows]
     return ('table', headers, body)
+
+
+def _true_note(rows: Sequence[SessionRow]) -> str:
+    """A word on E_n when the simulated crane is not the nominal one: there the disagreement is the finding."""
+    if not any(r.true and r.true != r.nominal for r in rows):
+        return ''
+    disagree = sum(r.agreement == 'disagree' for r in rows)
+    return (f' The simulated crane differs from the nominal one here on purpose (the campaign\'s true.*): E_n says '
+            f'how far the nominal model is from it ({disagree} of {len(rows)} session(s) disagree), which is the '
+            'finding a calibration uses, not a fault of the session: the status does not count it.')
 
 
 def _interval(value: float, low: float, high: float) -> str:
@@ -55,9 +80,12 @@ def campaign_blocks(result: CampaignAnalysis, images: Sequence[str]) -> list[Blo
     if rows:
         blocks += [
             ('p', 'Measured stiffness: the loading branch fitted over all its pairs (as the live estimator fits), in '
-                  "the LVDT's reading units (N/m for fy and fz, N·m/rad for mz), with its 95 % interval; the models "
-                  "are the nominal crane's (the recorded geometry) at each session's W and l0. Largest |measured − "
-                  f'tangent| / tangent: {_pct(worst)}.'),
+                  "the LVDT's reading units (N/m for fy and fz, N·m/rad for mz), with its 95 % interval (statistical "
+                  'only); k (GUM) with its expanded uncertainty U (coverage factor k; the fit and the sensors\' '
+                  'declared calibrations) and the repeatability it starts from (the 95 % interval of that fit, '
+                  'statistical only), and E_n against the model\'s prediction with its own U (|E_n| <= 1: agree). The '
+                  "models are the nominal crane's (the recorded geometry) at each session's W and l0. Largest "
+                  f'|measured − tangent| / tangent: {_pct(worst)}.' + _true_note(rows)),
             session_table(rows)]
     if result.full:
         worst6 = max((r.worst_diagonal_error for r in result.full if math.isfinite(r.worst_diagonal_error)),
@@ -73,9 +101,14 @@ def campaign_blocks(result: CampaignAnalysis, images: Sequence[str]) -> list[Blo
     if any(c.total >= COVERAGE_STUDY for c in result.coverage):
         departures = [c.quantity for c in result.coverage if not c.consistent]
         blocks += [('h2', 'Coverage of the 95 % intervals'),
-                   ('p', 'How often each quantity\'s 95 % interval covers the model\'s value (the exact tangent, '
-                         'its inverse for C), with the fraction\'s Clopper–Pearson 95 % interval (coverage.csv, '
-                         'coverage figure). Outside 0.95: ' + (', '.join(departures) or 'none') + '.'),
+                   ('p', 'How often each quantity\'s 95 % interval covers the truth (the true crane\'s exact '
+                         'tangent, its inverse for C: the crane the simulated rig ran), with the fraction\'s '
+                         'Clopper–Pearson 95 % interval (coverage.csv, coverage figure). "k <series> <branch>" is the '
+                         'samples\' fit\'s statistical interval, ", repeatability" the statistical interval of the '
+                         'fit U starts from, ", GUM U" the expanded interval k ± U; "prediction" the model\'s '
+                         'interval for the nominal crane (± U as E_n uses it, and the Monte Carlo\'s). A statistical-'
+                         'only interval counts no calibration error, so with sensors that have them it covers far '
+                         'less than 0.95. Outside 0.95: ' + (', '.join(departures) or 'none') + '.'),
                    ('table', ['quantity', 'covered', 'fraction', '95 % interval'],
                     [[c.quantity, f'{c.covered}/{c.total}', f'{c.fraction:.3f}',
                       f'{c.interval[0]:.3f} … {c.interval[1]:.3f}'] for c in result.coverage])]

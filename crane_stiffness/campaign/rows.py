@@ -3,6 +3,7 @@
 read them; no workflow here."""
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -37,10 +38,53 @@ class SessionRow:
     analysis: str
     nominal: dict[str, Any] = field(default_factory=dict)
     true: dict[str, Any] = field(default_factory=dict)
+    k_gum: float = math.nan
+    """The loading stiffness as the GUM states it (the hold means' fit when there are holds, else the samples')."""
+    U: float = math.nan
+    """Its expanded uncertainty (fit and declared calibrations), same unit."""
+    coverage_factor: float = math.nan
+    """k of U = k·u_c (Student's t at ν_eff)."""
+    repeatability_low: float = math.nan
+    """The 95 % interval of the fit U starts from (statistical only: the repeatability)."""
+    repeatability_high: float = math.nan
+    statistical_only: bool = False
+    """No calibration declared by the sensors: U is the fit's alone."""
+    prediction: float = math.nan
+    """The model's prediction for the nominal crane, the reference of E_n, and its expanded uncertainty."""
+    prediction_U: float = math.nan
+    en: float = math.nan
+    """E_n = (k_gum − prediction) / √(U² + prediction_U²): |E_n| <= 1, the two agree."""
+    agreement: str = ''
+    """'agree', 'disagree', or '' without an E_n."""
 
     @property
     def ok(self) -> bool:
         return self.status == 'OK'
+
+
+def uncertainty_fields(analysis: dict[str, Any], branch: str = 'loading') -> dict[str, Any]:
+    """The :class:`SessionRow` fields of a branch's measurement uncertainty and agreement from a session's
+    analysis.json (its ``uncertainty`` entry, crane_stiffness.analysis.stiffness_uncertainty); none without one."""
+    entry = (analysis.get('uncertainty') or {}).get(branch)
+    if not entry:
+        return {}
+
+    def number(value: Any) -> float:
+        try:
+            return float(value)
+        except (TypeError, ValueError):
+            return math.nan
+    u = entry.get('uncertainty') or {}
+    low, high = (entry.get('ci95') or [math.nan, math.nan])[:2]
+    out: dict[str, Any] = {'k_gum': number(u.get('value')), 'U': number(u.get('U')),
+                           'coverage_factor': number(u.get('k')), 'repeatability_low': number(low),
+                           'repeatability_high': number(high),
+                           'statistical_only': bool(entry.get('statistical_only'))}
+    en = entry.get('En')
+    if en:
+        out.update(prediction=number(en.get('reference')), prediction_U=number(en.get('U_reference')),
+                   en=number(en.get('en')), agreement='agree' if en.get('agrees') else 'disagree')
+    return out
 
 
 @dataclass

@@ -130,7 +130,10 @@ class SessionRunner:
             entry = campaign_entry(self.campaign, plan, self.hardware, confirmed)
             model = plan.nominal if self.hardware else plan.true
             seeds = {} if self.hardware or plan.seeds is None else plan.seeds
-            overrides = {**{node: {'seed': seed} for node, seed in seeds.items()}, 'crane_model': dict(model),
+            # (the campaign's sensor parameters on the simulated rig only: a real sensor has its own truth)
+            extra = {} if self.hardware else (plan.parameters or {})
+            overrides = {**extra, **{node: {**extra.get(node, {}), 'seed': seed} for node, seed in seeds.items()},
+                         'crane_model': dict(model),
                          'session_recorder': {**plan.nominal, 'campaign_entry': _yaml_string(json.dumps(entry)),
                                               'notes': f'campaign {self.campaign.name}, session {plan.id}'}}
             started = time.time()

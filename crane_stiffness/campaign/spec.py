@@ -14,6 +14,8 @@ The file is a ROS 2 parameter YAML with one section, ``campaign`` (see config/ca
         load_fraction: 0.5                    # side-force/moment peak: this fraction of the first-slack load
         true.wire_stiffness_factor: 1.0       # simulated rig only: the true crane against the nominal
         true.weight_factor: 1.0
+        true.crane: nominal                   # or drawn: each session's true crane drawn from true.uncertainty
+        sensor_parameters: none               # or a file of node sections set on top of the sensors' parameters
 
 The series ``full`` measures the whole 6×6 stiffness of every set-up in one designed multi-axis test
 (crane_stiffness.campaign.full_series): its program is ``design`` (the D-optimal program of each set-up, made from
@@ -32,7 +34,7 @@ import hashlib
 import json
 import math
 import os
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -96,8 +98,21 @@ CAMPAIGN_PARAMS: tuple[ParamSpec, ...] = (
               'the nominal one [-]', above=0.0),
     ParamSpec('true.weight_factor', 1.0, "simulated rig only: the true crane's weight over the nominal W [-]",
               above=0.0),
+    ParamSpec('true.crane', 'nominal', "simulated rig only: nominal (the true crane is the nominal one, scaled by "
+              "true.*_factor) or drawn (each session's true crane drawn from the inputs' uncertainties of "
+              'true.uncertainty, seeded by seed: a coverage study of the prediction) [-]',
+              choices=('nominal', 'drawn')),
+    ParamSpec('true.uncertainty', 'uncertainty_lab.yaml', "true.crane drawn: the crane inputs' uncertainties the "
+              'true cranes are drawn from (a file as crane-stiffness analyze --uncertainty reads; a name in the '
+              'installed config/ or a path relative to the campaign file) [-]'),
+    ParamSpec('sensor_parameters', 'none', 'simulated rig only: a ROS parameter file whose node sections (load_cell, '
+              "lvdt, ...) are set on top of the rig's own sensor parameters in every session (true calibration "
+              'errors, coloured noise); a node it sets to truth.mode drawn gets its own truth.seed per session '
+              '(its noise seed); none = nothing on top [-]'),
 )
 _SPECS = {spec.name: spec for spec in CAMPAIGN_PARAMS}
+#: The simulated sensors a campaign's sensor_parameters may set (each takes a noise seed per session).
+SENSOR_NODES = ('load_cell', 'lvdt', 'pose_sensor')
 
 
 @dataclass(frozen=True)
@@ -122,11 +137,17 @@ class Campaign:
     """Series full with program design: the program designed for each set-up."""
     true_wire_stiffness_factor: float
     true_weight_factor: float
+    true_crane: str = 'nominal'
+    """'nominal', or 'drawn': each session's true crane drawn from :attr:`true_uncertainty` (:mod:`.true_draw`)."""
+    true_uncertainty: Path | None = None
+    """The crane inputs' uncertainty file the true cranes are drawn from (true_crane 'drawn')."""
+    sensor_parameters: dict[str, dict[str, Any]] = field(default_factory=dict)
+    """Parameters by node set on top of the rig's sensor parameters in every session (simulated rig)."""
 
     @property
     def true_differs(self) -> bool:
         """The simulated crane is not the nominal one."""
-        return self.true_wire_stiffness_factor != 1.0 or self.true_weight_factor != 1.0
+        return self.true_wire_stiffness_factor != 1.0 or self.true_weight_factor != 1.0 or self.true_crane != 'nominal'
 
 
 @dataclass(frozen=True)
@@ -154,6 +175,9 @@ class SessionPlan:
     noise."""
     program_text: str | None = None
     """Series full with program design: the program file designed for this set-up (YAML text)."""
+    parameters: dict[str, dict[str, Any]] | None = None
+    """Parameters by node set on the simulated rig's nodes in this session beyond the rig's own (the campaign's
+    sensor_parameters, a drawn truth's truth.seed); None: none."""
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -269,12 +293,50 @@ def load_campaign(path: str | os.PathLike) -> Campaign:
         load_params(crane_path)
     except ConfigError as exc:
         raise _fail(path, 'crane', crane, str(exc)) from None
+    uncertainty = None
+    if values['true.crane'] == 'drawn':
+        uncertainty = _true_uncertainty(path, values['true.uncertainty'], crane_path)
+    sensors: dict[str, dict[str, Any]] = {}
+    if values['sensor_parameters'] != 'none':
+        sensors = _sensor_parameters(path, values['sensor_parameters'])
     return Campaign(path=path, name=values['name'], crane=crane_path, series=tuple(series),
                     programs=tuple(program_paths), weights=weights, lengths=lengths, heights=heights,
                     repeats=int(values['repeats']), load_fraction=float(values['load_fraction']),
                     seed=int(values['seed']), design=_design_settings(path, values),
                     true_wire_stiffness_factor=float(values['true.wire_stiffness_factor']),
-                    true_weight_factor=float(values['true.weight_factor']))
+                    true_weight_factor=float(values['true.weight_factor']), true_crane=values['true.crane'],
+                    true_uncertainty=uncertainty, sensor_parameters=sensors)
+
+
+def _true_uncertainty(path: Path, value: str, crane: Path) -> Path:
+    """The uncertainty file the true cranes are drawn from, checked against the crane it scatters."""
+    from crane_stiffness.campaign.true_draw import check_uncertainty_file
+    try:
+        found = _resolve(path, value)
+        check_uncertainty_file(found, crane)
+    except (ConfigError, ParameterError, ValueError) as exc:
+        raise _fail(path, 'true.uncertainty', value, str(exc)) from None
+    return found
+
+
+def _sensor_parameters(path: Path, value: str) -> dict[str, dict[str, Any]]:
+    """The node sections of the campaign's sensor_parameters file: {node: {parameter: value}}."""
+    try:
+        file = ParamFile.read(_resolve(path, value))
+    except (OSError, ConfigError) as exc:
+        raise _fail(path, 'sensor_parameters', value, f'cannot read: {exc}') from None
+    except Exception as exc:  # yaml.YAMLError and its kin
+        raise _fail(path, 'sensor_parameters', value, f'not valid YAML: {exc}') from None
+    if not file.is_mapping or not file.sections:
+        raise _fail(path, 'sensor_parameters', value, 'must hold node sections "<node>: ros__parameters: ..."')
+    out = {}
+    for node in file.sections:
+        params = file.params([node])
+        if node not in SENSOR_NODES or not params:
+            raise _fail(path, 'sensor_parameters', value, f'section {node!r}: must be one of '
+                        f'{", ".join(SENSOR_NODES)} with its parameters')
+        out[node] = params
+    return out
 
 
 def _design_settings(path: Path, values: Mapping[str, Any]) -> DesignSettings:
@@ -354,8 +416,44 @@ def plan_sessions(campaign: Campaign) -> list[SessionPlan]:
                     plans.append(SessionPlan(
                         index=index, id=session_id(series, weight, size, repeat, bool(campaign.lengths)),
                         series=series, program=str(program), program_scale=scale, weight=weight, l0=g.l0,
-                        height=g.height, repeat=repeat, nominal=nominal, true=true, seeds=seeds, program_text=text))
+                        height=g.height, repeat=repeat, nominal=nominal,
+                        true=_drawn_true(campaign, nominal, index) if campaign.true_crane == 'drawn' else true,
+                        seeds=seeds, program_text=text, parameters=_session_parameters(campaign, seeds)))
     return plans
+
+
+def _session_rng(campaign: Campaign, index: int, stream: int) -> Any:
+    """A generator for session ``index``'s draws of one kind (``stream``): seeded by the campaign's seed, or fresh
+    (seed -1)."""
+    import numpy as np
+    return np.random.default_rng(None if campaign.seed < 0 else (campaign.seed, index, stream))
+
+
+def _drawn_true(campaign: Campaign, nominal: dict[str, Any], index: int) -> dict[str, Any]:
+    """Session ``index``'s true crane drawn about ``nominal`` (:mod:`.true_draw`), then scaled by true.*_factor."""
+    from crane_stiffness.campaign.true_draw import TRUE_CRANE_STREAM, draw_true_crane, uncertainty_entries
+    assert campaign.true_uncertainty is not None  # load_campaign resolves it for true.crane drawn
+    entries = uncertainty_entries(campaign.true_uncertainty, geometry_from_params(nominal))
+    true = draw_true_crane(nominal, entries, _session_rng(campaign, index, TRUE_CRANE_STREAM))
+    true['geometry.weight'] *= campaign.true_weight_factor
+    key = 'geometry.wire_stiffness' if true['geometry.wire_stiffness'] else 'geometry.youngs_modulus'
+    true[key] *= campaign.true_wire_stiffness_factor
+    return true
+
+
+def _session_parameters(campaign: Campaign, seeds: Mapping[str, int] | None) -> dict[str, dict[str, Any]] | None:
+    """The campaign's sensor_parameters for one session: a node drawing its true calibration errors
+    (truth.mode drawn) draws them with its own noise seed (another stream of it: sim.truth), or a fresh one."""
+    if not campaign.sensor_parameters:
+        return None
+    out = {}
+    for node, params in campaign.sensor_parameters.items():
+        params = dict(params)
+        if params.get('truth.mode') == 'drawn':
+            import numpy as np
+            params['truth.seed'] = (seeds or {}).get(node, int(np.random.default_rng().integers(2 ** 31)))
+        out[node] = params
+    return out
 
 
 def plan_fingerprint(plans: list[SessionPlan]) -> str:

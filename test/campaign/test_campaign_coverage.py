@@ -42,17 +42,29 @@ def test_one_axis_coverage_counts_each_session_s_loading_and_unloading_interval(
     write_synthetic_campaign(out, spec, seed=40, sample_rate_hz=200)
     result = analyze_campaign(out, workers=2)
     coverage = {c.quantity: c for c in result.coverage}
-    assert set(coverage) == {'k fy loading', 'k fy unloading'}
-    assert coverage['k fy loading'].total == coverage['k fy unloading'].total == 12
-    # the rows' own verdict, computed by the campaign analysis from the same session analyses
-    assert coverage['k fy loading'].covered == sum(r.ci95_low <= r.model_tangent <= r.ci95_high for r in result.rows)
+    assert set(coverage) == {f'k fy {branch}{kind}' for branch in ('loading', 'unloading')
+                             for kind in ('', ', repeatability', ', GUM U')} | {'prediction fy, GUM U',
+                                                                               'prediction fy, Monte Carlo'}
+    assert all(c.total == 12 for c in coverage.values())
+    # the rows' own verdict, computed by the campaign analysis from the same session analyses (the true crane is the
+    # nominal one here: the truth is the model's tangent)
+    rows = result.rows
+    assert coverage['k fy loading'].covered == sum(r.ci95_low <= r.model_tangent <= r.ci95_high for r in rows)
+    assert coverage['k fy loading, GUM U'].covered == sum(abs(r.k_gum - r.model_tangent) <= r.U for r in rows)
+    assert coverage['k fy loading, repeatability'].covered == sum(
+        r.repeatability_low <= r.model_tangent <= r.repeatability_high for r in rows)
+    # perfect sensors, a budget counting their certificates: every expanded interval holds the truth, and the
+    # prediction's interval (about 6 % wide) holds its own nominal crane
+    assert coverage['k fy loading, GUM U'].covered == coverage['prediction fy, GUM U'].covered == 12
+    assert all(r.agreement == 'agree' and abs(r.en) < 0.1 and r.U > 0 for r in rows)
     with open(out / 'campaign' / 'coverage.csv') as f:
         table = {row['quantity']: row for row in csv.DictReader(f)}
     assert int(table['k fy loading']['covered']) == coverage['k fy loading'].covered
     assert int(table['k fy loading']['sessions']) == 12
     assert (out / 'campaign' / 'coverage.png').stat().st_size > 5000
     report = (out / 'campaign' / 'report.md').read_text()
-    assert 'Coverage of the 95 % intervals' in report and 'k fy unloading' in report
+    assert 'Coverage of the 95 % intervals' in report and 'k fy unloading, GUM U' in report
+    assert 'U (k)' in report and 'repeatability (95 %)' in report and ': agree' in report
 
 
 def test_six_axis_coverage_counts_every_entry_of_k_and_c_and_k2(tmp_path):

@@ -66,6 +66,9 @@ GOOD = ('series: [fy]\nprograms: [campaign_side_force]\nweights: [50.0]\nlengths
     (GOOD + 'repeats: 0\n', 'repeats', 'must be'),
     (GOOD + 'true.wire_stiffness_factor: -1.0\n', 'true.wire_stiffness_factor', 'must be > 0'),
     (GOOD.replace('campaign_side_force', 'campaign_moment_z'), 'programs[0]', 'not the series fy'),
+    (GOOD + 'true.crane: maybe\n', 'true.crane', 'must be one of nominal, drawn'),
+    (GOOD + 'true.crane: drawn\ntrue.uncertainty: no_such_file.yaml\n', 'true.uncertainty', 'not a file'),
+    (GOOD + 'sensor_parameters: crane_lab.yaml\n', 'sensor_parameters', 'must be one of load_cell, lvdt'),
 ])
 def test_a_bad_campaign_file_exits_2_naming_the_file_and_the_key(tmp_path, capsys, body, key, rule):
     path = write(tmp_path, body)
@@ -82,3 +85,34 @@ def test_every_key_is_declared_once_with_its_unit():
     assert len(names) == len(set(names))
     assert all(spec.unit for spec in CAMPAIGN_PARAMS), [s.name for s in CAMPAIGN_PARAMS if not s.unit]
     assert all(math.isfinite(w) for w in load_campaign(PAPER).weights)
+
+
+def test_the_gum_coverage_study_draws_each_session_s_true_crane_and_gives_its_sensors_their_truth_seeds():
+    """config/campaign_coverage_gum.yaml: every session a true crane of its own, drawn from config/uncertainty_lab.yaml
+    (the same in every planning), and sensors drawing their true errors with their own noise seeds."""
+    spec = load_campaign(REPO / 'config' / 'campaign_coverage_gum.yaml')
+    plans = plan_sessions(spec)
+    assert len(plans) == 200 and spec.true_differs
+    assert [p.true for p in plans] == [p.true for p in plan_sessions(spec)]  # seeded by the campaign's seed
+    ratio = [p.true['geometry.youngs_modulus'] / p.nominal['geometry.youngs_modulus'] - 1.0 for p in plans]
+    assert max(map(abs, ratio)) <= 0.05  # E within its ±5 % rectangular ...
+    spread = math.sqrt(sum(r * r for r in ratio) / len(ratio))
+    assert spread == pytest.approx(0.05 / math.sqrt(3.0), rel=0.15)  # ... spread as a rectangular one
+    weights = [p.true['geometry.weight'] - 50.0 for p in plans]
+    assert math.sqrt(sum(w * w for w in weights) / len(weights)) == pytest.approx(0.05, rel=0.15)  # U = 0.1 N, k = 2
+    assert len({p.true['geometry.a'] for p in plans}) == 200
+    assert all(max(map(abs, p.true['geometry.length_offsets'])) <= 5e-6 for p in plans)
+    for p in plans:
+        assert p.nominal['geometry.youngs_modulus'] == 206.831e9 and p.nominal['geometry.weight'] == 50.0
+        assert p.seeds is not None and p.parameters is not None
+        for node in ('load_cell', 'lvdt'):
+            assert p.parameters[node]['truth.mode'] == 'drawn'
+            assert p.parameters[node]['truth.seed'] == p.seeds[node]
+        assert p.parameters['load_cell']['calibration.nonlinearity'] == [0.0] * 6
+
+
+def test_sensor_parameters_for_a_node_that_is_no_sensor_are_refused_naming_the_section(tmp_path):
+    (tmp_path / 'extra.yaml').write_text('lvdt:\n  ros__parameters:\n    truth.mode: drawn\n'
+                                         'crane_model:\n  ros__parameters:\n    prediction_axis: fy\n')
+    with pytest.raises(CampaignFileError, match="sensor_parameters.*section 'crane_model'"):
+        load_campaign(write(tmp_path, GOOD + 'sensor_parameters: extra.yaml\n'))
