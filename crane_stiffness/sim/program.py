@@ -200,14 +200,15 @@ class LoadProgram:
                 ``segments.duration`` [float, s] (all required, equal lengths), ``repeats`` (int ≥ 1, default 1),
                 ``name`` (str, default 'program'), ``rate_hz`` (float > 0, default 100). Integers are accepted
                 for the float arrays.
-            strict: Reject keys that are not program parameters (``use_sim_time`` is always accepted).
+            strict: Reject keys that are not program parameters (``use_sim_time`` and how the load is applied,
+                :data:`LOAD_APPLICATION_PARAMS`, are always accepted: a program file may say so).
 
         Raises:
             ParameterError: Naming the field, the value and the rule.
         """
         if strict:
             for key in params:
-                if key not in PARAM_NAMES and key not in _IGNORED_PARAMS:
+                if key not in PARAM_NAMES and key not in _IGNORED_PARAMS and key not in LOAD_APPLICATION_KEYS:
                     raise ParameterError(str(key), params[key],
                                          f'unknown load-program parameter; known: {", ".join(PARAM_NAMES)}')
         arrays: dict[str, list[Any]] = {}
@@ -489,3 +490,5 @@ class Settling:
         if self._since is None:
             self._since = t_s
         return t_s - self._since >= self.hold_s
+#: Their names.
+LOAD_APPLICATION_KEYS = tuple(spec.name for spec in LOAD_APPLICATION_PARAMS)
