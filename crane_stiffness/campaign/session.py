@@ -145,7 +145,10 @@ class SessionRunner:
             seeds = {} if self.hardware or plan.seeds is None else plan.seeds
             overrides = {**{node: {'seed': seed} for node, seed in seeds.items()}, 'crane_model': dict(model),
                          'session_recorder': {**plan.nominal, 'campaign_entry': _yaml_string(json.dumps(entry)),
-                                              'notes': f'campaign {self.campaign.name}, session {plan.id}'}}
+                                              'notes': _yaml_string(f'campaign {self.campaign.name}, session '
+                                                                    f'{plan.id}' + (
+                                                  f'; crane_model outputs: {MODEL_OUTPUTS_ON_HARDWARE}'
+                                                  if self.hardware else ''))}}
             if self.load_program:
                 overrides['load_program'] = dict(self.load_program)
             started = time.time()
