@@ -3,8 +3,9 @@ crane_stiffness.campaign (added to the parser of crane_stiffness.cli.main by :fu
 
 Exit codes: 0 ok; 2 bad input (a campaign file with an unknown key or a value against its rule, a directory that is
 not a campaign or holds another one, data that cannot determine a calibrated parameter; one stderr line naming the
-file, key or parameter); 1 a session failed on the rig (the node's log tail on stderr); 130 interrupted (Ctrl-C or
-the operator stopped it: run the same command again to resume).
+file, key or parameter); 1 a session failed on the rig (the node's log tail on stderr); 5 ``campaign run``: a
+session is NOT OK or its bag was cut short (each named on stderr with its causes; this run's and those done before);
+130 interrupted (Ctrl-C or the operator stopped it: run the same command again to resume).
 """
 from __future__ import annotations
 
@@ -12,7 +13,8 @@ import argparse
 import sys
 from typing import Any, Callable
 
-from crane_stiffness.cli.exit_codes import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE, run_to_exit_code
+from crane_stiffness.cli.exit_codes import (EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_SESSION_NOT_OK, EXIT_USAGE,
+                                            run_to_exit_code)
 
 
 def _guarded(run: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Namespace], int]:
@@ -41,16 +43,52 @@ def _rig_arguments(items: list[str]) -> dict[str, str]:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
+    import functools
     from crane_stiffness.campaign.runner import run_campaign, service_confirm, terminal_confirm
     from crane_stiffness.campaign.spec import load_campaign
+    from crane_stiffness.campaign.verdict import Review, not_ok_summary
     campaign = load_campaign(args.campaign)
-    confirm = service_confirm() if args.confirm == 'service' else terminal_confirm
+    confirm = (service_confirm(operator=args.operator) if args.confirm == 'service' else
+               functools.partial(terminal_confirm, operator=args.operator))
+    # Asked after a NOT OK session only on hardware with someone at this terminal (a simulated session repeated
+    # gives the same numbers); else it goes on and the session stays marked NOT OK.
+    review = Review(args.out, on_not_ok=args.on_not_ok,
+                    interactive=args.hardware and args.confirm == 'terminal' and sys.stdin.isatty())
     run = run_campaign(campaign, args.out, hardware=args.hardware, confirm=confirm,
                        arguments=_rig_arguments(args.rig_arg), progress=not args.quiet, jobs=args.jobs,
-                       scheduler=args.scheduler, rig=args.rig)
+                       scheduler=args.scheduler, rig=args.rig, review=review,
+                       load_application=args.load_application, settle_s=args.settle_s, operator=args.operator)
     print(f'campaign {campaign.name}: {len(run.ran)} session(s) run, {len(run.skipped)} done before, '
-          f'{run.planned} planned -> {run.out}')
+          f'{run.planned} planned -> {run.out}'
+          + (f' ({len(run.repeated)} repeated after a NOT OK verdict)' if run.repeated else ''))
+    verdicts = {name: _verdict_before(args.out, name) for name in run.skipped}
+    verdicts.update(review.verdicts)
+    bad = not_ok_summary(verdicts)
+    if bad:
+        print(f'crane-stiffness: {len(bad)} of {len(verdicts)} session(s) NOT OK (each analysed after its run; '
+              f'`campaign analyze {args.out}` for the whole campaign):', file=sys.stderr)
+        for line in bad:
+            print(f'  {line}', file=sys.stderr)
+        return EXIT_SESSION_NOT_OK
     return EXIT_OK
+
+
+def _verdict_before(out: str, session: str) -> Any:
+    """The verdict of a session done before this run: the one kept, else (a run stopped while judging it) judged
+    now and kept."""
+    import json
+    from pathlib import Path
+    from crane_stiffness.campaign.runner import read_plan
+    from crane_stiffness.campaign.session import RESULT_FILE
+    from crane_stiffness.campaign.verdict import read_verdict, session_verdict, write_verdict
+    verdict = read_verdict(out, session)
+    if verdict is None:
+        plan = next(p for p in read_plan(out)['sessions'] if p['id'] == session)
+        result = json.loads((Path(out) / 'sessions' / session / RESULT_FILE).read_text())
+        verdict = session_verdict(out, plan, result)
+        verdict.decision = 'judged when the campaign was resumed'
+        write_verdict(out, verdict)
+    return verdict
 
 
 def cmd_analyze(args: argparse.Namespace) -> int:
@@ -121,6 +159,22 @@ def add_commands(subparsers: Any) -> None:
     r.add_argument('--confirm', choices=('terminal', 'service'), default='terminal',
                    help='with --hardware: a prompt at this terminal, or a call of /campaign/continue '
                         '(std_srvs/srv/Trigger) from any machine of the lab (default terminal)')
+    r.add_argument('--operator', default='', metavar='NAME',
+                   help='who confirms the set-ups, recorded with each confirmation (default: the login name)')
+    r.add_argument('--load-application', choices=('model', 'operator', 'actuator'), default=None,
+                   help='how the load reaches the crane: model = the simulated crane applies each command (the '
+                        'default without --hardware); operator = a person applies each new level the program names '
+                        '(the default with --hardware; the program holds until the level is confirmed); actuator '
+                        '= a loading actuator\'s driver subscribed to /crane/wrench_command')
+    r.add_argument('--settle-s', type=float, default=2.0, metavar='S',
+                   help='--load-application operator: a level counts as applied once the measured load has stayed '
+                        'within load_program\'s operator_tolerance of it for S seconds; 0 = only a call of '
+                        '/load_program/confirm confirms it (default 2)')
+    r.add_argument('--on-not-ok', choices=('ask', 'continue', 'stop'), default='ask',
+                   help='after a session whose verdict is NOT OK (each session is analysed at once and its verdict '
+                        'shown before the next set-up): ask the operator (repeat / continue / stop; with --hardware '
+                        'at a terminal, else continue), continue, or stop the campaign; either way the run exits 5 '
+                        'naming the NOT OK sessions (default ask)')
     r.add_argument('--rig-arg', action='append', default=[], metavar='NAME:=VALUE',
                    help='a rig.launch.py argument for every session (e.g. transport:=drivers); repeatable')
     r.add_argument('--jobs', type=int, default=None, metavar='N',

@@ -36,6 +36,9 @@ from crane_stiffness.campaign.spec import SERIES, Campaign, SessionPlan, plan_fi
 PLAN_FILE = 'plan.json'
 #: A confirmation: given the session and the instructions, return what the operator confirmed (or raise).
 Confirm = Callable[[SessionPlan, str], dict[str, Any]]
+#: A review after each session (crane_stiffness.campaign.verdict.Review): given the session, its result and whether
+#: it can be run again now, return 'continue', 'repeat' or 'stop'.
+Review = Callable[[SessionPlan, dict[str, Any], bool], str]
 
 
 class CampaignInterrupted(CampaignError):
@@ -51,6 +54,8 @@ class CampaignRun:
     ran: list[str] = field(default_factory=list)
     skipped: list[str] = field(default_factory=list)
     results: dict[str, dict[str, Any]] = field(default_factory=dict)
+    repeated: list[str] = field(default_factory=list)
+    """Sessions the operator had run again after their verdict (once per repeat)."""
 
 
 def instructions(plan: SessionPlan, total: int) -> str:
@@ -59,7 +64,9 @@ def instructions(plan: SessionPlan, total: int) -> str:
             f'W = {plan.weight:g} N, set the wires to l0 = {plan.l0:.4g} m (unloaded height {plan.height:.4g} m); '
             + ('program designed for this set-up (D-optimal, all six axes; the pose sensor measures)'
                if plan.program_text is not None else
-               f'program {Path(plan.program).name} scaled by {plan.program_scale:.4g}'))
+               f'program {Path(plan.program).name} scaled by {plan.program_scale:.4g}')
+            + '; leave the platform unloaded and still: the program tares the load cell and zeroes the LVDT at the '
+              'unloaded state before its first step (load_program tare_services)')
 
 
 def session_done(out: Path, plan: SessionPlan) -> bool:
@@ -135,7 +142,8 @@ def run_campaign(campaign: Campaign, out: str | os.PathLike, *, hardware: bool =
                  confirm: Confirm | None = None, arguments: Mapping[str, str] | None = None,
                  progress: bool = True, ready_timeout_s: float = 120.0, jobs: int | None = None,
                  on_session: Callable[[SessionPlan], None] | None = None, scheduler: str | None = None,
-                 rig: str | None = None) -> CampaignRun:
+                 rig: str | None = None, review: Review | None = None, load_application: str | None = None,
+                 settle_s: float = 2.0, operator: str = '') -> CampaignRun:
     """Run every session of ``campaign`` not done yet in ``out`` (see the module docstring).
 
     Args:
@@ -156,6 +164,11 @@ def run_campaign(campaign: Campaign, out: str | os.PathLike, *, hardware: bool =
             job, crane_stiffness.launcher.rig_host: the same bags and numbers, without starting eight processes per
             session); 'processes' starts them as ``ros2 launch`` does, every session anew. Default
             :func:`default_rig`.
+        review: called after each session, before the next set-up (the command line's shows the session's verdict,
+            crane_stiffness.campaign.verdict.Review): 'repeat' runs the session again (one session at a time only;
+            on hardware after a new confirmation), 'stop' stops the campaign (CampaignInterrupted).
+        load_application, settle_s, operator: how the load reaches the crane and who runs the test
+            (:func:`load_program_parameters`).
 
     Raises:
         CampaignError: ``out`` holds another campaign; a true crane with --hardware; jobs without simulated time.
@@ -197,7 +210,9 @@ def run_campaign(campaign: Campaign, out: str | os.PathLike, *, hardware: bool =
     jobs = max(1, min(jobs, len(todo)))
     domains = session_domains(env, jobs)
     session = SessionRunner(campaign, out, hardware, arguments, env, share_dir() / 'config',
-                             rosrun.node_executables(), ready_timeout_s, rig=rig)
+                             rosrun.node_executables(), ready_timeout_s, rig=rig,
+                             load_program=load_program_parameters(arguments, hardware, load_application, settle_s,
+                                                                  operator))
     bar = None
     if progress:
         from tqdm import tqdm
@@ -217,29 +232,46 @@ def run_campaign(campaign: Campaign, out: str | os.PathLike, *, hardware: bool =
             bar.set_postfix_str(', '.join(fractions) or '', refresh=False)
             bar.refresh()
 
-    def finished(plan: SessionPlan, result: dict[str, Any]) -> None:
+    def finished(plan: SessionPlan, result: dict[str, Any], repeatable: bool = False) -> str:
         fractions.pop(plan.id, None)
         run.ran.append(plan.id)
         run.results[plan.id] = result
         show()
+        decision = 'continue' if review is None else review(plan, result, repeatable)
+        if decision == 'repeat' and repeatable:
+            run.ran.remove(plan.id)
+            run.repeated.append(plan.id)
+            return decision
+        if decision == 'stop':
+            raise CampaignInterrupted(f'stopped by the operator after session {plan.id} (NOT OK; its verdict is in '
+                                      f'{out / "sessions" / plan.id / "verdict.json"}): {done_before + len(run.ran)} '
+                                      f'of {len(plans)} sessions done in {out}; run the same command again to go on '
+                                      'with the next one')
+        return 'continue'
+
+    def finished_once(plan: SessionPlan, result: dict[str, Any]) -> None:
+        finished(plan, result, False)  # (sessions side by side or on a cluster: not run again)
 
     try:
         if scheduler:
             from crane_stiffness.campaign.distributed import run_on_cluster
             texts = {plan.id: session_program_text(plan) for plan in todo}
-            run_on_cluster(campaign, out, todo, texts, arguments, scheduler, ready_timeout_s, on_session, finished,
-                           rig)
+            run_on_cluster(campaign, out, todo, texts, arguments, scheduler, ready_timeout_s, on_session,
+                           finished_once, rig)
         elif jobs == 1:
             for plan in todo:
-                if on_session is not None:
-                    on_session(plan)
-                confirmed = None
-                if hardware:
-                    confirmed = (confirm or terminal_confirm)(plan, instructions(plan, len(plans)))
-                fractions[plan.id] = 0.0
-                finished(plan, session.run(plan, confirmed, domains[0], _tracker(fractions, plan.id, show)))
+                decision = 'repeat'
+                while decision == 'repeat':  # (the session again when its review says so: it is set aside first)
+                    if on_session is not None:
+                        on_session(plan)
+                    confirmed = None
+                    if hardware:
+                        confirmed = (confirm or terminal_confirm)(plan, instructions(plan, len(plans)))
+                    fractions[plan.id] = 0.0
+                    decision = finished(plan, session.run(plan, confirmed, domains[0],
+                                                          _tracker(fractions, plan.id, show)), True)
         else:
-            _run_side_by_side(session, todo, domains, on_session, fractions, show, finished)
+            _run_side_by_side(session, todo, domains, on_session, fractions, show, finished_once)
     except KeyboardInterrupt:
         raise CampaignInterrupted(f'interrupted: {done_before + len(run.ran)} of {len(plans)} sessions done in '
                                   f'{out}; run the same command again to resume') from None
@@ -248,6 +280,34 @@ def run_campaign(campaign: Campaign, out: str | os.PathLike, *, hardware: bool =
         if bar is not None:
             bar.close()
     return run
+
+
+#: The Trigger services that tare the load cell and zero the LVDT, by transport (rig argument).
+TARE_SERVICES = {'sim': ['/load_cell/tare', '/lvdt/zero'], 'drivers': ['/netft/tare', '/modbus_lvdt/zero']}
+
+
+def load_program_parameters(arguments: Mapping[str, str], hardware: bool, load_application: str | None,
+                            settle_s: float, operator: str) -> dict[str, Any]:
+    """load_program's parameters for every session: how the load reaches the crane (default: the simulated crane,
+    ``model``; with hardware ``operator``, a person at each new level) and, with hardware, the tare and zero at the
+    unloaded state before the first step (the sensors of the rig's ``transport``) and who runs the test. An operator
+    level is confirmed by ``/load_program/confirm`` or by the measured load settling within its tolerance for
+    ``settle_s`` [s] (0: by the call only)."""
+    application = load_application or ('operator' if hardware else 'model')
+    if application not in ('model', 'operator', 'actuator'):
+        raise CampaignError(f'--load-application {application}: expected model, operator or actuator')
+    if application != 'model' and not hardware:
+        raise CampaignError(f'--load-application {application}: a person or an actuator applies the load on a real '
+                            'rig only: add --hardware (the simulated crane applies it itself)')
+    if not settle_s >= 0.0:
+        raise CampaignError(f'--settle-s {settle_s}: must be >= 0 [s]')
+    if not hardware:
+        return {}
+    params: dict[str, Any] = {'load_application': application, 'operator': operator_name(operator),
+                              'tare_services': TARE_SERVICES.get(str(arguments.get('transport', 'sim')), [])}
+    if application == 'operator':
+        params['operator_settle_s'] = float(settle_s)
+    return params
 
 
 def default_rig(arguments: Mapping[str, str], hardware: bool) -> str:
@@ -305,8 +365,21 @@ def _run_side_by_side(session: 'SessionRunner', todo: list[SessionPlan], domains
             raise
 
 
-def terminal_confirm(plan: SessionPlan, text: str) -> dict[str, Any]:
-    """Ask at the terminal: the operator types y when the set-up is done (q stops the campaign)."""
+def operator_name(given: str = '') -> str:
+    """Who confirms: ``given`` (``campaign run --operator``), else the login name of the process ($USER, $LOGNAME,
+    or the account's name), '' only when none is known."""
+    if given:
+        return given
+    import getpass
+    try:
+        return getpass.getuser()
+    except (OSError, KeyError):  # no $USER / $LOGNAME and a uid without a passwd entry (a bare container)
+        return ''
+
+
+def terminal_confirm(plan: SessionPlan, text: str, operator: str = '') -> dict[str, Any]:
+    """Ask at the terminal: the operator types y when the set-up is done (q stops the campaign); ``operator``: who
+    (default the login name, :func:`operator_name`), recorded with the confirmation."""
     print(f'\n{text}', file=sys.stderr)
     while True:
         try:
@@ -314,15 +387,16 @@ def terminal_confirm(plan: SessionPlan, text: str) -> dict[str, Any]:
         except EOFError:
             raise CampaignInterrupted(f'no confirmation for session {plan.id} (end of input)') from None
         if answer in ('y', 'yes'):
-            return {'how': 'terminal', 'at_utc': utc(), 'user': os.environ.get('USER', ''), 'instructions': text,
+            return {'how': 'terminal', 'at_utc': utc(), 'user': operator_name(operator), 'instructions': text,
                     'weight': plan.weight, 'l0': plan.l0}
         if answer in ('q', 'quit'):
             raise CampaignInterrupted(f'stopped by the operator before session {plan.id}')
 
 
-def service_confirm(timeout_s: float | None = None) -> Confirm:
+def service_confirm(timeout_s: float | None = None, operator: str = '') -> Confirm:
     """A confirmation by a ``/campaign/continue`` service call (std_srvs/Trigger), so a second machine can confirm:
-    the node ``campaign`` offers it while waiting; the call's answer repeats the instructions."""
+    the node ``campaign`` offers it while waiting; the call's answer repeats the instructions. The record's ``user``
+    is ``operator`` (default the login name of this process: the call itself does not say who made it)."""
     def confirm(plan: SessionPlan, text: str) -> dict[str, Any]:
         import rclpy
         from std_srvs.srv import Trigger
@@ -334,7 +408,8 @@ def service_confirm(timeout_s: float | None = None) -> Confirm:
         called: dict[str, Any] = {}
 
         def on_call(request: Any, response: Any) -> Any:
-            called.update({'how': 'service /campaign/continue', 'at_utc': utc(), 'instructions': text,
+            called.update({'how': 'service /campaign/continue', 'at_utc': utc(), 'user': operator_name(operator),
+                           'instructions': text,
                            'weight': plan.weight, 'l0': plan.l0})
             response.success = True
             response.message = f'running {text}'

@@ -20,6 +20,10 @@ from crane_stiffness.campaign.spec import Campaign, SessionPlan, scaled_program_
 RIGS = ('processes', 'host', 'host-here')
 
 RESULT_FILE = 'result.json'
+#: What a hardware session's record says of crane_model's outputs in its bag.
+MODEL_OUTPUTS_ON_HARDWARE = ('predictions of the nominal model, not measurements: /crane/applied_wrench is the '
+                             'commanded load as the model takes it, /crane/platform_pose the pose the model predicts '
+                             'for it; the measurements are the sensors\' topics')
 
 
 def session_program_text(plan: SessionPlan) -> str:
@@ -28,9 +32,11 @@ def session_program_text(plan: SessionPlan) -> str:
                                                                                         plan.program_scale)
 
 
-def campaign_entry(campaign: Campaign, plan: SessionPlan, hardware: bool, confirmed: Mapping[str, Any] | None
-                   ) -> dict[str, Any]:
-    """The session's place in the campaign as the recorder stores it (session_metadata.CAMPAIGN_KEY)."""
+def campaign_entry(campaign: Campaign, plan: SessionPlan, hardware: bool, confirmed: Mapping[str, Any] | None,
+                   load_application: str = 'model') -> dict[str, Any]:
+    """The session's place in the campaign as the recorder stores it (session_metadata.CAMPAIGN_KEY). On hardware
+    it says that crane_model's outputs in the bag (/crane/applied_wrench, /crane/platform_pose) are the nominal
+    model's predictions, not measurements, and how the load reached the crane (``load_application``)."""
     entry: dict[str, Any] = {
         'campaign': campaign.name, 'file': str(campaign.path), 'session': plan.id, 'index': plan.index,
         'series': plan.series, 'weight': plan.weight, 'l0': plan.l0, 'height': plan.height, 'repeat': plan.repeat,
@@ -39,6 +45,9 @@ def campaign_entry(campaign: Campaign, plan: SessionPlan, hardware: bool, confir
         'analysis_geometry': 'nominal'}
     if not hardware:
         entry['true_geometry'] = dict(plan.true)
+    else:
+        entry['load_application'] = load_application
+        entry['model_outputs'] = MODEL_OUTPUTS_ON_HARDWARE
     if confirmed is not None:
         entry['confirmed'] = dict(confirmed)
     return entry
@@ -64,7 +73,8 @@ class SessionRunner:
 
     def __init__(self, campaign: Campaign, out: Path, hardware: bool, arguments: Mapping[str, str],
                  env: Mapping[str, str], share: Path, executables: Path | None, ready_timeout_s: float,
-                 program_texts: Mapping[str, str] | None = None, rig: str = 'processes', here: Any = None) -> None:
+                 program_texts: Mapping[str, str] | None = None, rig: str = 'processes', here: Any = None,
+                 load_program: Mapping[str, Any] | None = None) -> None:
         self.campaign, self.out, self.hardware, self.arguments = campaign, out, hardware, dict(arguments)
         self.env, self.share, self.executables, self.ready_timeout_s = dict(env), share, executables, ready_timeout_s
         #: Program files by session id, made where the plan was made (a Dask worker gets them with the task).
@@ -76,6 +86,8 @@ class SessionRunner:
         #: ROS domain, in its own process (:attr:`hosts`), or with ``rig='host-here'`` on ``here``, a RigHost of this
         #: process that the caller keeps (a Dask worker's).
         self.rig = rig
+        #: Parameters of load_program set on top of the program file (how the load is applied, the tare).
+        self.load_program = dict(load_program or {})
         self.hosts: dict[int, Any] = {}
         self._hosts_lock = threading.Lock()
         self._here = here
@@ -127,7 +139,8 @@ class SessionRunner:
             program = folder / 'program.yaml'
             program.write_text(self.program_texts[plan.id] if plan.id in self.program_texts else
                                session_program_text(plan))
-            entry = campaign_entry(self.campaign, plan, self.hardware, confirmed)
+            entry = campaign_entry(self.campaign, plan, self.hardware, confirmed,
+                                   str(self.load_program.get('load_application', 'model')))
             model = plan.nominal if self.hardware else plan.true
             seeds = {} if self.hardware or plan.seeds is None else plan.seeds
             # (the campaign's sensor parameters on the simulated rig only: a real sensor has its own truth)
@@ -135,7 +148,12 @@ class SessionRunner:
             overrides = {**extra, **{node: {**extra.get(node, {}), 'seed': seed} for node, seed in seeds.items()},
                          'crane_model': dict(model),
                          'session_recorder': {**plan.nominal, 'campaign_entry': _yaml_string(json.dumps(entry)),
-                                              'notes': f'campaign {self.campaign.name}, session {plan.id}'}}
+                                              'notes': _yaml_string(f'campaign {self.campaign.name}, session '
+                                                                    f'{plan.id}' + (
+                                                  f'; crane_model outputs: {MODEL_OUTPUTS_ON_HARDWARE}'
+                                                  if self.hardware else ''))}}
+            if self.load_program:
+                overrides['load_program'] = dict(self.load_program)
             started = time.time()
             try:
                 ran = self._outcome(folder, program, plan, domain, overrides, progress, should_stop)

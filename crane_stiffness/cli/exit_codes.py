@@ -1,7 +1,8 @@
 """The exit codes of the ``crane-stiffness`` command line and the one way its commands turn errors into them.
 
 0 ok; 1 a session failed on the rig; 2 bad input (named on stderr); 3 no equilibrium for the load; 4 the solver gave
-up; 130 interrupted.
+up; 5 ``campaign run``: every session ran, but one or more is NOT OK or its bag was cut short (named on stderr with
+the causes); 130 interrupted.
 """
 from __future__ import annotations
 
@@ -13,6 +14,9 @@ EXIT_FAILED = 1
 EXIT_USAGE = 2
 EXIT_NO_EQUILIBRIUM = 3
 EXIT_SOLVER = 4
+#: ``campaign run``: a session's verdict is NOT OK (the analysis' problems, the estimator's status) or its bag is not
+#: the whole run (cut short); stderr names each such session and why.
+EXIT_SESSION_NOT_OK = 5
 EXIT_INTERRUPTED = 130
 
 #: (exception classes, exit code, stderr message with ``{exc}`` for the exception), first match wins.

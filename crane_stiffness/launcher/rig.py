@@ -354,10 +354,11 @@ class ProgramWatch:
         self.seen: float | None = None
         self.seen_at = now
 
-    def expired(self, progress: float) -> bool:
-        """Give up now? ``progress``: the program's latest reported progress."""
+    def expired(self, progress: float, holding: bool = False) -> bool:
+        """Give up now? ``progress``: the program's latest reported progress; ``holding``: the program says it waits
+        for someone (an operator applying a level, a tare), which is no stall however long it takes."""
         now = time.monotonic()
-        if progress != self.seen:
+        if progress != self.seen or holding:
             self.seen, self.seen_at = progress, now
         return now >= self.deadline and now - self.seen_at >= self.stall_s
 
@@ -372,7 +373,8 @@ def wait_for_program_end(procs: Processes, observer: Observer, duration_s: float
     """Spin ``observer`` until load_program has exited with status 0; RosRunError when it failed, another node
     died, or :class:`ProgramWatch` gives up on it."""
     watch = ProgramWatch(duration_s, margin_s, stall_s)
-    while procs.procs['load_program'].poll() is None and not watch.expired(observer.progress):
+    while procs.procs['load_program'].poll() is None and not watch.expired(
+            observer.progress, observer.state.get('state') in ('waiting', 'taring')):
         procs.check_alive(allow_exit=('load_program',))
         observer.spin_once(0.1)
         if progress is not None:

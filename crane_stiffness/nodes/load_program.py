@@ -14,6 +14,20 @@ command; the commands are published only once DDS has matched those readers). Wh
 missing item every ``ready_log_period_s``; after ``ready_timeout_s`` it logs an error naming what never came and
 exits with status 1. A user running part of the rig lists only what runs (the launch file does that for its
 arguments, see crane_stiffness.launcher.rig_description).
+
+**How the load reaches the crane** (``load_application``, crane_stiffness.sim.program.LOAD_APPLICATIONS): ``model``
+and ``actuator`` publish the commands and nothing more (crane_model, or an actuator's driver subscribed to
+/crane/wrench_command, applies them). ``operator`` (wall-clock time): where the command reaches a new level
+(:func:`~crane_stiffness.sim.program.load_prompts`: a step's start, a ramp's end) the program holds (state
+``waiting``, the instruction in the state's ``prompt``, and in the log) until the level is confirmed: a call of
+~/confirm (std_srvs/Trigger; ``ros2 service call /load_program/confirm std_srvs/srv/Trigger``) or, with
+``operator_settle_s`` > 0, the measured load (/load_cell/wrench, the level's axis) within ``operator_tolerance`` of it
+for that long. Each confirmation (how, when, by whom) is kept in the state's ``confirmed``.
+
+**Tare and zero at the unloaded state**: ``tare_services`` (std_srvs/Trigger, e.g. /netft/tare, /modbus_lvdt/zero)
+are called in turn just before the program's first step, with nothing applied yet; their answers (the offsets the
+sensors report), when and by whom go into the state's ``tare``, so the recorder keeps them (the bag's
+/load_program/state and its session end record). A tare that fails stops the node with status 1 before any load.
 """
 from __future__ import annotations
 
@@ -35,12 +49,14 @@ from crane_stiffness.contract import topics
 from crane_stiffness.params.spec import ParamSpec
 from crane_stiffness.rosnode.qos import LATCHED_QOS, RELIABLE_QOS, rclpy_qos, stream_qos
 from crane_stiffness.rosnode.diagnostics import Counters, Diagnostics
+from crane_stiffness.rosnode.load_application import LoadApplication
 from crane_stiffness.rosnode.run import run
 from crane_stiffness.rosnode.parameters import Params, check
 from crane_stiffness.rosnode.sim_time import SimTimeParticipant, uses_sim_time
 from crane_stiffness.launcher.rig_description import NODES as RIG_NODES
 from crane_stiffness.launcher.rig_description import readiness
-from crane_stiffness.sim.program import PROGRAM_KEYS, PROGRAM_PARAMS, LoadProgram, ProgramState
+from crane_stiffness.sim.program import (AXIS_UNITS, LOAD_APPLICATION_PARAMS, PROGRAM_KEYS, PROGRAM_PARAMS,
+                                        LoadProgram, LoadPrompt, ProgramState, Settling, load_prompts)
 from crane_stiffness.contract.status import OK, WARN
 from crane_stiffness.serde.stamps import split_ns
 
@@ -64,6 +80,7 @@ SOURCES = {topics.PREDICTED_AXIS_STIFFNESS: "crane_model's prediction", topics.L
 
 PARAMS = (
     *PROGRAM_PARAMS,
+    *LOAD_APPLICATION_PARAMS,
     ParamSpec('autostart', True, 'start the program by itself once the rig is ready (see wait_for_*), '
               'start_delay_s after that'),
     ParamSpec('start_delay_s', 0.5, 'wait between the rig being ready and an automatic start [s]', low=0.0,
@@ -171,7 +188,7 @@ class _Readiness:
         self._subscriptions = {}
 
 
-class LoadProgramNode(Node):
+class LoadProgramNode(LoadApplication, Node):
     """Idle → running ⇄ paused → done (or stopped); the program itself is crane_stiffness.sim.program."""
 
     def __init__(self, **kwargs: Any) -> None:
@@ -204,11 +221,29 @@ class LoadProgramNode(Node):
         self.create_service(Trigger, '~/start', self._srv_start)
         self.create_service(Trigger, '~/pause', self._srv_pause)
         self.create_service(Trigger, '~/stop', self._srv_stop)
+        # load_application operator: the levels to be confirmed, the next one, the confirmations, the settle rule.
+        assert self.program is not None  # (set by the Params above)
+        self.prompts: list[LoadPrompt] = load_prompts(self.program) if self._operator_mode else []
+        self.prompt_index = 0
+        self.confirmations: list[dict[str, Any]] = []
+        self._settling: Settling | None = None
+        self.create_service(Trigger, '~/confirm', self._srv_confirm)
+        if self._operator_mode and self.params['operator_settle_s'] > 0:
+            self.create_subscription(WrenchStamped, topics.LOAD_CELL_WRENCH, self._on_measured,
+                                     rclpy_qos(topics.SENSOR_DATA))
+        # tare_services: called once, before the first start; their answers.
+        self.tare: list[dict[str, Any]] = []
+        self._tare_todo: list[str] | None = None  # None: not begun
+        self._tare_timer: Timer | None = None
+        self._tare_future: Any = None
+        self._tare_client: Any = None
+        self._tare_wait_started = 0.0
         self.diagnostics = Diagnostics(self, self._report)
         self._autostart: Timer | None = None
         self._exit_timer: Timer | None = None
         self._readiness: _Readiness | None = None
-        self._wait_started = self._next_report = 0.0  # time.monotonic() [s], set with the readiness
+        self._wait_started: float = 0.0  # time.monotonic() [s], set with the readiness
+        self._next_report: float = 0.0
         if self.params['autostart']:
             assert self.program is not None
             # On simulated time no message can come before time starts, and time starts only when every node of
@@ -231,6 +266,15 @@ class LoadProgramNode(Node):
     # --- parameters ---
     def _validate(self, values: dict[str, Any]) -> LoadProgram:
         check(values['ready_log_period_s'] > 0, 'ready_log_period_s', values['ready_log_period_s'], 'must be > 0')
+        check(not (self.sim_time and values['load_application'] == 'operator'), 'load_application', 'operator',
+              'needs wall-clock time (use_sim_time false): a person applies the load')
+        check(not (self.sim_time and any(str(v).strip() for v in values['tare_services'])), 'tare_services',
+              list(values['tare_services']), 'needs wall-clock time (use_sim_time false): the simulated sensors '
+              'start zeroed')
+        if self.state not in ('idle',) and self.program is not None:
+            for key in ('load_application', 'tare_services'):
+                if values[key] != self.params[key]:
+                    raise ValueError(f'{key} cannot change once the program has started')
         wanted_subscribers(values['wait_for_subscribers'])  # raises naming a malformed entry
         if self.state in ('running', 'paused') and self.program is not None:
             if any(values[k] != self.params[k] for k in PROGRAM_KEYS):
@@ -239,6 +283,9 @@ class LoadProgramNode(Node):
 
     def _apply(self, program: LoadProgram, values: dict[str, Any]) -> None:
         self.program = program
+        if hasattr(self, 'prompts'):  # (a program set while idle: its own levels)
+            self.prompts = load_prompts(program) if values['load_application'] == 'operator' else []
+            self.prompt_index = 0
         if self.timer is not None:
             self.destroy_timer(self.timer)
         if not self.sim_time:
@@ -295,7 +342,7 @@ class LoadProgramNode(Node):
         self.destroy_timer(self._autostart)
         self._autostart = None
         if self.state == 'idle':
-            self._start()
+            self._begin()
 
     def _start(self, at_s: float | None = None) -> str:
         if self.state == 'running':
@@ -342,7 +389,7 @@ class LoadProgramNode(Node):
         assert self.program is not None
         now = self.get_clock().now().nanoseconds
         period = round(1e9 / self.program.rate_hz)
-        running = self.state in ('running', 'paused')
+        running = self.state in ('running', 'paused', 'waiting')
         if self._last_tick_ns is None or not running:
             self._last_tick_ns = now // period * period  # nothing to catch up while nothing plays
             if not running:
@@ -353,12 +400,16 @@ class LoadProgramNode(Node):
             self._last_tick_ns = tick
 
     def _emit(self, t_ns: int) -> None:
-        """The program's command at node-clock time ``t_ns`` (while running or paused), stamped ``t_ns``."""
-        if self.state not in ('running', 'paused'):
+        """The program's command at node-clock time ``t_ns`` (while running, paused or waiting for the operator),
+        stamped ``t_ns``."""
+        if self.state not in ('running', 'paused', 'waiting'):
             return
         if self.state == 'running' and self.started_at is not None and t_ns * 1e-9 < self.started_at:
             return  # a tick before the (re)start: the program had not begun
         assert self.program is not None
+        if (self.state == 'running' and self.prompt_index < len(self.prompts)
+                and self._program_time(t_ns * 1e-9) >= self.prompts[self.prompt_index].time_s):
+            self._wait_for_operator(self.prompts[self.prompt_index])
         st = self.program.wrench_at(self._program_time(t_ns * 1e-9))
         self.last = st
         cmd = WrenchStamped()
@@ -395,21 +446,31 @@ class LoadProgramNode(Node):
     def _publish_state(self) -> None:
         assert self.program is not None
         st = self.last
-        self.pub_state.publish(String(data=json.dumps({
+        state: dict[str, Any] = {
             'program': self.program.name, 'state': self.state, 'time_s': round(self._program_time(), 6),
             'duration_s': self.program.duration_s,
             'segment': None if st is None else int(st.segment_index),
             'repeat': None if st is None else int(st.repeat_index),
-            'phase': None if st is None else st.phase})))
+            'phase': None if st is None else st.phase, 'load_application': self.params['load_application']}
+        if self.state == 'waiting':
+            prompt = self.prompts[self.prompt_index]
+            state['prompt'] = {'level': prompt.index + 1, 'of': len(self.prompts), 'axis': prompt.axis,
+                               'value': prompt.level, 'unit': AXIS_UNITS[prompt.axis],
+                               'text': prompt.text(len(self.prompts))}
+        if self.confirmations:
+            state['confirmed'] = self.confirmations
+        if self.tare:
+            state['tare'] = self.tare
+        self.pub_state.publish(String(data=json.dumps(state)))
 
     # --- services ---
     def _srv_start(self, request, response):
-        response.message = self._start()
+        response.message = self._begin() if self.state == 'idle' else self._start()
         response.success = True
         return response
 
     def _srv_pause(self, request, response):
-        if self.state != 'running':
+        if self.state != 'running':  # (waiting for the operator: it holds already)
             response.success, response.message = False, f'not running (state {self.state})'
             return response
         self.elapsed = self._program_time()

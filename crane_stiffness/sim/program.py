@@ -200,14 +200,15 @@ class LoadProgram:
                 ``segments.duration`` [float, s] (all required, equal lengths), ``repeats`` (int ≥ 1, default 1),
                 ``name`` (str, default 'program'), ``rate_hz`` (float > 0, default 100). Integers are accepted
                 for the float arrays.
-            strict: Reject keys that are not program parameters (``use_sim_time`` is always accepted).
+            strict: Reject keys that are not program parameters (``use_sim_time`` and how the load is applied,
+                :data:`LOAD_APPLICATION_PARAMS`, are always accepted: a program file may say so).
 
         Raises:
             ParameterError: Naming the field, the value and the rule.
         """
         if strict:
             for key in params:
-                if key not in PARAM_NAMES and key not in _IGNORED_PARAMS:
+                if key not in PARAM_NAMES and key not in _IGNORED_PARAMS and key not in LOAD_APPLICATION_KEYS:
                     raise ParameterError(str(key), params[key],
                                          f'unknown load-program parameter; known: {", ".join(PARAM_NAMES)}')
         arrays: dict[str, list[Any]] = {}
@@ -399,3 +400,95 @@ PROGRAM_PARAMS: tuple[ParamSpec, ...] = (
 )
 #: Their names.
 PROGRAM_KEYS = tuple(spec.name for spec in PROGRAM_PARAMS)
+
+
+# ------------------------------------------------------------------------------------------- load application --
+#: How the commanded load reaches the crane: ``model`` the simulated crane (crane_model applies the command),
+#: ``operator`` a person hangs weights or sets a screw at each new level when the program asks and confirms (or the
+#: measured load settles at the level), ``actuator`` a driver of a loading actuator subscribed to
+#: /crane/wrench_command applies it. Only ``operator`` changes how the program plays.
+LOAD_APPLICATIONS = ('model', 'operator', 'actuator')
+#: The unit of each axis' level, for the operator's prompt.
+AXIS_UNITS = {'fx': 'N', 'fy': 'N', 'fz': 'N', 'mx': 'N·m', 'my': 'N·m', 'mz': 'N·m'}
+
+#: How the load reaches the crane and the unloaded-state tare, declared once (the load_program node declares them;
+#: the recorder reads them back with the node's parameters, so the session record holds them).
+LOAD_APPLICATION_PARAMS: tuple[ParamSpec, ...] = (
+    ParamSpec('load_application', 'model', 'how the commanded load reaches the crane: model = the simulated crane '
+              '(crane_model applies each command); operator = a person applies each new level the program names '
+              '(on /load_program/state) and the program holds there until ~/confirm is called or the measured '
+              'load settles at it (operator_settle_s); actuator = a loading actuator\'s driver subscribed to '
+              '/crane/wrench_command applies it [-]', choices=LOAD_APPLICATIONS,
+              rule='operator: wall-clock time only'),
+    ParamSpec('operator_tolerance', 0.05, "load_application operator: the measured load's component on the level's "
+              'axis (/load_cell/wrench, in the sensor\'s frame: mount it aligned with crane_base) counts as at the '
+              'level within this [N or N·m]', above=0.0),
+    ParamSpec('operator_settle_s', 0.0, 'load_application operator: the level counts as applied once the measured '
+              'load has stayed within operator_tolerance of it this long; 0 = only a ~/confirm call confirms [s]',
+              low=0.0, high=3600.0),
+    ParamSpec('tare_services', [''], 'std_srvs/Trigger services called in turn at the unloaded state just before '
+              "the program's first step (e.g. /netft/tare, /modbus_lvdt/zero); their answers are published with "
+              "the program's state and so kept in the session record; the program does not start when one fails; "
+              "[''] = none [-]", rule='wall-clock time only'),
+    ParamSpec('operator', '', 'who runs the test, recorded with the tare and each confirmed level; empty = the '
+              "login name of the node's process [-]"),
+)
+
+
+@dataclass(frozen=True, slots=True)
+class LoadPrompt:
+    """A new level the operator applies (load_application operator): at program time ``time_s`` [s] the command
+    reaches ``level`` [N or N·m] on ``axis``; ``wrench`` is the whole commanded wrench then ([fx fy fz] N,
+    [mx my mz] N·m, fixed frame)."""
+
+    index: int
+    time_s: float
+    axis: str
+    level: float
+    wrench: tuple[float, ...]
+
+    def text(self, total: int) -> str:
+        """The instruction, e.g. 'level 2/11: set fy = 0.8 N (every other axis as it is)'."""
+        others = [f'{a} = {v:g} {AXIS_UNITS[a]}' for a, v in zip(AXES, self.wrench) if a != self.axis and v != 0.0]
+        return (f'level {self.index + 1}/{total}: set {self.axis} = {self.level:g} {AXIS_UNITS[self.axis]} ('
+                + ('with ' + ', '.join(others) if others else 'every other axis unloaded') + ')')
+
+
+def load_prompts(program: LoadProgram) -> list[LoadPrompt]:
+    """Where the command reaches a new level, in program order over every repeat: at the start of a step, at the
+    end of a ramp (the command ramps meanwhile, so an operator applying it by hand is told at once and the program
+    holds at the ramp's end until the level is confirmed). A segment that leaves its axis' value unchanged (a hold,
+    a flat ramp) asks for nothing."""
+    prompts: list[LoadPrompt] = []
+    wrench = [0.0] * len(AXES)
+    t = 0.0
+    for _ in range(program.repeats):
+        for seg in program.segments:
+            j = seg.axis_index
+            changed = seg.kind in ('step', 'ramp') and seg.target != wrench[j]
+            if changed:
+                wrench[j] = seg.target
+                at = t if seg.kind == 'step' else t + seg.duration_s
+                prompts.append(LoadPrompt(len(prompts), at, seg.axis, seg.target, tuple(wrench)))
+            t += seg.duration_s
+    return prompts
+
+
+class Settling:
+    """Whether a measured value has stayed within ``tolerance`` of ``target`` for ``hold_s`` [s] (samples in time
+    order; a sample outside the band starts the wait again)."""
+
+    def __init__(self, target: float, tolerance: float, hold_s: float) -> None:
+        self.target, self.tolerance, self.hold_s = float(target), float(tolerance), float(hold_s)
+        self._since: float | None = None
+
+    def update(self, t_s: float, value: float) -> bool:
+        """Feed the sample ``value`` at time ``t_s`` [s]; True once settled."""
+        if not (math.isfinite(value) and abs(value - self.target) <= self.tolerance):
+            self._since = None
+            return False
+        if self._since is None:
+            self._since = t_s
+        return t_s - self._since >= self.hold_s
+#: Their names.
+LOAD_APPLICATION_KEYS = tuple(spec.name for spec in LOAD_APPLICATION_PARAMS)

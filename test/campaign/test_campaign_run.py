@@ -55,7 +55,11 @@ def test_an_interrupted_campaign_resumes_where_it_stopped_and_records_true_and_n
     assert done.is_file() and not (out / 'sessions' / 'fy_W100_l0.5_r1' / 'result.json').exists()
     again = subprocess.run([str(CLI), 'campaign', 'run', str(spec), '--out', str(out), '--quiet', '--jobs', '1'],
                            capture_output=True, text=True, timeout=400)
-    assert again.returncode == 0, again.stderr[-3000:]
+    # Each session judged (the one done before too, when the Ctrl-C came before its verdict): the run exits 0 when
+    # every verdict is OK, else 5 (this crane is 8 % softer than the nominal model the verdict compares with).
+    verdicts = [json.loads((out / 'sessions' / s / 'verdict.json').read_text())
+                for s in ('fy_W50_l0.5_r1', 'fy_W100_l0.5_r1')]
+    assert again.returncode == (0 if all(v['status'] == 'OK' for v in verdicts) else 5), again.stderr[-3000:]
     assert '1 session(s) run, 1 done before, 2 planned' in again.stdout
     assert json.loads(done.read_text())['session'] == 'fy_W50_l0.5_r1'  # the first session was not redone
     for session, weight in (('fy_W50_l0.5_r1', 50.0), ('fy_W100_l0.5_r1', 100.0)):
