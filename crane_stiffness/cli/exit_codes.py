@@ -1,7 +1,8 @@
 """The exit codes of the ``crane-stiffness`` command line and the one way its commands turn errors into them.
 
 0 ok; 1 a session failed on the rig; 2 bad input (named on stderr); 3 no equilibrium for the load; 4 the solver gave
-up; 130 interrupted.
+up; 5 ``analyze``'s verdict is NOT OK (a fit that is not a stiffness, the fitted axis not the loaded one, or a branch
+far from the model: the reasons printed and in the report); 130 interrupted.
 """
 from __future__ import annotations
 
@@ -13,6 +14,8 @@ EXIT_FAILED = 1
 EXIT_USAGE = 2
 EXIT_NO_EQUILIBRIUM = 3
 EXIT_SOLVER = 4
+#: ``analyze`` ran and wrote everything, and its verdict is NOT OK (crane_stiffness.analysis.verdict).
+EXIT_NOT_OK = 5
 EXIT_INTERRUPTED = 130
 
 #: (exception classes, exit code, stderr message with ``{exc}`` for the exception), first match wins.
