@@ -37,7 +37,7 @@ from crane_stiffness.estimation.live_pairs import LivePairs
 from crane_stiffness.params.geometry import geometry_from_params
 from crane_stiffness.uncertainty.agreement import en_number
 from crane_stiffness.uncertainty.budget import json_ready
-from crane_stiffness.uncertainty.crane_inputs import input_names, load_uncertainty_file
+from crane_stiffness.uncertainty.crane_inputs import crane_inputs, input_names, load_uncertainty_file
 from crane_stiffness.uncertainty.measurement import SlopeStatistics, measured_stiffness
 from crane_stiffness.uncertainty.prediction import predict_stiffness
 
@@ -76,9 +76,15 @@ def _cross_load_ratio(data: SessionData, axis: str) -> float:
 
 def _prediction(data: SessionData, model: ModelSummary, uncertainty_file: str | os.PathLike | None,
                 problems: list[str], monte_carlo: bool) -> tuple[dict[str, Any], float, float] | None:
-    """The prediction's dict, and its value and U in LVDT reading units; None (with a problem) when it fails."""
+    """The prediction's dict, and its value and U in LVDT reading units; None (with a problem) when it fails. A
+    file the caller named (``uncertainty_file``) with a bad entry is refused: its error, naming the field, the value
+    and the rule, propagates (``analyze`` exits 2) rather than leave E_n out unnoticed."""
     from crane_stiffness.params.files import config_path
     assert data.geometry_params is not None  # a model summary comes from a recorded geometry
+    if uncertainty_file is not None:
+        geometry = geometry_from_params(data.geometry_params)
+        path = config_path(str(uncertainty_file))
+        crane_inputs(geometry, load_uncertainty_file(path))  # refused here, naming the field
     try:
         geometry = geometry_from_params(data.geometry_params)
         path = config_path(str(uncertainty_file) if uncertainty_file is not None else DEFAULT_UNCERTAINTY_FILE)
@@ -167,7 +173,7 @@ def monte_carlo_line(result: dict[str, Any], unit: str, scale: float = 1.0) -> s
             f"d_high = {check['d_high'] * a:.3g} vs δ = {check['delta'] * a:.3g} {unit})")
     if not check['validated']:
         gum_low, gum_high = sorted(v * scale for v in result['interval'])
-        line += ('; the GUM interval is the wider, so conservative' if gum_low <= low and high <= gum_high else
+        line += ('; it is the wider one, so conservative' if gum_low <= low and high <= gum_high else
                  '; state the Monte Carlo interval')
     if not mc.get('converged', True):
         line += f"; the adaptive procedure did not settle within {mc['trials']} draws"
