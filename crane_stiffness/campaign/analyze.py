@@ -73,8 +73,8 @@ def analyze_one(bag: str, out: str, kind: str = 'one_axis') -> str:
     try:
         if kind == 'full':
             analyze_full6(bag, out)
-        else:
-            analyze_session(bag, out, progress=False)
+        else:  # the campaign's tables state no Monte Carlo: its sessions are analysed with the GUM alone (faster)
+            analyze_session(bag, out, progress=False, monte_carlo=False)
     except (CraneStiffnessError, OSError, ValueError) as exc:
         return f'{type(exc).__name__}: {exc}'
     (Path(out) / SOURCE_FILE).write_text(json.dumps(bag_fingerprint(Path(bag))))
