@@ -86,7 +86,10 @@ def plot_budget(path: str | Path, panels: Sequence[tuple[str, dict[str, Any], fl
         fig.suptitle(title, fontsize=10)
     path = Path(path)
     # PNG at zlib's fastest level: encoding is a quarter of the figure's time, and the file stays ~150 kB
-    fig.savefig(path, **({'pil_kwargs': {'compress_level': 1}} if path.suffix == '.png' else {}))
+    if path.suffix == '.png':
+        fig.savefig(path, pil_kwargs={'compress_level': 1})
+    else:
+        fig.savefig(path)
     plt.close(fig)
     return path
 
