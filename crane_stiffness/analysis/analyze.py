@@ -35,9 +35,13 @@ decode):
    live estimate.
 5. **Model** from the recorded geometry (crane_stiffness.analysis.sweep.force_displacement): the nonlinear model,
    the linearized eq. (18), the W = 0 elastic model and a single wire carrying W/6, as in the paper's Figs. 5–9.
-6. **Uncertainty** (:mod:`crane_stiffness.analysis.stiffness_uncertainty`, in the 'model' stage): each branch's k
-   with its GUM budget (the hold means' fit as Type A, the sensors' declared calibrations as Type B) and E_n
-   against the model's prediction with its own uncertainty.
+6. **Uncertainty** (:mod:`crane_stiffness.analysis.stiffness_uncertainty`, the 'uncertainty' stage): each branch's
+   k with its GUM budget (the hold means' fit as Type A, the sensors' declared calibrations as Type B) and E_n
+   against the model's prediction with its own uncertainty; beside each, JCGM 101's Monte Carlo (``monte_carlo``,
+   seeded). A branch with |E_n| > 1 is a problem naming its likely causes.
+7. **Verdict** (:mod:`crane_stiffness.analysis.verdict`): NOT OK when a fit is not a stiffness, the fitted axis is
+   not the loaded one, or a branch is far from the model; the budget figure (:mod:`crane_stiffness.analysis.
+   budget_figure`) beside the others.
 
 A damaged bag (truncated, bad chunk) is analysed from its readable part, with the damage listed in the report; a
 missing sensor topic raises :class:`~crane_stiffness.bag.TopicNotFoundError` naming it and the topics present;
@@ -66,7 +70,8 @@ from crane_stiffness.analysis.mapping import SensorMapping
 from crane_stiffness.analysis.model_summary import accepted_commands, model_summary
 from crane_stiffness.analysis.progress import Progress
 from crane_stiffness.analysis.results import (CycleFits, SessionAnalysis, Step)
-from crane_stiffness.analysis.stiffness_uncertainty import session_uncertainty
+from crane_stiffness.analysis.stiffness_uncertainty import model_disagreements, session_uncertainty
+from crane_stiffness.analysis.verdict import Verdict, fit_problem_line
 from crane_stiffness.bag import BagDamageWarning
 from crane_stiffness.contract.command_limits import command_faults
 from crane_stiffness.params.geometry import geometry_from_params
@@ -80,7 +85,8 @@ from crane_stiffness.estimation.settings import LiveSettings
 from crane_stiffness.estimation.stream_delay import stream_delay_of
 from crane_stiffness.estimation.offset import correct_stamps
 
-STAGES = ('open+decode', 'pair', 'stream delay', 'steps', 'fits', 'model', 'summary', 'figures', 'report')
+STAGES = ('open+decode', 'pair', 'stream delay', 'steps', 'fits', 'model', 'uncertainty', 'summary', 'figures',
+          'budget figure', 'report')
 #: Shortest run of equal commands taken as a hold [s].
 MIN_HOLD_S = 0.2
 
@@ -215,9 +221,9 @@ def _branch_fits(settings: LiveSettings, pairs: LivePairs, lo: int, hi: int) -> 
 
 
 def _fit_quality(data: SessionData, pairs: LivePairs, lo: int, hi: int, fits: dict[str, LineFit | None],
-                 problems: list[str]) -> dict[str, float]:
+                 problems: list[str], failures: list[str]) -> dict[str, float]:
     """The live estimator's trust rules (estimation.quality) on each branch fit and on the loaded axis: problems
-    appended; returns each branch's scatter ratio."""
+    appended, to ``failures`` too (they make the verdict NOT OK); returns each branch's scatter ratio."""
     s = data.settings
     c = data.command
     if c is not None and c.size:
@@ -227,6 +233,7 @@ def _fit_quality(data: SessionData, pairs: LivePairs, lo: int, hi: int, fits: di
             axis_problem = quality.axis_problem(s.force_axis, wrench.min(axis=0), wrench.max(axis=0))
             if axis_problem:
                 problems.append(axis_problem)
+                failures.append(axis_problem)
     scatter = {}
     loading = pairs.loading[lo:hi]
     for branch, fit in fits.items():
@@ -239,7 +246,9 @@ def _fit_quality(data: SessionData, pairs: LivePairs, lo: int, hi: int, fits: di
         found = quality.fit_problems(float(fit.stiffness), float(fit.ci95_low), float(fit.ci95_high),
                                      scatter[branch], s.max_scatter_ratio)
         if found:
-            problems.append(f'{branch} fit not trusted: ' + '; '.join(found))
+            line = fit_problem_line(branch, found, float(fit.stiffness))
+            problems.append(line)
+            failures.append(line)
     return scatter
 
 
@@ -269,7 +278,7 @@ def analyze_session(bag_path: str | Path, out_dir: str | Path | None = None, *, 
                     reports: Sequence[str] = ('md',), write_json: bool = True, axis: str | None = None,
                     settle_fraction: float = 0.3, model_points: int = 41, progress: bool = False,
                     write_files: bool = True, mapping: SensorMapping | None = None,
-                    uncertainty_file: str | Path | None = None) -> SessionAnalysis:
+                    uncertainty_file: str | Path | None = None, monte_carlo: bool = True) -> SessionAnalysis:
     """Analyse one recorded session (see the module docstring) and write its figures, report and JSON.
 
     Args:
@@ -288,6 +297,7 @@ def analyze_session(bag_path: str | Path, out_dir: str | Path | None = None, *, 
             recorded); the result's ``mapping`` says what was used.
         uncertainty_file: the crane inputs' uncertainties for the model's prediction and E_n (default
             config/uncertainty_lab.yaml; :mod:`crane_stiffness.analysis.stiffness_uncertainty`).
+        monte_carlo: JCGM 101's Monte Carlo beside each GUM result (seeded; False: the GUM alone, ~0.4 s less).
 
     Returns:
         the :class:`SessionAnalysis` (its ``files`` lists what was written).
@@ -301,8 +311,9 @@ def analyze_session(bag_path: str | Path, out_dir: str | Path | None = None, *, 
     _check_options(formats, reports, settle_fraction)
     path = Path(bag_path)
     problems: list[str] = []
+    failures: list[str] = []  # the problems that make the verdict NOT OK
     missing: list[str] = []
-    bar = Progress(progress, len(STAGES) if write_files else len(STAGES) - 2, f'analyze {path.name}')
+    bar = Progress(progress, len(STAGES) if write_files else len(STAGES) - 3, f'analyze {path.name}')
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter('always', BagDamageWarning)
@@ -326,19 +337,22 @@ def analyze_session(bag_path: str | Path, out_dir: str | Path | None = None, *, 
             steps = _steps(data, pairs, commands, t0, settle_fraction, problems)
             bar.done()
             bar.stage('fits')
-            fits = _fits(data, pairs, commands, steps, t0, problems)
+            fits = _fits(data, pairs, commands, steps, t0, problems, failures)
             bar.done()
             bar.stage('model')
             model = model_summary(data, steps, commands, model_points, problems)
+            bar.done()
+            bar.stage('uncertainty')
             uncertainty = session_uncertainty(data, pairs, *_program_span(pairs, commands), steps,
                                               fits['branch_fits'], fits['hold_fits'], model, problems,
-                                              uncertainty_file)
+                                              uncertainty_file, monte_carlo)
+            disagreements = model_disagreements(uncertainty, data.settings.stiffness_unit)
             bar.done()
         bar.stage('summary')
         problems[:0] = _rewarn(caught)
         counters = {**input_counters, **pairs.counters}
         problems += _missing_topic_problems(missing) + ([delay_problem] if delay_problem else [])
-        problems += _input_problems(counters, data.settings)
+        problems += _input_problems(counters, data.settings) + disagreements
         result = SessionAnalysis(
             bag=str(path), session=str(data.session.get('session') or path.name),
             notes=str(data.session.get('notes', '')), recorded_with=str(data.session.get('software_version', '')),
@@ -348,7 +362,8 @@ def analyze_session(bag_path: str | Path, out_dir: str | Path | None = None, *, 
             geometry=_geometry_summary(data, problems), settings=asdict(data.settings), counts=data.counts,
             pairing=counters, steps=steps, model=model, problems=problems, missing_topics=missing,
             stream_delay=dict(delay_values), mapping=data.mapping.to_dict() if data.mapping else {},
-            uncertainty=uncertainty, **fits)
+            uncertainty=uncertainty, model_disagreements=disagreements,
+            verdict=Verdict(failures + disagreements).to_dict(), **fits)
         bar.done()
         if write_files:
             out = Path(out_dir) if out_dir is not None else _default_out(path)
@@ -356,6 +371,10 @@ def analyze_session(bag_path: str | Path, out_dir: str | Path | None = None, *, 
             bar.stage('figures')
             from crane_stiffness.analysis import figures
             result.files += figures.write_session_figures(result, data, pairs, commands, t0, out, formats)
+            bar.done()
+            bar.stage('budget figure')
+            from crane_stiffness.analysis.budget_figure import write_budget_figure
+            result.files += write_budget_figure(result, out, formats)
             bar.done()
             bar.stage('report')
             result.timings_s = dict(bar.timings)
@@ -390,12 +409,12 @@ def _program_span(pairs: LivePairs, commands: CommandSeries | None) -> tuple[int
 
 
 def _fits(data: SessionData, pairs: LivePairs, commands: CommandSeries | None, steps: list[Step], t0: float,
-          problems: list[str]) -> dict[str, Any]:
+          problems: list[str], failures: list[str]) -> dict[str, Any]:
     """The 'fits' stage: each branch over the program, the hold means of each approach, each repeat's branches, and
     the live estimate checked (SessionAnalysis fields)."""
     lo, hi = _program_span(pairs, commands)
     branch_fits = _branch_fits(data.settings, pairs, lo, hi)
-    _fit_quality(data, pairs, lo, hi, branch_fits, problems)
+    _fit_quality(data, pairs, lo, hi, branch_fits, problems, failures)
     hold_fits = {}
     for approach in BRANCHES:
         sel = [s for s in steps if s.approach == approach and s.n > 0]

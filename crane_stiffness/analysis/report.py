@@ -67,10 +67,18 @@ def mapping_text(m: dict[str, Any]) -> str:
     return text + f'); geometry {m["geometry_source"]}'
 
 
+def verdict_text(a: SessionAnalysis) -> str:
+    """'Verdict: OK' or 'Verdict: NOT OK: …' (the reasons are listed under Problems)."""
+    v = a.verdict
+    if v.get('level', 'OK') == 'OK':
+        return 'Verdict: OK (no fit refused, none far from the model; the problems below, if any, do not change it).'
+    return f"Verdict: NOT OK: {len(v['reasons'])} reason(s), listed first under Problems."
+
+
 def session_blocks(a: SessionAnalysis, images: Sequence[str] = ()) -> list[Block]:
     """The report of one session as blocks."""
     unit = a.unit
-    blocks: list[Block] = [('h1', f'Stiffness test session {a.session}')]
+    blocks: list[Block] = [('h1', f'Stiffness test session {a.session}'), ('p', verdict_text(a))]
     rows: list[list[Any]]  # table cells, str() of each (numbers for the later tables)
     rows = [['bag', a.bag], ['recorded (UTC)', a.start_time_utc or '–'], ['duration', f'{fmt(a.duration_s, 5)} s'],
             ['messages', fmt(sum(a.counts.values()))], ['software', f'recorded with {a.recorded_with or "?"}, '
@@ -125,6 +133,10 @@ def session_blocks(a: SessionAnalysis, images: Sequence[str] = ()) -> list[Block
     if a.uncertainty:
         blocks.append(('p', 'Measurement uncertainty (GUM; docs/uncertainty.md, "The measured stiffness"):'))
         blocks.append(('ul', uncertainty_lines(a.uncertainty, unit)))
+        budget = [Path(f).name for f in a.files if Path(f).stem == 'budget']
+        if budget:
+            blocks.append(('p', f'The budget of each estimate: {", ".join(budget)} (the contributions |c_i|·u(x_i), '
+                                'largest first, u_c and U marked).'))
     if a.live is not None:
         live = a.live
         blocks.append(('h2', 'Live estimate reproduced'))
@@ -164,7 +176,8 @@ def session_blocks(a: SessionAnalysis, images: Sequence[str] = ()) -> list[Block
         blocks.append(('img', image, Path(image).stem.replace('_', ' ')))
     if a.problems:
         blocks.append(('h2', 'Problems'))
-        blocks.append(('ul', a.problems))
+        reasons = list(a.verdict.get('reasons', []))
+        blocks.append(('ul', reasons + [p for p in a.problems if p not in reasons]))
     return blocks
 
 
@@ -183,6 +196,7 @@ def comparison_blocks(c: SessionComparison, images: Sequence[str] = ()) -> list[
                            ('p', 'Stiffness in N/m (N·m/rad for moment axes) of LVDT reading; fits over all pairs of '
                                  'each branch unless noted.'),
                            ('table', headers, rows)]
+    blocks += uncertainty_comparison_blocks(c)
     for image in images:
         blocks.append(('img', image, Path(image).stem.replace('_', ' ')))
     problems = [f'{a.session}: {p}' for a in c.sessions for p in a.problems]
@@ -191,6 +205,38 @@ def comparison_blocks(c: SessionComparison, images: Sequence[str] = ()) -> list[
                 [[a.session, mapping_text(a.mapping)] for a in c.sessions])]
     if problems:
         blocks += [('h2', 'Problems'), ('ul', problems)]
+    return blocks
+
+
+def _k_with_u(k: float, big_u: float, factor: float) -> str:
+    """'53786 ± 799 (k = 1.96)', or '–'."""
+    if not math.isfinite(k):
+        return '–'
+    return f'{fmt(k)} ± {fmt(big_u, 4)} (k = {factor:.2f})' if math.isfinite(big_u) else fmt(k)
+
+
+def _en(en: float) -> str:
+    return '–' if not math.isfinite(en) else f"{en:+.2f} ({'agree' if abs(en) <= 1.0 else 'DISAGREE'})"
+
+
+def uncertainty_comparison_blocks(c: SessionComparison) -> list[Block]:
+    """Each session's k ± U (coverage factor k) per branch and E_n with the model; every two sessions' E_n."""
+    rows = []
+    for r in c.rows:
+        for branch in ('loading', 'unloading'):
+            rows.append([r['session'], f"{branch} ({r[f'{branch}_fit'] or '–'})",
+                         _k_with_u(r[f'{branch}_measured_k'], r[f'{branch}_U'], r[f'{branch}_coverage_factor']),
+                         _k_with_u(r['model_k'], r['model_U'], r['model_coverage_factor']),
+                         _en(r[f'{branch}_En_model'])])
+    blocks: list[Block] = [('h2', 'Measurement uncertainty and agreement'),
+                           ('p', 'k ± U (expanded uncertainty, 95 %, GUM, coverage factor k) of each branch and of the '
+                                 'model\'s prediction; E_n = (k − k_model)/√(U² + U_model²), |E_n| <= 1 agrees.'),
+                           ('table', ['session', 'branch (fit)', 'k ± U', 'model ± U', 'E_n vs model'], rows)]
+    if c.agreement:
+        blocks += [('p', 'Sessions against each other: E_n = (k_b − k_a)/√(U_a² + U_b²), both measurements\' U.'),
+                   ('table', ['a', 'b', 'branch', 'k_a ± U_a', 'k_b ± U_b', 'E_n'],
+                    [[p['a'], p['b'], p['branch'], f"{fmt(p['k_a'])} ± {fmt(p['U_a'], 4)}",
+                      f"{fmt(p['k_b'])} ± {fmt(p['U_b'], 4)}", _en(p['En'])] for p in c.agreement])]
     return blocks
 
 

@@ -134,6 +134,10 @@ class SessionAnalysis:
     #: Each branch's measured stiffness with its GUM uncertainty and E_n against the model's prediction with its own
     #: (analysis.stiffness_uncertainty.session_uncertainty): {'prediction': …, 'loading': …, 'unloading': …}.
     uncertainty: dict[str, Any] = field(default_factory=dict)
+    #: The problems about a branch far from the model (|E_n| > 1), each with its likely causes; also in ``problems``.
+    model_disagreements: list[str] = field(default_factory=list)
+    #: OK, or NOT OK with the reasons (analysis.verdict.Verdict.to_dict): {'level': …, 'reasons': [...]}.
+    verdict: dict[str, Any] = field(default_factory=lambda: {'level': 'OK', 'reasons': []})
 
     def to_dict(self) -> dict[str, Any]:
         return json_safe(self)
@@ -146,9 +150,11 @@ class SessionComparison:
     rows: list[dict[str, Any]]
     sessions: list[SessionAnalysis]
     files: list[str] = field(default_factory=list)
+    #: Every two sessions branch by branch: both k with their U and E_n (analysis.compare.session_agreement).
+    agreement: list[dict[str, Any]] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:
-        return json_safe({'rows': self.rows, 'files': self.files})
+        return json_safe({'rows': self.rows, 'agreement': self.agreement, 'files': self.files})
 
 
 def json_safe(value: Any) -> Any:

@@ -3,11 +3,12 @@ crane_stiffness.analysis.compare and crane_stiffness.bag.recover_bag (added to t
 :func:`add_commands`). ``analyze`` of a six-axis session (a bag holding /pose_sensor/pose) runs the 6×6 analysis
 (crane_stiffness.analysis.full6) and prints its table; the 1-D analysis too when the bag also holds the LVDT.
 
-Exit codes as crane_stiffness.cli.main: 0 ok, 2 bad input (a missing or unreadable bag, a missing sensor topic, nothing
-to
-fit; the reason on stderr). Damage the reader works around (a truncated or corrupt part of a bag) is reported on
-stderr as a warning and in the report, and the readable part is analysed. ``recover`` exits 2 when a file could not
-be recovered.
+Exit codes as crane_stiffness.cli.exit_codes: 0 ok, 2 bad input (a missing or unreadable bag, a missing sensor topic,
+nothing to fit; the reason on stderr), and for ``analyze`` of a one-axis session 5 when its verdict is NOT OK
+(crane_stiffness.analysis.verdict: a fit that is not a stiffness, the fitted axis not the loaded one, a branch far
+from the model), after writing everything; the reasons are printed first among the problems. Damage the reader works
+around (a truncated or corrupt part of a bag) is reported on stderr as a warning and in the report, and the readable
+part is analysed. ``recover`` exits 2 when a file could not be recovered.
 """
 from __future__ import annotations
 
@@ -19,7 +20,7 @@ from typing import Any, Callable
 
 from crane_stiffness.contract.axes import AXES
 
-from crane_stiffness.cli.exit_codes import EXIT_OK, EXIT_USAGE, run_to_exit_code
+from crane_stiffness.cli.exit_codes import EXIT_NOT_OK, EXIT_OK, EXIT_USAGE, run_to_exit_code
 
 
 def _guarded(run: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Namespace], int]:
@@ -79,8 +80,11 @@ def _print_summary(a: Any) -> None:
         parts = [f'{b} live {a.live.live[b]["stiffness"]:.10g} vs offline {a.live.offline[b]["stiffness"]:.10g} '
                  f'(largest relative difference {a.live.max_rel_diff[b]:.2g})' for b in ('loading', 'unloading')]
         print('last live estimate reproduced: ' + '; '.join(parts))
-    for problem in a.problems:
+    reasons = list(a.verdict.get('reasons', []))
+    for problem in reasons + [p for p in a.problems if p not in reasons]:
         print(f'  ! {problem}')
+    print(f"verdict: {a.verdict.get('level', 'OK')}" + (f" ({len(reasons)} reason(s): the first problem(s) above)"
+                                                        if reasons else ''))
 
 
 def _mapping(args: argparse.Namespace) -> Any:
@@ -149,16 +153,17 @@ def cmd_analyze(args: argparse.Namespace) -> int:
     analysis = analyze_session(args.bag, args.out, formats=(args.format,), reports=(args.report,),
                                write_json=args.json, axis=args.axis, settle_fraction=args.settle,
                                progress=not args.quiet and not args.json, mapping=_mapping(args),
-                               uncertainty_file=args.uncertainty)
+                               uncertainty_file=args.uncertainty, monte_carlo=args.monte_carlo == 'on')
+    code = EXIT_OK if analysis.verdict.get('level', 'OK') == 'OK' else EXIT_NOT_OK
     if args.json:
         json.dump(analysis.to_dict(), sys.stdout, indent=1, allow_nan=False)
         print()
-        return EXIT_OK
+        return code
     _print_summary(analysis)
     print('wrote:')
     for path in analysis.files:
         print(f'  {path}')
-    return EXIT_OK
+    return code
 
 
 def cmd_compare(args: argparse.Namespace) -> int:
@@ -170,11 +175,16 @@ def cmd_compare(args: argparse.Namespace) -> int:
         json.dump(comparison.to_dict(), sys.stdout, indent=1, allow_nan=False)
         print()
         return EXIT_OK
-    print(f'{"session":<28} {"axis":<4} {"loading k":>12} {"unloading k":>12} {"model k":>12} {"error":>9}')
+    print(f'{"session":<28} {"axis":<4} {"loading k":>12} {"unloading k":>12} {"model k":>12} {"error":>9}  '
+          f'{"loading k ± U (hold means)":>26} {"E_n model":>9}')
     for r in comparison.rows:
         err = r['relative_error_loading']
+        measured = f'{r["loading_measured_k"]:.6g} ± {r["loading_U"]:.4g}'
         print(f'{r["session"]:<28} {r["axis"]:<4} {r["loading_k"]:>12.6g} {r["unloading_k"]:>12.6g} '
-              f'{r["model_tangent_k"]:>12.6g} {100 * err:>+8.3f}%')
+              f'{r["model_tangent_k"]:>12.6g} {100 * err:>+8.3f}%  {measured:>26} {r["loading_En_model"]:>+9.2f}')
+    for p in comparison.agreement:
+        print(f'{p["b"]} against {p["a"]}, {p["branch"]}: {p["k_b"]:.6g} ± {p["U_b"]:.4g} vs {p["k_a"]:.6g} ± '
+              f'{p["U_a"]:.4g} {p["unit"]} (U, 95 %): E_n = {p["En"]:+.2f}, {"agree" if p["agrees"] else "DISAGREE"}')
     print('wrote:')
     for path in comparison.files:
         print(f'  {path}')
@@ -248,6 +258,9 @@ def add_commands(subparsers: Any) -> None:
     p.add_argument('--uncertainty', metavar='FILE', default=None,
                    help="the crane inputs' uncertainties for the model's prediction and E_n (default "
                         'config/uncertainty_lab.yaml; docs/uncertainty.md)')
+    p.add_argument('--monte-carlo', choices=('on', 'off'), default='on',
+                   help="JCGM 101's Monte Carlo beside each GUM result (seeded: the same bag, the same numbers); "
+                        'off: the GUM alone, about 0.4 s less (default on)')
     _add_mapping_options(p)
     p.set_defaults(func=_guarded(cmd_analyze))
     p = subparsers.add_parser('compare', help='sessions side by side: table and overlay figure')

@@ -73,8 +73,8 @@ def analyze_one(bag: str, out: str, kind: str = 'one_axis') -> str:
     try:
         if kind == 'full':
             analyze_full6(bag, out)
-        else:
-            analyze_session(bag, out, progress=False)
+        else:  # the campaign's tables state no Monte Carlo: its sessions are analysed with the GUM alone (faster)
+            analyze_session(bag, out, progress=False, monte_carlo=False)
     except (CraneStiffnessError, OSError, ValueError) as exc:
         return f'{type(exc).__name__}: {exc}'
     (Path(out) / SOURCE_FILE).write_text(json.dumps(bag_fingerprint(Path(bag))))
@@ -83,7 +83,9 @@ def analyze_one(bag: str, out: str, kind: str = 'one_axis') -> str:
 
 def _status(analysis: dict[str, Any], result: dict[str, Any] | None) -> list[str]:
     """Why a session is not OK ([] when it is)."""
-    reasons = list(analysis.get('problems') or [])
+    # A session far from the nominal model (|E_n| > 1) is the campaign's finding, in its tables: not a broken session.
+    finding = set(analysis.get('model_disagreements') or [])
+    reasons = [p for p in analysis.get('problems') or [] if p not in finding]
     loading = ((result or {}).get('status') or {}).get('loading')
     if result is not None and (loading is None or loading.get('level') != 'OK'):
         level = loading.get('level') if loading else 'none'

@@ -5,7 +5,8 @@ module, analyze, compare, recover; campaign run / analyze and calibrate (crane_s
 (the multi-axis load program of the 6×6 test: crane_stiffness.full6.cli). Geometry
 comes from
 ``--config FILE`` (a ROS parameter YAML, the same file the nodes read) and/or flags, flags winning; SI units.
-Exit codes: 0 ok, 2 bad input (named on stderr), 3 no equilibrium for the load, 4 solver gave up.
+Exit codes: 0 ok, 2 bad input (named on stderr), 3 no equilibrium for the load, 4 solver gave up, 5 ``analyze``'s
+verdict NOT OK (crane_stiffness.cli.exit_codes).
 """
 from __future__ import annotations
 

@@ -47,6 +47,7 @@ from crane_stiffness.sim.calibration import PREFIX, Stated, stated_values
 from crane_stiffness.uncertainty.budget import DEFAULT_COVERAGE, UncertaintyResult, json_ready, propagate
 from crane_stiffness.uncertainty.errors import InputError
 from crane_stiffness.uncertainty.inputs import InputQuantity
+from crane_stiffness.uncertainty.montecarlo import DEFAULT_DIGITS, monte_carlo, with_monte_carlo
 
 #: The inputs acting on the force (sensitivity +k), in the order of the measurement function.
 #: How many times the stated (non)linearity [fraction of full scale] a smooth characteristic's local sensitivity
@@ -146,7 +147,8 @@ def _positive(value: float | None) -> float | None:
 def measured_stiffness(slope: SlopeStatistics, axis: str, *, load_cell: Mapping[str, Any] | None = None,
                        lvdt: Mapping[str, Any] | None = None, force_span: float | None = None,
                        displacement_span: float | None = None, cross_load_ratio: float = 0.0,
-                       unit: str = 'N/m', coverage: float = DEFAULT_COVERAGE) -> MeasuredStiffness:
+                       unit: str = 'N/m', coverage: float = DEFAULT_COVERAGE, monte_carlo_run: bool = False,
+                       seed: int | None = 0, significant_digits: int = DEFAULT_DIGITS) -> MeasuredStiffness:
     """The stiffness along ``axis`` with its budget (see the module docstring).
 
     Args:
@@ -160,6 +162,10 @@ def measured_stiffness(slope: SlopeStatistics, axis: str, *, load_cell: Mapping[
         cross_load_ratio: largest load on the other axes of the same kind over the axis' largest load (0 in a
             one-axis test), for the misalignment's cross-coupling.
         unit: the stiffness' unit for the budget.
+        monte_carlo_run: also propagate the distributions by JCGM 101's adaptive Monte Carlo through the same
+            measurement function (the calibration effects drawn from their declared distributions, the Type A as
+            the scaled and shifted t of JCGM 101 6.4.9 with ν = n − 2), seeded with ``seed``, at
+            ``significant_digits``; the result's ``monte_carlo`` then holds it and the GUM's validation (section 8).
     """
     if axis not in AXES:
         raise InputError('axis', axis, f'must be one of {", ".join(AXES)}')
@@ -212,7 +218,11 @@ def measured_stiffness(slope: SlopeStatistics, axis: str, *, load_cell: Mapping[
     add('lvdt_linearity', None if linearity is None or half_stroke is None or x_span is None else
         _relative('lvdt_linearity', linearity, 0, 1e-2 * min(half_stroke / x_span, SMOOTH_SLOPE_FACTOR)))
     names = [q.name for q in inputs]
-    result = propagate(stiffness_function(names), inputs, coverage=coverage)
+    function = stiffness_function(names)
+    result = propagate(function, inputs, coverage=coverage)
+    if monte_carlo_run:
+        mc = monte_carlo(function, inputs, coverage=coverage, significant_digits=significant_digits, seed=seed)
+        result = with_monte_carlo(result, mc, significant_digits)
     return MeasuredStiffness(result, slope.source, tuple(left_out), tuple(counted))
 
 

@@ -58,6 +58,17 @@ def symmetric_interval(sorted_y: np.ndarray, coverage: float = DEFAULT_COVERAGE)
     return float(sorted_y[r - 1]), float(sorted_y[min(r + q, m) - 1])
 
 
+def interval_ends(y: np.ndarray, coverage: float = DEFAULT_COVERAGE) -> tuple[float, float]:
+    """:func:`symmetric_interval` of values in any order, by partial sorting (O(M): the adaptive procedure's batches
+    need only the two order statistics)."""
+    m = y.size
+    q = int(coverage * m + 0.5)
+    r = max(1, int(0.5 * (m - q) + 0.5))
+    low, high = r - 1, min(r + q, m) - 1
+    part = np.partition(y, (low, high))
+    return float(part[low]), float(part[high])
+
+
 def shortest_interval(sorted_y: np.ndarray, coverage: float = DEFAULT_COVERAGE) -> tuple[float, float]:
     """The shortest coverage interval of sorted values (JCGM 101 7.7.2): y_(r*), y_(r*+q) with the least width."""
     m = sorted_y.size
@@ -169,14 +180,20 @@ def monte_carlo(function: Callable[..., Any], inputs: Sequence[InputQuantity], *
                  for done in range(0, trials, batch)]
         return summarise(np.concatenate(parts), coverage, significant_digits, True, seed_value)
     parts, stats = [], []
+    shift = total = squares = 0.0  # running sums about the first batch's mean: u of all trials without concatenating
     while True:
         y = _evaluate(function, draw_inputs(inputs, batch, rng, correlations))
         parts.append(y)
-        sorted_y = np.sort(y)
-        stats.append((float(np.mean(y)), float(np.std(y, ddof=1)), *symmetric_interval(sorted_y, coverage)))
+        if len(parts) == 1:
+            shift = float(np.mean(y))
+        d = y - shift
+        total += float(np.sum(d))
+        squares += float(d @ d)
+        stats.append((float(np.mean(y)), float(np.std(y, ddof=1)), *interval_ends(y, coverage)))
         h = len(parts)
         if h >= 2:
-            u_all = float(np.std(np.concatenate(parts), ddof=1))
+            m = h * batch
+            u_all = math.sqrt(max(squares - total * total / m, 0.0) / (m - 1))
             if u_all == 0.0:
                 break
             delta = numerical_tolerance(u_all, significant_digits)

@@ -30,7 +30,7 @@ from crane_stiffness.serde import (decode_diagnostic_array, decode_float64_multi
                                    encode_float64_multiarray, encode_stamped, encode_string)
 from crane_stiffness.sim.program import LoadProgram, Segment, load_program_file
 
-K_TRUE = 48_000.0  # N/m, the linear truth of the synthetic sessions
+K_TRUE = 53_793.5  # N/m, the linear truth of the synthetic sessions: the lab model's tangent along fy, so they agree
 
 
 def short_program(repeats: int = 2) -> LoadProgram:
@@ -149,8 +149,8 @@ def test_the_nonlinear_model_is_matched_and_slack_softening_seen(tmp_path):
 def test_outputs_written(analysis):
     out = Path(analysis.files[0]).parent
     names = sorted(Path(f).name for f in analysis.files)
-    assert names == ['analysis.json', 'force_displacement.png', 'force_displacement.svg', 'report.html',
-                     'report.md', 'timeseries.png', 'timeseries.svg']
+    assert names == ['analysis.json', 'budget.png', 'budget.svg', 'force_displacement.png', 'force_displacement.svg',
+                     'report.html', 'report.md', 'timeseries.png', 'timeseries.svg']
     for name in ('force_displacement.png', 'timeseries.png'):
         assert (out / name).read_bytes()[:8] == b'\x89PNG\r\n\x1a\n' and (out / name).stat().st_size > 20_000
     assert '<svg' in (out / 'force_displacement.svg').read_text()[:2000]
@@ -280,8 +280,8 @@ def test_cli_analyze_json_and_compare(linear_session, tmp_path, capsys):
                      '--report', 'html', '--quiet']) == 0
     out = capsys.readouterr().out
     assert 'loading    k = ' in out and 'last live estimate reproduced' in out
-    assert sorted(p.name for p in (tmp_path / 'b').iterdir()) == ['force_displacement.svg', 'report.html',
-                                                                  'timeseries.svg']
+    assert sorted(p.name for p in (tmp_path / 'b').iterdir()) == ['budget.svg', 'force_displacement.svg',
+                                                                  'report.html', 'timeseries.svg']
     assert cli_main(['compare', str(linear_session.path), str(linear_session.path), '--out',
                      str(tmp_path / 'c'), '--quiet']) == 0
     assert (tmp_path / 'c' / 'compare.md').is_file()

@@ -85,8 +85,8 @@ def shell(tmp_path_factory) -> Shell:
     ``bags/`` and a synthetic campaign."""
     root = tmp_path_factory.mktemp('plain_shell')
     (root / 'config').symlink_to(REPO / 'config')
-    for name, seed in (('a', 1), ('b', 2)):
-        write_synthetic_session(root / 'bags' / name, _program(), geometry=lab_model(0.5, 50.0), stiffness=48_000.0,
+    for name, seed in (('a', 1), ('b', 2)):  # linear truth: the lab model's tangent along fy (analyze's verdict OK)
+        write_synthetic_session(root / 'bags' / name, _program(), geometry=lab_model(0.5, 50.0), stiffness=53_793.5,
                                 seed=seed)
     spec = root / 'campaign.yaml'
     spec.write_text('campaign:\n  ros__parameters:\n    name: readme\n    series: [fy, fz, mz]\n'
