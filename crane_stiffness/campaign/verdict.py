@@ -5,8 +5,10 @@
 loading k with its GUM U and E_n against the model, and whether the bag holds the whole run (the result's
 ``recording.problem``, crane_stiffness.bag.session_metadata.cut_short).
 
-A session is NOT OK when its row is NOT OK, its bag was cut short or it could not be analysed. The verdict, with what
-the operator decided after it, is kept in ``DIR/sessions/<session>/verdict.json`` (written after result.json: a
+A session is NOT OK when its row is NOT OK, its bag was cut short, it could not be analysed, or a branch is far from
+the model (|E_n| > 1) while the crane on the rig is meant to be the modelled one (hardware, or a simulated nominal
+crane; a campaign that simulates another crane on purpose finds the disagreement in its tables instead). The
+verdict, with what the operator decided after it, is kept in ``DIR/sessions/<session>/verdict.json`` (written after result.json: a
 session resumed later keeps its verdict, and the run's exit code counts it). No ROS.
 """
 from __future__ import annotations
@@ -109,6 +111,13 @@ def session_verdict(out: str | os.PathLike, plan: Mapping[str, Any], result: Map
         verdict = SessionVerdict(session=session, status=row.status, reasons=list(row.reasons), unit=row.unit, k=row.k,
                                  U=_number((loading.get('uncertainty') or {}).get('U')), model=row.model_tangent,
                                  relative_error=row.relative_error, en=_number((loading.get('En') or {}).get('en')))
+        disagreements = list(analysis.get('model_disagreements') or [])
+        if disagreements and plan.get('true') == plan.get('nominal'):
+            # The rig is meant to be the modelled crane (hardware, or a simulated nominal one): a number far from the
+            # model beyond any plausible uncertainty is a gain, sign, unit or set-up to check before the next set-up.
+            # Where the campaign simulates another crane on purpose, the disagreement is its finding (its tables).
+            verdict.status = 'NOT OK'
+            verdict.reasons.extend(r for r in disagreements if r not in verdict.reasons)
     if cut:
         verdict.cut_short = cut
         verdict.status = 'NOT OK'

@@ -128,3 +128,25 @@ def test_campaign_run_exits_5_naming_the_not_ok_sessions_done_before(campaign):
         assert f'  {plan.id}: ' in bad.stderr
     finally:
         set_result(out, result)
+
+
+def test_a_session_far_from_the_model_is_not_ok_unless_the_campaign_simulates_another_crane(tmp_path):
+    """A crane half as stiff as modelled: where the campaign simulates it on purpose (true.* set) the disagreement is
+    the campaign's finding, not a reason; where the rig is meant to be the modelled crane (hardware, or the nominal
+    simulated one: the plan's true crane is its nominal) it makes the session NOT OK, naming the disagreement."""
+    path = tmp_path / 'soft.yaml'
+    path.write_text('campaign:\n  ros__parameters:\n    name: soft\n    series: [fy]\n'
+                    '    programs: [campaign_side_force]\n    weights: [40.0]\n    lengths: [0.5]\n'
+                    '    true.wire_stiffness_factor: 0.5\n')
+    out = tmp_path / 'out'
+    plan = write_synthetic_campaign(out, load_campaign(path), seed=7, sample_rate_hz=200)[0].to_dict()
+    result = result_of(out, plan['id'])
+    assert plan['true'] != plan['nominal']
+    finding = session_verdict(out, plan, result)
+    analysis = json.loads((out / 'analysis' / plan['id'] / 'analysis.json').read_text())
+    far = analysis['model_disagreements']
+    assert far and abs(finding.en) > 1.0, (finding.en, far)
+    assert not set(far) & set(finding.reasons)
+    meant = session_verdict(out, dict(plan, true=plan['nominal']), result)
+    assert meant.status == 'NOT OK' and set(far) <= set(meant.reasons)
+    assert meant.en == finding.en
