@@ -65,15 +65,14 @@ from crane_stiffness.model.stiffness import axis_stiffness
 from crane_stiffness.serde import CdrError, decode_float64, decode_stamped, stamp_seconds
 from crane_stiffness.estimation.branch import BRANCHES
 from crane_stiffness.estimation.fit_lines import FIT_LINE_FIELDS
-from crane_stiffness.errors import CraneStiffnessError
 from crane_stiffness.estimation.live import PAIR_FIELDS, VALUE_FIELDS, LiveStiffness
-from crane_stiffness.estimation.live_uncertainty import prediction_relative_uncertainty
 from crane_stiffness.estimation.settings import DISPLACEMENT_TYPE_PARAM, ESTIMATOR_PARAMS, LiveSettings
 from crane_stiffness.params.spec import ParamSpec
 from crane_stiffness.contract.status import wire_level
 from crane_stiffness.estimation.sync import DISPLACEMENT, FORCE
 from crane_stiffness.rosnode.qos import KEPT_QOS, LATCHED_QOS, RELIABLE_QOS, sensor_qos, stream_qos
 from crane_stiffness.rosnode.sim_time import PeriodicOutput, SimTimeParticipant, uses_sim_time
+from crane_stiffness.rosnode.control_callers import ServiceCallers
 from crane_stiffness.rosnode.diagnostics import Diagnostics
 from crane_stiffness.rosnode.estimator_references import EstimatorReferences
 from crane_stiffness.rosnode.run import run
@@ -173,16 +172,18 @@ class StiffnessEstimatorNode(Node):
                                                   self._then_drain(self._on_force), sensor_qos(self.sim_time),
                                                   event_callbacks=_NO_EVENTS_SUB, raw=True)
         self.tangent: np.ndarray | None = None  # the model's newest 6x6 tangent (/crane/predicted_stiffness)
-        self.geometry_params: dict[str, Any] | None = None  # the model node's geometry.*, once read
+        self.references: EstimatorReferences | None = None  # (created once the settings are: below)
         self.params = Params(self, PARAMS, _validate, self._apply)  # subscribes the displacement
         self.create_subscription(Float64MultiArray, topics.PREDICTED_STIFFNESS, self._on_tangent, LATCHED_QOS)
         for stream, topic in ((DISPLACEMENT, topics.LVDT_ZERO), (FORCE, topics.LOAD_CELL_TARE)):
             self.create_subscription(Float64, topic, partial(self._on_zero_epoch, stream), LATCHED_QOS)
         self.create_service(Trigger, '~/reset', self._srv_reset)
+        self.callers = ServiceCallers(self)  # who resets (the live view names its client)
         self.diagnostics = Diagnostics(self, self._diagnostics_report)
         self.references = EstimatorReferences(
             self, {'load_cell': self.settings['load_cell_nodes'], 'lvdt': self.settings['lvdt_nodes'],
-                   'model': [self.settings['model_node']]}, self._on_reference)
+                   'model': [self.settings['model_node']]}, lambda: self.core,
+            lambda: self.settings['uncertainty_file'])
         self.sim = SimTimeParticipant(self, 3, self.sim_report, drain=self._drain_all,
                                       inputs=[topics.WRENCH_COMMAND, topics.REJECTED_COMMAND, topics.LOAD_CELL_WRENCH,
                                               topics.LVDT_DISPLACEMENT])
@@ -190,7 +191,10 @@ class StiffnessEstimatorNode(Node):
             self.sim.counted(pub)  # (the recorder, a stage above, waits for them and logs them in their step)
 
     def sim_report(self, t_ns: int) -> None:
-        """Simulated time: every input up to ``t_ns`` has been handled (drained before this call)."""
+        """Simulated time: every input up to ``t_ns`` has been handled (drained before this call). Held while the
+        calibrations and the model's geometry are being read (EstimatorReferences.holds): the same U in every run."""
+        if self.references is not None and self.references.holds(t_ns, self.sim_report):
+            return
         if self.timer is not None:
             self.timer.at_watermark(t_ns)
         self.sim.report(t_ns)
@@ -243,40 +247,10 @@ class StiffnessEstimatorNode(Node):
                                             self.sim_time)
             else:
                 self.timer.set_period(1.0 / values['diagnostics_rate_hz'])
-        changed = any(values[k] != self.settings.get(k) for k in ('force_axis', 'uncertainty_file'))
         self.settings = values
         self._set_prediction()  # force_axis may have changed: the prediction follows it
-        if changed and self.geometry_params is not None:
-            self._predict_uncertainty()
-
-    def _on_reference(self, kind: str, node: str, values: dict[str, Any]) -> None:
-        """A sensor's declared calibration or the model's geometry, read (at start or after a change)."""
-        assert self.core is not None
-        if kind == 'model':
-            self.geometry_params = values
-            self._predict_uncertainty()
-            return
-        load_cell, lvdt = self.core.calibrations
-        self.core.calibrations = (values, lvdt) if kind == 'load_cell' else (load_cell, values)
-        declared = sorted({k.split('.')[1].removesuffix('_distribution').removesuffix('_k') for k in values
-                           if k.startswith('calibration.')})
-        self.get_logger().info(f'U of the live k: the {kind} calibration of /{node} read '
-                               f'({", ".join(declared) or "none declared"})')
-
-    def _predict_uncertainty(self) -> None:
-        """The model prediction's relative U along ``force_axis`` (GUM linear law; once per geometry and axis)."""
-        assert self.core is not None and self.geometry_params is not None
-        axis, unit = self.core.settings.force_axis, self.core.settings.stiffness_unit
-        try:
-            value, relative = prediction_relative_uncertainty(self.geometry_params, axis,
-                                                              self.settings['uncertainty_file'])
-        except (CraneStiffnessError, ValueError, OSError) as exc:
-            self.core.prediction_relative_U = float('nan')
-            self.get_logger().warn(f"the model's prediction with its uncertainty failed, no E_n: {exc}")
-            return
-        self.core.prediction_relative_U = relative
-        self.get_logger().info(f"model prediction along {axis} at rest: {value:.6g} ± {relative * value:.4g} {unit} "
-                               f"(U, 95 %, GUM linear law; {self.settings['uncertainty_file']}): E_n live")
+        if self.references is not None:
+            self.references.update_prediction()  # (computed again only for a new axis or uncertainty file)
 
     # --- inputs: a message (sensors: serialized) and, when taken by _drain, its message info ---
     def _decode(self, data: bytes, count: int, stream: str) -> tuple[float, tuple[float, ...]] | None:
@@ -514,7 +488,8 @@ class StiffnessEstimatorNode(Node):
         response.success = True
         response.message = (f'fits cleared, pairing, branches, commands and stream health restarted ({fitted} pairs '
                             f'fitted so far; segment {self.core.counters.segments})')
-        self.get_logger().info(response.message)
+        self.get_logger().info(f'~/reset by {self.callers.caller(self.callers.service_name("~/reset"))}: '
+                               f'{response.message}')
         return response
 
 
