@@ -151,6 +151,7 @@ class LiveViewNode(Node):
         self.prediction = float('nan')  # the estimator's (its values' prediction: always of its own axis)
         self.axis: tuple[str, str] | None = None  # (fitted axis, stiffness unit) from the estimator's status
         self.statuses: list[tuple[str, int, str]] = []
+        self.uncertainty: dict[str, dict[str, str]] = {}  # each branch status's key/values: its U and E_n
         # the six-axis estimator's newest K and C data, and status (level, message, key-values); None: not yet
         self.k6: list[float] | None = None
         self.c6: list[float] | None = None
@@ -292,6 +293,10 @@ class LiveViewNode(Node):
     def _on_estimate(self, msg: DiagnosticArray) -> None:
         self.statuses = [(s.name, s.level[0] if isinstance(s.level, bytes) else int(s.level), s.message)
                          for s in msg.status]
+        # each branch's U and E_n (the estimate channel carries them beside the values' repeatability interval)
+        self.uncertainty = plot.branch_uncertainty([(s.name, {kv.key: kv.value for kv in s.values})
+                                                    for s in msg.status])
+        self.dirty.add('estimate')
         for s in msg.status:  # the fitted axis and its unit, from the first branch status that names them
             values = {kv.key: kv.value for kv in s.values}
             if 'axis' in values and 'unit' in values:
@@ -329,9 +334,10 @@ class LiveViewNode(Node):
             sent += self._send_plot(fox, dirty, now)
             if 'status' in dirty and self.statuses:
                 sent += fox.log_json(PREFIX + 'status', plot.status_message(self.statuses, self.axis), now)
-            if topics.STIFFNESS_VALUES in dirty and fox.wanted(PREFIX + 'estimate'):
-                values = self._newest(topics.STIFFNESS_VALUES)
-                sent += fox.log_json(PREFIX + 'estimate', plot.estimate_message(values.data), now)
+            values = (self._newest(topics.STIFFNESS_VALUES) if dirty & {topics.STIFFNESS_VALUES, 'estimate'}
+                      and fox.wanted(PREFIX + 'estimate') else None)
+            if values is not None:  # the values' k and repeatability, the status's U and E_n
+                sent += fox.log_json(PREFIX + 'estimate', plot.estimate_message(values.data, self.uncertainty), now)
             sent += self._send_crane(fox, dirty, now)
             sent += self._send_stiffness6(fox, dirty, now)
         except ValueError as exc:  # a message of the wrong shape (a foreign publisher): said, not fatal
