@@ -5,7 +5,8 @@ geometry (its ``geometry.*``, the crane file), over ROS as the session recorder 
 reports a change of them on /parameter_events. The calibrations go to the live core
 (:attr:`LiveStiffness.calibrations <crane_stiffness.estimation.live.LiveStiffness>`), the geometry to the model
 prediction's relative U (:func:`~crane_stiffness.estimation.live_uncertainty.prediction_relative_uncertainty`, once
-per geometry and axis).
+per geometry and axis, on a thread of its own: loading the model's compiled kernels takes seconds of wall-clock time
+on a busy machine, and the estimator's callbacks go on meanwhile).
 
 Of each kind the first node of its list that answers is the one read (``/load_cell`` or the driver ``/netft``; the
 others' clients are closed then): a node absent from the rig costs a readiness check every half second, nothing once
@@ -18,6 +19,7 @@ read is in the graph, at most :data:`WAIT_S` of wall-clock time: its statuses th
 from __future__ import annotations
 
 import math
+import threading
 import time
 from typing import Any, Callable, Sequence
 
@@ -57,6 +59,10 @@ class EstimatorReferences:
         self.read_from: dict[str, str] = {}  # kind -> the node read (without '/')
         self.geometry: dict[str, Any] | None = None  # the model node's geometry.*, once read
         self._predicted: tuple | None = None  # (geometry, axis, file) of the prediction's U now in the core
+        # the prediction being computed on a thread of its own (loading the model's compiled kernels takes seconds
+        # of wall-clock time on a busy machine: the estimator's callbacks go on meanwhile), and its result
+        self._computing: threading.Thread | None = None
+        self._computed: tuple[str, str, str, float, float, str] | None = None  # axis, unit, path, value, U/k, error
         self._readers: dict[str, NodeParameterReader] = {}
         self._held: tuple[int, Callable[[int], None]] | None = None  # a watermark waiting for the reads
         self._since = time.monotonic()
@@ -79,8 +85,9 @@ class EstimatorReferences:
     def _poll(self) -> None:
         for reader in list(self._readers.values()):
             reader.poll()
+        self._take_prediction()
         self._release()
-        if not self._readers and self._held is None:
+        if not self._readers and self._held is None and self._computing is None:
             self._timer.cancel()
 
     def _read(self, kind: str, node: str, values: dict[str, Any]) -> None:
@@ -112,16 +119,40 @@ class EstimatorReferences:
         if key == self._predicted:
             return
         self._predicted = key
-        log = self._node.get_logger()
-        try:
-            value, relative = prediction_relative_uncertainty(self.geometry, axis, path)
-        except (CraneStiffnessError, ValueError, OSError) as exc:
-            core.prediction_relative_U = math.nan
-            log.warn(f"the model's prediction with its uncertainty failed, no E_n: {exc}")
+        core.prediction_relative_U = math.nan  # (none while the new one is computed)
+        geometry = dict(self.geometry)
+
+        def compute() -> None:
+            try:
+                value, relative = prediction_relative_uncertainty(geometry, axis, path)
+                self._computed = (axis, unit, path, value, relative, '')
+            except (CraneStiffnessError, ValueError, OSError) as exc:
+                self._computed = (axis, unit, path, math.nan, math.nan, str(exc))
+        if self._computing is not None:
+            self._computing.join()  # (an older one: its result is dropped below, the key has changed)
+            self._computed = None
+        self._computing = threading.Thread(target=compute, name='prediction_uncertainty', daemon=True)
+        self._computing.start()
+        if self._timer.is_canceled():
+            self._timer.reset()
+
+    def _take_prediction(self) -> None:
+        """The prediction's U, once its thread is done: into the core (on the executor's thread)."""
+        if self._computing is None or self._computing.is_alive():
             return
-        core.prediction_relative_U = relative
-        log.info(f'model prediction along {axis} at rest: {value:.6g} ± {relative * value:.4g} {unit} (U, 95 %, '
-                 f'GUM linear law; {path}): E_n live')
+        self._computing, done, self._computed = None, self._computed, None
+        core = self._core()
+        if done is None or core is None:
+            return
+        axis, unit, path, value, relative, error = done
+        log = self._node.get_logger()
+        if error:
+            log.warn(f"the model's prediction with its uncertainty failed, no E_n: {error}")
+            return
+        if axis == core.settings.force_axis:
+            core.prediction_relative_U = relative
+            log.info(f'model prediction along {axis} at rest: {value:.6g} ± {relative * value:.4g} {unit} (U, 95 %, '
+                     f'GUM linear law; {path}): E_n live')
 
     def _on_event(self, event: ParameterEvent) -> None:
         """A node read reports changed parameters: read it again if one of them matters."""
@@ -149,14 +180,17 @@ class EstimatorReferences:
         present = {('/' + ns.strip('/') + '/' + name).replace('//', '/')
                    for name, ns in self._node.get_node_names_and_namespaces()}
         waiting = [kind for kind in self.pending if present & set(self._nodes[kind])]
+        if self._computing is not None:
+            waiting.append("the model prediction's U")
         if not waiting:
             return False
         if time.monotonic() - self._since < WAIT_S:
             return True
         if not self._gave_up:
             self._gave_up = True
-            self._node.get_logger().warn(f'simulated time waited {WAIT_S:g} s for the {", ".join(waiting)} '
-                                         'parameters: going on without them (U statistical only for them)')
+            self._node.get_logger().warn(f'simulated time waited {WAIT_S:g} s for {", ".join(waiting)}: going on '
+                                         'without (U statistical only for a sensor not read, no E_n without the '
+                                         'model)')
         return False
 
     def _release(self) -> None:

@@ -258,7 +258,7 @@ function updateIntervals(est, unit) {
       e.U_low === null ? null : `${e.U_low},${e.U_high}`);
     const en = document.getElementById(`En-${b}`);
     set(`En-${b}`, e.En === null ? '–' : `${e.En >= 0 ? '+' : '−'}${Math.abs(e.En).toFixed(2)}`, e.En);
-    en.className = e.En === null ? '' : (Math.abs(e.En) > 1 ? 'level-1' : 'level-0');
+    en.className = e.En === null ? '' : (Math.abs(e.En) > 1 ? 'en-far' : 'en-agree');
   }
   const p = est.loading.prediction, pu = est.loading.prediction_U;
   set('ki-model', p === null ? '–' : `${fmt(p, 6)} ${unit}`, p);
