@@ -100,6 +100,7 @@ class EstimatorReferences:
         log = self._node.get_logger()
         if kind == 'model':
             self.geometry = values
+            log.info(f"the model's geometry of /{node} read: the prediction's U is computed")
             self.update_prediction()
         elif core is not None:
             load_cell, lvdt = core.calibrations
@@ -128,6 +129,8 @@ class EstimatorReferences:
                 self._computed = (axis, unit, path, value, relative, '')
             except (CraneStiffnessError, ValueError, OSError) as exc:
                 self._computed = (axis, unit, path, math.nan, math.nan, str(exc))
+            except Exception as exc:  # noqa: BLE001 (a thread's error would only go to stderr: said in the log)
+                self._computed = (axis, unit, path, math.nan, math.nan, f'{type(exc).__name__}: {exc}')
         if self._computing is not None:
             self._computing.join()  # (an older one: its result is dropped below, the key has changed)
             self._computed = None

@@ -209,7 +209,7 @@ function updateStiffness6() {
     cells[2].textContent = c.ci95_low === null ? '–' : `${compact(c.ci95_low)} .. ${compact(c.ci95_high)}`;
     // U when the six-axis estimator states it (the field on the channel); until then said so, never a blank
     const hasU = c.U !== null && c.U !== undefined;
-    cells[3].textContent = hasU ? `${compact(c.U_low)} .. ${compact(c.U_high)}` : (c.measured === null ? '–' : 'not stated');
+    cells[3].textContent = hasU ? `± ${compact(c.U)}` : (c.measured === null ? '–' : 'not stated');
     cells[3].dataset.value = hasU ? `${c.U_low},${c.U_high}` : '';
     cells[4].textContent = compact(c.tangent);
     cells[5].textContent = c.model_zero ? 'model: 0' :
