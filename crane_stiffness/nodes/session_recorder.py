@@ -505,7 +505,7 @@ class SessionRecorder(Node):
             return response
         who = self.callers.caller(self.callers.service_name('~/stop'))  # logged by stop()
         path, count = self.stop('service', by=who)
-        response.success, response.message = True, f'closed {path}: {count} messages (stopped by {who})'
+        response.success, response.message = True, f'closed {path}: {count} messages'
         return response
 
     @property
