@@ -9,7 +9,8 @@ Written by the session recorder (and by the synthetic sessions), read by the off
   :func:`read_session`.
 - :data:`NODE_PARAMETERS_METADATA`: the parameters the rig's nodes ran with, read from them over ROS,
   ``{node: JSON of {parameter: value}}``; read by :func:`read_node_parameters`.
-- :data:`SESSION_END_METADATA`: added when the recording is closed (stop reason, end time, message counts).
+- :data:`SESSION_END_METADATA`: added when the recording is closed (stop reason, end time, message counts; who
+  stopped it, ``stopped_by``, when ~/stop was called).
 
 MCAP metadata values are strings: everything that is not a string is stored as JSON
 (:func:`crane_stiffness.bag.metadata.encode_metadata`). This module imports no ROS.
@@ -143,14 +144,19 @@ def _records(source: Records) -> Mapping[str, Mapping[str, str]]:
 
 def session_end_record(reason: str, end_ns: int, message_count: int, recorded: Mapping[str, int],
                        program_state: Mapping[str, Any], published: Mapping[str, int] | None = None,
-                       published_through_ns: int | None = None, at_end: bool = False) -> dict[str, Any]:
+                       published_through_ns: int | None = None, at_end: bool = False,
+                       stopped_by: str | None = None) -> dict[str, Any]:
     """The :data:`SESSION_END_METADATA` record: why and when [ns of the recorder's clock] the recording ended, the
     messages in the bag (in all and per topic, ``recorded``) and the program's last state. On simulated time also
     ``published``: what the rig's nodes published per recorded topic through ``published_through_ns`` (their own
     counters, summed by the clock), ``missing``: what of it the bag lacks, and ``complete``: the session ended at the
-    instant its program fixed (``at_end``) with nothing missing: the same bag at any load."""
+    instant its program fixed (``at_end``) with nothing missing: the same bag at any load. ``stopped_by``: who
+    called ~/stop, in words (the live view's client address and Origin, or a ROS service client:
+    :mod:`crane_stiffness.contract.control_events`), for a recording stopped from outside."""
     record: dict[str, Any] = {'stop_reason': reason, 'end_time_ns': str(end_ns), 'message_count': message_count,
                               'topics': {t: n for t, n in recorded.items() if n}, 'program_state': dict(program_state)}
+    if stopped_by is not None:
+        record['stopped_by'] = stopped_by
     if published:
         counted = {t: int(n) for t, n in sorted(published.items()) if t in recorded}
         missing = {t: n - recorded[t] for t, n in counted.items() if recorded[t] < n}
@@ -175,7 +181,8 @@ def cut_short(end: Mapping[str, Any]) -> str:
     program = end.get('program_state')
     state = program.get('state') if isinstance(program, dict) else None
     if reason == 'service':
-        return ('the recording was stopped from outside (a ~/stop service call) before the run\'s end, at '
+        by = f' by {end["stopped_by"]}' if end.get('stopped_by') else ''
+        return (f'the recording was stopped from outside (a ~/stop service call{by}) before the run\'s end, at '
                 f'{int(end.get("end_time_ns", 0)) * 1e-9:.3f} s: the bag is not the whole run')
     if reason not in ('program done', 'shutdown') or (reason == 'shutdown' and state != 'done'):
         return f'the recording ended before the program did ({reason}): the bag is not the whole run'

@@ -22,4 +22,12 @@ same definitions, so a change here is a change everywhere.
   interval of every entry of the 6×6 matrix, labels and strides), both directions.
 - ``command_limits.py``: which commanded wrenches are absurd (not finite, or beyond the force and moment limits): the
   model rejects them and the estimator leaves out the time they were in force.
+- ``control_events.py``: who asked a node to stop, tare or reset: the control event a caller (the live view) publishes
+  on ``/rig/control_events`` before it calls a ``std_srvs/Trigger`` service, naming its client; the serving node
+  records or logs it (the recorder: ``stopped_by`` in the session end), else says "a ROS service client".
+- The live estimate's statuses on ``/stiffness/estimate`` (``diagnostic_msgs/DiagnosticArray``): each branch's
+  key/values carry, beside the fit's numbers (``ci95_low``/``ci95_high``: the repeatability), its measurement
+  uncertainty ``U`` (expanded, 95 %), ``U_low``/``U_high`` (k ∓ U), ``coverage_factor``, ``u_c``, ``nu_eff``,
+  ``prediction_U`` (the model's U), ``En`` (E_n against the model), ``statistical_only`` and ``calibration`` (what U
+  counts); |E_n| > 1 is WARN.
 """

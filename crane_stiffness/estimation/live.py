@@ -66,6 +66,7 @@ from crane_stiffness.estimation.stream_delay import StreamDelay
 from crane_stiffness.contract.command_limits import command_fault
 from crane_stiffness.estimation import live_status
 from crane_stiffness.estimation.live_status import VALUE_FIELDS, BranchReport
+from crane_stiffness.estimation.live_uncertainty import BranchUncertainty, LiveBudget, cross_load_ratio
 from crane_stiffness.estimation.lag import LagHistogram
 from crane_stiffness.estimation.inputs import (CommandHold, InputCounters, StreamHealth,
                                                command_inputs, input_faults)
@@ -94,6 +95,11 @@ class LiveStiffness:
         #: Keep every fitted pair for :meth:`take_fitted_pairs` (the node's live view topic); off: nothing kept.
         self.record_pairs = False
         self._fitted_pairs: list[float] = []
+        # The sensors' declared calibrations (their nodes' parameters; None: not read) and the model prediction's
+        # U / value (NaN: unknown): what each branch's U and E_n are computed from at refresh (live_uncertainty).
+        self.calibrations: tuple[dict | None, dict | None] = (None, None)
+        self.prediction_relative_U = math.nan
+        self._budget = LiveBudget()
         self._build(None)
 
     def _build(self, old: ApproximateTimeSync | InterpolatingSync | None) -> None:
@@ -124,6 +130,7 @@ class LiveStiffness:
     def _clear_outputs(self) -> None:
         self._nonlinearity = {b: math.nan for b in BRANCHES}
         self._scatter = {b: math.nan for b in BRANCHES}
+        self._uncertainty: dict[Branch, BranchUncertainty | None] = {b: None for b in BRANCHES}
         self._rows: dict[Branch, list[float]] = {b: self._row(None) for b in BRANCHES}
         self._dirty: set[Branch] = set()
         self._current: Branch | None = None
@@ -444,8 +451,28 @@ class LiveStiffness:
         for branch in BRANCHES:
             self._nonlinearity[branch] = self._estimator.nonlinearity(branch)
             self._scatter[branch] = self._estimator.scatter_ratio(branch)
+            self._uncertainty[branch] = self._branch_uncertainty(branch)
         self._delay.update()
         return dict(self._nonlinearity)
+
+    def _branch_uncertainty(self, branch: Branch) -> BranchUncertainty | None:
+        """``branch``'s k with U and E_n now (:func:`~.live_uncertainty.branch_uncertainty`; a pass over its window
+        for the spans the fit covers)."""
+        est = self._estimator.estimate(branch)
+        if est is None:
+            return None
+        s = self._settings
+        x, y = self._estimator.window_data(branch)
+        x_span = float(x.max() - x.min()) * (s.lever_arm_m if s.lever_arm_m > 0.0 else 1.0)  # as the LVDT reads
+        return self._budget.branch(branch, s.force_axis, s.stiffness_unit, float(est.stiffness), float(est.stderr),
+                                   int(est.n), float(y.max() - y.min()), x_span, calibrations=self.calibrations,
+                                   cross_load=cross_load_ratio(s.force_axis, self._command_range.low,
+                                                               self._command_range.high),
+                                   prediction=self.prediction, prediction_relative_U=self.prediction_relative_U)
+
+    def uncertainty(self, branch: Branch) -> BranchUncertainty | None:
+        """``branch``'s k with U and E_n as of the last :meth:`refresh` (None without an estimate then)."""
+        return self._uncertainty[branch]
 
     @property
     def stream_delay(self) -> StreamDelay:

@@ -13,6 +13,7 @@ from crane_stiffness.estimation.branch import BRANCHES, Branch
 from crane_stiffness.estimation.estimator import StiffnessEstimator
 from crane_stiffness.estimation.inputs import InputCounters, StreamHealth
 from crane_stiffness.estimation.lag import LagHistogram
+from crane_stiffness.estimation.live_uncertainty import BranchUncertainty, far_message, statement
 from crane_stiffness.estimation.quality import fit_problems
 from crane_stiffness.estimation.settings import LiveSettings
 from crane_stiffness.estimation.stream_delay import StreamDelay
@@ -37,6 +38,7 @@ class LiveStiffness(Protocol):
     _segment_reason: str
     _nonlinearity: dict[Branch, float]
     _scatter: dict[Branch, float]
+    _uncertainty: dict[Branch, BranchUncertainty | None]
     _rows: dict[Branch, list[float]]
     _current: Branch | None
     _newest_stamp: float
@@ -161,8 +163,16 @@ def branch_reports(live: LiveStiffness, now_s: float = math.nan) -> list[BranchR
             pairs[names.index('prediction')] = ('prediction', status_value(live.prediction))
         else:
             message = (f'k = {row["stiffness"]:.6g} {unit} (95 %: {row["ci95_low"]:.6g} .. '
-                       f'{row["ci95_high"]:.6g}), n = {int(row["n"])}')
+                       f'{row["ci95_high"]:.6g}, repeatability), n = {int(row["n"])}')
             level = OK
+            unc = live._uncertainty[branch]
+            if unc is not None:  # U beside the statistical interval (the repeatability), E_n against the model
+                message += '; ' + statement(unc, unit)
+                pairs += [(k, status_value(v)) for k, v in unc.values()]
+                pairs += [('statistical_only', str(unc.statistical_only).lower()), ('calibration', unc.calibration)]
+                if unc.far_from_model:
+                    level = WARN
+                    message = far_message(unc, unit) + '; ' + message
             if nl > s.nonlinearity_warn:
                 level = WARN
                 message = f'nonlinear (slack wire?): nonlinearity {nl:.3g} > {s.nonlinearity_warn:g}; ' + message

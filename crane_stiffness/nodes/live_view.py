@@ -51,6 +51,7 @@ from std_srvs.srv import Trigger
 from crane_stiffness.contract import stiffness6_layout, topics
 from crane_stiffness.model import CraneGeometry
 from crane_stiffness.rosnode.qos import KEPT_QOS, LATCHED_QOS, RELIABLE_QOS, rclpy_qos
+from crane_stiffness.rosnode.control_callers import CallAnnouncer
 from crane_stiffness.rosnode.run import run
 from crane_stiffness.rosnode.session_qos import message_class
 from crane_stiffness.rosnode.parameters import Params, check
@@ -150,6 +151,7 @@ class LiveViewNode(Node):
         self.prediction = float('nan')  # the estimator's (its values' prediction: always of its own axis)
         self.axis: tuple[str, str] | None = None  # (fitted axis, stiffness unit) from the estimator's status
         self.statuses: list[tuple[str, int, str]] = []
+        self.uncertainty: dict[str, dict[str, str]] = {}  # each branch status's key/values: its U and E_n
         # the six-axis estimator's newest K and C data, and status (level, message, key-values); None: not yet
         self.k6: list[float] | None = None
         self.c6: list[float] | None = None
@@ -158,6 +160,7 @@ class LiveViewNode(Node):
         self.dirty: set[str] = set()
         self.resent_ns = 0  # when every derived channel was last sent (a client that joined since gets them all)
         self.trigger_clients = {name: self.create_client(Trigger, name) for name in DEFAULT_SERVICES}
+        self.announcer = CallAnnouncer(self)  # names the WebSocket client of each call (control events)
         self.params = Params(self, PARAMS, _validate, self._apply)
         self.create_subscription(Float64MultiArray, topics.FITTED_PAIRS, self._on_pairs, RELIABLE_QOS)
         self.create_subscription(Float64MultiArray, topics.FIT_LINES, self._on_fit_lines, RELIABLE_QOS)
@@ -290,6 +293,10 @@ class LiveViewNode(Node):
     def _on_estimate(self, msg: DiagnosticArray) -> None:
         self.statuses = [(s.name, s.level[0] if isinstance(s.level, bytes) else int(s.level), s.message)
                          for s in msg.status]
+        # each branch's U and E_n (the estimate channel carries them beside the values' repeatability interval)
+        self.uncertainty = plot.branch_uncertainty([(s.name, {kv.key: kv.value for kv in s.values})
+                                                    for s in msg.status])
+        self.dirty.add('estimate')
         for s in msg.status:  # the fitted axis and its unit, from the first branch status that names them
             values = {kv.key: kv.value for kv in s.values}
             if 'axis' in values and 'unit' in values:
@@ -327,9 +334,10 @@ class LiveViewNode(Node):
             sent += self._send_plot(fox, dirty, now)
             if 'status' in dirty and self.statuses:
                 sent += fox.log_json(PREFIX + 'status', plot.status_message(self.statuses, self.axis), now)
-            if topics.STIFFNESS_VALUES in dirty and fox.wanted(PREFIX + 'estimate'):
-                values = self._newest(topics.STIFFNESS_VALUES)
-                sent += fox.log_json(PREFIX + 'estimate', plot.estimate_message(values.data), now)
+            values = (self._newest(topics.STIFFNESS_VALUES) if dirty & {topics.STIFFNESS_VALUES, 'estimate'}
+                      and fox.wanted(PREFIX + 'estimate') else None)
+            if values is not None:  # the values' k and repeatability, the status's U and E_n
+                sent += fox.log_json(PREFIX + 'estimate', plot.estimate_message(values.data, self.uncertainty), now)
             sent += self._send_crane(fox, dirty, now)
             sent += self._send_stiffness6(fox, dirty, now)
         except ValueError as exc:  # a message of the wrong shape (a foreign publisher): said, not fatal
@@ -401,21 +409,26 @@ class LiveViewNode(Node):
         return int(fox.log_json(PREFIX + 'stiffness6', message, now))
 
     # --- services through the bridge ---
-    def _caller(self, name: str) -> Callable[[], tuple[bool, str]]:
-        return lambda: self._call(name)
+    def _caller(self, name: str) -> Callable[[str], tuple[bool, str]]:
+        return lambda caller: self._call(name, caller)
 
-    def _call(self, name: str) -> tuple[bool, str]:
-        """A server thread: call the ROS Trigger service ``name`` and wait for its answer."""
+    def _call(self, name: str, caller: str) -> tuple[bool, str]:
+        """A server thread: call the ROS Trigger service ``name`` for the WebSocket client ``caller`` (its address
+        and Origin) and wait for its answer. The call is announced first (a control event naming the client, every
+        reader's acknowledgement awaited: crane_stiffness.contract.control_events), so the node serving it can say
+        who stopped, tared or reset it."""
         client = self.trigger_clients[name]
         if not client.service_is_ready():
             raise RuntimeError(f'service {name} is not available (is its node running?)')
+        if not self.announcer.announce(name, f"the live view's WebSocket client {caller}"):
+            self.get_logger().warn(f'service {name}: the control event naming {caller} was not acknowledged in time')
         done = threading.Event()
         future = client.call_async(Trigger.Request())
         future.add_done_callback(lambda _: done.set())
         if not done.wait(self.settings['service_timeout_s']):
             raise RuntimeError(f'service {name}: no answer in {self.settings["service_timeout_s"]:g} s')
         response = future.result()
-        self.get_logger().info(f'service {name} called through the WebSocket: success={response.success}, '
+        self.get_logger().info(f'service {name} called through the WebSocket by {caller}: success={response.success}, '
                                f'{response.message}')
         return bool(response.success), str(response.message)
 

@@ -41,6 +41,7 @@ from crane_stiffness.rosnode.sensor_timing import (
 )
 from crane_stiffness.rosnode.sim_time import SimTimeParticipant, drain
 from crane_stiffness.rosnode.messages import finite
+from crane_stiffness.rosnode.control_callers import ServiceCallers
 from crane_stiffness.rosnode.run import run
 from crane_stiffness.rosnode.parameters import Params
 from crane_stiffness.serde.stamps import split_ns, stamp_ns
@@ -94,6 +95,7 @@ class LoadCell(Node):
         self.sim.counted(self.tare_epoch.pub)
         self._epoch_sent = not self.schedule.sim_time
         self.create_service(Trigger, '~/tare', self._srv_tare)
+        self.callers = ServiceCallers(self)  # who tares (the live view names its client)
         self.diagnostics = Diagnostics(self, self._report)
         self.get_logger().info(f'{topics.WAITING_FOR_LOAD} before publishing')
 
@@ -190,7 +192,8 @@ class LoadCell(Node):
         response.success = True
         response.message = (f'tared on {n} samples: offset [fx fy fz] = {[round(v, 6) for v in offset[:3].tolist()]} '
                             f'N, [mx my mz] = {[round(v, 7) for v in offset[3:].tolist()]} N·m')
-        self.get_logger().info(response.message)
+        self.get_logger().info(f'~/tare by {self.callers.caller(self.callers.service_name("~/tare"))}: '
+                               f'{response.message}')
         return response
 
     def _report(self):

@@ -37,6 +37,7 @@ from crane_stiffness.drivers.errors import DriverError
 from crane_stiffness.drivers.rdt_client import RdtReceiver, fetch_netftapi2
 from crane_stiffness.drivers.rdt_pipeline import RdtPipeline
 from crane_stiffness.rosnode.qos import SENSOR_QOS
+from crane_stiffness.rosnode.control_callers import ServiceCallers
 from crane_stiffness.rosnode.diagnostics import Counters, Diagnostics
 from crane_stiffness.rosnode.sensor_timing import ZeroEpoch, create_grid_timer
 from crane_stiffness.rosnode.run import run
@@ -137,6 +138,7 @@ class NetFt(Node):
         self.tare_epoch = ZeroEpoch(self, topics.LOAD_CELL_TARE)  # tares/biases since start, latched
         self.params = Params(self, PARAMS, self._validate, self._apply)
         self.create_service(Trigger, '~/tare', self._srv_tare)
+        self.callers = ServiceCallers(self)  # who tares (the live view names its client)
         self.diagnostics = Diagnostics(self, self._report)
 
     def _validate(self, values: dict[str, Any]) -> dict[str, Any]:
@@ -222,7 +224,8 @@ class NetFt(Node):
             self.tare_epoch.step()  # software tare or hardware bias: the readings step either way
         except DriverError as exc:
             response.success, response.message = False, str(exc)
-        self.get_logger().info(f'~/tare: {response.message}')
+        self.get_logger().info(f'~/tare by {self.callers.caller(self.callers.service_name("~/tare"))}: '
+                               f'{response.message}')
         return response
 
     def _report(self):

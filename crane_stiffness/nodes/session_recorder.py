@@ -14,17 +14,17 @@ started with, software version, start time and ``notes``; the parameters the rig
 ``crane_stiffness/node_parameters``; on close ``crane_stiffness/session_end`` (stop reason, end time, counts; on
 simulated time the rig's own publish counts against the bag's). The offline analysis prefers the nodes' own values.
 
-Recording starts by itself (``autostart``) or with ~/start; ~/stop closes the bag (both std_srvs/Trigger). With
+Recording starts by itself (``autostart``) or with ~/start; ~/stop closes the bag (both std_srvs/Trigger), naming its
+caller in the log and the session end (``stopped_by``; crane_stiffness.contract.control_events). With
 ``stop_on_program_done`` it stops once the program is done: on simulated time at the instant the program fixed, else
 ``stop_delay_s`` after /load_program/state says 'done' (crane_stiffness.rosnode.program_end). Ctrl-C and SIGTERM close
 the bag cleanly, also when repeated; after SIGKILL every chunk written so far (at most ``flush_interval_s`` old) is
 readable and ``crane-stiffness recover BAG`` rewrites the files. It runs all day: its freed memory goes back to the
 system every ``TRIM_INTERVAL_S`` (crane_stiffness.rosnode.malloc_trim).
 
-A write the system refuses (disk full, I/O error) stops the recording, not the node (ERROR, the file cut after its
-last complete chunk, metadata.yaml from what is on disk; ~/start opens a new bag). Every message received is
-accounted for (FINAL_COUNTERS, /diagnostics): ``received = written + dropped_*``, one counter per reason
-(docs/recording.md).
+A write the system refuses (disk full, I/O error) stops the recording, not the node (ERROR; the file cut after its
+last complete chunk, metadata.yaml from what is on disk; ~/start opens a new bag). Every message is counted
+(FINAL_COUNTERS): ``received = written + dropped_*``, one counter per reason (docs/recording.md).
 """
 from __future__ import annotations
 
@@ -44,21 +44,20 @@ from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
 from crane_stiffness import __version__
-
 from crane_stiffness.contract import topics
 from crane_stiffness.bag import BagWriter, dump_qos_profiles
 from crane_stiffness.bag.errors import BagError, BagWriteFailedError
 from crane_stiffness.rosnode.diagnostics import Diagnostics
 from crane_stiffness.rosnode.malloc_trim import TRIM_INTERVAL_S, release_free_memory, trim_available
 from crane_stiffness.rosnode.run import run
+from crane_stiffness.rosnode.control_callers import ServiceCallers
 from crane_stiffness.rosnode.parameter_reader import NodeParameterReader, plain
 from crane_stiffness.rosnode.parameters import Params
 from crane_stiffness.rosnode.program_end import ProgramEnd
 from crane_stiffness.rosnode.qos import SIM_STREAM_QOS
 from crane_stiffness.rosnode.recorded_channel import NO_EVENTS, SIM_INPUTS, SIM_OUTPUTS, RecordedChannel, deep
 from crane_stiffness.rosnode.sim_time import SimTimeParticipant, drain, uses_sim_time
-from crane_stiffness.rosnode.session_recorder_params import (OWN_SECTIONS, PARAMS, RECORDING_KEYS, session_dir,
-                                                          validate)
+from crane_stiffness.rosnode.session_recorder_params import OWN_SECTIONS, PARAMS, RECORDING_KEYS, session_dir, validate
 from crane_stiffness.rosnode.session_qos import (adapted_qos, contract_qos, offered_profiles, publisher_types)
 from crane_stiffness.params.files import params_files_from_args, read_params_files
 from crane_stiffness.serde import header_stamp_ns
@@ -110,6 +109,7 @@ class SessionRecorder(Node):
         self.params = Params(self, PARAMS, validate, self._apply)
         self.create_service(Trigger, '~/start', self._srv_start)
         self.create_service(Trigger, '~/stop', self._srv_stop)
+        self.callers = ServiceCallers(self)  # who calls ~/stop (the live view names its client)
         self.diagnostics = Diagnostics(self, self._report)
         recorded = {self.resolve_topic_name(t) for t in self.params['topics']}
         outputs = [t for t in SIM_OUTPUTS if t in recorded]
@@ -177,11 +177,11 @@ class SessionRecorder(Node):
         self.get_logger().info(f'recording {len(self.channels)} topic(s) to {path}')
         return path
 
-    def stop(self, reason: str = 'service', through_ns: int | None = None) -> tuple[Path | None, int]:
-        """Close the bag (metadata.yaml written), unsubscribe; returns (bag directory, messages written).
-
-        ``through_ns``: simulated time, the session's end [ns]: what is held up to it is written, anything logged
-        later is left out (counted as ``after_end``), so the bag ends at the same instant in every run."""
+    def stop(self, reason: str = 'service', through_ns: int | None = None, by: str = '') -> tuple[Path | None, int]:
+        """Close the bag (metadata.yaml written), unsubscribe; returns (bag directory, messages written). ``by``: who
+        called ~/stop (the session end's ``stopped_by``). ``through_ns``: simulated time, the session's end [ns]: what
+        is held up to it is written, anything logged later is left out (counted as ``after_end``), so the bag ends at
+        the same instant in every run."""
         if self.writer is not None:  # (outside the lock: a write error in them stops the recording itself)
             self._write_before_time(self.get_clock().now().nanoseconds)  # time never started: logged at 0, not lost
             self._release(through_ns)  # simulated time: what is held, in log-time order
@@ -206,7 +206,7 @@ class SessionRecorder(Node):
                 writer.add_metadata(SESSION_END_METADATA, session_end_record(
                     reason, self.get_clock().now().nanoseconds if through_ns is None else through_ns, count,
                     {c.topic: c.count for c in self.channels.values()}, self.program.state,
-                    self.sim.published, self.sim.watermark_ns, at_end=through_ns is not None))
+                    self.sim.published, self.sim.watermark_ns, at_end=through_ns is not None, stopped_by=by or None))
             except BagWriteFailedError as exc:
                 self._note_write_failure(exc)
             except BagError:
@@ -226,7 +226,7 @@ class SessionRecorder(Node):
                 self.get_logger().error(f'{self.last_bag}: {writer.salvage}')
             else:
                 self.status = f'idle; last bag {self.last_bag} ({count} messages, {reason})'
-                self.get_logger().info(f'closed {self.last_bag}: {count} messages ({reason})')
+                self.get_logger().info(f'closed {self.last_bag}: {count} messages ({reason}{" by " * bool(by)}{by})')
             return self.last_bag, count
 
     def _note_write_failure(self, exc: BagWriteFailedError) -> None:
@@ -503,7 +503,8 @@ class SessionRecorder(Node):
             response.success = False
             response.message = 'not recording' + (f' (last bag {self.last_bag})' if self.last_bag else '')
             return response
-        path, count = self.stop('service')
+        who = self.callers.caller(self.callers.service_name('~/stop'))  # logged by stop()
+        path, count = self.stop('service', by=who)
         response.success, response.message = True, f'closed {path}: {count} messages'
         return response
 

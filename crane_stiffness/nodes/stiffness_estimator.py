@@ -34,6 +34,12 @@ The wrench is moved from the sensor's frame to the platform centre in crane_base
 displacement stamps are corrected by ``displacement_delay_s``; the remaining delay between the streams is estimated
 from the recent data (``delay_window_s``) and reported in the input status (stream_delay_*), WARN above
 ``max_stream_delay_s``.
+Each branch's status states the expanded uncertainty U (GUM, k ≈ 2, 95 %) of its k beside the fit's statistical
+interval (the repeatability), and E_n against the model: U from the window's fit and the load cell's and the LVDT's
+declared calibrations (their ``calibration.*`` parameters, read from ``load_cell_nodes`` and ``lvdt_nodes`` over ROS at
+start and when they change: crane_stiffness.rosnode.estimator_references; "statistical only" while none is
+declared), the model's U from ``model_node``'s geometry and ``uncertainty_file`` (GUM linear law, computed once);
+|E_n| > 1 is WARN (estimation.live_uncertainty).
 Service ~/reset (std_srvs/Trigger) starts afresh: fits, branch tracker, pairing queues, commands held, stream health
 (the counters go on). Plug in a real driver by remapping the input topics.
 """
@@ -66,7 +72,9 @@ from crane_stiffness.contract.status import wire_level
 from crane_stiffness.estimation.sync import DISPLACEMENT, FORCE
 from crane_stiffness.rosnode.qos import KEPT_QOS, LATCHED_QOS, RELIABLE_QOS, sensor_qos, stream_qos
 from crane_stiffness.rosnode.sim_time import PeriodicOutput, SimTimeParticipant, uses_sim_time
+from crane_stiffness.rosnode.control_callers import ServiceCallers
 from crane_stiffness.rosnode.diagnostics import Diagnostics
+from crane_stiffness.rosnode.estimator_references import EstimatorReferences
 from crane_stiffness.rosnode.run import run
 from crane_stiffness.rosnode.messages import stamp_to_s
 from crane_stiffness.rosnode.parameters import Params
@@ -102,6 +110,15 @@ PARAMS = (
     *ESTIMATOR_PARAMS,
     ParamSpec('diagnostics_rate_hz', 5.0, 'rate of /stiffness/estimate and of the nonlinearity update [Hz]',
               above=0.0),
+    ParamSpec('load_cell_nodes', ['/load_cell', '/netft'], "nodes whose declared calibration (calibration.*, "
+              "full_scale) counts in each branch's U: the first that answers is read, at start and when it changes; "
+              "read at start [-]"),
+    ParamSpec('lvdt_nodes', ['/lvdt', '/modbus_lvdt'], "nodes whose declared calibration (calibration.*, range_m) "
+              "counts in each branch's U, as load_cell_nodes; read at start [-]"),
+    ParamSpec('model_node', '/crane_model', "node whose geometry.* (the crane file) the model prediction's U is "
+              "computed from, once; '' = no E_n; read at start [-]"),
+    ParamSpec('uncertainty_file', 'uncertainty_lab.yaml', "the crane inputs' uncertainties for the prediction's U "
+              '(a file of config/ or a path) [-]', rule='a readable uncertainty file'),
 )
 
 
@@ -155,12 +172,18 @@ class StiffnessEstimatorNode(Node):
                                                   self._then_drain(self._on_force), sensor_qos(self.sim_time),
                                                   event_callbacks=_NO_EVENTS_SUB, raw=True)
         self.tangent: np.ndarray | None = None  # the model's newest 6x6 tangent (/crane/predicted_stiffness)
+        self.references: EstimatorReferences | None = None  # (created once the settings are: below)
         self.params = Params(self, PARAMS, _validate, self._apply)  # subscribes the displacement
         self.create_subscription(Float64MultiArray, topics.PREDICTED_STIFFNESS, self._on_tangent, LATCHED_QOS)
         for stream, topic in ((DISPLACEMENT, topics.LVDT_ZERO), (FORCE, topics.LOAD_CELL_TARE)):
             self.create_subscription(Float64, topic, partial(self._on_zero_epoch, stream), LATCHED_QOS)
         self.create_service(Trigger, '~/reset', self._srv_reset)
+        self.callers = ServiceCallers(self)  # who resets (the live view names its client)
         self.diagnostics = Diagnostics(self, self._diagnostics_report)
+        self.references = EstimatorReferences(
+            self, {'load_cell': self.settings['load_cell_nodes'], 'lvdt': self.settings['lvdt_nodes'],
+                   'model': [self.settings['model_node']]}, lambda: self.core,
+            lambda: self.settings['uncertainty_file'])
         self.sim = SimTimeParticipant(self, 3, self.sim_report, drain=self._drain_all,
                                       inputs=[topics.WRENCH_COMMAND, topics.REJECTED_COMMAND, topics.LOAD_CELL_WRENCH,
                                               topics.LVDT_DISPLACEMENT])
@@ -168,7 +191,10 @@ class StiffnessEstimatorNode(Node):
             self.sim.counted(pub)  # (the recorder, a stage above, waits for them and logs them in their step)
 
     def sim_report(self, t_ns: int) -> None:
-        """Simulated time: every input up to ``t_ns`` has been handled (drained before this call)."""
+        """Simulated time: every input up to ``t_ns`` has been handled (drained before this call). Held while the
+        calibrations and the model's geometry are being read (EstimatorReferences.holds): the same U in every run."""
+        if self.references is not None and self.references.holds(t_ns, self.sim_report):
+            return
         if self.timer is not None:
             self.timer.at_watermark(t_ns)
         self.sim.report(t_ns)
@@ -223,6 +249,8 @@ class StiffnessEstimatorNode(Node):
                 self.timer.set_period(1.0 / values['diagnostics_rate_hz'])
         self.settings = values
         self._set_prediction()  # force_axis may have changed: the prediction follows it
+        if self.references is not None:
+            self.references.update_prediction()  # (computed again only for a new axis or uncertainty file)
 
     # --- inputs: a message (sensors: serialized) and, when taken by _drain, its message info ---
     def _decode(self, data: bytes, count: int, stream: str) -> tuple[float, tuple[float, ...]] | None:
@@ -460,7 +488,8 @@ class StiffnessEstimatorNode(Node):
         response.success = True
         response.message = (f'fits cleared, pairing, branches, commands and stream health restarted ({fitted} pairs '
                             f'fitted so far; segment {self.core.counters.segments})')
-        self.get_logger().info(response.message)
+        self.get_logger().info(f'~/reset by {self.callers.caller(self.callers.service_name("~/reset"))}: '
+                               f'{response.message}')
         return response
 
 

@@ -35,9 +35,9 @@ from crane_stiffness.view.wsframes import announced_length, frame, frame_bounds,
 
 #: The WebSocket subprotocols the SDK's server speaks (the page asks for the first; Lichtblick for the second).
 SUBPROTOCOLS = ('foxglove.sdk.v1', 'foxglove.websocket.v1')
-#: A service call's handler: (request encoding, request payload) -> response payload; raising refuses the call
-#: with the exception's text.
-CallHandler = Callable[[str, bytes], bytes]
+#: A service call's handler: (request encoding, request payload, the caller: the client's address and Origin in
+#: words, :func:`who`) -> response payload; raising refuses the call with the exception's text.
+CallHandler = Callable[[str, bytes, str], bytes]
 _TIMEOUT_S = 60.0  # for a handshake to arrive or be answered: only a stuck peer takes this long
 _MAX_HEAD = 16 * 1024  # bytes of a handshake request or response
 _MAX_CLIENT_MESSAGE = 1 << 20  # bytes of one client message (subscriptions, calls): a bigger one closes it
@@ -374,7 +374,7 @@ class WebSocketFront:
     async def _answer(self, conn: _Connection, service_id: int, call_id: int, encoding: str, payload: bytes) -> None:
         self.service_calls += 1
         try:
-            response = await asyncio.to_thread(self.by_id[service_id][1], encoding, payload)
+            response = await asyncio.to_thread(self.by_id[service_id][1], encoding, payload, conn.name)
         except Exception as exc:  # noqa: BLE001 (any failure of the call is the client's to read)
             conn.send(_failure(service_id, call_id, str(exc)))
             return

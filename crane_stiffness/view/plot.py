@@ -7,7 +7,7 @@ Units: displacement x in m (rad for a moment axis), force y in N (N·m), stiffne
 from __future__ import annotations
 
 import math
-from typing import Any, Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
@@ -125,10 +125,40 @@ def prediction_message(prediction: float, fit_lines: Sequence[float] | None,
     return out
 
 
-def estimate_message(values: Sequence[float]) -> dict[str, Any]:
-    """The live estimate per branch from a /stiffness/estimate_values message's data (rows × VALUE_FIELDS)."""
+def estimate_message(values: Sequence[float], uncertainty: Mapping[str, Mapping[str, str]] | None = None
+                     ) -> dict[str, Any]:
+    """The live estimate per branch from a /stiffness/estimate_values message's data (rows × VALUE_FIELDS), with
+    each branch's measurement uncertainty from its status on /stiffness/estimate (``uncertainty``: {branch: the
+    status's key/values}, :func:`branch_uncertainty`): U [k's unit], U_low and U_high = k ∓ U (the expanded interval
+    beside ci95_*, the repeatability), coverage_factor, En, prediction_U (None: not stated) and statistical_only
+    (True: no calibration counted in U)."""
     rows = _rows(values, VALUE_FIELDS)
-    return {b: {k: _num(row[k]) for k in _ESTIMATE_FIELDS} for b, row in rows.items()}
+    out: dict[str, Any] = {}
+    for b, row in rows.items():
+        entry: dict[str, Any] = {k: _num(row[k]) for k in _ESTIMATE_FIELDS}
+        kv = (uncertainty or {}).get(b, {})
+        big_u = _number(kv.get('U'))
+        entry.update(U=_num(big_u), U_low=_num(row['stiffness'] - big_u), U_high=_num(row['stiffness'] + big_u),
+                     coverage_factor=_num(_number(kv.get('coverage_factor'))), En=_num(_number(kv.get('En'))),
+                     prediction_U=_num(_number(kv.get('prediction_U'))),
+                     statistical_only=kv.get('statistical_only') == 'true')
+        out[b] = entry
+    return out
+
+
+def _number(text: str | None) -> float:
+    """A status value as a number (NaN when absent or not a number)."""
+    try:
+        return float(text) if text is not None else math.nan
+    except ValueError:
+        return math.nan
+
+
+def branch_uncertainty(statuses: Sequence[tuple[str, Mapping[str, str]]]) -> dict[str, dict[str, str]]:
+    """{branch: key/values} of the branch statuses of /stiffness/estimate ((name, key/values) per status; a branch
+    status is named '<node>: loading' or '<node>: unloading')."""
+    return {name.rsplit(': ', 1)[-1]: dict(values) for name, values in statuses
+            if name.rsplit(': ', 1)[-1] in BRANCHES}
 
 
 def status_message(statuses: Sequence[tuple[str, int, str]], axis: tuple[str, str] | None = None
@@ -161,6 +191,7 @@ _POINTS = js.array(js.obj({'x': js.NUMBER, 'y': js.NUMBER}))
 _XY_POINTS = js.array(js.obj({k: js.NUMBER for k in ('t', 'x', 'y', 'fit', 'lower', 'upper', 'prediction')}))
 _ESTIMATE_FIELDS = ('stiffness', 'ci95_low', 'ci95_high', 'r2', 'n', 'prediction', 'relative_error', 'current',
                     'sample_stamp')
+_UNCERTAINTY_FIELDS = ('U', 'U_low', 'U_high', 'coverage_factor', 'En', 'prediction_U')
 #: JSON schemas of the derived channels: every field the messages carry, typed: what Foxglove's panels offer as
 #: paths (e.g. ``/live_view/estimate.loading.stiffness``); a field without a type makes the apps refuse the channel.
 SCHEMAS: dict[str, dict[str, Any]] = {
@@ -170,7 +201,8 @@ SCHEMAS: dict[str, dict[str, Any]] = {
                                     'n': js.NUMBER, 'line': _POINTS, 'lower': _POINTS, 'upper': _POINTS})
                          for b in BRANCHES}, 'crane_stiffness.FitLines'),
     'prediction': js.obj({'stiffness': js.NUMBER, 'line': _POINTS}, 'crane_stiffness.PredictionLine'),
-    'estimate': js.obj({b: js.obj({k: js.NUMBER for k in _ESTIMATE_FIELDS}) for b in BRANCHES},
+    'estimate': js.obj({b: js.obj({**{k: js.NUMBER for k in _ESTIMATE_FIELDS + _UNCERTAINTY_FIELDS},
+                                   'statistical_only': js.BOOLEAN}) for b in BRANCHES},
                        'crane_stiffness.Estimate'),
     'status': js.obj({'level': js.INTEGER, 'level_name': js.STRING, 'text': js.STRING,
                       'statuses': js.array(js.obj({'name': js.STRING, 'level': js.INTEGER, 'level_name': js.STRING,

@@ -33,8 +33,8 @@ WEB_DIR = Path(__file__).with_name('web')
 #: The WebSocket subprotocol the page asks for.
 SUBPROTOCOL = SUBPROTOCOLS[0]
 TRIGGER = 'std_srvs/srv/Trigger'
-#: What a Trigger call returns to the server: (success, message).
-TriggerHandler = Callable[[], tuple[bool, str]]
+#: A Trigger call for a client (its address and Origin in words) -> (success, message).
+TriggerHandler = Callable[[str], tuple[bool, str]]
 
 
 class _Listener(ServerListener):
@@ -157,8 +157,8 @@ class FoxgloveServer:
         return self.front.service_calls
 
     @staticmethod
-    def _call(handler: TriggerHandler, encoding: str, _payload: bytes) -> bytes:
-        success, message = handler()  # an exception becomes the client's serviceCallFailure
+    def _call(handler: TriggerHandler, encoding: str, _payload: bytes, caller: str) -> bytes:
+        success, message = handler(caller)  # an exception becomes the client's serviceCallFailure
         return _trigger_response(encoding, success, message)
 
     def log_json(self, topic: str, message: dict[str, Any], log_time_ns: int) -> bool:

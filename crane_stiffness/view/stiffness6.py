@@ -36,13 +36,16 @@ def _k2_interval(values: Mapping[str, str]) -> tuple[float, float]:
 
 
 def stiffness6_message(stiffness: Sequence[float] | None, tangent: np.ndarray,
-                       status: tuple[int, str, Mapping[str, str]] | None) -> dict[str, Any]:
+                       status: tuple[int, str, Mapping[str, str]] | None,
+                       uncertainty: np.ndarray | None = None) -> dict[str, Any]:
     """The channel's message. ``stiffness``: the newest /stiffness6/stiffness data (None: no fit yet; laid out as
     crane_stiffness.contract.stiffness6_layout says, ViewError otherwise); ``tangent``: the model's K (6, 6);
     ``status``:
     (published level, message, key-values) of the newest /stiffness6/status (None: none yet). ``fit`` says whether a
     measured K is there; K2 measured is read from it (:func:`~crane_stiffness.full6.reference.k2_of`, what the
-    estimator fits), its interval from the status."""
+    estimator fits), its interval from the status. The statistical interval is the repeatability; ``uncertainty``:
+    each entry's expanded uncertainty U (6, 6) [its unit, 95 %] when the six-axis estimator states one (each cell's
+    ``U``, ``U_low``, ``U_high`` = measured ∓ U), else None: the cells' U fields are null (no U on the wire yet)."""
     tangent = np.asarray(tangent, dtype=float)
     zero = structural_zeros(tangent)
     try:
@@ -51,10 +54,12 @@ def stiffness6_message(stiffness: Sequence[float] | None, tangent: np.ndarray,
         raise ViewError(str(exc)) from exc
     k, low, high = cube
     relative = relative_error(k, tangent)  # (NaN where the fit is missing: k is NaN then)
+    big_u = np.full((6, 6), np.nan) if uncertainty is None else np.asarray(uncertainty, dtype=float).reshape(6, 6)
     rows = [{'load': AXES[i], 'cells': [
         {'displacement': DISPLACEMENTS[j], 'measured': _num(k[i, j]), 'ci95_low': _num(low[i, j]),
          'ci95_high': _num(high[i, j]), 'tangent': float(tangent[i, j]), 'relative_error': _num(relative[i, j]),
-         'model_zero': bool(zero[i, j])} for j in range(6)]} for i in range(6)]
+         'model_zero': bool(zero[i, j]), 'U': _num(big_u[i, j]), 'U_low': _num(k[i, j] - big_u[i, j]),
+         'U_high': _num(k[i, j] + big_u[i, j])} for j in range(6)]} for i in range(6)]
     k2_low, k2_high = _k2_interval(status[2]) if status is not None else (math.nan, math.nan)
     k2_measured, k2_tangent = k2_of(k), k2_of(tangent)
     if status is None:
@@ -75,7 +80,8 @@ SCHEMA = js.obj({
     'k2': js.obj({k: js.NUMBER for k in ('measured', 'ci95_low', 'ci95_high', 'tangent', 'relative_error')}),
     'rows': js.array(js.obj({'load': js.STRING, 'cells': js.array(js.obj({
         'displacement': js.STRING, 'measured': js.NUMBER, 'ci95_low': js.NUMBER, 'ci95_high': js.NUMBER,
-        'tangent': js.NUMBER, 'relative_error': js.NUMBER, 'model_zero': js.BOOLEAN}))}))},
+        'tangent': js.NUMBER, 'relative_error': js.NUMBER, 'model_zero': js.BOOLEAN, 'U': js.NUMBER,
+        'U_low': js.NUMBER, 'U_high': js.NUMBER}))}))},
     'crane_stiffness.Stiffness6')
 
 __all__ = ['SCHEMA', 'stiffness6_message']

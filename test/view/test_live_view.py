@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import time
 from typing import Any, Callable
 
@@ -80,7 +81,11 @@ def test_protocol_channels_values_and_tare(install_tree, rclpy_context, tmp_path
                       'service /load_cell/tare called through the WebSocket' in procs.log('live_view'))
             assert watcher.tare_epochs and watcher.tare_epochs[-1] == (epochs_before or [0.0])[-1] + 1, \
                 (epochs_before, watcher.tare_epochs)
-            assert 'service /load_cell/tare called through the WebSocket: success=True' in procs.log('live_view')
+            # the view names the client it called for, and so does the load cell (the view's control event)
+            assert re.search(r'service /load_cell/tare called through the WebSocket by 127\.0\.0\.1:\d+ '
+                             r'\(Origin none\): success=True', procs.log('live_view'))
+            _wait_for(lambda: re.search(r"~/tare by the live view's WebSocket client 127\.0\.0\.1:\d+ \(Origin "
+                                        r'none\) \(through /live_view\): tared on', procs.log('load_cell')))
         finally:
             client.close()
         codes = procs.stop()

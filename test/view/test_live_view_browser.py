@@ -1,13 +1,18 @@
 """The live view's page in a real browser: headless Chromium (Debian's ``chromium``, installed by the test set-up
 when missing) opens it while the program runs; the live estimate the page shows is the estimator's (read from the
-DOM), the plot shows points (the screenshot is not blank there), and the screenshots are saved in out/live_view/
-(docs/figures/ holds copies of them)."""
+DOM), the plot shows points (the screenshot is not blank there), the live k is shown with its two intervals, the
+repeatability (the fit's 95 %) and the expanded uncertainty U (GUM, 95 %), in numbers and drawn, and E_n against the
+model, and the screenshots are saved in out/live_view/ (docs/figures/ holds copies of them)."""
 from __future__ import annotations
 
+import json
+import math
+import re
 import shutil
 import time
 
 import numpy as np
+import pytest
 from matplotlib import image
 
 from crane_stiffness.launcher.rosrun import installed_config
@@ -47,6 +52,16 @@ def test_page_shows_the_estimators_estimate_and_points(install_tree, rclpy_conte
                                      " t.rows[i + 1].cells[1].textContent]); })()")
             # the whole page: where the crane is depends on the fonts and on what the page shows (the side column
             # can wrap under the plot, the crane then lies below the window)
+            # k with both intervals: the numbers (U and E_n from the estimator's status) and the drawing
+            browser.wait_for("document.getElementById('U-loading').dataset.value && "
+                             "document.getElementById('En-loading').dataset.value && "
+                             "document.getElementById('kint').dataset.drawn === 'intervals'")
+            intervals = browser.evaluate(
+                "(() => { const v = (id) => document.getElementById(id).dataset.value;"
+                " return [v('ki-loading'), v('rep-loading'), v('U-loading'), v('Uint-loading'), v('En-loading'),"
+                " v('ki-model'), v('U-model'), document.getElementById('U-loading').textContent,"
+                " document.getElementById('kint').dataset.intervals,"
+                " document.getElementById('calibration').textContent]; })()")
             png = browser.screenshot(tmp_path / 'page.png', full_page=True).read_bytes()
             plot, crane = browser.box('#xy'), browser.box('#scene')
         finally:
@@ -57,6 +72,7 @@ def test_page_shows_the_estimators_estimate_and_points(install_tree, rclpy_conte
         while shown[1] and float(shown[1]) not in watcher.values and time.monotonic() < deadline:
             time.sleep(0.05)
     value, stamp, text, level, channels = shown
+    _check_intervals(intervals, watcher)
     assert [row[0] for row in table] == [f'wire_{i}' for i in range(1, 7)]
     for name, slack, tension, shown_name, shown_value, shown_text in table:  # the cells of the same message, or
         assert shown_name == name  # of one 0.1 s later (the page draws at most 10 times a second)
@@ -72,3 +88,27 @@ def test_page_shows_the_estimators_estimate_and_points(install_tree, rclpy_conte
     SHOTS.mkdir(parents=True, exist_ok=True)
     shutil.copy(tmp_path / 'page.png', SHOTS / 'page.png')
     image.imsave(SHOTS / 'crane.png', crane_pixels)
+
+
+def _check_intervals(intervals: list, watcher) -> None:
+    """The page's k, its repeatability and its U: the estimator's numbers, two intervals of visibly different width
+    (U counts the sensors' calibrations: about 1.5 % of k; the repeatability of thousands of pairs, a few hundredths
+    of a percent), E_n within the model's and the measurement's U."""
+    k, rep, big_u, u_interval, en, model, model_u, u_text, drawn, calibration = intervals
+    k, big_u, en, model, model_u = map(float, (k, big_u, en, model, model_u))
+    rep_low, rep_high = map(float, rep.split(','))
+    u_low, u_high = map(float, u_interval.split(','))
+    assert rep_low < k < rep_high and u_low < rep_low and rep_high < u_high
+    assert u_low == pytest.approx(k - big_u) and u_high == pytest.approx(k + big_u)
+    assert 0.005 * k < big_u < 0.05 * k, big_u  # the load cell's 1 % (k = 2) alone is 0.5 % of k
+    assert big_u > 10 * (rep_high - rep_low) / 2
+    assert abs(en) <= 1.0 and 0.03 * model < model_u < 0.1 * model  # the model's U: ~6 %, mostly the wires' E
+    assert en == pytest.approx((k - model) / math.hypot(big_u, model_u), abs=0.05)  # (k from a later batch)
+    assert 'k = 1.9' in u_text and 'declared calibrations' in calibration
+    # the estimator stated that U in a status (4 significant digits)
+    stated = {float(m) for s in watcher.status_history for _, text in s.values()
+              for m in re.findall(r'U = ([0-9.]+) N/m', text)}
+    assert float(f'{big_u:.4g}') in stated, (big_u, sorted(stated)[:5])
+    pixels = json.loads(drawn)
+    assert pixels['loading']['U_px'] > 5 * pixels['loading']['repeatability_px'], pixels
+    assert pixels['loading']['U_px'] > 20 and pixels['model']['U_px'] > pixels['loading']['U_px'], pixels

@@ -247,7 +247,9 @@ def test_six_axis_page_leads_with_the_6x6_in_a_stable_layout_and_no_text_covers_
                                        "[...r.cells].map((c) => c.textContent))")
                 assert [r[0] for r in row] == ['u_x', 'u_y', 'u_z', 'θ_x', 'θ_y', 'θ_z']
                 assert float(row[1][1]) == pytest.approx(measured[1, 1], rel=5e-4)
-                assert row[1][4] == f'{100 * (measured[1, 1] / tangent[1, 1] - 1.0):.2f} %'
+                assert row[1][5] == f'{100 * (measured[1, 1] / tangent[1, 1] - 1.0):.2f} %'
+                # the statistical interval is the repeatability; no U on the wire for the 6x6 yet: said, not blank
+                assert ' .. ' in row[1][2] and row[1][3] == 'not stated', row[1]
                 assert check_texts(browser) > 100
                 browser.screenshot(tmp_path / f'six_axis_{width}.png', full_page=True)
             finally:

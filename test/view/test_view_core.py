@@ -153,13 +153,15 @@ def test_every_derived_channel_has_a_schema_foxglove_apps_parse_and_its_messages
                        tensions=[8.6, 0.0, 13.7, 3.5, 3.5, 13.7], force=(0.0, 3.2, 0.0), stamp_s=1.0)
     messages = {'xy': buf.message(rows, 52_000.0), 'fit_lines': plot.fit_lines_message(rows),
                 'prediction': plot.prediction_message(52_000.0, rows, (0.0, 1e-4)),
-                'estimate': plot.estimate_message(values),
+                'estimate': plot.estimate_message(values, {'loading': {
+                    'U': '798.8', 'coverage_factor': '1.96', 'En': '-0.01', 'prediction_U': '3284',
+                    'statistical_only': 'false'}}),
                 'status': plot.status_message([('loading', 0, 'OK k = 50000'), ('input', 1, 'late')]),
                 'wires': plot.wires_message(['wire_1', 'wire_2'], [0.5, 0.5], [8.6, 0.0], 1e-6),
                 'scene': scene_update(geometry, state, 200.0, np.diag([1.9e-5, 1.9e-5, 4.9e-7])),
                 'stiffness6': stiffness6.stiffness6_message(
                     np.r_[np.eye(6).ravel() * 2.0, np.eye(6).ravel(), np.eye(6).ravel() * 3.0], np.eye(6),
-                    (1, 'condition 1e4', {'k2_ci95': '-1 .. 1'}))}
+                    (1, 'condition 1e4', {'k2_ci95': '-1 .. 1'}), np.full((6, 6), 0.5))}
     assert set(messages) == set(schemas)
     for name, message in messages.items():
         decoded = json.loads(json.dumps(message, allow_nan=False))
@@ -184,3 +186,31 @@ def test_the_page_is_told_the_kind_of_run_in_its_config_and_a_status_names_the_f
                                  ('mz', 'N·m/rad'))
     assert (status['axis'], status['unit'], status['level_name']) == ('mz', 'N·m/rad', 'OK')
     assert plot.status_message([])['axis'] == ''
+
+
+def test_the_estimate_channel_carries_each_branch_U_and_E_n_from_its_status():
+    """U, k ∓ U and E_n come from the branch's status (its key/values), beside the values' repeatability; a
+    branch whose status states none has them null, and statistical_only says whether U counts no calibration."""
+    from crane_stiffness.estimation.live_status import VALUE_FIELDS
+    from crane_stiffness.view import stiffness6
+    row = dict.fromkeys(VALUE_FIELDS, math.nan)
+    row.update(stiffness=53792.9, ci95_low=53782.1, ci95_high=53803.7, prediction=53793.5)
+    values = [row[f] for f in VALUE_FIELDS] * 2
+    statuses = [('/stiffness_estimator: loading', {'U': '798.8', 'coverage_factor': '1.96', 'En': '-0.000183',
+                                                  'prediction_U': '3283.8', 'statistical_only': 'false'}),
+                ('/stiffness_estimator: unloading', {'U': '12.1', 'statistical_only': 'true', 'En': 'nan'}),
+                ('/stiffness_estimator: input', {'pairs': '10'})]
+    message = plot.estimate_message(values, plot.branch_uncertainty(statuses))
+    loading, unloading = message['loading'], message['unloading']
+    assert loading['U'] == 798.8 and loading['U_low'] == pytest.approx(53792.9 - 798.8)
+    assert loading['U_high'] == pytest.approx(53792.9 + 798.8) and loading['coverage_factor'] == 1.96
+    assert loading['En'] == -0.000183 and loading['prediction_U'] == 3283.8 and loading['statistical_only'] is False
+    assert loading['ci95_low'] == 53782.1  # the repeatability, unchanged beside U
+    assert unloading['U'] == 12.1 and unloading['En'] is None and unloading['statistical_only'] is True
+    bare = plot.estimate_message(values)  # no status yet
+    assert bare['loading']['U'] is None and bare['loading']['U_low'] is None and not bare['loading']['statistical_only']
+    # the 6x6 cells: U when one is given (none on the wire yet), null otherwise
+    k6 = np.r_[np.eye(6).ravel() * 2.0, np.eye(6).ravel(), np.eye(6).ravel() * 3.0]
+    cell = stiffness6.stiffness6_message(k6, np.eye(6), None, np.full((6, 6), 0.25))['rows'][0]['cells'][0]
+    assert (cell['U'], cell['U_low'], cell['U_high']) == (0.25, 1.75, 2.25)
+    assert stiffness6.stiffness6_message(k6, np.eye(6), None)['rows'][0]['cells'][0]['U'] is None

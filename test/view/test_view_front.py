@@ -4,6 +4,7 @@ with the token, refused without), an unmasked frame and an over-long one (the co
 a request that is no handshake (400); and its frame helpers on known bytes."""
 from __future__ import annotations
 
+import re
 import socket
 import struct
 from typing import Iterator
@@ -26,8 +27,8 @@ def server() -> Iterator[tuple[FoxgloveServer, list[str], list[str]]]:
     calls: list[str] = []
     warnings: list[str] = []
 
-    def tare() -> tuple[bool, str]:
-        calls.append('tare')
+    def tare(caller: str) -> tuple[bool, str]:
+        calls.append(caller)
         return True, 'tared'
     fs = FoxgloveServer('127.0.0.1', 0, {}, {'/live_view/xy': ('X', {'type': 'object'})}, {SERVICE: tare},
                         lambda *_: None, lambda *_: None, warnings.append, AccessPolicy('127.0.0.1'))
@@ -55,7 +56,8 @@ def test_a_fragmented_call_is_read_whole(server):
             assert client.responses[9] == ('json', b'{"success": true, "message": "tared"}')
         else:
             assert 'no token' in client.failures[9]
-    assert calls == ['tare']
+    # the handler is told who calls: the client's address and its Origin (this client sends none)
+    assert len(calls) == 1 and re.fullmatch(r'127\.0\.0\.1:\d+ \(Origin none\)', calls[0]), calls
 
 
 def test_an_unmasked_or_overlong_frame_closes_the_connection(server):
@@ -79,7 +81,7 @@ def test_an_unmasked_or_overlong_frame_closes_the_connection(server):
         assert client.call(SERVICE, 'json', b'{}', 4)[0] == 'json'
     finally:
         client.close()
-    assert calls == ['tare']
+    assert len(calls) == 1 and calls[0].startswith('127.0.0.1:')
 
 
 def test_no_handshake_is_a_bad_request(server):

@@ -8,7 +8,7 @@ const CHANNELS = ['xy', 'fit_lines', 'prediction', 'estimate', 'status', 'wires'
 const state = { messages: 0, lastCount: 0, data: {}, dirty: new Set(), drawnAt: 0, run: null, k6Row: 1 };
 // The boxes of the text drawn on each canvas, in its pixels ({text, left, top, width, height}), as the drawing code
 // placed it: what a test reads to check that no two texts of the page overlap (the DOM's text it reads itself).
-window.__textBoxes = { xy: [], scene: [] };
+window.__textBoxes = { xy: [], scene: [], kint: [] };
 const WIRE_LABEL = /^wire_\d/;
 // What each channel changes on the page: only that part is drawn again (the rest keeps its pixels and DOM).
 const PART = { xy: 'plot', fit_lines: 'plot', prediction: 'plot', estimate: 'text', status: 'text', wires: 'wires',
@@ -55,8 +55,9 @@ function buildTables() {
   select.value = String(state.k6Row);
   select.onchange = () => { state.k6Row = Number(select.value); state.dirty.add('stiffness6'); };
   document.getElementById('k6-row-table').innerHTML =
-    '<tr><th>displacement</th><th>K measured</th><th>95 % interval</th><th>model tangent</th><th>measured / tangent − 1</th></tr>' +
-    disp.map((d) => `<tr><td>${d}</td><td>–</td><td>–</td><td>–</td><td>–</td></tr>`).join('');
+    '<tr><th>displacement</th><th>K measured</th><th>repeatability 95 %</th><th>U (95 %)</th><th>model tangent</th>' +
+    '<th>measured / tangent − 1</th></tr>' +
+    disp.map((d) => `<tr><td>${d}</td><td>–</td><td>–</td><td>–</td><td>–</td><td>–</td></tr>`).join('');
   document.getElementById('wires').innerHTML = '<tr><th>wire</th><th>tension</th><th>length</th></tr>' +
     [1, 2, 3, 4, 5, 6].map((i) => `<tr><td>wire_${i}</td><td>–</td><td>–</td></tr>`).join('');
 }
@@ -137,6 +138,7 @@ function updateText() {
     document.getElementById('k-prediction').textContent = p === null ? '–' : `${fmt(p, 6)} ${unit}`;
     const rel = est.loading.relative_error;
     document.getElementById('rel-error').textContent = rel === null ? '' : `loading ${(100 * rel).toFixed(2)} %`;
+    updateIntervals(est, unit);
   }
   const st = state.data.status;
   if (st) {
@@ -185,7 +187,8 @@ function updateStiffness6() {
     td.dataset.value = c.measured === null ? '' : String(c.measured);
     td.dataset.relative = c.relative_error === null ? '' : String(c.relative_error);
     td.title = `${row.load}/${c.displacement}: ${c.measured === null ? '–' : c.measured} ` +
-      `[${c.ci95_low === null ? '–' : c.ci95_low}, ${c.ci95_high === null ? '–' : c.ci95_high}], tangent ${c.tangent}`;
+      `[${c.ci95_low === null ? '–' : c.ci95_low}, ${c.ci95_high === null ? '–' : c.ci95_high}] (repeatability)` +
+      (c.U === null || c.U === undefined ? '' : `, ± ${c.U} (U, 95 %)`) + `, tangent ${c.tangent}`;
     const cls = c.model_zero ? 'k6 model-zero' : 'k6';
     if (td.className !== cls) td.className = cls;
     td.style.background = c.model_zero || c.relative_error === null ? '' : diverging(c.relative_error);
@@ -196,7 +199,7 @@ function updateStiffness6() {
   badge.dataset.level = k6.level;
   const k2 = k6.k2;
   document.getElementById('stiffness6-k2').textContent = k6.fit ? `K2 = ${compact(k2.measured)} ` +
-    `[${compact(k2.ci95_low)}, ${compact(k2.ci95_high)}] N/rad, model tangent ${compact(k2.tangent)}` :
+    `[${compact(k2.ci95_low)}, ${compact(k2.ci95_high)}] N/rad (repeatability), model tangent ${compact(k2.tangent)}` :
     `K2: waiting for the 6×6 fit… (model tangent ${compact(k2.tangent)} N/rad)`;
   document.getElementById('stiffness6-message').textContent = k6.message || 'waiting for the six-axis estimator…';
   const row = k6.rows[state.k6Row], rowTable = document.getElementById('k6-row-table');
@@ -204,8 +207,12 @@ function updateStiffness6() {
     const cells = rowTable.rows[j + 1].cells;
     cells[1].textContent = compact(c.measured);
     cells[2].textContent = c.ci95_low === null ? '–' : `${compact(c.ci95_low)} .. ${compact(c.ci95_high)}`;
-    cells[3].textContent = compact(c.tangent);
-    cells[4].textContent = c.model_zero ? 'model: 0' :
+    // U when the six-axis estimator states it (the field on the channel); until then said so, never a blank
+    const hasU = c.U !== null && c.U !== undefined;
+    cells[3].textContent = hasU ? `± ${compact(c.U)}` : (c.measured === null ? '–' : 'not stated');
+    cells[3].dataset.value = hasU ? `${c.U_low},${c.U_high}` : '';
+    cells[4].textContent = compact(c.tangent);
+    cells[5].textContent = c.model_zero ? 'model: 0' :
       (c.relative_error === null ? '–' : `${(100 * c.relative_error).toFixed(2)} %`);
   });
 }
@@ -231,6 +238,103 @@ function canvasText(ctx, id, text, x, y, align = 'left', vertical = false) {
 function overlaps(a, b, gap = 0) {
   return a.left < b.left + b.width + gap && b.left < a.left + a.width + gap &&
     a.top < b.top + b.height + gap && b.top < a.top + a.height + gap;
+}
+
+// The intervals table under the plot: each branch's k, its repeatability (the fit's 95 % interval), its expanded
+// uncertainty U (GUM, 95 %) and k ± U, E_n against the model; the model's prediction with its own U.
+function updateIntervals(est, unit) {
+  const set = (id, text, value) => {
+    const el = document.getElementById(id);
+    el.textContent = text;
+    el.dataset.value = value === null || value === undefined ? '' : String(value);
+  };
+  for (const b of ['loading', 'unloading']) {
+    const e = est[b];
+    set(`ki-${b}`, e.stiffness === null ? '–' : `${fmt(e.stiffness, 6)} ${unit}`, e.stiffness);
+    set(`rep-${b}`, e.ci95_low === null ? '–' : `${fmt(e.ci95_low, 6)} .. ${fmt(e.ci95_high, 6)}`,
+      e.ci95_low === null ? null : `${e.ci95_low},${e.ci95_high}`);
+    set(`U-${b}`, e.U === null ? '–' : `± ${fmt(e.U, 4)} (k = ${fmt(e.coverage_factor, 3)})`, e.U);
+    set(`Uint-${b}`, e.U_low === null ? '–' : `${fmt(e.U_low, 6)} .. ${fmt(e.U_high, 6)}`,
+      e.U_low === null ? null : `${e.U_low},${e.U_high}`);
+    const en = document.getElementById(`En-${b}`);
+    set(`En-${b}`, e.En === null ? '–' : `${e.En >= 0 ? '+' : '−'}${Math.abs(e.En).toFixed(2)}`, e.En);
+    en.className = e.En === null ? '' : (Math.abs(e.En) > 1 ? 'en-far' : 'en-agree');
+  }
+  const p = est.loading.prediction, pu = est.loading.prediction_U;
+  set('ki-model', p === null ? '–' : `${fmt(p, 6)} ${unit}`, p);
+  set('U-model', pu === null ? '–' : `± ${fmt(pu, 4)}`, pu);
+  set('Uint-model', p === null || pu === null ? '–' : `${fmt(p - pu, 6)} .. ${fmt(p + pu, 6)}`,
+    p === null || pu === null ? null : `${p - pu},${p + pu}`);
+  const l = est.loading;
+  document.getElementById('calibration').textContent = l.U === null ? 'U: waiting for the estimator\'s status…' :
+    (l.statistical_only ? 'U is statistical only: no calibration declared by the sensors (their calibration.* ' +
+      'parameters), so it is the fit\'s alone.' :
+      'U counts the fit and the sensors\' declared calibrations (load cell and LVDT certificates); |E_n| <= 1: ' +
+      'the measurement agrees with the model within both U.');
+  drawIntervals(est, unit);
+}
+
+// The intervals drawn on one scale: per branch a dot at k, a thick bar over its repeatability interval and a thin
+// line with end ticks over k ± U; the model's prediction ± its U. The canvas says what it drew (in pixels) for tests.
+function drawIntervals(est, unit) {
+  const canvas = document.getElementById('kint');
+  const ctx = canvas.getContext('2d');
+  const W = canvas.width, H = canvas.height, m = { l: 90, r: 20, t: 10, b: 26 };
+  ctx.clearRect(0, 0, W, H);
+  window.__textBoxes.kint = [];
+  ctx.font = '12px sans-serif';
+  const p = est.loading.prediction, pu = est.loading.prediction_U;
+  const rows = [['loading', '#1f77b4', est.loading], ['unloading', '#e07b00', est.unloading]]
+    .filter(([, , e]) => e.stiffness !== null)
+    .map(([name, color, e]) => ({ name, color, k: e.stiffness, rep: [e.ci95_low, e.ci95_high],
+      u: e.U === null ? null : [e.U_low, e.U_high] }));
+  if (p !== null) rows.push({ name: 'model', color: '#2a9d2a', k: p, rep: null, u: pu === null ? null : [p - pu, p + pu] });
+  if (!rows.length) {
+    ctx.fillStyle = '#333';
+    canvasText(ctx, 'kint', 'waiting for an estimate…', W / 2, H / 2, 'center');
+    canvas.dataset.drawn = '';
+    return;
+  }
+  let [lo, hi] = [Infinity, -Infinity];
+  for (const r of rows) for (const v of [r.k, ...(r.u || []), ...(r.rep || [])]) {
+    if (v !== null) { lo = Math.min(lo, v); hi = Math.max(hi, v); }
+  }
+  const pad = (hi - lo) * 0.08 || Math.abs(hi) * 1e-3 || 1;
+  lo -= pad; hi += pad;
+  const sx = (v) => m.l + (v - lo) / (hi - lo) * (W - m.l - m.r);
+  const rowH = (H - m.t - m.b) / 3;
+  ctx.strokeStyle = '#ccc'; ctx.lineWidth = 1;
+  ctx.beginPath(); ctx.moveTo(m.l, H - m.b); ctx.lineTo(W - m.r, H - m.b); ctx.stroke();
+  ctx.fillStyle = '#333';
+  for (let i = 0; i <= 4; i++) {
+    const v = lo + (hi - lo) * i / 4;
+    canvasText(ctx, 'kint', fmt(v, 6), sx(v), H - 8, i === 0 ? 'left' : i === 4 ? 'right' : 'center');
+  }
+  const drawn = {};
+  rows.forEach((r, i) => {
+    const y = m.t + rowH * (i + 0.5);
+    ctx.fillStyle = r.color;
+    canvasText(ctx, 'kint', r.name, 6, y + 4);
+    ctx.strokeStyle = r.color; ctx.fillStyle = r.color;
+    const d = { k: r.k };
+    if (r.u) {  // k ± U: a thin line with end ticks
+      ctx.lineWidth = 1.5; ctx.beginPath();
+      ctx.moveTo(sx(r.u[0]), y); ctx.lineTo(sx(r.u[1]), y);
+      for (const v of r.u) { ctx.moveTo(sx(v), y - 7); ctx.lineTo(sx(v), y + 7); }
+      ctx.stroke();
+      d.U_px = sx(r.u[1]) - sx(r.u[0]);
+    }
+    if (r.rep && r.rep[0] !== null) {  // the repeatability: a thick bar (at least 2 px, so it shows)
+      const a = sx(r.rep[0]), b = sx(r.rep[1]);
+      ctx.globalAlpha = 0.6; ctx.fillRect(Math.min(a, (a + b) / 2 - 1), y - 4, Math.max(b - a, 2), 8);
+      ctx.globalAlpha = 1;
+      d.repeatability_px = b - a;
+    }
+    ctx.beginPath(); ctx.arc(sx(r.k), y, 3, 0, 2 * Math.PI); ctx.fill();
+    drawn[r.name] = d;
+  });
+  canvas.dataset.drawn = 'intervals';
+  canvas.dataset.intervals = JSON.stringify(drawn);
 }
 
 function drawPlot() {
@@ -280,6 +384,20 @@ function drawPlot() {
       l.line.forEach((p, i) => (i ? ctx.lineTo(sx(p.x), sy(p.y)) : ctx.moveTo(sx(p.x), sy(p.y))));
       ctx.stroke();
     }
+  }
+  const fan = lines.loading, eL = (state.data.estimate || {}).loading;
+  if (fan && fan.line.length && eL && eL.U !== null && eL.stiffness !== null) {
+    // k ± U of the loading branch: two dotted lines through its fit's centroid (the repeatability is the shaded band)
+    const xc = fan.x_mean, yc = fan.stiffness * fan.x_mean + fan.intercept;
+    const xs = [fan.line[0].x, fan.line[fan.line.length - 1].x];
+    ctx.save();
+    ctx.beginPath(); ctx.rect(m.l, m.t, W - m.l - m.r, H - m.t - m.b); ctx.clip();
+    ctx.strokeStyle = colors.loading; ctx.setLineDash([2, 4]); ctx.lineWidth = 1.5;
+    for (const k of [eL.stiffness - eL.U, eL.stiffness + eL.U]) {
+      ctx.beginPath(); ctx.moveTo(sx(xs[0]), sy(yc + k * (xs[0] - xc))); ctx.lineTo(sx(xs[1]), sy(yc + k * (xs[1] - xc)));
+      ctx.stroke();
+    }
+    ctx.restore();
   }
   if (pred.line.length) {
     ctx.save();
