@@ -5,7 +5,12 @@ of many seeded sessions of one set-up: ``config/campaign_coverage.yaml``, ``conf
 The quantities: for the one-axis series, the loading and the unloading stiffness of each series against the model's
 exact tangent at rest (in the LVDT's reading units, as the campaign's rows); for the series full, each of the 36
 entries of K against the tangent and of C = K⁻¹ against the tangent's inverse, and the coupling K2 against the
-tangent's. Each session counts once per quantity: a session without that interval (no fit) is left out of its total.
+tangent's. With the six-axis analysis' measurement uncertainty (full6.json ``uncertainty``), the same for the
+expanded (GUM) intervals value ± U of every entry ('U K[fx,ux]', …, 'U K2'), pooled over the 36 entries of K and
+of C ('U K (36 pooled)'; the statistical-only intervals beside them, 'stat …', and the JCGM 102 Monte Carlo's,
+'MC …': a pooled count's 36 entries of one session share its calibration errors, so its binomial interval is too
+narrow and a per-entry count is the exact one). Each session counts once per quantity: a session without that
+interval (no fit) is left out of its total.
 The fraction's interval is Clopper–Pearson's (exact, two-sided 95 %): a fraction whose interval leaves out 0.95 is
 a departure to explain. Reads the analyses ``campaign analyze`` wrote; no ROS.
 """
@@ -97,7 +102,51 @@ def campaign_coverage(rows: Sequence[SessionRow], full: Sequence[Full6Row]) -> l
                         f'{name}[{DEFLECTIONS[i]},{AXES[j]}]'
                     _count(counts, label, covers[i][j])
         _count(counts, 'K2', (analysis.get('k2') or {}).get('covers_tangent'))
+        _count_gum(counts, analysis)
     return [Coverage(q, c, n) for q, (c, n) in counts.items()]
+
+
+def _inside(interval: Any, truth: Any) -> list[list[bool]] | None:
+    """Entry by entry, whether [low, high] (two 6×6 lists, or two numbers) holds ``truth``; None when missing."""
+    import numpy as np
+    if not interval or truth is None:
+        return None
+    low, high, t = (np.asarray(x, dtype=float) for x in (interval[0], interval[1], truth))
+    if not (np.all(np.isfinite(low)) and np.all(np.isfinite(high))):
+        return None
+    return ((low <= t) & (t <= high)).tolist()
+
+
+def _count_gum(counts: dict[str, list[int]], analysis: dict[str, Any]) -> None:
+    """The six-axis session's GUM intervals (full6.json's ``uncertainty``, crane_stiffness.analysis.full6_uncertainty)
+    against the tangent: 'U K[..]' per entry of K (the expanded interval value ± U), 'U C[..]', 'U K2'; pooled over
+    the 36 entries 'U K (36 pooled)', 'U C (36 pooled)', the statistical-only intervals 'stat K (36 pooled)',
+    'stat C (36 pooled)', 'stat K2', and the Monte Carlo's (JCGM 102) 'MC K (36 pooled)', 'MC C (36 pooled)'."""
+    u = analysis.get('uncertainty') or {}
+    reference = analysis.get('reference') or {}
+    if not u or not reference:
+        return
+    k2_truth = (analysis.get('k2') or {}).get('tangent')
+    for name, key, truth in (('K', 'stiffness', reference.get('tangent')), ('C', 'compliance',
+                                                                           reference.get('compliance'))):
+        entries = u.get(key) or {}
+        for kind, interval in (('U', entries.get('interval')), ('stat', entries.get('statistical_interval')),
+                               ('MC', (entries.get('monte_carlo') or {}).get('interval'))):
+            covers = _inside(interval, truth)
+            if covers is None:
+                continue
+            for i in range(6):
+                for j in range(6):
+                    if kind == 'U':
+                        label = f'U {name}[{AXES[i]},{DEFLECTIONS[j]}]' if name == 'K' else \
+                            f'U {name}[{DEFLECTIONS[i]},{AXES[j]}]'
+                        _count(counts, label, covers[i][j])
+                    _count(counts, f'{kind} {name} (36 pooled)', covers[i][j])
+    k2 = u.get('k2') or {}
+    for kind, interval in (('U', k2.get('interval')), ('stat', k2.get('statistical_interval'))):
+        covers = _inside(interval, k2_truth)
+        if covers is not None:
+            _count(counts, f'{kind} K2', covers)
 
 
 def _float(value: Any) -> float:

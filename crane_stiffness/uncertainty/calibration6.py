@@ -50,8 +50,8 @@ from crane_stiffness.uncertainty.measurement import stated_component
 _DISTRIBUTION = {'normal': 'normal', 'rectangular': 'rectangular', 'triangular': 'triangular', 'u_shaped': 'arcsine'}
 _AXES = ('fx', 'fy', 'fz', 'mx', 'my', 'mz')
 _XYZ = ('x', 'y', 'z')
-#: Fixed-point iterations inverting the nonlinearity (its slope is ~1e-2 at most: two leave 1e-6 of it).
-_NONLINEAR_ITERATIONS = 2
+#: Fixed-point iterations inverting the nonlinearity (its slope 3L is ~1e-2 at most: four leave ~1e-10 of it).
+_NONLINEAR_ITERATIONS = 4
 
 
 def _quantity(name: str, stated: Stated, index: int, scale: float) -> InputQuantity:
