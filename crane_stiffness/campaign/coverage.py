@@ -158,7 +158,8 @@ def _float(value: Any) -> float:
 
 def write_coverage(coverage: Sequence[Coverage], target: Path, formats: Sequence[str] = ('png',)) -> list[str]:
     """``coverage.csv`` and the figure ``coverage.<fmt>`` (each quantity's fraction with its interval against
-    0.95) in ``target``; the files written."""
+    0.95) in ``target``, and for a six-axis study's GUM intervals ``coverage_gum.<fmt>``
+    (crane_stiffness.campaign.full_figures.gum_coverage_figure); the files written."""
     target.mkdir(parents=True, exist_ok=True)
     path = target / 'coverage.csv'
     with open(path, 'w', newline='') as f:
@@ -171,6 +172,10 @@ def write_coverage(coverage: Sequence[Coverage], target: Path, formats: Sequence
     files = [str(path)]
     if coverage:
         files += _figure(coverage, target, formats)
+    if any(c.quantity.startswith('U K[') for c in coverage):  # a six-axis study's GUM intervals
+        from crane_stiffness.campaign.full_figures import gum_coverage_figure
+        files += gum_coverage_figure([(c.quantity, c.covered, c.total, *c.interval) for c in coverage], target,
+                                     formats)
     return files
 
 
