@@ -71,3 +71,36 @@ def test_a_calibration_component_dropped_from_the_budget_shows_in_the_coverage(s
     covered, k2_covered, _ = _coverage(study, lc, pose)
     failing = [k for k in [*covered.ravel(), k2_covered] if binomial_interval(int(k), SESSIONS)[1] < 0.95]
     assert failing, covered
+
+
+def test_campaign_coverage_counts_the_gum_intervals_of_full6_json(study, tmp_path):
+    """campaign analyze's coverage (crane_stiffness.campaign.coverage) reads the six-axis analyses' ``uncertainty``
+    and counts what a direct check of the same sessions counts; it draws the GUM figure."""
+    import json
+
+    from crane_stiffness.campaign.coverage import campaign_coverage, write_coverage
+    from crane_stiffness.campaign.rows import Full6Row
+    from crane_stiffness.uncertainty.budget import json_ready
+    tangent, k2, means = study
+    lc, pose = declared_calibrations()
+    calibration = six_axis_inputs(lc, pose)
+    rows, direct, stat_k2 = [], np.zeros((6, 6), dtype=int), 0
+    for n, (w, d) in enumerate(means[:20]):
+        r = matrix_uncertainty(w, d, calibration, trials=200, seed=n)
+        direct += r.stiffness.covers(tangent)
+        stat_k2 += int(r.k2.statistical_covers(k2))
+        folder = tmp_path / f's{n}'
+        folder.mkdir()
+        (folder / 'full6.json').write_text(json.dumps({
+            'uncertainty': json_ready(r.to_dict(covariance=False)),
+            'reference': {'tangent': tangent.tolist(), 'compliance': np.linalg.inv(tangent).tolist()},
+            'k2': {'tangent': k2}, 'comparison': None}))
+        rows.append(Full6Row(f's{n}', 50.0, 0.5, 0.5, n, 'OK', [], [], np.nan, np.nan, np.nan, k2, k2, 0, np.nan, 0,
+                             str(folder)))
+    coverage = {c.quantity: c for c in campaign_coverage([], rows)}
+    assert coverage['U K[fx,ux]'].total == 20 and coverage['U K[fx,ux]'].covered == direct[0, 0]
+    assert coverage['U K[mz,thz]'].covered == direct[5, 5]
+    assert coverage['U K (36 pooled)'].covered == direct.sum() and coverage['U K (36 pooled)'].total == 720
+    assert coverage['stat K2'].covered == stat_k2 and 'MC C (36 pooled)' in coverage
+    files = write_coverage(list(coverage.values()), tmp_path / 'campaign')
+    assert any(f.endswith('coverage_gum.png') for f in files)
