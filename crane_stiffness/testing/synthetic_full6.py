@@ -12,6 +12,7 @@ deflection the true one plus the pose sensor's bias and white noise. Units N, NÂ
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -92,10 +93,12 @@ def synthetic_pairs(truth: ModelResponses, *, noise: NoiseLevels = LAB_NOISE, se
 LOAD_CELL_FULL_SCALE = (40.0, 40.0, 120.0, 2.0, 2.0, 2.0)
 #: Coloured noise of the synthetic GUM sessions, per channel: AR(1) std, its correlation time [s], 1/f std and
 #: random-walk drift per sqrt(s), for the wrench [N, NÂ·m] and the deflection [m, rad].
-GUM_WRENCH_NOISE = {'ar1_std': [0.01] * 3 + [5e-4] * 3, 'ar1_tau_s': 0.1, 'flicker_std': [0.005] * 3 + [2.5e-4] * 3,
-                    'random_walk': [0.002] * 3 + [1e-4] * 3}
-GUM_POSE_NOISE = {'ar1_std': [5e-7] * 3 + [5e-6] * 3, 'ar1_tau_s': 0.1, 'flicker_std': [2e-7] * 3 + [2e-6] * 3,
-                  'random_walk': [2e-8] * 3 + [2e-7] * 3}
+GUM_WRENCH_NOISE: dict[str, Any] = {
+    'ar1_std': [0.01] * 3 + [5e-4] * 3, 'ar1_tau_s': 0.1, 'flicker_std': [0.005] * 3 + [2.5e-4] * 3,
+    'random_walk': [0.002] * 3 + [1e-4] * 3}
+GUM_POSE_NOISE: dict[str, Any] = {
+    'ar1_std': [5e-7] * 3 + [5e-6] * 3, 'ar1_tau_s': 0.1, 'flicker_std': [2e-7] * 3 + [2e-6] * 3,
+    'random_walk': [2e-8] * 3 + [2e-7] * 3}
 
 
 def declared_calibrations() -> tuple[dict[str, object], dict[str, object]]:

@@ -292,11 +292,13 @@ def matrix_uncertainty(wrench: ArrayLike, deflection: ArrayLike, calibration: Ca
         cov_b_c = (jac * (h / step) ** 2) @ jac.T
     else:
         cov_b_c = np.zeros((36, 36))
-    k_matrix = np.linalg.inv(c)
+    k_matrix = np.asarray(np.linalg.inv(c), dtype=np.float64)
     g = -np.kron(k_matrix, k_matrix.T)
     cov_a_k, cov_b_k = g @ cov_a_c @ g.T, g @ cov_b_c @ g.T
     k2g = k2_gradient()
-    mc_k = mc_c = mc_k2 = None
+    mc_k: NDArray[np.float64] | None = None
+    mc_c: NDArray[np.float64] | None = None
+    mc_k2: NDArray[np.float64] | None = None
     cov_k_mc = cov_c_mc = None
     if trials:
         rng = np.random.default_rng(seed)
@@ -309,7 +311,7 @@ def matrix_uncertainty(wrench: ArrayLike, deflection: ArrayLike, calibration: Ca
             cw, cd = calibration.correct(x, w, d)
             vec_c = vec_c + (_refit(cw, cd).reshape(trials, 36) - _refit(w[None], d[None]).reshape(1, 36))
         mc_c = vec_c
-        mc_k = np.linalg.inv(vec_c.reshape(trials, 6, 6)).reshape(trials, 36)
+        mc_k = np.asarray(np.linalg.inv(vec_c.reshape(trials, 6, 6)), dtype=np.float64).reshape(trials, 36)
         mc_k2 = (mc_k @ k2g)[:, None]
         cov_k_mc, cov_c_mc = np.cov(mc_k, rowvar=False), np.cov(mc_c, rowvar=False)
     vec_k = k_matrix.reshape(36)
