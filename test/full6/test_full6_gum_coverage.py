@@ -78,7 +78,7 @@ def test_campaign_coverage_counts_the_gum_intervals_of_full6_json(study, tmp_pat
     and counts what a direct check of the same sessions counts; it draws the GUM figure."""
     import json
 
-    from crane_stiffness.campaign.coverage import campaign_coverage, write_coverage
+    from crane_stiffness.campaign.coverage import campaign_coverage, pooled_gum_coverage, write_coverage
     from crane_stiffness.campaign.rows import Full6Row
     from crane_stiffness.uncertainty.budget import json_ready
     tangent, k2, means = study
@@ -100,7 +100,9 @@ def test_campaign_coverage_counts_the_gum_intervals_of_full6_json(study, tmp_pat
     coverage = {c.quantity: c for c in campaign_coverage([], rows)}
     assert coverage['U K[fx,ux]'].total == 20 and coverage['U K[fx,ux]'].covered == direct[0, 0]
     assert coverage['U K[mz,thz]'].covered == direct[5, 5]
-    assert coverage['U K (36 pooled)'].covered == direct.sum() and coverage['U K (36 pooled)'].total == 720
-    assert coverage['stat K2'].covered == stat_k2 and 'MC C (36 pooled)' in coverage
-    files = write_coverage(list(coverage.values()), tmp_path / 'campaign')
-    assert any(f.endswith('coverage_gum.png') for f in files)
+    assert coverage['stat K2'].covered == stat_k2 and 'U C[uy,fy]' in coverage
+    pooled = {c.quantity: c for c in pooled_gum_coverage(rows)}
+    assert pooled['U K (36 pooled)'].covered == direct.sum() and pooled['U K (36 pooled)'].total == 720
+    assert set(pooled) == {f'{k} {m} (36 pooled)' for k in ('U', 'MC', 'stat') for m in ('K', 'C')}
+    files = write_coverage(list(coverage.values()), tmp_path / 'campaign', full=rows)
+    assert any(f.endswith('coverage_gum.png') for f in files) and any(f.endswith('_pooled.csv') for f in files)
