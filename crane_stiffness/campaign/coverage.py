@@ -5,11 +5,7 @@ of many seeded sessions of one set-up: ``config/campaign_coverage.yaml``, ``conf
 The quantities: for the one-axis series, the loading and the unloading stiffness of each series against the model's
 exact tangent at rest (in the LVDT's reading units, as the campaign's rows); for the series full, each of the 36
 entries of K against the tangent and of C = K⁻¹ against the tangent's inverse, and the coupling K2 against the
-tangent's. With the six-axis analysis' measurement uncertainty (full6.json ``uncertainty``), the same for the
-expanded (GUM) intervals value ± U of every entry ('U K[fx,ux]', …, 'U C[…]', 'U K2') and K2's statistical-only
-interval ('stat K2'); pooled over the 36 entries, the expanded, statistical-only and Monte Carlo intervals
-(:func:`pooled_gum_coverage`, ``coverage_gum_pooled.csv``). Each session counts once per quantity: a session without
-that interval (no fit) is left out of its total.
+tangent's. Each session counts once per quantity: a session without that interval (no fit) is left out of its total.
 The fraction's interval is Clopper–Pearson's (exact, two-sided 95 %): a fraction whose interval leaves out 0.95 is
 a departure to explain. Reads the analyses ``campaign analyze`` wrote; no ROS.
 """
