@@ -130,10 +130,7 @@ class SessionRunner:
             entry = campaign_entry(self.campaign, plan, self.hardware, confirmed)
             model = plan.nominal if self.hardware else plan.true
             seeds = {} if self.hardware or plan.seeds is None else plan.seeds
-            # A sensor with true calibration errors (truth.*) draws them with its session's seed too: a sensor file
-            # with truth.mode drawn gives every session its own errors (a coverage study), not one set for all.
-            overrides = {**{node: {'seed': seed, **({'truth.seed': seed} if node in _TRUTH_NODES else {})}
-                            for node, seed in seeds.items()}, 'crane_model': dict(model),
+            overrides = {**{node: {'seed': seed} for node, seed in seeds.items()}, 'crane_model': dict(model),
                          'session_recorder': {**plan.nominal, 'campaign_entry': _yaml_string(json.dumps(entry)),
                                               'notes': f'campaign {self.campaign.name}, session {plan.id}'}}
             started = time.time()
@@ -163,10 +160,6 @@ class SessionRunner:
         tmp.write_text(json.dumps(result, indent=1, allow_nan=True))
         os.replace(tmp, folder / RESULT_FILE)
         return result
-
-
-#: The simulated sensors with true calibration errors (truth.mode, truth.seed: crane_stiffness.sim.truth).
-_TRUTH_NODES = ('load_cell', 'lvdt')
 
 
 def _yaml_string(text: str) -> str:
