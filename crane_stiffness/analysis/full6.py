@@ -7,11 +7,14 @@ a bag, compared with the exact tangent and the paper's eq. (18) at the session's
    deflection from the first pose, labelled with the load step in force after ``settle_s``.
 3. **Fit** (crane_stiffness.full6.identify.identify): C and K with errors in both variables, an interval on every
    entry, K2 and the status.
-4. **Compare** (crane_stiffness.full6.reference.reference_at_rest): per entry of K the relative error against the
+4. **Uncertainty** (crane_stiffness.analysis.full6_uncertainty): every entry of K, C and K2 with its GUM
+   uncertainty from the step means and the sensors' declared calibrations, the 36×36 covariances, and E_n per entry
+   against the model's tangent with its own uncertainty.
+5. **Compare** (crane_stiffness.full6.reference.reference_at_rest): per entry of K the relative error against the
    tangent (measured / tangent − 1; None where the tangent's entry is zero, below :data:`ZERO_COUPLING` of the
    geometric mean of its two diagonal entries) and whether the interval holds the tangent's entry (zeros too); the
    same for C; K2 against the tangent's and eq. (18)'s.
-5. **Write** ``full6.json`` (:meth:`Full6Analysis.to_dict`), the figures (crane_stiffness.analysis.full6_figures) and
+6. **Write** ``full6.json`` (:meth:`Full6Analysis.to_dict`), the figures (crane_stiffness.analysis.full6_figures) and
    the report (crane_stiffness.analysis.full6_report).
 
 Matrices are lists of rows: K row i the load [fx, fy, fz, mx, my, mz] (N, N·m), column j the displacement
@@ -31,9 +34,11 @@ from crane_stiffness import __version__
 from crane_stiffness.analysis.errors import SessionAnalysisError
 from crane_stiffness.analysis.full6_load import FULL6_TOPICS, Full6Data, load_full6
 from crane_stiffness.analysis.full6_result import Full6Analysis
+from crane_stiffness.analysis.full6_uncertainty import session_matrix_uncertainty
 from crane_stiffness.full6.full_scale import with_full_scale
 from crane_stiffness.full6.identify import ComplianceFit, identify
 from crane_stiffness.full6.pairs import LabelledPairs, full6_pairs
+from crane_stiffness.full6.statistics import pair_statistics
 from crane_stiffness.full6.reference import (K2_ENTRIES, ZERO_COUPLING, Reference, entry_name, k2_of,
                                             reference_at_rest, relative_error, structural_zeros)
 from crane_stiffness.contract.status import NAMES
@@ -122,9 +127,10 @@ def pairs_of(data: Full6Data) -> LabelledPairs:
 
 def analyze_full6(bag_path: str | Path, out_dir: str | Path | None = None, *, formats: Sequence[str] = ('png',),
                   reports: Sequence[str] = ('md',), write_json: bool = True,
-                  write_files: bool = True) -> Full6Analysis:
+                  write_files: bool = True, uncertainty_file: str | Path | None = None) -> Full6Analysis:
     """Analyse a six-axis session (module docstring) and write ``full6.json``, its figures and report into
-    ``out_dir`` (default ``out/analysis/<bag name>``; nothing with ``write_files=False``).
+    ``out_dir`` (default ``out/analysis/<bag name>``; nothing with ``write_files=False``). ``uncertainty_file``:
+    the crane inputs' uncertainties for the model's prediction (default config/uncertainty_lab.yaml).
 
     Raises:
         BagNotFoundError / BagFormatError: no readable bag; TopicNotFoundError: a stream missing (named).
@@ -146,6 +152,10 @@ def analyze_full6(bag_path: str | Path, out_dir: str | Path | None = None, *, fo
         problems.append('eq. (18) does not describe this geometry (a centre-of-mass offset, unequal wires or a load '
                         'point off the centre): compared with the exact tangent only')
     g = data.geometry
+    gum, gum_result = (None, None)
+    if fit.n_steps > 0:
+        gum, gum_result = session_matrix_uncertainty(pair_statistics(pairs.wrench, pairs.deflection, pairs.step),
+                                                     data.sensors, g, problems, uncertainty_file=uncertainty_file)
     result = Full6Analysis(
         bag=str(path), session=str(data.session.get('session') or path.name), notes=str(data.session.get('notes', '')),
         recorded_with=str(data.session.get('software_version', '')), analysed_with=__version__,
@@ -160,7 +170,7 @@ def analyze_full6(bag_path: str | Path, out_dir: str | Path | None = None, *, fo
         offset=fit.offset.tolist(), k2=_k2(fit, ref), reference=None if ref is None else _reference(ref),
         comparison=None if ref is None else _comparison(fit, ref), diagonal=_diagonal(fit, ref), problems=problems,
         compliance_covariance=fit.compliance_cov.tolist() if np.all(np.isfinite(fit.compliance_cov)) else None,
-        fit=fit, model=ref)
+        uncertainty=gum, fit=fit, model=ref, matrix_uncertainty=gum_result)
     if write_files:
         out = Path(out_dir) if out_dir is not None else Path('out') / 'analysis' / path.name
         out.mkdir(parents=True, exist_ok=True)

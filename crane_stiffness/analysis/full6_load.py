@@ -91,6 +91,7 @@ class Full6Data:
         counts: messages per topic in the bag; dropped: non-finite samples left out per topic.
         start_ns, end_ns: the bag's first and last log time [ns].
         saturated: load-cell samples left out at full scale, per axis (6,) (crane_stiffness.full6.full_scale).
+        sensors: the recorded parameters of each node by name (the sensors' declared calibrations among them).
     """
 
     path: Path
@@ -111,6 +112,7 @@ class Full6Data:
     start_ns: int | None
     end_ns: int | None
     saturated: NDArray[np.int64] = field(default_factory=lambda: np.zeros(6, dtype=np.int64))
+    sensors: dict[str, dict[str, Any]] = field(default_factory=dict)
 
 
 def is_full6_bag(path: str | Path) -> bool:
@@ -235,7 +237,8 @@ def load_full6(path: str | Path, problems: list[str]) -> Full6Data:
                      wrench_stamp=w['stamp_s'][w_order], wrench_log=w['log_time_ns'][w_order] * 1e-9,
                      wrench=wrench, pose_stamp=p['stamp_s'][p_order], pose_log=p['log_time_ns'][p_order] * 1e-9,
                      position=p_raw[p_order, :3], quaternion=p_raw[p_order, 3:], counts=counts, dropped=dropped,
-                     start_ns=start_ns, end_ns=end_ns, saturated=saturated)
+                     start_ns=start_ns, end_ns=end_ns, saturated=saturated,
+                     sensors={k: dict(v) for k, v in params.items() if isinstance(v, dict)})
 
 
 __all__ = ['DEFAULT_SETTLE_S', 'ESTIMATOR6', 'FULL6_TOPICS', 'Full6Data', 'Full6Settings', 'is_full6_bag',

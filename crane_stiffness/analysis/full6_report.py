@@ -94,8 +94,58 @@ def summary_lines(a: Full6Analysis) -> list[str]:
     out = [headline(a), '  ' + settings_line(a), f'status {status_text(a)}',
            'K diagonal (each axis with the other five displacements held at zero):'] + table
     out += [k2_line(a), fit_line(a)]
+    gum = gum_rows(a)
+    if gum:
+        rows = [_GUM_HEADERS] + gum
+        widths = [max(len(r[i]) for r in rows) for i in range(len(_GUM_HEADERS))]
+        out += ['measurement uncertainty (GUM, 95 %):'] + [
+            '  ' + '  '.join(f'{v:<{w}}' if i == 0 else f'{v:>{w}}' for i, (v, w) in enumerate(zip(r, widths)))
+            for r in rows]
+    out.append(gum_line(a))
     out += [f'  ! {p}' for p in a.problems]
     return out
+
+
+_GUM_HEADERS = ['entry', 'measured', 'U (k)', 'statistical 95 % CI', 'model ± U', 'E_n']
+
+
+def _num(value: Any, digits: int = 6) -> str:
+    return '–' if value is None or value == 'inf' else fmt(float(value), digits)
+
+
+def gum_rows(a: Full6Analysis) -> list[list[str]]:
+    """K's diagonal and K2 with their GUM uncertainty: entry, measured, U with k, the statistical interval, the
+    model's tangent ± its U, E_n. Empty without an uncertainty."""
+    from crane_stiffness.full6.reference import entry_name
+    u = a.uncertainty
+    if not u:
+        return []
+    k, pred, en = u['stiffness'], u.get('prediction'), u.get('En')
+    rows = []
+    for i in range(6):
+        model = '–' if pred is None else (f'{_num(pred["stiffness"]["value"][i][i])} ± '
+                                          f'{_num(pred["stiffness"]["U"][i][i], 4)}')
+        rows.append([entry_name(i, i), _num(k['value'][i][i]), f'{_num(k["U"][i][i], 4)} ({_num(k["k"][i][i], 3)})',
+                     f'{_num(k["statistical_interval"][0][i][i])} … {_num(k["statistical_interval"][1][i][i])}',
+                     model, '–' if en is None else _num(en['stiffness'][i][i], 3)])
+    k2 = u['k2']
+    model = '–' if pred is None else f'{_num(pred["k2"]["value"])} ± {_num(pred["k2"]["U"], 4)}'
+    rows.append(['K2', _num(k2['value']), f'{_num(k2["U"], 4)} ({_num(k2["k"], 3)})',
+                 f'{_num(k2["statistical_interval"][0])} … {_num(k2["statistical_interval"][1])}', model,
+                 '–' if en is None else _num(en['k2'], 3)])
+    return rows
+
+
+def gum_line(a: Full6Analysis) -> str:
+    """What the uncertainty counts, and how many entries agree with the model."""
+    u = a.uncertainty
+    if not u:
+        return 'measurement uncertainty: – (the step means cannot give it; see the problems)'
+    line = (f'GUM: Type A from {u["type_a"]["steps"]} step means (ν = {u["type_a"]["dof"]}); {u["calibration"]}; '
+            f'{u["trials"]} Monte Carlo trials (JCGM 102)')
+    if u.get('En'):
+        line += f'; E_n: {u["En"]["agree"]} of {u["En"]["of"]} entries of K agree with the model (|E_n| <= 1)'
+    return line
 
 
 def _matrix_rows(value: list[list[float]], low: list[list[float]], high: list[list[float]]) -> list[list[str]]:
@@ -123,6 +173,22 @@ def full6_blocks(a: Full6Analysis, images: Sequence[str] = ()) -> list[Block]:
     columns = ['load', *DISPLACEMENTS]
     s = a.stiffness
     blocks.append(('table', columns, _matrix_rows(s['value'], s['low'], s['high'])))
+    u = a.uncertainty
+    if u:
+        blocks += [('h2', 'Measurement uncertainty (GUM, 95 %): K\'s diagonal and K2'), ('p', gum_line(a)),
+                   ('table', _GUM_HEADERS, gum_rows(a)),
+                   ('h2', 'K ± U (expanded uncertainty, 95 %; rows loads, columns displacements)'),
+                   ('table', columns, [[AXES[i]] + [f'{_num(u["stiffness"]["value"][i][j], 5)} ± '
+                                                    f'{_num(u["stiffness"]["U"][i][j], 3)}' for j in range(6)]
+                                       for i in range(6)]),
+                   ('h2', 'C ± U (rows displacements, columns loads)'),
+                   ('table', ['displacement', *AXES], [[DISPLACEMENTS[i]] + [
+                       f'{_num(u["compliance"]["value"][i][j], 5)} ± {_num(u["compliance"]["U"][i][j], 3)}'
+                       for j in range(6)] for i in range(6)])]
+        if u.get('En'):
+            blocks += [('h2', 'E_n per entry of K against the model (|E_n| <= 1 agrees)'),
+                       ('table', columns, [[AXES[i]] + [_num(v, 3) for v in row]
+                                           for i, row in enumerate(u['En']['stiffness'])])]
     if a.reference is not None:
         t = a.reference['tangent']
         blocks += [('h2', 'Exact tangent at the rest pose'),
@@ -140,5 +206,5 @@ def write_full6_report(a: Full6Analysis, out: Path, reports: Sequence[str]) -> l
     return write_blocks(full6_blocks(a, images), Path(out), 'full6_report', reports, f'six-axis session {a.session}')
 
 
-__all__ = ['diagonal_rows', 'fit_line', 'full6_blocks', 'headline', 'k2_line', 'settings_line', 'status_text',
-           'summary_lines', 'write_full6_report']
+__all__ = ['diagonal_rows', 'fit_line', 'full6_blocks', 'gum_line', 'gum_rows', 'headline', 'k2_line',
+           'settings_line', 'status_text', 'summary_lines', 'write_full6_report']

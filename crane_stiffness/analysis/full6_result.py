@@ -9,6 +9,7 @@ from typing import Any
 from crane_stiffness.analysis.results import json_safe
 from crane_stiffness.full6.identify import ComplianceFit
 from crane_stiffness.full6.reference import Reference
+from crane_stiffness.uncertainty.matrix import MatrixUncertainty
 
 
 @dataclass
@@ -33,9 +34,13 @@ class Full6Analysis:
         diagonal: K's diagonal, one dict per axis: entry, unit, measured, low, high, tangent, relative_error, covers.
         compliance_covariance: the covariance of row-major vec C (36, 36) [SI²] (the calibration weighs a
             session's C with it: crane_stiffness.campaign.calibrate); None when the fit gave none.
+        uncertainty: the measurement uncertainty (crane_stiffness.analysis.full6_uncertainty): per entry of K and C
+            (and K2) u_c, U, k, coverage, interval, the statistical interval and the Monte Carlo's; the 36×36
+            covariances; the model's prediction with its U and E_n per entry; None when the step means cannot give it.
         problems: what the reader should know; files: what was written.
-        fit, model: the :class:`~crane_stiffness.full6.identify.ComplianceFit` and
-            :class:`~crane_stiffness.full6.reference.Reference` themselves (not in the JSON).
+        fit, model, matrix_uncertainty: the :class:`~crane_stiffness.full6.identify.ComplianceFit`,
+            :class:`~crane_stiffness.full6.reference.Reference` and
+            :class:`~crane_stiffness.uncertainty.matrix.MatrixUncertainty` themselves (not in the JSON).
     """
 
     bag: str
@@ -64,11 +69,14 @@ class Full6Analysis:
     problems: list[str]
     files: list[str] = field(default_factory=list)
     compliance_covariance: list[list[float]] | None = None
+    uncertainty: dict[str, Any] | None = None
     fit: ComplianceFit | None = field(default=None, repr=False)
     model: Reference | None = field(default=None, repr=False)
+    matrix_uncertainty: MatrixUncertainty | None = field(default=None, repr=False)
 
     def to_dict(self) -> dict[str, Any]:
-        return {f.name: json_safe(getattr(self, f.name)) for f in fields(self) if f.name not in ('fit', 'model')}
+        return {f.name: json_safe(getattr(self, f.name)) for f in fields(self)
+                if f.name not in ('fit', 'model', 'matrix_uncertainty')}
 
 
 __all__ = ['Full6Analysis']

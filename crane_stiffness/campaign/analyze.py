@@ -283,7 +283,7 @@ def analyze_campaign(out: str | Path, *, workers: int | None = None, scheduler: 
         result.files.append(str(target / 'full.csv'))
     from crane_stiffness.campaign.coverage import campaign_coverage, write_coverage
     result.coverage = campaign_coverage(rows, full)
-    result.files += write_coverage(result.coverage, target, formats)
+    result.files += write_coverage(result.coverage, target, formats, full)
     result.files += report.write_campaign_report(result, target, reports)
     (target / 'campaign.json').write_text(json.dumps(result.to_dict(), indent=1, allow_nan=False))
     result.files.append(str(target / 'campaign.json'))

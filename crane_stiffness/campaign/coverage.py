@@ -196,6 +196,66 @@ def campaign_coverage(rows: Sequence[SessionRow], full: Sequence[Full6Row]) -> l
                         f'{name}[{DEFLECTIONS[i]},{AXES[j]}]'
                     _count(counts, label, covers[i][j])
         _count(counts, 'K2', (analysis.get('k2') or {}).get('covers_tangent'))
+        _count_gum(counts, analysis)
+    return [Coverage(q, c, n) for q, (c, n) in counts.items()]
+
+
+def _inside(interval: Any, truth: Any) -> list[list[bool]] | None:
+    """Entry by entry, whether [low, high] (two 6×6 lists, or two numbers) holds ``truth``; None when missing."""
+    import numpy as np
+    if not interval or truth is None:
+        return None
+    low, high, t = (np.asarray(x, dtype=float) for x in (interval[0], interval[1], truth))
+    if not (np.all(np.isfinite(low)) and np.all(np.isfinite(high))):
+        return None
+    return ((low <= t) & (t <= high)).tolist()
+
+
+def _count_gum(counts: dict[str, list[int]], analysis: dict[str, Any], kinds: tuple[str, ...] = ('U',),
+               per_entry: bool = True) -> None:
+    """The six-axis session's GUM intervals (full6.json's ``uncertainty``, crane_stiffness.analysis.full6_uncertainty)
+    against the tangent. Per entry (``per_entry``): 'U K[..]' of K (the expanded interval value ± U), 'U C[..]',
+    and 'U K2', 'stat K2' (the statistical-only interval). Pooled over the 36 entries (not ``per_entry``):
+    '<kind> K (36 pooled)', '<kind> C (36 pooled)' for each of ``kinds``: 'U', 'stat' (value ± t·u_a), 'MC' (the
+    JCGM 102 Monte Carlo's interval)."""
+    u = analysis.get('uncertainty') or {}
+    reference = analysis.get('reference') or {}
+    if not u or not reference:
+        return
+    for name, key, truth in (('K', 'stiffness', reference.get('tangent')), ('C', 'compliance',
+                                                                           reference.get('compliance'))):
+        entries = u.get(key) or {}
+        intervals = {'U': entries.get('interval'), 'stat': entries.get('statistical_interval'),
+                     'MC': (entries.get('monte_carlo') or {}).get('interval')}
+        for kind in kinds:
+            covers = _inside(intervals[kind], truth)
+            if covers is None:
+                continue
+            for i in range(6):
+                for j in range(6):
+                    if per_entry:
+                        label = f'{kind} {name}[{AXES[i]},{DEFLECTIONS[j]}]' if name == 'K' else \
+                            f'{kind} {name}[{DEFLECTIONS[i]},{AXES[j]}]'
+                        _count(counts, label, covers[i][j])
+                    else:
+                        _count(counts, f'{kind} {name} (36 pooled)', covers[i][j])
+    if per_entry:
+        k2 = u.get('k2') or {}
+        for kind, interval in (('U', k2.get('interval')), ('stat', k2.get('statistical_interval'))):
+            covers = _inside(interval, (analysis.get('k2') or {}).get('tangent'))
+            if covers is not None:
+                _count(counts, f'{kind} K2', covers)
+
+
+def pooled_gum_coverage(full: Sequence[Full6Row]) -> list[Coverage]:
+    """Pooled over the 36 entries of K and of C, the sessions' expanded ('U'), statistical-only ('stat') and
+    Monte Carlo ('MC') intervals that hold the tangent (see :func:`_count_gum`). A pooled count's 36 entries of one
+    session share its calibration errors, so its binomial interval is narrower than it should be; the per-entry
+    counts of :func:`campaign_coverage` are the exact ones."""
+    counts: dict[str, list[int]] = {}
+    for frow in full:
+        analysis = json.loads((Path(frow.analysis) / 'full6.json').read_text())
+        _count_gum(counts, analysis, ('U', 'MC', 'stat'), per_entry=False)
     return [Coverage(q, c, n) for q, (c, n) in counts.items()]
 
 
@@ -206,9 +266,12 @@ def _float(value: Any) -> float:
         return math.nan
 
 
-def write_coverage(coverage: Sequence[Coverage], target: Path, formats: Sequence[str] = ('png',)) -> list[str]:
+def write_coverage(coverage: Sequence[Coverage], target: Path, formats: Sequence[str] = ('png',),
+                   full: Sequence[Full6Row] = ()) -> list[str]:
     """``coverage.csv`` and the figure ``coverage.<fmt>`` (each quantity's fraction with its interval against
-    0.95) in ``target``; the files written."""
+    0.95) in ``target``, and for a six-axis study's GUM intervals (the analyses of ``full``) the pooled fractions
+    ``coverage_gum_pooled.csv`` (:func:`pooled_gum_coverage`) and ``coverage_gum.<fmt>``
+    (crane_stiffness.campaign.full_figures.gum_coverage_figure); the files written."""
     target.mkdir(parents=True, exist_ok=True)
     path = target / 'coverage.csv'
     with open(path, 'w', newline='') as f:
@@ -221,6 +284,19 @@ def write_coverage(coverage: Sequence[Coverage], target: Path, formats: Sequence
     files = [str(path)]
     if coverage:
         files += _figure(coverage, target, formats)
+    if any(c.quantity.startswith('U K[') for c in coverage):  # a six-axis study's GUM intervals
+        from crane_stiffness.campaign.full_figures import gum_coverage_figure
+        pooled = pooled_gum_coverage(full)
+        path = target / 'coverage_gum_pooled.csv'
+        with open(path, 'w', newline='') as f:
+            writer = csv.writer(f)
+            writer.writerow(['quantity', 'covered', 'entries', 'fraction', 'ci95_low', 'ci95_high'])
+            for c in pooled:
+                writer.writerow([c.quantity, c.covered, c.total, f'{c.fraction:.4f}', *(f'{v:.4f}' for v in
+                                                                                        c.interval)])
+        files.append(str(path))
+        files += gum_coverage_figure([(c.quantity, c.covered, c.total, *c.interval) for c in [*coverage, *pooled]],
+                                     target, formats)
     return files
 
 

@@ -6,6 +6,9 @@ the model (crane_stiffness.full6.reference).
   95 % interval (hollow: session not OK); the calibrated model beside them when given.
 - ``full_coupling_k2``: the side–tilt coupling K2 [N/rad] against W likewise: the term the paper's eq. (18) has and
   one-axis tests never measure, with its sign.
+- ``coverage_gum``: a six-axis coverage study's GUM intervals (crane_stiffness.campaign.coverage): how often each
+  entry's expanded interval of K held the tangent (a 6×6 map), and the pooled fractions of the expanded, Monte
+  Carlo and statistical-only intervals of K, C and K2 with their Clopper–Pearson intervals against 0.95.
 """
 from __future__ import annotations
 
@@ -25,6 +28,9 @@ from crane_stiffness.full6.reference import entry_name, k2_of  # noqa: E402
 Adjust = Callable[[dict[str, Any]], dict[str, Any]]
 UNITS = ('N/m', 'N/m', 'N/m', 'N·m/rad', 'N·m/rad', 'N·m/rad')
 COLORS = ('tab:blue', 'tab:red', 'tab:green', 'tab:purple', 'tab:brown')
+#: K's columns as the coverage rows spell them (crane_stiffness.campaign.coverage.DEFLECTIONS; not imported from
+#: there: coverage imports this module for its figure).
+_COLUMNS = ('ux', 'uy', 'uz', 'thx', 'thy', 'thz')
 
 
 def model_matrices(nominal: dict[str, Any], weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -148,3 +154,55 @@ def write_full_figures(rows: Sequence[Full6Row], out: Path, formats: Sequence[st
 
 
 __all__ = ['model_matrices', 'plot_diagonal', 'plot_k2', 'write_full_figures']
+
+
+def gum_coverage_figure(rows: Sequence[tuple[str, int, int, float, float]], target: Path,
+                        formats: Sequence[str] = ('png',)) -> list[str]:
+    """``coverage_gum.<fmt>`` in ``target`` from the coverage rows (quantity, covered, sessions, CI low, CI high) of
+    crane_stiffness.campaign.coverage (module docstring); nothing without 'U K[..]' rows. The files written."""
+    from crane_stiffness.contract.axes import AXES
+    by_name = {r[0]: r for r in rows}
+    if not any(name.startswith('U K[') for name in by_name):
+        return []
+    grid = np.full((6, 6), np.nan)
+    for i in range(6):
+        for j in range(6):
+            r = by_name.get(f'U K[{AXES[i]},{_COLUMNS[j]}]')
+            if r is not None and r[2]:
+                grid[i, j] = r[1] / r[2]
+    fig, (left, right) = plt.subplots(1, 2, figsize=(11.5, 4.6), layout='constrained',
+                                      gridspec_kw={'width_ratios': [1.0, 1.25]})
+    image = left.imshow(grid, cmap='RdYlGn', vmin=0.85, vmax=1.0)
+    for i in range(6):
+        for j in range(6):
+            if np.isfinite(grid[i, j]):
+                left.text(j, i, f'{grid[i, j]:.2f}', ha='center', va='center', fontsize=8)
+    left.set_xticks(range(6), ['u_x', 'u_y', 'u_z', 'θ_x', 'θ_y', 'θ_z'])
+    left.set_yticks(range(6), list(AXES))
+    sessions = sorted({r[2] for r in rows if r[0].startswith('U K[')})
+    left.set_title(f'K: sessions whose value ± U holds the tangent ({sessions[-1]} sessions)', fontsize=9)
+    fig.colorbar(image, ax=left, shrink=0.8)
+    pooled = [name for name in ('U K (36 pooled)', 'MC K (36 pooled)', 'stat K (36 pooled)', 'U C (36 pooled)',
+                                'MC C (36 pooled)', 'stat C (36 pooled)', 'U K2', 'stat K2') if name in by_name]
+    x = np.arange(len(pooled))
+    frac = np.array([by_name[n][1] / by_name[n][2] for n in pooled])
+    low = np.array([by_name[n][3] for n in pooled])
+    high = np.array([by_name[n][4] for n in pooled])
+    colours = ['tab:blue' if n.startswith('U') else 'tab:orange' if n.startswith('MC') else 'tab:gray'
+               for n in pooled]
+    right.bar(x, frac, color=colours, alpha=0.8)
+    right.errorbar(x, frac, yerr=[frac - low, high - frac], fmt='none', ecolor='k', capsize=3)
+    right.axhline(0.95, color='k', ls='--', lw=0.8, label='nominal 0.95')
+    right.set_xticks(x, pooled, rotation=30, ha='right', fontsize=8)
+    right.set_ylim(max(0.0, float(np.nanmin(low)) - 0.05), 1.01)
+    right.set_ylabel('fraction of intervals holding the tangent')
+    right.set_title('pooled: expanded (U), Monte Carlo (MC), statistical only (stat); Clopper–Pearson 95 %',
+                    fontsize=9)
+    right.legend(loc='lower right', fontsize=8)
+    files = []
+    for fmt in formats:
+        path = Path(target) / f'coverage_gum.{fmt}'
+        fig.savefig(path, dpi=130)
+        files.append(str(path))
+    plt.close(fig)
+    return files

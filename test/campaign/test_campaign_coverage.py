@@ -84,4 +84,5 @@ def test_six_axis_coverage_counts_every_entry_of_k_and_c_and_k2(tmp_path):
     assert coverage['K2'].covered == sum(r.k2_low <= r.k2_tangent <= r.k2_high for r in result.full)
     # two sessions are no coverage study: the report leaves the table out, the CSV has it
     assert 'Coverage of the 95 % intervals' not in (out / 'campaign' / 'report.md').read_text()
-    assert len((out / 'campaign' / 'coverage.csv').read_text().splitlines()) == 1 + 73
+    # K's and C's 72 entries and K2; the same of the expanded (GUM) intervals and K2's statistical-only one
+    assert len((out / 'campaign' / 'coverage.csv').read_text().splitlines()) == 1 + 73 + 74
