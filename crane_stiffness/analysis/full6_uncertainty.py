@@ -30,6 +30,7 @@ from crane_stiffness.uncertainty.prediction6 import MatrixPrediction, en_matrix,
 DEFAULT_UNCERTAINTY_FILE = 'uncertainty_lab.yaml'
 LOAD_CELL_NODES = ('load_cell', '/load_cell', 'netft', '/netft')
 POSE_SENSOR_NODES = ('pose_sensor', '/pose_sensor')
+LVDT_ARRAY_NODES = ('lvdt_array', '/lvdt_array')
 
 
 def _node(sensors: dict[str, dict[str, Any]], names: tuple[str, ...]) -> dict[str, Any] | None:
@@ -59,7 +60,8 @@ def session_matrix_uncertainty(stats: PairStatistics, sensors: dict[str, dict[st
     statistics (their step means), the recorded node parameters and the geometry (None: no prediction, no E_n);
     (None, None) with a problem appended when the step means cannot give it."""
     means = stats.step_means
-    calibration = six_axis_inputs(_node(sensors, LOAD_CELL_NODES), _node(sensors, POSE_SENSOR_NODES))
+    calibration = six_axis_inputs(_node(sensors, LOAD_CELL_NODES), _node(sensors, POSE_SENSOR_NODES),
+                                  _node(sensors, LVDT_ARRAY_NODES))
     try:
         result = matrix_uncertainty(means[:, :6], means[:, 6:], calibration, seed=seed)
     except (CraneStiffnessError, np.linalg.LinAlgError) as exc:

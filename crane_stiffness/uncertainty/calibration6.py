@@ -170,14 +170,18 @@ class CalibrationInputs:
         return w, d
 
 
-def six_axis_inputs(load_cell: Mapping[str, Any] | None, pose_sensor: Mapping[str, Any] | None
-                    ) -> CalibrationInputs:
+def six_axis_inputs(load_cell: Mapping[str, Any] | None, pose_sensor: Mapping[str, Any] | None,
+                    lvdt_array: Mapping[str, Any] | None = None) -> CalibrationInputs:
     """The Type B inputs from the sensor nodes' recorded parameters (``calibration.*``; the load cell's
     ``full_scale``), None where a node's parameters were not recorded. A component declared ``not_stated`` or not
-    declared is left out and named."""
+    declared is left out and named. The deflection measured by an LVDT array (``lvdt_array``'s parameters recorded):
+    its channels' calibrations are not propagated through the array's pose solution yet, so they are named as left
+    out, never counted as zero."""
     inputs: list[InputQuantity] = []
     counted: list[str] = []
     left_out: list[str] = []
+    if lvdt_array is not None:
+        left_out.append('lvdt_array channel calibrations (not propagated through the array\'s pose)')
     notes: list[str] = []
     fs_value = (load_cell or {}).get('full_scale', [math.inf] * 6)
     try:

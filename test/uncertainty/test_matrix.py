@@ -101,6 +101,8 @@ def test_a_missing_declaration_is_named_never_a_silent_zero():
     cal = six_axis_inputs(lc, None)
     assert 'load_cell cross-talk' in cal.left_out and 'pose_sensor angle' in cal.left_out
     assert 'statistical only for' in cal.statement and 'load_cell cross-talk' in cal.statement
+    array = six_axis_inputs(lc, None, {'calibration.gain': 0.001})  # the deflection from an LVDT array
+    assert any(name.startswith('lvdt_array') for name in array.left_out) and 'lvdt_array' in array.statement
     nothing = six_axis_inputs(None, None)
     assert nothing.statistical_only and nothing.statement.startswith('statistical only')
     d = WRENCHES @ C_TRUE.T + np.random.default_rng(2).standard_normal(WRENCHES.shape) * 1e-7
