@@ -230,7 +230,7 @@ def read_node_parameters(source: Records) -> dict[str, dict[str, Any]]:
 
 
 __all__ = [
-    'CAMPAIGN_KEY', 'NODE_PARAMETERS_METADATA', 'SESSION_END_METADATA', 'SESSION_METADATA', 'analysis_geometry_params',
-    'MIN_STREAM_MESSAGES', 'SENSOR_STREAMS', 'cut_short', 'near_empty', 'read_node_parameters', 'read_session', 'read_session_end', 'session_end_record', 'session_metadata',
-    'session_record',
+    'CAMPAIGN_KEY', 'MIN_STREAM_MESSAGES', 'NODE_PARAMETERS_METADATA', 'SENSOR_STREAMS', 'SESSION_END_METADATA',
+    'SESSION_METADATA', 'analysis_geometry_params', 'cut_short', 'near_empty', 'read_node_parameters', 'read_session',
+    'read_session_end', 'session_end_record', 'session_metadata', 'session_record',
 ]
