@@ -6,12 +6,12 @@ Polls one channel (``register``, ``register_type``, ``data_type``, ``word_order`
 /lvdt/displacement (PointStamped, sensor QoS, frame ``frame_id``): point.x = ``gain`` · raw + ``offset`` − zero [m],
 stamped at the middle of the request (the DAQ has no clock of its own to stamp with). /diagnostics: polls, failures
 (timeouts, dropped connections, Modbus exception responses: ERROR with the reason) and the poll jitter (start of
-each request against the ideal grid: p50, p99, max [µs]; late polls). After a failure the device is asked again
-every ``reconnect_interval_s``. Service ~/zero (std_srvs/Trigger) zeroes on the mean of the last ``zero_samples``
-readings; the number of zeros since start is published, latched, on /lvdt/zero (std_msgs/Float64, at start and
-after every zero) so the estimator starts a new fit segment. At start a wrong address or a silent device stops the
-node (exit 2) with the reason, after trying for
-``wait_for_device_s``.
+each request against the ideal grid: p50, p99, max [µs]; late polls; ``missed_polls``: instants of the grid the
+timer skipped because the process was busy past the next one, i.e. readings never taken). After a failure the
+device is asked again every ``reconnect_interval_s``. Service ~/zero (std_srvs/Trigger) zeroes on the mean of the
+last ``zero_samples`` readings; the number of zeros since start is published, latched, on /lvdt/zero
+(std_msgs/Float64, at start and after every zero) so the estimator starts a new fit segment. At start a wrong
+address or a silent device stops the node (exit 2) with the reason, after trying for ``wait_for_device_s``.
 """
 from __future__ import annotations
 
@@ -91,13 +91,16 @@ def _validate(values: dict[str, Any]) -> Channel:
 
 @dataclass
 class PollCounters(Counters):
-    """``received`` = successful polls; failures by kind; late polls (started more than half a period late)."""
+    """``received`` = successful polls; failures by kind; late polls (started more than half a period late);
+    ``missed_polls``: grid instants no poll was made at (the timer skipped them: the process was busy past the next
+    instant), counted exactly from the timer's own next call time."""
 
     failures: int = 0
     timeouts: int = 0
     exception_responses: int = 0
     reconnects: int = 0
     late_polls: int = 0
+    missed_polls: int = 0
     stream_restarts: int = 0
 
 
@@ -116,6 +119,7 @@ class ModbusLvdt(Node):
         self._retry_at = 0.0
         self._jitter_ns: deque[int] = deque(maxlen=5000)   # request start minus its grid instant
         self._recent: deque[float] = deque(maxlen=10)
+        self._next_due_ns: int | None = None  # the timer's next call [ns of the node clock], as of the last tick
         self.pub = self.create_publisher(PointStamped, topics.LVDT_DISPLACEMENT, SENSOR_QOS)
         self.zero_epoch = ZeroEpoch(self, topics.LVDT_ZERO)  # zeros since start, latched on /lvdt/zero
         self.params = Params(self, PARAMS, self._validate, self._apply)
@@ -146,10 +150,23 @@ class ModbusLvdt(Node):
                 self.destroy_timer(self.timer)
             self.period_ns = round(1e9 / values['poll_rate_hz'])
             self.timer = create_grid_timer(self, 1.0 / values['poll_rate_hz'], self._tick)
+            self._next_due_ns = None
         self.settings = values
+
+    def _count_missed(self) -> None:
+        """rcl's timer skips the instants it is too late for: its next call, read at each tick, steps by one period
+        when none was skipped; the steps beyond one are polls never made."""
+        until = self.timer.time_until_next_call() if self.timer is not None else None
+        if until is None:
+            return
+        due = self._now_ns() + until
+        if self._next_due_ns is not None:
+            self.counters.missed_polls += max(0, round((due - self._next_due_ns) / self.period_ns) - 1)
+        self._next_due_ns = due
 
     def _tick(self) -> None:
         assert self.poller is not None
+        self._count_missed()
         now = time.monotonic()
         if now < self._retry_at:
             return
