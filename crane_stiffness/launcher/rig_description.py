@@ -225,10 +225,10 @@ def flag(value: str | bool) -> bool:
 
 
 #: Launch configurations that launch and launch_ros set or read themselves (``ros2 launch --launch-prefix``,
-#: ``emulate_tty``, PushRosNamespace, SetRemap, SetParameter): in the launch context beside the rig's arguments, never
-#: a typo of one.
-LAUNCH_OWN = frozenset({'launch-prefix', 'launch-prefix-filter', 'emulate_tty', 'ros_namespace', 'ros_remaps',
-                        'global_params'})
+#: ``emulate_tty``, ``sigterm_timeout:=``/``sigkill_timeout:=``: how long launch waits at Ctrl-C; PushRosNamespace,
+#: SetRemap, SetParameter): in the launch context beside the rig's arguments, never a typo of one.
+LAUNCH_OWN = frozenset({'launch-prefix', 'launch-prefix-filter', 'emulate_tty', 'sigterm_timeout', 'sigkill_timeout',
+                        'ros_namespace', 'ros_remaps', 'global_params'})
 
 
 def check_argument_names(names: Iterable[str], launch_own: Iterable[str] = LAUNCH_OWN) -> None:

@@ -81,3 +81,7 @@ def test_every_shipped_file_has_only_sections_of_the_rigs_nodes():
 def test_a_node_ending_with_a_failure_stops_the_launch_naming_it(process, code, shutting_down, expected):
     problem = exit_problem(process, code, shutting_down)
     assert problem.startswith(expected) and (problem == '') == (expected == '')
+
+
+def test_launchs_own_timeouts_are_not_typos():
+    check_argument_names(['sigterm_timeout', 'sigkill_timeout', 'program'])
