@@ -341,7 +341,7 @@ def exit_problem(process: str, returncode: int | None, shutting_down: bool) -> s
     (a bad parameter: 2; load_program giving up on the rig: 1; a crash: a negative signal number) leaves a rig that
     measures nothing, so the launch ends with it, naming it. Status 0 (load_program done with its program) and
     whatever happens once the launch is shutting down (Ctrl-C) are no failure."""
-    if shutting_down or returncode in (0, None):
+    if shutting_down or returncode is None or returncode == 0:
         return ''
     name = process.rsplit('-', 1)[0] if process.rsplit('-', 1)[-1].isdigit() else process
     how = f'was killed by signal {-returncode}' if returncode < 0 else f'exited with status {returncode}'

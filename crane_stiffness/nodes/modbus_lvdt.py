@@ -113,7 +113,7 @@ class ModbusLvdt(Node):
         self._reported = PollCounters()
         self.settings: dict[str, Any] = {}
         self.poller: ModbusPoller | None = None  # created by the first _apply (Params, below): _tick asserts it
-        self.timer = None
+        self.timer: Any = None  # the poll timer (create_grid_timer), made by the first _apply
         self.zero_m = 0.0
         self.last_error = ''
         self._retry_at = 0.0
