@@ -142,9 +142,10 @@ def _records(source: Records) -> Mapping[str, Mapping[str, str]]:
     return reader() if callable(reader) else source  # type: ignore[return-value]
 
 
-#: The sensor streams a session measures with: one the recorder subscribed to that holds fewer messages than
-#: :data:`MIN_STREAM_MESSAGES` makes the bag near empty (a driver that never delivered, a remapping to nowhere).
-SENSOR_STREAMS = (topics.LOAD_CELL_WRENCH, topics.LVDT_DISPLACEMENT, topics.POSE_SENSOR_POSE)
+#: The sensor streams every session measures with: one the recorder subscribed to that holds fewer messages than
+#: :data:`MIN_STREAM_MESSAGES` makes the bag near empty (a driver that never delivered, a remapping to nowhere). Not
+#: the pose sensor's: the recorder subscribes to it in every session, and only a six-axis program has one.
+SENSOR_STREAMS = (topics.LOAD_CELL_WRENCH, topics.LVDT_DISPLACEMENT)
 #: Fewer messages than this on a recorded sensor stream: the session measured nothing worth keeping (0.1 s at the
 #: sensors' 1 kHz, 1 s of a DAQ polled at 100 Hz) [messages].
 MIN_STREAM_MESSAGES = 100
