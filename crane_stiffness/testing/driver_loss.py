@@ -40,17 +40,18 @@ class LossFigures:
     ft_lost: int          # RDT records lost (from the records' sequence numbers)
 
     @property
-    def lost(self) -> int:
-        """Readings lost anywhere: never taken, failed, or missing from the bag."""
-        return self.missed_polls + self.failures + self.bag_missing
+    def skipped_share(self) -> float:
+        """Grid instants the driver's timer skipped, of all it passed over the whole run."""
+        return self.missed_polls / max(1, self.polls + self.missed_polls + self.failures)
 
     @property
     def lost_share(self) -> float:
-        """Of the readings the grid should have given over the run."""
-        return self.lost / max(1, self.polls + self.missed_polls + self.failures)
+        """Grid instants of the program's span with no reading in the bag (skipped, failed or not delivered), of
+        all in that span: the readings the measurement lacks."""
+        return self.bag_missing / max(1, self.bag_readings + self.bag_missing)
 
     def as_dict(self) -> dict[str, Any]:
-        return {**asdict(self), 'lost': self.lost, 'lost_share': self.lost_share}
+        return {**asdict(self), 'skipped_share': self.skipped_share, 'lost_share': self.lost_share}
 
 
 def busy_process() -> subprocess.Popen:
