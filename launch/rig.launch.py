@@ -20,8 +20,8 @@ from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
 from launch_ros.actions import Node
 from launch_ros.substitutions import FindPackageShare
 
-from crane_stiffness.launcher.rig_description import (ARGUMENTS, PACKAGE, RigError, check_argument_names,
-                                                     exit_problem, rig_nodes)
+from crane_stiffness.launcher.rig_description import (ARGUMENTS, PACKAGE, SIGKILL_AFTER_S, RigError,
+                                                     check_argument_names, exit_problem, rig_nodes)
 
 CONFIG = PathJoinSubstitution([FindPackageShare(PACKAGE), 'config'])
 
@@ -34,7 +34,9 @@ def rig(context):
     given = {a.name: LaunchConfiguration(a.name).perform(context) for a in ARGUMENTS}
     return [Node(package=PACKAGE, executable=n.executable, name=n.name,
                  parameters=[*n.parameter_files, n.parameters] if n.parameters else list(n.parameter_files),
-                 remappings=list(n.remappings), output='screen')
+                 remappings=list(n.remappings), output='screen',
+                 # a node still starting on a busy machine at Ctrl-C ends cleanly once started: not killed at 10 s
+                 sigkill_timeout=LaunchConfiguration('sigkill_timeout', default=str(SIGKILL_AFTER_S)))
             for n in rig_nodes(CONFIG.perform(context), given)]
 
 

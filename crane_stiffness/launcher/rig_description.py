@@ -49,10 +49,10 @@ from crane_stiffness.errors import CraneStiffnessError
 from crane_stiffness.params.errors import ConfigError
 from crane_stiffness.params.files import ParamFile, check_sections, did_you_mean
 
-__all__ = ['ARGUMENTS', 'LAUNCH_OWN', 'MACHINES', 'NODES', 'PACKAGE', 'TRANSPORTS', 'Argument', 'NodeStart', 'RigError',
-           'RigNode', 'argument_values', 'check_argument_names', 'check_file_sections', 'config_files', 'config_path',
-           'exit_problem',
-           'flag', 'known_programs', 'program_file', 'readiness', 'rig_nodes']
+__all__ = ['ARGUMENTS', 'LAUNCH_OWN', 'MACHINES', 'NODES', 'PACKAGE', 'SIGKILL_AFTER_S', 'TRANSPORTS', 'Argument',
+           'NodeStart', 'RigError', 'RigNode', 'argument_values', 'check_argument_names', 'check_file_sections',
+           'config_files', 'config_path', 'exit_problem', 'flag', 'known_programs', 'program_file', 'readiness',
+           'rig_nodes']
 
 
 class RigError(CraneStiffnessError, ValueError):
@@ -229,6 +229,13 @@ def flag(value: str | bool) -> bool:
 #: SetRemap, SetParameter): in the launch context beside the rig's arguments, never a typo of one.
 LAUNCH_OWN = frozenset({'launch-prefix', 'launch-prefix-filter', 'emulate_tty', 'sigterm_timeout', 'sigkill_timeout',
                         'ros_namespace', 'ros_remaps', 'global_params'})
+
+
+#: Ctrl-C: how long launch waits after its SIGTERM (itself 5 s after the SIGINT) before it kills a node [s]. Every
+#: node holds both signals while its interpreter starts and ends cleanly once started, but on a busy two-core machine
+#: (load 15) starting took longer than launch's default 5 s: the whole rig was killed, the recorder's bag unclosed.
+#: ``sigkill_timeout:=S`` on the command line still sets it (launch's own configuration).
+SIGKILL_AFTER_S = 55.0
 
 
 def check_argument_names(names: Iterable[str], launch_own: Iterable[str] = LAUNCH_OWN) -> None:
