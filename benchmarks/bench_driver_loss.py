@@ -3,10 +3,10 @@ config/drivers_ati_labjack.yaml over the device emulators (crane_stiffness.testi
 modbus_emulator as processes of their own, the drivers pointed at them), the side-force program (21 s), beside one
 busy process, for each ``--rates`` value of modbus_lvdt's ``poll_rate_hz`` (``--runs`` times each).
 
-Reported per run, counts only: polls made, grid instants the driver's timer skipped (``missed_polls``), failed
-polls (and their share of the grid instants), the bag's readings within the program and the grid instants there
-with none (the share lost);
-the F/T driver's RDT records received and lost beside it. Baseline: the template's former 500 Hz; target: nothing
+Reported per run, counts only: polls made, grid instants the driver's timer skipped (taken late at the next tick,
+``caught_up_polls``, or never, ``missed_polls``), failed polls (and their share of the grid instants), the bag's
+readings within the program and the grid instants there with none (the share lost); the F/T driver's RDT records
+received and lost beside it. Baseline: the template's former 500 Hz; target: nothing
 lost at the template's rate.
 
 Run: .venv/bin/python benchmarks/bench_driver_loss.py [--rates 500 100] [--runs 2] [--json out.json]
@@ -44,8 +44,9 @@ def main(argv: list[str] | None = None) -> int:
             figures = run_template_rig(share, env, ws / f'run_{rate:g}_{run}', poll_rate_hz=rate, busy=not args.idle)
             load = os.getloadavg()[0]
             results.append({**figures.as_dict(), 'load_average_1min': load})
-            print(f'{rate:6.0f} Hz run {run + 1}: {figures.polls} polls, {figures.missed_polls} skipped, '
-                  f'{figures.failures} failed ({100 * figures.skipped_share:.2f} % skipped); bag within the program '
+            print(f'{rate:6.0f} Hz run {run + 1}: {figures.polls} polls, {figures.caught_up} skipped and taken late, '
+                  f'{figures.missed_polls} never taken, {figures.failures} failed ({100 * figures.skipped_share:.2f} % '
+                  f'skipped); bag within the program '
                   f'{figures.bag_readings} readings, {figures.bag_missing} missing ({100 * figures.lost_share:.2f} % '
                   f'lost); RDT {figures.ft_received} records, '
                   f'{figures.ft_lost} lost; load average {load:.1f}', flush=True)

@@ -6,8 +6,9 @@ Polls one channel (``register``, ``register_type``, ``data_type``, ``word_order`
 /lvdt/displacement (PointStamped, sensor QoS, frame ``frame_id``): point.x = ``gain`` · raw + ``offset`` − zero [m],
 stamped at the middle of the request (the DAQ has no clock of its own to stamp with). /diagnostics: polls, failures
 (timeouts, dropped connections, Modbus exception responses: ERROR with the reason) and the poll jitter (start of
-each request against the ideal grid: p50, p99, max [µs]; late polls; ``missed_polls``: instants of the grid the
-timer skipped because the process was busy past the next one, i.e. readings never taken). After a failure the
+each request against the ideal grid: p50, p99, max [µs]; late polls; instants of the grid the timer skipped because
+the process was busy past the next one: their readings taken late at the next tick, ``caught_up_polls``, or never,
+``missed_polls``). After a failure the
 device is asked again every ``reconnect_interval_s``. Service ~/zero (std_srvs/Trigger) zeroes on the mean of the
 last ``zero_samples`` readings; the number of zeros since start is published, latched, on /lvdt/zero
 (std_msgs/Float64, at start and after every zero) so the estimator starts a new fit segment. At start a wrong
@@ -68,6 +69,8 @@ PARAMS = (
               'longer when the DAQ (or its emulator) starts with the driver [s]'),
     *LVDT_CALIBRATION_PARAMS,
 )
+#: A tick after skipped grid instants takes their readings at once, up to this much of them [s of polls].
+MAX_CATCH_UP_S = 0.1
 START_ONLY = ('host', 'port', 'unit_id', 'timeout_s', 'wait_for_device_s')
 CHANNEL_KEYS = ('register', 'register_type', 'data_type', 'word_order', 'gain', 'offset')
 
@@ -92,8 +95,9 @@ def _validate(values: dict[str, Any]) -> Channel:
 @dataclass
 class PollCounters(Counters):
     """``received`` = successful polls; failures by kind; late polls (started more than half a period late);
-    ``missed_polls``: grid instants no poll was made at (the timer skipped them: the process was busy past the next
-    instant), counted exactly from the timer's own next call time."""
+    ``caught_up_polls``: grid instants the timer skipped (the process was busy past the next instant; counted exactly
+    from the timer's own next call time) whose readings were taken late, at the next tick; ``missed_polls``: those
+    with no reading at all (more than MAX_CATCH_UP_S behind, a failed poll, a device being waited for)."""
 
     failures: int = 0
     timeouts: int = 0
@@ -101,6 +105,7 @@ class PollCounters(Counters):
     reconnects: int = 0
     late_polls: int = 0
     missed_polls: int = 0
+    caught_up_polls: int = 0
     stream_restarts: int = 0
 
 
@@ -153,28 +158,43 @@ class ModbusLvdt(Node):
             self._next_due_ns = None
         self.settings = values
 
-    def _count_missed(self) -> None:
-        """rcl's timer skips the instants it is too late for: its next call, read at each tick, steps by one period
-        when none was skipped; the steps beyond one are polls never made."""
+    def _skipped(self) -> int:
+        """Grid instants rcl's timer skipped since the previous tick (it skips those it is too late for): its next
+        call, read at each tick, steps by one period when none was skipped."""
         until = self.timer.time_until_next_call() if self.timer is not None else None
         if until is None:
-            return
+            return 0
         due = self._now_ns() + until
-        if self._next_due_ns is not None:
-            self.counters.missed_polls += max(0, round((due - self._next_due_ns) / self.period_ns) - 1)
+        skipped = 0 if self._next_due_ns is None else max(0, round((due - self._next_due_ns) / self.period_ns) - 1)
         self._next_due_ns = due
+        return skipped
 
     def _tick(self) -> None:
         assert self.poller is not None
-        self._count_missed()
+        skipped = self._skipped()
         now = time.monotonic()
         if now < self._retry_at:
+            self.counters.missed_polls += skipped  # the device is being waited for: nothing to catch up on
             return
+        # A busy process (or a slow answer) made the timer skip instants: their readings are taken now, late and
+        # stamped when taken, rather than lost (at most MAX_CATCH_UP_S worth; the rest count as missed).
+        catch_up = min(skipped, max(1, round(MAX_CATCH_UP_S * 1e9 / self.period_ns)))
+        self.counters.missed_polls += skipped - catch_up
+        for i in range(1 + catch_up):
+            if not self._poll(now):
+                self.counters.missed_polls += catch_up - i if i else catch_up
+                return
+            if i:
+                self.counters.caught_up_polls += 1
+
+    def _poll(self, now: float) -> bool:
+        """One request and its reading published; False when it failed."""
+        assert self.poller is not None
         try:
             reading = self.poller.read()
         except DriverError as exc:
             self._failed(exc, now)
-            return
+            return False
         if self.last_error:
             self.get_logger().info(f'{self.poller.where} answers again')
             self.last_error = ''
@@ -193,6 +213,7 @@ class ModbusLvdt(Node):
         msg.point.x = reading.metres - self.zero_m
         self.pub.publish(msg)
         self.counters.published += 1
+        return True
 
     def _failed(self, exc: DriverError, now: float) -> None:
         self.counters.failures += 1

@@ -5,8 +5,9 @@ the loss against the DAQ's poll rate (benchmarks/bench_driver_loss.py).
 ``transport:=drivers`` with the emulators (rdt_emulator, modbus_emulator: separate processes, as in a lab where the
 devices are boxes on the network) and the drivers netft and modbus_lvdt reading the file as a lab copies it, only
 pointed at the emulators' loopback ports. A reading is lost when the DAQ driver's timer skips a poll (its process was
-busy past the next instant of its grid: ``missed_polls``, counted exactly from the timer's next call time), when a
-poll fails, or when the reading does not reach the recorder (the bag's readings within the program against the grid
+busy past the next instant of its grid, counted exactly from the timer's next call time) and the driver could not
+take that reading late at its next tick (``missed_polls``; those it took late are ``caught_up_polls``), when a poll
+fails, or when the reading does not reach the recorder (the bag's readings within the program against the grid
 instants it spans). No wall-clock rate is asserted anywhere: every instant of the grid is accounted for.
 """
 from __future__ import annotations
@@ -31,7 +32,8 @@ class LossFigures:
 
     poll_rate_hz: float
     polls: int            # readings the DAQ driver took (successful polls)
-    missed_polls: int     # grid instants its timer skipped
+    caught_up: int        # grid instants its timer skipped whose readings it took late, at the next tick
+    missed_polls: int     # grid instants with no reading taken at all
     failures: int         # polls that got no reading
     published: int        # readings it published
     bag_readings: int     # readings in the bag from the program's first command to its last
@@ -41,8 +43,8 @@ class LossFigures:
 
     @property
     def skipped_share(self) -> float:
-        """Grid instants the driver's timer skipped, of all it passed over the whole run."""
-        return self.missed_polls / max(1, self.polls + self.missed_polls + self.failures)
+        """Grid instants the driver's timer skipped (caught up or missed), of all it passed over the whole run."""
+        return (self.caught_up + self.missed_polls) / max(1, self.polls + self.missed_polls + self.failures)
 
     @property
     def lost_share(self) -> float:
@@ -116,5 +118,6 @@ def run_template_rig(share: Path, env: Mapping[str, str], out: Path, drivers_fil
     if not summary.get('bag'):
         raise RuntimeError(f'no bag recorded: {summary}')
     readings, missing = bag_loss(Path(summary['bag']), round(1e9 / rate))
-    return LossFigures(rate, int(daq['received']), int(daq['missed_polls']), int(daq['failures']),
+    return LossFigures(rate, int(daq['received']), int(daq['caught_up_polls']), int(daq['missed_polls']),
+                       int(daq['failures']),
                        int(daq['published']), readings, missing, int(ft['received']), int(ft['records_lost']))
