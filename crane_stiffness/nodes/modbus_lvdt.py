@@ -69,8 +69,9 @@ PARAMS = (
               'longer when the DAQ (or its emulator) starts with the driver [s]'),
     *LVDT_CALIBRATION_PARAMS,
 )
-#: A tick after skipped grid instants takes their readings at once, up to this much of them [s of polls].
-MAX_CATCH_UP_S = 0.1
+#: A tick after skipped grid instants takes their readings at once, up to this much of them [s of polls]: a stall
+#: of the process (or of the device's answer) of more than 0.1 s was seen beside a busy process at load 15.
+MAX_CATCH_UP_S = 1.0
 START_ONLY = ('host', 'port', 'unit_id', 'timeout_s', 'wait_for_device_s')
 CHANNEL_KEYS = ('register', 'register_type', 'data_type', 'word_order', 'gain', 'offset')
 
