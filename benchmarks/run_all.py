@@ -31,6 +31,7 @@ BENCHMARKS = [
     # The live view's WebSocket front (Origin, Host, token) against the SDK's server straight: its own cost.
     ('bench_view_front.py', [], 'bench_view_front.json'),
     ('bench_netft.py', [], 'bench_netft.json'),
+    ('bench_driver_loss.py', [], 'bench_driver_loss.json'),   # LVDT readings lost at the template's DAQ rate
     ('bench_startup.py', [], 'bench_startup.json'),
     ('bench_sim_time.py', [], 'bench_sim_time.json'),   # the simulated rig flat out, idle and beside busy processes
     ('bench_cpu.py', [], 'bench_cpu.json'),             # make demo's rig and its page in Chromium: CPU budget

@@ -23,6 +23,7 @@ from typing import Any, Protocol, Union
 
 from crane_stiffness import __version__
 from crane_stiffness.bag.metadata import decode_metadata, encode_metadata
+from crane_stiffness.contract import topics
 from crane_stiffness.sim.program import LoadProgram
 
 SESSION_METADATA = 'crane_stiffness/session'
@@ -142,6 +143,25 @@ def _records(source: Records) -> Mapping[str, Mapping[str, str]]:
     return reader() if callable(reader) else source  # type: ignore[return-value]
 
 
+#: The sensor streams every session measures with: one the recorder subscribed to that holds fewer messages than
+#: :data:`MIN_STREAM_MESSAGES` makes the bag near empty (a driver that never delivered, a remapping to nowhere). Not
+#: the pose sensor's: the recorder subscribes to it in every session, and only a six-axis program has one.
+SENSOR_STREAMS = (topics.LOAD_CELL_WRENCH, topics.LVDT_DISPLACEMENT)
+#: Fewer messages than this on a recorded sensor stream: the session measured nothing worth keeping (0.1 s at the
+#: sensors' 1 kHz, 1 s of a DAQ polled at 100 Hz) [messages].
+MIN_STREAM_MESSAGES = 100
+
+
+def near_empty(recorded: Mapping[str, int]) -> str:
+    """'' when every sensor stream the recorder subscribed to (a key of ``recorded``: topic -> messages in the bag)
+    holds at least :data:`MIN_STREAM_MESSAGES`, else which do not, for people."""
+    short = {t: int(recorded[t]) for t in SENSOR_STREAMS if t in recorded and int(recorded[t]) < MIN_STREAM_MESSAGES}
+    if not short:
+        return ''
+    return ('the bag is near empty: ' + ', '.join(f'{t} {n} message(s)' for t, n in short.items())
+            + f' (fewer than {MIN_STREAM_MESSAGES}): the sensor never delivered; nothing was measured')
+
+
 def session_end_record(reason: str, end_ns: int, message_count: int, recorded: Mapping[str, int],
                        program_state: Mapping[str, Any], published: Mapping[str, int] | None = None,
                        published_through_ns: int | None = None, at_end: bool = False,
@@ -152,11 +172,15 @@ def session_end_record(reason: str, end_ns: int, message_count: int, recorded: M
     counters, summed by the clock), ``missing``: what of it the bag lacks, and ``complete``: the session ended at the
     instant its program fixed (``at_end``) with nothing missing: the same bag at any load. ``stopped_by``: who
     called ~/stop, in words (the live view's client address and Origin, or a ROS service client:
-    :mod:`crane_stiffness.contract.control_events`), for a recording stopped from outside."""
+    :mod:`crane_stiffness.contract.control_events`), for a recording stopped from outside. ``failed``, only when the
+    bag is near empty (:func:`near_empty`): why the session failed."""
     record: dict[str, Any] = {'stop_reason': reason, 'end_time_ns': str(end_ns), 'message_count': message_count,
                               'topics': {t: n for t, n in recorded.items() if n}, 'program_state': dict(program_state)}
     if stopped_by is not None:
         record['stopped_by'] = stopped_by
+    failed = near_empty(recorded)
+    if failed:
+        record['failed'] = failed
     if published:
         counted = {t: int(n) for t, n in sorted(published.items()) if t in recorded}
         missing = {t: n - recorded[t] for t, n in counted.items() if recorded[t] < n}
@@ -174,7 +198,8 @@ def read_session_end(source: Records) -> dict[str, Any]:
 def cut_short(end: Mapping[str, Any]) -> str:
     """'' when a session's end record says its bag holds the whole run, else why not, for people: no end record
     (the recorder never closed the bag), a recording stopped from outside (~/stop) or by a write error, the node shut
-    down before the program was done, or (simulated time) messages the rig published missing from the bag."""
+    down before the program was done, a bag near empty (the record's ``failed``), or (simulated time) messages the
+    rig published missing from the bag."""
     if not end:
         return 'the bag has no session end: the recorder did not close it (killed?)'
     reason = end.get('stop_reason', '?')
@@ -186,6 +211,8 @@ def cut_short(end: Mapping[str, Any]) -> str:
                 f'{int(end.get("end_time_ns", 0)) * 1e-9:.3f} s: the bag is not the whole run')
     if reason not in ('program done', 'shutdown') or (reason == 'shutdown' and state != 'done'):
         return f'the recording ended before the program did ({reason}): the bag is not the whole run'
+    if end.get('failed'):
+        return str(end['failed'])
     if str(end.get('complete', '')).lower() == 'false':  # (simulated time; the record keeps it as JSON text)
         return f'the bag lacks messages the rig published: {end.get("missing")}'
     return ''
@@ -211,7 +238,7 @@ def read_node_parameters(source: Records) -> dict[str, dict[str, Any]]:
 
 
 __all__ = [
-    'CAMPAIGN_KEY', 'NODE_PARAMETERS_METADATA', 'SESSION_END_METADATA', 'SESSION_METADATA', 'analysis_geometry_params',
-    'cut_short', 'read_node_parameters', 'read_session', 'read_session_end', 'session_end_record', 'session_metadata',
-    'session_record',
+    'CAMPAIGN_KEY', 'MIN_STREAM_MESSAGES', 'NODE_PARAMETERS_METADATA', 'SENSOR_STREAMS', 'SESSION_END_METADATA',
+    'SESSION_METADATA', 'analysis_geometry_params', 'cut_short', 'near_empty', 'read_node_parameters', 'read_session',
+    'read_session_end', 'session_end_record', 'session_metadata', 'session_record',
 ]

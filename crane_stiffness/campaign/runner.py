@@ -403,7 +403,7 @@ def service_confirm(timeout_s: float | None = None, operator: str = '') -> Confi
         print(f'\n{text}\nwaiting for a call of /campaign/continue (std_srvs/srv/Trigger) ...', file=sys.stderr,
               flush=True)
         ctx = rclpy.Context()
-        rclpy.init(context=ctx)
+        rclpy.init(args=[], context=ctx)  # not sys.argv: --rig-arg NAME:=VALUE there warns as a remap rule
         node = rclpy.create_node('campaign', context=ctx)
         called: dict[str, Any] = {}
 

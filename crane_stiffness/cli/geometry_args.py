@@ -8,6 +8,7 @@ from typing import Any
 from crane_stiffness.errors import CraneStiffnessError
 from crane_stiffness.model import CraneGeometry
 from crane_stiffness.model.geometry import lab_model_fields
+from crane_stiffness.nodes import NODES
 from crane_stiffness.params.files import config_path, load_params
 from crane_stiffness.params.geometry import GEOMETRY_PARAMS, PREFIX, geometry_from_params, geometry_to_params
 
@@ -45,7 +46,8 @@ def config_geometry_params(config: str, node: str | None = None) -> dict[str, An
     """Every geometry.* parameter of a ROS parameter YAML (a path, or a name in the installed config/), those the
     file does not set at their defaults: what ``--config`` reads, here and in ``analyze``/``compare``. Raises
     ConfigError / GeometryError naming the file or the bad value."""
-    return geometry_to_params(geometry_from_params(load_params(config_path(config), node)))
+    # (a section close to one of the package's nodes that applies to none can only be a typo: refused)
+    return geometry_to_params(geometry_from_params(load_params(config_path(config), node, known_nodes=NODES)))
 
 
 def geometry_from_args(args: argparse.Namespace) -> CraneGeometry:

@@ -20,6 +20,8 @@ same definitions, so a change here is a change everywhere.
   ``diagnostic_msgs/DiagnosticStatus`` (OK with a message that starts "waiting").
 - ``stiffness6_layout.py``: the layout of ``/stiffness6/stiffness`` and ``/stiffness6/compliance`` (value and 95 %
   interval of every entry of the 6×6 matrix, labels and strides), both directions.
+- ``publishers.py``: which node publishes each rig topic (the simulated sensor or the driver), so a wait that times
+  out names the node that should have published.
 - ``command_limits.py``: which commanded wrenches are absurd (not finite, or beyond the force and moment limits): the
   model rejects them and the estimator leaves out the time they were in force.
 - ``control_events.py``: who asked a node to stop, tare or reset: the control event a caller (the live view) publishes

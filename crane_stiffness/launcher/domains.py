@@ -151,7 +151,7 @@ def foreign_nodes(domain: int, look_s: float | None = None) -> list[str]:
     from rclpy.signals import SignalHandlerOptions
 
     context = rclpy.Context()
-    rclpy.init(context=context, domain_id=domain, signal_handler_options=SignalHandlerOptions.NO)
+    rclpy.init(args=[], context=context, domain_id=domain, signal_handler_options=SignalHandlerOptions.NO)
     try:
         name = f'crane_stiffness_domain_look_{os.getpid()}'
         node = rclpy.create_node(name, context=context, start_parameter_services=False,

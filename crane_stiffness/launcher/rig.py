@@ -403,7 +403,7 @@ def run_rig(share: Path, env: Mapping[str, str], out: Path, program: str, sessio
                          f'rig {session}', env=env)
     env = with_claim(env, claim.domain)
     ctx = rclpy.Context()
-    rclpy.init(context=ctx, domain_id=claim.domain)
+    rclpy.init(args=[], context=ctx, domain_id=claim.domain)  # not sys.argv: a NAME:=VALUE there warns
     # (rigs side by side in one process: one observer each, named apart, as rcl's logging keys its publisher by name)
     observer = Observer(f'rig_observer_{domain_id}' if domain_id is not None else 'rig_observer', context=ctx)
     observer.should_stop = should_stop

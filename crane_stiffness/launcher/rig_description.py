@@ -31,21 +31,27 @@ two network namespaces by it.
 Every node starts at the same instant (as ``ros2 launch`` starts them); load_program starts the program only when
 the rig is ready. What "ready" means follows from the nodes started (:func:`readiness`): a message on the model's
 prediction and on both sensor streams, and each started node subscribed to the topics it reads. An unknown program
-or a missing parameter file raises :class:`RigError` naming the file before anything starts.
+or a missing parameter file raises :class:`RigError` naming the file before anything starts; so do what can only be
+typos: an argument the rig does not declare (``transprot:=drivers``, :func:`check_argument_names`; launch itself
+would take it silently) and a parameter-file section that applies to no node of the rig (``stiffness_estimater:``,
+read by none), each with the closest declared name.
 """
 from __future__ import annotations
 
 import os
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any, Iterable, Mapping
 
 from crane_stiffness import PACKAGE
 
 from crane_stiffness.contract import topics
 from crane_stiffness.errors import CraneStiffnessError
+from crane_stiffness.params.errors import ConfigError
+from crane_stiffness.params.files import ParamFile, check_sections, did_you_mean
 
-__all__ = ['ARGUMENTS', 'MACHINES', 'NODES', 'PACKAGE', 'TRANSPORTS', 'Argument', 'NodeStart', 'RigError', 'RigNode',
-           'argument_values', 'config_files', 'config_path', 'flag', 'known_programs', 'program_file', 'readiness',
+__all__ = ['ARGUMENTS', 'LAUNCH_OWN', 'MACHINES', 'NODES', 'PACKAGE', 'SIGKILL_AFTER_S', 'TRANSPORTS', 'Argument',
+           'NodeStart', 'RigError', 'RigNode', 'argument_values', 'check_argument_names', 'check_file_sections',
+           'config_files', 'config_path', 'exit_problem', 'flag', 'known_programs', 'program_file', 'readiness',
            'rig_nodes']
 
 
@@ -218,13 +224,36 @@ def flag(value: str | bool) -> bool:
     raise ValueError(f'{value!r}: expected true or false')
 
 
+#: Launch configurations that launch and launch_ros set or read themselves (``ros2 launch --launch-prefix``,
+#: ``emulate_tty``, ``sigterm_timeout:=``/``sigkill_timeout:=``: how long launch waits at Ctrl-C; PushRosNamespace,
+#: SetRemap, SetParameter): in the launch context beside the rig's arguments, never a typo of one.
+LAUNCH_OWN = frozenset({'launch-prefix', 'launch-prefix-filter', 'emulate_tty', 'sigterm_timeout', 'sigkill_timeout',
+                        'ros_namespace', 'ros_remaps', 'global_params'})
+
+
+#: Ctrl-C: how long launch waits after its SIGTERM (itself 5 s after the SIGINT) before it kills a node [s]. Every
+#: node holds both signals while its interpreter starts and ends cleanly once started, but on a busy two-core machine
+#: (load 15) starting took longer than launch's default 5 s: the whole rig was killed, the recorder's bag unclosed.
+#: ``sigkill_timeout:=S`` on the command line still sets it (launch's own configuration).
+SIGKILL_AFTER_S = 55.0
+
+
+def check_argument_names(names: Iterable[str], launch_own: Iterable[str] = LAUNCH_OWN) -> None:
+    """RigError naming the first argument in ``names`` the rig does not declare (``launch_own``: the launch
+    configurations of launch itself, aside) and the closest declared one: ``ros2 launch`` takes any
+    ``name:=value`` and the rig would run without it (``sim_sensor:=false`` starting the emulators all the same)."""
+    declared = [a.name for a in ARGUMENTS]
+    for name in sorted(set(names) - set(declared) - set(launch_own)):
+        hint = did_you_mean(name, declared) or f"; the rig's arguments: {', '.join(declared)}"
+        raise RigError(f'{name}:=...: the rig has no argument {name!r}{hint} (ros2 launch crane_stiffness '
+                       'rig.launch.py --show-args lists them)')
+
+
 def argument_values(config_dir: str | os.PathLike, given: Mapping[str, str | bool] | None = None) -> dict[str, Any]:
-    """Every argument's value: the given ones, else the defaults (config files in ``config_dir``)."""
+    """Every argument's value: the given ones, else the defaults (config files in ``config_dir``); RigError names an
+    argument the rig does not declare (:func:`check_argument_names`)."""
     given = dict(given or {})
-    unknown = set(given) - {a.name for a in ARGUMENTS}
-    if unknown:
-        raise RigError(f'unknown rig argument(s) {", ".join(sorted(unknown))}; known: '
-                         f'{", ".join(a.name for a in ARGUMENTS)}')
+    check_argument_names(given, launch_own=())
     values = {a.name: given.get(a.name, a.default) for a in ARGUMENTS}
     for a in ARGUMENTS:
         if a.config_file:
@@ -313,8 +342,42 @@ def is_six_axis_program(path: str | os.PathLike) -> bool:
     return SIX_AXIS_SECTION in _sections(str(path))
 
 
+def exit_problem(process: str, returncode: int | None, shutting_down: bool) -> str:
+    """Why the launch must stop when the node process ``process`` (launch's name for it, ``crane_model-1``, or the
+    node's) ended with ``returncode`` ('' when it may end so): a node that ends on its own with a non-zero status
+    (a bad parameter: 2; load_program giving up on the rig: 1; a crash: a negative signal number) leaves a rig that
+    measures nothing, so the launch ends with it, naming it. Status 0 (load_program done with its program) and
+    whatever happens once the launch is shutting down (Ctrl-C) are no failure."""
+    if shutting_down or returncode is None or returncode == 0:
+        return ''
+    name = process.rsplit('-', 1)[0] if process.rsplit('-', 1)[-1].isdigit() else process
+    how = f'was killed by signal {-returncode}' if returncode < 0 else f'exited with status {returncode}'
+    why = {'load_program': ': it gave up waiting for the rig (its last lines say what never came)'}.get(name, '')
+    return (f'{name} {how}{why}: the rig cannot measure without it, so the launch stops (see {name}\'s output '
+            'above)')
+
+
+def check_file_sections(files: Mapping[str, str], roles: Iterable[str]) -> None:
+    """RigError naming a parameter file of ``roles`` (of ``files``: role -> path) with a section that applies to no
+    node of the rig (:data:`NODES`), and the closest node: its parameters would be read by none, silently. A file
+    that cannot be read passes here: the node that reads it stops and says why."""
+    import yaml
+    names = [node.name for node in NODES]
+    for path in dict.fromkeys(files[role] for role in roles):
+        try:
+            file = ParamFile.read(path)
+        except (OSError, UnicodeDecodeError, yaml.YAMLError):
+            continue
+        try:
+            check_sections(path, file.sections, names)
+        except ConfigError as exc:
+            raise RigError(str(exc)) from None
+
+
 def rig_nodes(config_dir: str | os.PathLike, given: Mapping[str, str | bool] | None = None) -> list[NodeStart]:
-    """The nodes the rig starts for the arguments ``given`` (the rest at their defaults), in start order."""
+    """The nodes the rig starts for the arguments ``given`` (the rest at their defaults), in start order; RigError
+    for what cannot start as asked (an unknown argument, program or value, a missing file, a file section that
+    applies to no node of the rig)."""
     values = argument_values(config_dir, given)
     if values['transport'] not in TRANSPORTS:
         raise RigError(f"transport {values['transport']!r}: expected one of {', '.join(TRANSPORTS)}")
@@ -330,6 +393,8 @@ def rig_nodes(config_dir: str | os.PathLike, given: Mapping[str, str | bool] | N
                        'device protocols keep wall-clock time')
     started = [node for node in NODES if (node.condition is None or flag(values[node.condition]))
                and all(str(values[arg]) == value for arg, value in node.when)]
+    check_file_sections(files, {role for node in started for role in node.files
+                                if role != 'drivers' or values['transport'] == 'drivers'})
 
     def clock(node: RigNode) -> dict[str, Any]:
         """Simulated time: every node follows /clock; the clock source waits for the participants started."""

@@ -116,7 +116,9 @@ class RigHost:
         self.claim = claim_domain(int(domain_id), f'rig host {os.getpid()}')
         self.domain_id = self.claim.domain
         self.context = rclpy.Context()
-        rclpy.init(context=self.context, domain_id=self.domain_id, signal_handler_options=SignalHandlerOptions.NO)
+        # args=[]: not sys.argv, whose NAME:=VALUE (campaign run --rig-arg) rcl reads as deprecated remap rules
+        rclpy.init(args=[], context=self.context, domain_id=self.domain_id,
+                   signal_handler_options=SignalHandlerOptions.NO)
         self.executor: Any = None  # a session's, while it runs
         self.sessions = 0
 

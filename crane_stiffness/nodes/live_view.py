@@ -63,6 +63,7 @@ from crane_stiffness.view import plot, stiffness6
 from crane_stiffness.view.access import AccessPolicy, default_token_file, write_token_file
 from crane_stiffness.view.msgdefs import definition
 from crane_stiffness.view.scene import SCENE_SCHEMA, SLACK_TENSION_N, CraneState, scene_update
+from crane_stiffness.view.errors import ViewError
 from crane_stiffness.view.server import FoxgloveServer, PageServer
 
 PREFIX = '/live_view/'
@@ -127,6 +128,16 @@ def _validate(values: dict[str, Any]) -> CraneGeometry:
     AccessPolicy(values['host'], token=values['token'] or 'x' * 16, allowed_origins=values['allowed_origins'],
                  allowed_hosts=values['allowed_hosts'])  # raises ViewError (a ValueError) naming the field
     return geometry_from_params(values)  # raises GeometryError (a ValueError) naming the field
+
+
+
+def _port_hint(exc: ViewError, parameter: str, argument: str) -> ViewError:
+    """A server that cannot listen says which parameter (and launch argument) chooses its port: 'Address already in
+    use' alone left a lab guessing which of the rig's ports another program had taken."""
+    if 'cannot serve' not in str(exc):
+        return exc
+    return ViewError(f'{exc} (parameter {parameter}; ros2 launch: {argument}:=...): another program has the port, '
+                     f'or it is not free on this host: set {parameter} to a free one')
 
 
 class LiveViewNode(Node):
@@ -202,11 +213,17 @@ class LiveViewNode(Node):
         host = values['host']
         policy = AccessPolicy(host, page_port=values['http_port'], token=values['token'],
                               allowed_origins=values['allowed_origins'], allowed_hosts=values['allowed_hosts'])
-        self.foxglove = FoxgloveServer(host, values['port'], ros, derived, services, self._want, logger.info,
-                                       logger.warn, policy)
         try:
-            self.page = PageServer(host, values['http_port'], self.foxglove.port,
-                                   'six_axis' if values['six_axis_program'] else 'one_axis', policy, logger.warn)
+            self.foxglove = FoxgloveServer(host, values['port'], ros, derived, services, self._want, logger.info,
+                                           logger.warn, policy)
+        except ViewError as exc:
+            raise _port_hint(exc, 'port', 'view_port') from None
+        try:
+            try:
+                self.page = PageServer(host, values['http_port'], self.foxglove.port,
+                                       'six_axis' if values['six_axis_program'] else 'one_axis', policy, logger.warn)
+            except ViewError as exc:  # e.g. a device emulator given http_port:=8080, the page's default
+                raise _port_hint(exc, 'http_port', 'view_http_port') from None
             self.token_file = (Path(values['token_file']) if values['token_file']
                                else default_token_file(self.foxglove.port))
             write_token_file(self.token_file, policy.token)

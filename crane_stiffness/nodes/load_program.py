@@ -58,6 +58,7 @@ from crane_stiffness.launcher.rig_description import readiness
 from crane_stiffness.sim.program import (AXIS_UNITS, LOAD_APPLICATION_PARAMS, PROGRAM_KEYS, PROGRAM_PARAMS,
                                         LoadProgram, LoadPrompt, ProgramState, Settling, load_prompts)
 from crane_stiffness.contract.status import OK, WARN
+from crane_stiffness.contract.publishers import awaited_from
 from crane_stiffness.serde.stamps import split_ns
 
 #: What the program waits for by default: the whole simulated rig with the recorder, as
@@ -132,7 +133,7 @@ class _Readiness:
             self._received[topic] = False
             if msg_type is not None:
                 self._subscribe(topic, message_class(msg_type))
-            self.items.append((f'a message on {topic}' + (f' ({SOURCES[topic]})' if topic in SOURCES else ''),
+            self.items.append((f'a message on {topic}{awaited_from(topic, [r for _, r in subscribers])}',
                                partial(self._received.__getitem__, topic)))
         self._pending_types = [t for t in self._received if t not in self._subscriptions]
         command_readers = set()

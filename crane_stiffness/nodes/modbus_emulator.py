@@ -13,6 +13,11 @@ served the rest pose and met the crane's poses only during the first ramp, it ze
 offset by the load at that instant, a stiffness several per cent off). True calibration errors and coloured noise
 as ``lvdt`` has them (``truth.*``, ``noise.*``; ``truth.mode: drawn`` draws from its own ``calibration.*``), all off
 by default.
+
+Between sessions: an emulator that stays up (a lab's stand-in for the DAQ, started once) forgets the held pose and
+its zero when the platform pose's last publisher leaves (the session's crane_model ended) and on ~/reset
+(std_srvs/Trigger): every read answers "busy" again until the next session's first pose, which it zeroes on as a
+fresh emulator would, so a new session never reads the previous one's platform.
 """
 from __future__ import annotations
 
@@ -22,6 +27,7 @@ from typing import Any
 import numpy as np
 from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
+from std_srvs.srv import Trigger
 
 from crane_stiffness.contract import topics
 from crane_stiffness.params.spec import ParamSpec
@@ -50,6 +56,8 @@ PARAMS = (
     *LVDT_IMPERFECTION_PARAMS,
 )
 START_ONLY = ('host', 'port', 'unit_id')
+#: How often a long-running emulator looks whether the session's model is still there [s].
+SESSION_CHECK_S = 0.2
 
 
 def _validate(values: dict[str, Any]):
@@ -78,7 +86,11 @@ class ModbusEmulator(Node):
         self.t0 = time.monotonic()  # the coloured noise's time origin (reads come on the wall clock)
         self.params = Params(self, PARAMS, self._validate, self._apply)
         self.lag = InputLag()
-        self.create_subscription(PoseStamped, topics.PLATFORM_POSE, self._on_pose, RELIABLE_QOS)
+        self.input = self.create_subscription(PoseStamped, topics.PLATFORM_POSE, self._on_pose, RELIABLE_QOS)
+        self.resets = 0
+        self.create_service(Trigger, '~/reset', self._srv_reset)
+        self._publisher_seen = False  # a publisher of the held input seen in the graph since
+        self.create_timer(SESSION_CHECK_S, self._check_session)
         self.diagnostics = Diagnostics(self, self._report)
 
     def _validate(self, values: dict[str, Any]):
@@ -128,11 +140,37 @@ class ModbusEmulator(Node):
         self.pose = pose
         self.counters.used += 1
 
+    def reset(self, why: str) -> None:
+        """Forget the held pose and the zero taken on the first one: reads answer busy until the next pose."""
+        if self.pose is not None:
+            self.pose = None
+            self.zero_pose = None
+            self.resets += 1
+            self.get_logger().info(f'{why}: the held pose and its zero are forgotten; reads answer "busy" until the '
+                                   'next platform pose')
+
+    def _check_session(self) -> None:
+        """The session's crane_model gone (no publisher of the platform pose left): its platform is no longer there."""
+        # Only a publisher seen in the graph and gone again counts: the graph may show a publisher later than its
+        # first message arrives, and a reset then would leave the rig waiting for a reading that never comes.
+        publishers = self.count_publishers(self.input.topic_name)  # (as remapped)
+        if publishers:
+            self._publisher_seen = True
+        elif self._publisher_seen and self.pose is not None:
+            self._publisher_seen = False
+            self.reset(f'no publisher of {topics.PLATFORM_POSE} left (the session ended)')
+
+    def _srv_reset(self, request, response):
+        self.reset('~/reset')
+        response.success, response.message = True, f'reads answer busy until the next {topics.PLATFORM_POSE}'
+        return response
+
     def _report(self):
         self.counters.published = self.device.reads
         late, lag_pairs = self.lag.status('the platform pose', self.settings['max_input_lag_s'])
         pairs = self.counters.as_pairs() + [('port', str(self.device.port)),
                                             ('zeroed', str(self.zero_pose is not None).lower()),
+                                            ('resets', str(self.resets)),
                                             ('zero_offset_m', repr(self.model.zero_offset))] + lag_pairs
         if late:
             return WARN, late, pairs

@@ -6,12 +6,13 @@ Polls one channel (``register``, ``register_type``, ``data_type``, ``word_order`
 /lvdt/displacement (PointStamped, sensor QoS, frame ``frame_id``): point.x = ``gain`` · raw + ``offset`` − zero [m],
 stamped at the middle of the request (the DAQ has no clock of its own to stamp with). /diagnostics: polls, failures
 (timeouts, dropped connections, Modbus exception responses: ERROR with the reason) and the poll jitter (start of
-each request against the ideal grid: p50, p99, max [µs]; late polls). After a failure the device is asked again
-every ``reconnect_interval_s``. Service ~/zero (std_srvs/Trigger) zeroes on the mean of the last ``zero_samples``
-readings; the number of zeros since start is published, latched, on /lvdt/zero (std_msgs/Float64, at start and
-after every zero) so the estimator starts a new fit segment. At start a wrong address or a silent device stops the
-node (exit 2) with the reason, after trying for
-``wait_for_device_s``.
+each request against the ideal grid: p50, p99, max [µs]; late polls; instants of the grid the timer skipped because
+the process was busy past the next one: their readings taken late at the next tick, ``caught_up_polls``, or never,
+``missed_polls``). After a failure the
+device is asked again every ``reconnect_interval_s``. Service ~/zero (std_srvs/Trigger) zeroes on the mean of the
+last ``zero_samples`` readings; the number of zeros since start is published, latched, on /lvdt/zero
+(std_msgs/Float64, at start and after every zero) so the estimator starts a new fit segment. At start a wrong
+address or a silent device stops the node (exit 2) with the reason, after trying for ``wait_for_device_s``.
 """
 from __future__ import annotations
 
@@ -68,6 +69,9 @@ PARAMS = (
               'longer when the DAQ (or its emulator) starts with the driver [s]'),
     *LVDT_CALIBRATION_PARAMS,
 )
+#: A tick after skipped grid instants takes their readings at once, up to this much of them [s of polls]: a stall
+#: of the process (or of the device's answer) of more than 0.1 s was seen beside a busy process at load 15.
+MAX_CATCH_UP_S = 1.0
 START_ONLY = ('host', 'port', 'unit_id', 'timeout_s', 'wait_for_device_s')
 CHANNEL_KEYS = ('register', 'register_type', 'data_type', 'word_order', 'gain', 'offset')
 
@@ -91,13 +95,18 @@ def _validate(values: dict[str, Any]) -> Channel:
 
 @dataclass
 class PollCounters(Counters):
-    """``received`` = successful polls; failures by kind; late polls (started more than half a period late)."""
+    """``received`` = successful polls; failures by kind; late polls (started more than half a period late);
+    ``caught_up_polls``: grid instants the timer skipped (the process was busy past the next instant; counted exactly
+    from the timer's own next call time) whose readings were taken late, at the next tick; ``missed_polls``: those
+    with no reading at all (more than MAX_CATCH_UP_S behind, a failed poll, a device being waited for)."""
 
     failures: int = 0
     timeouts: int = 0
     exception_responses: int = 0
     reconnects: int = 0
     late_polls: int = 0
+    missed_polls: int = 0
+    caught_up_polls: int = 0
     stream_restarts: int = 0
 
 
@@ -110,12 +119,13 @@ class ModbusLvdt(Node):
         self._reported = PollCounters()
         self.settings: dict[str, Any] = {}
         self.poller: ModbusPoller | None = None  # created by the first _apply (Params, below): _tick asserts it
-        self.timer = None
+        self.timer: Any = None  # the poll timer (create_grid_timer), made by the first _apply
         self.zero_m = 0.0
         self.last_error = ''
         self._retry_at = 0.0
         self._jitter_ns: deque[int] = deque(maxlen=5000)   # request start minus its grid instant
         self._recent: deque[float] = deque(maxlen=10)
+        self._next_due_ns: int | None = None  # the timer's next call [ns of the node clock], as of the last tick
         self.pub = self.create_publisher(PointStamped, topics.LVDT_DISPLACEMENT, SENSOR_QOS)
         self.zero_epoch = ZeroEpoch(self, topics.LVDT_ZERO)  # zeros since start, latched on /lvdt/zero
         self.params = Params(self, PARAMS, self._validate, self._apply)
@@ -146,18 +156,46 @@ class ModbusLvdt(Node):
                 self.destroy_timer(self.timer)
             self.period_ns = round(1e9 / values['poll_rate_hz'])
             self.timer = create_grid_timer(self, 1.0 / values['poll_rate_hz'], self._tick)
+            self._next_due_ns = None
         self.settings = values
+
+    def _skipped(self) -> int:
+        """Grid instants rcl's timer skipped since the previous tick (it skips those it is too late for): its next
+        call, read at each tick, steps by one period when none was skipped."""
+        until = self.timer.time_until_next_call() if self.timer is not None else None
+        if until is None:
+            return 0
+        due = self._now_ns() + until
+        skipped = 0 if self._next_due_ns is None else max(0, round((due - self._next_due_ns) / self.period_ns) - 1)
+        self._next_due_ns = due
+        return skipped
 
     def _tick(self) -> None:
         assert self.poller is not None
+        skipped = self._skipped()
         now = time.monotonic()
         if now < self._retry_at:
+            self.counters.missed_polls += skipped  # the device is being waited for: nothing to catch up on
             return
+        # A busy process (or a slow answer) made the timer skip instants: their readings are taken now, late and
+        # stamped when taken, rather than lost (at most MAX_CATCH_UP_S worth; the rest count as missed).
+        catch_up = min(skipped, max(1, round(MAX_CATCH_UP_S * 1e9 / self.period_ns)))
+        self.counters.missed_polls += skipped - catch_up
+        for i in range(1 + catch_up):
+            if not self._poll(now):
+                self.counters.missed_polls += catch_up - i if i else catch_up
+                return
+            if i:
+                self.counters.caught_up_polls += 1
+
+    def _poll(self, now: float) -> bool:
+        """One request and its reading published; False when it failed."""
+        assert self.poller is not None
         try:
             reading = self.poller.read()
         except DriverError as exc:
             self._failed(exc, now)
-            return
+            return False
         if self.last_error:
             self.get_logger().info(f'{self.poller.where} answers again')
             self.last_error = ''
@@ -176,6 +214,7 @@ class ModbusLvdt(Node):
         msg.point.x = reading.metres - self.zero_m
         self.pub.publish(msg)
         self.counters.published += 1
+        return True
 
     def _failed(self, exc: DriverError, now: float) -> None:
         self.counters.failures += 1

@@ -12,6 +12,11 @@ counts (``counts_per_force`` [counts/N], ``counts_per_torque`` [counts/(N·m)]).
 serves /netftapi2.xml like an ATI box (0 = a free port). The hardware bias command zeroes it like the real one.
 True calibration errors and coloured noise as ``load_cell`` has them (``truth.*``, ``noise.*``; ``truth.mode: drawn``
 draws from its own ``calibration.*``), all off by default.
+
+Between sessions: an emulator that stays up (a lab's stand-in for the box, started once) forgets the held wrench when
+the applied wrench's last publisher leaves (the session's crane_model ended) and on ~/reset (std_srvs/Trigger): its
+records are not ready again until the next session's model says what load is in force, so a new session never reads
+the previous one's load.
 """
 from __future__ import annotations
 
@@ -22,6 +27,7 @@ from typing import Any
 import numpy as np
 from geometry_msgs.msg import WrenchStamped
 from rclpy.node import Node
+from std_srvs.srv import Trigger
 
 from crane_stiffness.contract import topics
 from crane_stiffness.params.spec import ParamSpec
@@ -58,6 +64,8 @@ PARAMS = (
     *LOAD_CELL_CALIBRATION_PARAMS,
     *LOAD_CELL_IMPERFECTION_PARAMS,
 )
+#: How often a long-running emulator looks whether the session's model is still there [s].
+SESSION_CHECK_S = 0.2
 START_ONLY = ('host', 'port', 'http_port', 'sample_rate_hz', 'clock_ppm', 'counts_per_force', 'counts_per_torque',
               'records_per_packet')
 
@@ -81,6 +89,7 @@ class EmulatorCounters(Counters):
 
     stream_requests: int = 0
     bias_commands: int = 0
+    resets: int = 0
 
 
 class RdtEmulator(Node):
@@ -96,7 +105,10 @@ class RdtEmulator(Node):
         self.t0 = time.monotonic()
         self.params = Params(self, PARAMS, self._validate, self._apply)
         self.lag = InputLag()
-        self.create_subscription(WrenchStamped, topics.APPLIED_WRENCH, self._on_applied, RELIABLE_QOS)
+        self.input = self.create_subscription(WrenchStamped, topics.APPLIED_WRENCH, self._on_applied, RELIABLE_QOS)
+        self.create_service(Trigger, '~/reset', self._srv_reset)
+        self._publisher_seen = False  # a publisher of the held input seen in the graph since
+        self.create_timer(SESSION_CHECK_S, self._check_session)
         self.diagnostics = Diagnostics(self, self._report)
         self.get_logger().info(f'{topics.WAITING_FOR_LOAD}: until then every record has status '
                                f'0x{STATUS_NOT_READY:08x}')
@@ -148,6 +160,30 @@ class RdtEmulator(Node):
             self.get_logger().info(f'first applied wrench {list(wrench)}: records have status 0 from now on')
         self.applied = np.array(wrench)
         self.counters.used += 1
+
+    def reset(self, why: str) -> None:
+        """Forget the held wrench: records are not ready until the next applied wrench."""
+        if self.applied is not None:
+            self.applied = None
+            self.counters.resets += 1
+            self.get_logger().info(f'{why}: the held wrench is forgotten; records have status '
+                                   f'0x{STATUS_NOT_READY:08x} until the next applied wrench')
+
+    def _check_session(self) -> None:
+        """The session's crane_model gone (no publisher of the applied wrench left): its load is no longer in force."""
+        # Only a publisher seen in the graph and gone again counts: the graph may show a publisher later than its
+        # first message arrives, and a reset then would leave the rig waiting for a reading that never comes.
+        publishers = self.count_publishers(self.input.topic_name)  # (as remapped)
+        if publishers:
+            self._publisher_seen = True
+        elif self._publisher_seen and self.applied is not None:
+            self._publisher_seen = False
+            self.reset(f'no publisher of {topics.APPLIED_WRENCH} left (the session ended)')
+
+    def _srv_reset(self, request, response):
+        self.reset('~/reset')
+        response.success, response.message = True, f'records not ready until the next {topics.APPLIED_WRENCH}'
+        return response
 
     def _report(self):
         dev = self.device

@@ -12,10 +12,15 @@ knows ``/**`` and the node's own name, a subset of that). The node is given by i
 (``/rig/lvdt``) or by its name alone (``lvdt``: that node in whatever namespace; a section of any namespace applies).
 Sections with a wildcard apply first, then those naming the node, each group in file order: rclpy's order (``/**``
 first, then the node's own section).
+
+A section that applies to no node is read by none, silently, in ROS: ``stiffness_estimater:`` leaves the estimator at
+its defaults. :func:`stray_sections` finds them for the nodes a caller knows (the rig launcher knows the rig's,
+:func:`load_params` is given the package's), and :func:`check_sections` refuses them naming the closest node.
 """
 from __future__ import annotations
 
 import copy
+import difflib
 import functools
 import os
 import re
@@ -97,6 +102,46 @@ def applicable_sections(keys: Iterable[str], node: str | None) -> list[str]:
         return keys
     chosen = [k for k in keys if section_applies(k, node)]
     return [k for k in chosen if _is_wildcard(k)] + [k for k in chosen if not _is_wildcard(k)]
+
+
+def closest(name: str, known: Iterable[str]) -> str | None:
+    """The known name ``name`` most likely stands for (difflib's closest, at least 0.6 alike), or None."""
+    close = difflib.get_close_matches(name, sorted(set(known)), n=1)
+    return close[0] if close else None
+
+
+def did_you_mean(name: str, known: Iterable[str]) -> str:
+    """`` (did you mean 'x'?)`` for the closest known name, or '' when none is close."""
+    match = closest(name, known)
+    return f" (did you mean '{match}'?)" if match else ''
+
+
+def stray_sections(keys: Iterable[str], nodes: Iterable[str]) -> list[str]:
+    """The section keys (in file order) that apply to none of ``nodes`` (names, or fully qualified names): read
+    by no node of them. A wildcard key (``/**``, ``/rig/*``) is never stray: it may be meant for any node."""
+    nodes = list(nodes)
+    return [k for k in keys if not _is_wildcard(k) and not any(section_applies(k, n) for n in nodes)]
+
+
+def _node_name(key: str) -> str:
+    return key.rstrip('/').rsplit('/', 1)[-1]
+
+
+def check_sections(path: str | os.PathLike, keys: Iterable[str], nodes: Iterable[str], *, only_typos: bool = False,
+                   who: str = 'the rig') -> None:
+    """ConfigError naming the file, the first section of ``keys`` that applies to none of ``nodes`` and the closest
+    node, e.g. ``sensors.yaml: section 'stiffness_estimater' applies to no node of the rig (did you mean
+    'stiffness_estimator'?)``. ``only_typos``: refuse only a section close to a node's name (one that can only be a
+    typo; a file may hold sections for other packages' nodes), the others pass."""
+    nodes = list(nodes)
+    names = [_node_name(n) for n in nodes]
+    for key in stray_sections(keys, nodes):
+        match = closest(_node_name(key), names)
+        if match is None and only_typos:
+            continue
+        hint = f" (did you mean '{match}'?)" if match else f"; its nodes: {', '.join(sorted(set(names)))}"
+        raise ConfigError(f'{path}: section {key!r} applies to no node of {who}{hint}: its parameters would be '
+                          'read by none')
 
 
 class NodeSections:
@@ -200,10 +245,13 @@ def read_params_files(paths: Sequence[str]) -> tuple[list[dict[str, str]], dict[
     return files, sections, problems
 
 
-def load_params(path: str | os.PathLike, node_name: str | None = None) -> dict[str, Any]:
+def load_params(path: str | os.PathLike, node_name: str | None = None,
+                known_nodes: Iterable[str] | None = None) -> dict[str, Any]:
     """Flat parameters of a ROS parameter YAML file for the node ``node_name`` (its name, or its fully qualified
     name), the sections applied the way ROS applies them (:func:`applicable_sections`: ``/**`` and other
     wildcards first, then the node's own). Without ``node_name`` every section is merged in file order.
+    ``known_nodes``: the package's node names; a section close to one of them that applies to none
+    (``crane_modle:``) can only be a typo and is refused (:func:`check_sections`).
     """
     path = Path(path)
     try:
@@ -214,6 +262,8 @@ def load_params(path: str | os.PathLike, node_name: str | None = None) -> dict[s
         raise ConfigError(f'{path}: not valid YAML: {exc}') from None
     if not file.is_mapping:
         raise ConfigError(f'{path}: expected "<node>: ros__parameters: ..." at the top level')
+    if known_nodes is not None:
+        check_sections(path, file.sections, known_nodes, only_typos=True, who='this package')
     keys = applicable_sections(file.sections, node_name)
     for key in keys:
         if file.sections[key] is None:

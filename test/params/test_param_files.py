@@ -68,3 +68,19 @@ def test_params_files_from_ros_arguments():
     argv = ['node', '--params-file', 'x', '--ros-args', '--params-file', 'a.yaml', '-p', 'k:=1', '--',
             '--params-file', 'y', '--ros-args', '--params-file', 'b.yaml']
     assert params_files_from_args(argv) == ['a.yaml', 'b.yaml']
+
+
+def test_a_section_that_can_only_be_a_typo_is_refused_naming_the_closest_node(tmp_path):
+    """A section read by no node is silent in ROS; given the package's nodes, load_params refuses one close to a
+    node's name (the CLI's --config), and lets pass one like none (another package's node in a shared file)."""
+    from crane_stiffness.nodes import NODES
+    path = tmp_path / 'crane.yaml'
+    path.write_text('/**:\n  ros__parameters:\n    geometry.height: 0.5\n'
+                    'crane_modle:\n  ros__parameters:\n    x: 1\n')
+    with pytest.raises(ConfigError, match=rf"{path}: section 'crane_modle' applies to no node of this package "
+                                          r"\(did you mean 'crane_model'\?\)"):
+        load_params(path, 'crane_model', known_nodes=NODES)
+    assert load_params(path, 'crane_model') == {'geometry.height': 0.5}  # without the list: ROS's silence
+    path.write_text('/**:\n  ros__parameters:\n    geometry.height: 0.5\n'
+                    'camera_driver:\n  ros__parameters:\n    x: 1\n/rig/crane_model:\n  ros__parameters:\n    y: 2\n')
+    assert load_params(path, 'crane_model', known_nodes=NODES) == {'geometry.height': 0.5, 'y': 2}
