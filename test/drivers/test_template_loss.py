@@ -19,7 +19,7 @@ from helpers import REPO
 pytestmark = pytest.mark.ros
 
 
-def test_the_template_loses_no_lvdt_reading_beside_a_busy_process(install_tree, tmp_path):
+def test_the_template_runs_the_rig_over_the_emulators_beside_a_busy_process(install_tree, tmp_path):
     install, env = install_tree
     share = installed_config(install)
     rate = load_params(REPO / 'config' / TEMPLATE, 'modbus_lvdt')['poll_rate_hz']
