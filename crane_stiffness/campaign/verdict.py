@@ -8,8 +8,8 @@ loading k with its GUM U and E_n against the model, and whether the bag holds th
 A session is NOT OK when its row is NOT OK, its bag was cut short, it could not be analysed, or a branch is far from
 the model (|E_n| > 1) while the crane on the rig is meant to be the modelled one (hardware, or a simulated nominal
 crane; a campaign that simulates another crane on purpose finds the disagreement in its tables instead). The
-verdict, with what the operator decided after it, is kept in ``DIR/sessions/<session>/verdict.json`` (written after result.json: a
-session resumed later keeps its verdict, and the run's exit code counts it). No ROS.
+verdict, with what the operator decided after it, is kept in ``DIR/sessions/<session>/verdict.json`` (written after
+result.json: a session resumed later keeps its verdict, and the run's exit code counts it). No ROS.
 """
 from __future__ import annotations
 
