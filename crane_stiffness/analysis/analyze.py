@@ -278,7 +278,8 @@ def analyze_session(bag_path: str | Path, out_dir: str | Path | None = None, *, 
                     reports: Sequence[str] = ('md',), write_json: bool = True, axis: str | None = None,
                     settle_fraction: float = 0.3, model_points: int = 41, progress: bool = False,
                     write_files: bool = True, mapping: SensorMapping | None = None,
-                    uncertainty_file: str | Path | None = None, monte_carlo: bool = True) -> SessionAnalysis:
+                    uncertainty_file: str | Path | None = None, monte_carlo: bool = True,
+                    prediction_monte_carlo: bool | None = None) -> SessionAnalysis:
     """Analyse one recorded session (see the module docstring) and write its figures, report and JSON.
 
     Args:
@@ -298,6 +299,7 @@ def analyze_session(bag_path: str | Path, out_dir: str | Path | None = None, *, 
         uncertainty_file: the crane inputs' uncertainties for the model's prediction and E_n (default
             config/uncertainty_lab.yaml; :mod:`crane_stiffness.analysis.stiffness_uncertainty`).
         monte_carlo: JCGM 101's Monte Carlo beside each GUM result (seeded; False: the GUM alone, ~0.4 s less).
+        prediction_monte_carlo: the prediction's alone (None: as ``monte_carlo``); E_n's reference U follows it.
 
     Returns:
         the :class:`SessionAnalysis` (its ``files`` lists what was written).
@@ -345,7 +347,7 @@ def analyze_session(bag_path: str | Path, out_dir: str | Path | None = None, *, 
             bar.stage('uncertainty')
             uncertainty = session_uncertainty(data, pairs, *_program_span(pairs, commands), steps,
                                               fits['branch_fits'], fits['hold_fits'], model, problems,
-                                              uncertainty_file, monte_carlo)
+                                              uncertainty_file, monte_carlo, prediction_monte_carlo)
             disagreements = model_disagreements(uncertainty, data.settings.stiffness_unit)
             bar.done()
         bar.stage('summary')

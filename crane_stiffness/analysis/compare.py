@@ -117,7 +117,8 @@ def compare_sessions(bags: Iterable[str | Path], out_dir: str | Path | None = No
         from tqdm import tqdm
         iterator = tqdm(paths, desc='compare', unit='session', leave=False)
     for p in iterator:
-        analyses.append(analyze_session(p, axis=axis, write_files=False, mapping=mapping, monte_carlo=False))
+        analyses.append(analyze_session(p, axis=axis, write_files=False, mapping=mapping, monte_carlo=False,
+                                         prediction_monte_carlo=True))  # E_n as `analyze` has it
     comparison = SessionComparison(rows=[comparison_row(a) for a in analyses], sessions=analyses,
                                    agreement=session_agreement(analyses))
     out = Path(out_dir) if out_dir is not None else Path('out') / 'compare'

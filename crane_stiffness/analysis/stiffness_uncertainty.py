@@ -5,9 +5,9 @@ The measured k of a branch is the fit of its hold means when there is one (its T
 freedom, honest under coloured noise and drift), else the fit of its samples; the calibrations are those the load
 cell and LVDT nodes declared and the recorder stored (:mod:`crane_stiffness.uncertainty.measurement`). The model's
 prediction for the recorded geometry along the axis carries the uncertainty of the crane's inputs (default
-``config/uncertainty_lab.yaml``) by the GUM's law of propagation; E_n uses the GUM's U of both. For this model the
-prediction's linear interval is the wider one (its budget is mostly one rectangular input), so E_n leans towards
-"agree": the coverage study measured 4 of 200 disagreeing where about 5 % would (docs/uncertainty.md, Coverage).
+``config/uncertainty_lab.yaml``) by the GUM's law of propagation, with its Monte Carlo (once per crane and
+process); E_n uses the measured k's U and the prediction's U for agreement (the Monte Carlo's where it does not
+validate the GUM interval: :func:`~crane_stiffness.uncertainty.prediction.agreement_U`).
 
 Beside each GUM result (both branches and the prediction) stands, unless switched off, JCGM 101's adaptive Monte
 Carlo through the same measurement function, seeded (:data:`MONTE_CARLO_SEED`) so that the same bag gives the same
@@ -22,6 +22,8 @@ with their U, the relative difference and the likely causes in the order a lab c
 """
 from __future__ import annotations
 
+import functools
+import json
 import math
 import os
 from typing import Any
@@ -37,10 +39,10 @@ from crane_stiffness.estimation.fit import LineFit
 from crane_stiffness.estimation.live_pairs import LivePairs
 from crane_stiffness.params.geometry import geometry_from_params
 from crane_stiffness.uncertainty.agreement import en_number
-from crane_stiffness.uncertainty.budget import json_ready
+from crane_stiffness.uncertainty.budget import UncertaintyResult, json_ready
 from crane_stiffness.uncertainty.crane_inputs import crane_inputs, input_names, load_uncertainty_file
 from crane_stiffness.uncertainty.measurement import SlopeStatistics, measured_stiffness
-from crane_stiffness.uncertainty.prediction import predict_stiffness
+from crane_stiffness.uncertainty.prediction import agreement_U, predict_stiffness
 
 #: The crane inputs' uncertainties unless the caller names a file (in the package's config/).
 DEFAULT_UNCERTAINTY_FILE = 'uncertainty_lab.yaml'
@@ -75,6 +77,15 @@ def _cross_load_ratio(data: SessionData, axis: str) -> float:
     return max(v for a, v in peak.items() if a != axis) / peak[axis]
 
 
+@functools.lru_cache(maxsize=32)
+def _predicted(geometry_params: str, axis: str, entries: str, monte_carlo: bool) -> UncertaintyResult:
+    """The model's prediction for a crane (its geometry parameters and inputs' uncertainties as JSON: a campaign's
+    sessions of one set-up share one), computed once per process: its Monte Carlo does not depend on the session."""
+    geometry = geometry_from_params(json.loads(geometry_params))
+    return predict_stiffness(geometry, axis, uncertainty=json.loads(entries), monte_carlo_run=monte_carlo,
+                             seed=MONTE_CARLO_SEED)
+
+
 def _prediction(data: SessionData, model: ModelSummary, uncertainty_file: str | os.PathLike | None,
                 problems: list[str], monte_carlo: bool) -> tuple[dict[str, Any], float, float] | None:
     """The prediction's dict, and its value and U in LVDT reading units; None (with a problem) when it fails. A
@@ -93,34 +104,38 @@ def _prediction(data: SessionData, model: ModelSummary, uncertainty_file: str | 
         if uncertainty_file is None:  # the lab file, for whatever crane: keep its entries this crane has
             known = set(input_names(geometry))
             entries = {name: entry for name, entry in entries.items() if name in known}
-        prediction = predict_stiffness(geometry, model.axis, uncertainty=entries, monte_carlo_run=monte_carlo,
-                                       seed=MONTE_CARLO_SEED)
+        prediction = _predicted(json.dumps(data.geometry_params, sort_keys=True, default=str), model.axis,
+                                json.dumps(entries, sort_keys=True, default=str), monte_carlo)
     except (CraneStiffnessError, ValueError) as exc:
         problems.append(f"the model's prediction with its uncertainty failed: {exc}")
         return None
     scale = model.lvdt_scale
+    big_u, source = agreement_U(prediction)
     return ({'axis': model.axis, 'unit': model.unit, 'lvdt_scale': scale, 'uncertainty_file': str(path),
              'method': 'GUM law of propagation (linear)' + (
                  '; Monte Carlo (JCGM 101, adaptive) through the exact tangent' if monte_carlo else ''),
-             'uncertainty': json_ready(prediction.to_dict())},
-            prediction.value * scale, prediction.U * abs(scale))
+             'uncertainty': json_ready(prediction.to_dict()), 'U_for_En': big_u, 'U_for_En_from': source},
+            prediction.value * scale, big_u * abs(scale))
 
 
 def session_uncertainty(data: SessionData, pairs: LivePairs, lo: int, hi: int, steps: list[Step],
                         branch_fits: dict[str, LineFit | None], hold_fits: dict[str, LineFit | None],
                         model: ModelSummary | None, problems: list[str],
-                        uncertainty_file: str | os.PathLike | None = None, monte_carlo: bool = True
-                        ) -> dict[str, Any]:
+                        uncertainty_file: str | os.PathLike | None = None, monte_carlo: bool = True,
+                        prediction_monte_carlo: bool | None = None) -> dict[str, Any]:
     """{'prediction': …, 'loading': …, 'unloading': …}: each branch's measured k (its fit, the
     :class:`~crane_stiffness.uncertainty.measurement.MeasuredStiffness` dict, the fit's statistical 95 % CI) and
     ``En`` against the prediction when there is one; a branch without a fit is left out. ``monte_carlo``: each
-    result's ``uncertainty.monte_carlo`` holds JCGM 101's (else None)."""
+    result's ``uncertainty.monte_carlo`` holds JCGM 101's (else None); ``prediction_monte_carlo`` the prediction's
+    alone (None: as ``monte_carlo``; computed once per crane and process), which sets E_n's reference U
+    (:func:`~crane_stiffness.uncertainty.prediction.agreement_U`)."""
     s = data.settings
     axis = s.force_axis
     out: dict[str, Any] = {}
     reference = None
     if model is not None and model.lvdt_scale and math.isfinite(model.tangent_at_rest):
-        found = _prediction(data, model, uncertainty_file, problems, monte_carlo)
+        found = _prediction(data, model, uncertainty_file, problems,
+                            monte_carlo if prediction_monte_carlo is None else prediction_monte_carlo)
         if found is not None:
             out['prediction'], value, big_u = found
             reference = (value, big_u)
@@ -150,8 +165,9 @@ def session_uncertainty(data: SessionData, pairs: LivePairs, lo: int, hi: int, s
             cross_load_ratio=cross, unit=s.stiffness_unit, monte_carlo_run=monte_carlo, seed=MONTE_CARLO_SEED)
         entry = {'fit': source, **measured.to_dict(), 'ci95': [float(fit.ci95_low), float(fit.ci95_high)]}
         if reference is not None:
-            entry['En'] = en_number(measured.result.value, measured.result.U, reference[0], reference[1],
-                                    unit=s.stiffness_unit).to_dict()
+            entry['En'] = {**en_number(measured.result.value, measured.result.U, reference[0], reference[1],
+                                       unit=s.stiffness_unit).to_dict(),
+                           'U_reference_from': out['prediction']['U_for_En_from']}
         out[branch] = entry
     return out
 

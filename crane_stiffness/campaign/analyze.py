@@ -73,8 +73,9 @@ def analyze_one(bag: str, out: str, kind: str = 'one_axis') -> str:
     try:
         if kind == 'full':
             analyze_full6(bag, out)
-        else:  # the campaign's tables state no Monte Carlo: its sessions are analysed with the GUM alone (faster)
-            analyze_session(bag, out, progress=False, monte_carlo=False)
+        else:  # the measured k with the GUM alone (faster); the prediction's Monte Carlo (once per set-up and
+            # process) sets E_n's reference U as `analyze` has it
+            analyze_session(bag, out, progress=False, monte_carlo=False, prediction_monte_carlo=True)
     except (CraneStiffnessError, OSError, ValueError) as exc:
         return f'{type(exc).__name__}: {exc}'
     (Path(out) / SOURCE_FILE).write_text(json.dumps(bag_fingerprint(Path(bag))))

@@ -185,9 +185,10 @@ def far_message(b: BranchUncertainty, unit: str) -> str:
 
 def prediction_relative_uncertainty(geometry_params: Mapping[str, Any], axis: str,
                                     uncertainty_file: str = 'uncertainty_lab.yaml') -> tuple[float, float]:
-    """The model's rest stiffness along ``axis`` and its relative expanded uncertainty U / value, by the GUM's linear
-    law (:func:`~crane_stiffness.uncertainty.prediction.predict_stiffness` without its Monte Carlo: 2N + 1 cranes,
-    milliseconds) over the crane's inputs: their values from ``geometry_params`` (the crane_model node's
+    """The model's rest stiffness along ``axis`` and its relative expanded uncertainty U / value for E_n, as
+    ``analyze`` states it (:func:`~crane_stiffness.uncertainty.prediction.agreement_U`: the GUM's, or its Monte
+    Carlo's where that does not validate the GUM interval; ~0.3–1 s, on the node's own thread) over the crane's
+    inputs: their values from ``geometry_params`` (the crane_model node's
     ``geometry.*``, i.e. the crane file), their uncertainties from ``uncertainty_file`` (a name in the package's
     config/ or a path; the lab file's entries this crane has, as ``analyze`` takes them). Computed once, not per
     sample. Raises CraneStiffnessError (or ValueError) naming what it could not read."""
@@ -196,13 +197,13 @@ def prediction_relative_uncertainty(geometry_params: Mapping[str, Any], axis: st
     from crane_stiffness.params.files import config_path
     from crane_stiffness.params.geometry import geometry_from_params
     from crane_stiffness.uncertainty.crane_inputs import input_names, load_uncertainty_file
-    from crane_stiffness.uncertainty.prediction import predict_stiffness
+    from crane_stiffness.uncertainty.prediction import agreement_U, predict_stiffness
     geometry = geometry_from_params(dict(geometry_params))
     entries = load_uncertainty_file(config_path(uncertainty_file))
     known = set(input_names(geometry))
     entries = {name: entry for name, entry in entries.items() if name in known}
-    result = predict_stiffness(geometry, axis, uncertainty=entries, monte_carlo_run=False)
-    return result.value, abs(result.U / result.value)
+    result = predict_stiffness(geometry, axis, uncertainty=entries, seed=0)
+    return result.value, abs(agreement_U(result)[0] / result.value)
 
 
 __all__ = ['FAR_CAUSES', 'LIVE_TYPE_A', 'BranchUncertainty', 'LiveBudget', 'cross_load_ratio', 'far_message',
