@@ -151,9 +151,13 @@ def test_layouts_open_in_lichtblick_every_channel_parsed_and_the_crane_drawn(ins
                                                                             lichtblick):
     install, env = install_tree
     path = chromium()
-    # Three times the side-force program (63 s): the app takes tens of seconds to load in software rendering.
-    # The app is served from an origin of its own: allowed as a lab allows the Foxglove or Lichtblick web app.
-    with live_rig(env, installed_config(install), tmp_path, rclpy_context, overrides={'load_program': {'repeats': 3}},
+    # 25 times the side-force program (525 s): the program must still run when the second layout is shown,
+    # however long the app takes to load in software rendering on a busy machine (each layout may wait out its
+    # patience twice), since the plots follow the last 30 s and the crane model publishes the wire tensions only as
+    # the commanded load changes: opened after the program, the tensions plot is empty. The rig stops as soon as
+    # both layouts are checked. The app is served from an origin of its own: allowed as a lab allows the Foxglove or
+    # Lichtblick web app.
+    with live_rig(env, installed_config(install), tmp_path, rclpy_context, overrides={'load_program': {'repeats': 25}},
                   allowed_origins=lichtblick) as (procs, watcher, ports):
         wait_for_pairs(procs, watcher, 500)
         # The address as the node prints it for the Foxglove apps, the token in its query: what a lab pastes.
