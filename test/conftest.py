@@ -186,7 +186,9 @@ LICHTBLICK_WEB = os.environ.get('LICHTBLICK_WEB', '')
 OUTSIDE_TOOLS = {
     'genuine_cli': (GENUINE_CLI, 'genuine ros2 CLI', 'not on PATH (source its setup file to run them)'),
     'lichtblick': (LICHTBLICK_WEB if os.path.isfile(os.path.join(LICHTBLICK_WEB, 'index.html')) else None,
-                   'Lichtblick web build', 'not found (set LICHTBLICK_WEB to the directory of its index.html)'),
+                   'Lichtblick web build',
+                   f'not found: LICHTBLICK_WEB={LICHTBLICK_WEB!r} holds no index.html' if LICHTBLICK_WEB
+                   else 'not found (set LICHTBLICK_WEB to the directory of its index.html)'),
 }
 _NOT_RUN: dict[str, list[str]] = {marker: [] for marker in OUTSIDE_TOOLS}
 
