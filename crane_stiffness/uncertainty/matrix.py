@@ -215,7 +215,9 @@ def _entries(value: NDArray[np.float64], cov_a: NDArray[np.float64], cov_b: NDAr
     u_b = np.sqrt(np.maximum(np.diag(cov_b), 0.0))
     u_c = np.hypot(u_a, u_b)
     with np.errstate(divide='ignore', invalid='ignore'):
-        nu = np.where(u_a > 0.0, u_c ** 4 / (u_a ** 4 / dof), math.inf)
+        # ν_eff = ν·(u_c/u_a)⁴ >= ν (the Type B has ν = ∞), written so that it is ν exactly without a Type B:
+        # u_c⁴ / (u_a⁴ / ν) may round to just below ν, and k (ν_eff truncated, GUM G.4.1) jump to t(ν − 1)
+        nu = np.where(u_a > 0.0, dof * (u_c / u_a) ** 4, math.inf)
     k = np.array([coverage_factor(float(n), coverage) for n in nu])
     t = float(stats.t.ppf(0.5 * (1.0 + coverage), dof))
     if mc is not None:
