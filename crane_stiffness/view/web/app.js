@@ -8,7 +8,7 @@ const CHANNELS = ['xy', 'fit_lines', 'prediction', 'estimate', 'status', 'wires'
 const state = { messages: 0, lastCount: 0, data: {}, dirty: new Set(), drawnAt: 0, run: null, k6Row: 1 };
 // The boxes of the text drawn on each canvas, in its pixels ({text, left, top, width, height}), as the drawing code
 // placed it: what a test reads to check that no two texts of the page overlap (the DOM's text it reads itself).
-window.__textBoxes = { xy: [], scene: [], kint: [] };
+window.__textBoxes = { xy: [], scene: [], kint: [], k6int: [] };
 const WIRE_LABEL = /^wire_\d/;
 // What each channel changes on the page: only that part is drawn again (the rest keeps its pixels and DOM).
 const PART = { xy: 'plot', fit_lines: 'plot', prediction: 'plot', estimate: 'text', status: 'text', wires: 'wires',
@@ -198,9 +198,10 @@ function updateStiffness6() {
   badge.textContent = k6.level_name;
   badge.dataset.level = k6.level;
   const k2 = k6.k2;
+  const k2U = k2.U === null || k2.U === undefined ? '' : `, ± ${compact(k2.U)} (U, 95 %)`;
   document.getElementById('stiffness6-k2').textContent = k6.fit ? `K2 = ${compact(k2.measured)} ` +
-    `[${compact(k2.ci95_low)}, ${compact(k2.ci95_high)}] N/rad (repeatability), model tangent ${compact(k2.tangent)}` :
-    `K2: waiting for the 6×6 fit… (model tangent ${compact(k2.tangent)} N/rad)`;
+    `[${compact(k2.ci95_low)}, ${compact(k2.ci95_high)}] N/rad (repeatability)${k2U}, model tangent ` +
+    `${compact(k2.tangent)}` : `K2: waiting for the 6×6 fit… (model tangent ${compact(k2.tangent)} N/rad)`;
   document.getElementById('stiffness6-message').textContent = k6.message || 'waiting for the six-axis estimator…';
   const row = k6.rows[state.k6Row], rowTable = document.getElementById('k6-row-table');
   row.cells.forEach((c, j) => {
@@ -215,6 +216,62 @@ function updateStiffness6() {
     cells[5].textContent = c.model_zero ? 'model: 0' :
       (c.relative_error === null ? '–' : `${(100 * c.relative_error).toFixed(2)} %`);
   });
+  // what U counts (the estimator's statement: "statistical only" named for what no sensor declares)
+  document.getElementById('stiffness6-uncertainty').textContent = !k6.fit ? 'U: waiting for the 6×6 fit…' :
+    (k6.uncertainty ? `U (GUM, 95 %): ${k6.uncertainty}` : 'U: not stated by the six-axis estimator for this fit');
+  drawK6Intervals(row);
+}
+
+// The chosen row's six entries, each on a line of its own scale (their units differ): a dot at K, a thick bar over
+// its repeatability (the fit's 95 %), a thin line with end ticks over K ± U, a green tick at the model's tangent.
+// The canvas says what it drew (in pixels) for tests.
+function drawK6Intervals(row) {
+  const canvas = document.getElementById('k6int');
+  const ctx = canvas.getContext('2d');
+  const W = canvas.width, H = canvas.height, m = { l: 44, r: 8, t: 4, b: 4 }, lw = 86;
+  ctx.clearRect(0, 0, W, H);
+  window.__textBoxes.k6int = [];
+  ctx.font = '11px sans-serif';
+  const rowH = (H - m.t - m.b) / 6, drawn = {};
+  row.cells.forEach((c, j) => {
+    const y = m.t + rowH * (j + 0.5);
+    ctx.fillStyle = '#333';
+    canvasText(ctx, 'k6int', c.displacement, 4, y + 4);
+    if (c.measured === null) return;
+    const values = [c.measured, c.tangent, c.ci95_low, c.ci95_high, c.U_low, c.U_high].filter((v) => v !== null);
+    let lo = Math.min(...values), hi = Math.max(...values);
+    const pad = (hi - lo) * 0.08 || Math.abs(hi) * 1e-3 || 1;
+    lo -= pad; hi += pad;
+    const x0 = m.l + lw, x1 = W - m.r - lw;
+    const sx = (v) => x0 + (v - lo) / (hi - lo) * (x1 - x0);
+    canvasText(ctx, 'k6int', compact(lo), x0 - 4, y + 4, 'right');
+    canvasText(ctx, 'k6int', compact(hi), x1 + 4, y + 4, 'left');
+    ctx.strokeStyle = '#ddd'; ctx.lineWidth = 1;
+    ctx.beginPath(); ctx.moveTo(x0, y); ctx.lineTo(x1, y); ctx.stroke();
+    const d = { k: c.measured };
+    ctx.strokeStyle = '#2a9d2a'; ctx.lineWidth = 2;  // the model's tangent
+    ctx.beginPath(); ctx.moveTo(sx(c.tangent), y - 6); ctx.lineTo(sx(c.tangent), y + 6); ctx.stroke();
+    ctx.strokeStyle = '#333'; ctx.fillStyle = '#333';
+    if (c.U !== null && c.U !== undefined) {  // K ± U: a thin line with end ticks
+      ctx.lineWidth = 1.5; ctx.beginPath();
+      ctx.moveTo(sx(c.U_low), y); ctx.lineTo(sx(c.U_high), y);
+      for (const v of [c.U_low, c.U_high]) { ctx.moveTo(sx(v), y - 5); ctx.lineTo(sx(v), y + 5); }
+      ctx.stroke();
+      d.U_px = sx(c.U_high) - sx(c.U_low);
+    }
+    if (c.ci95_low !== null) {  // the repeatability: a thick bar (at least 2 px, so it shows)
+      const a = sx(c.ci95_low), b = sx(c.ci95_high);
+      ctx.fillStyle = '#1f77b4'; ctx.globalAlpha = 0.6;
+      ctx.fillRect(Math.min(a, (a + b) / 2 - 1), y - 3, Math.max(b - a, 2), 6);
+      ctx.globalAlpha = 1;
+      d.repeatability_px = b - a;
+    }
+    ctx.fillStyle = '#000';
+    ctx.beginPath(); ctx.arc(sx(c.measured), y, 2.5, 0, 2 * Math.PI); ctx.fill();
+    drawn[c.displacement] = d;
+  });
+  canvas.dataset.drawn = Object.keys(drawn).length ? 'intervals' : '';
+  canvas.dataset.intervals = JSON.stringify(drawn);
 }
 
 // Text on a canvas, its box recorded (window.__textBoxes[canvas id]): align 'left'/'center'/'right' about x, the
