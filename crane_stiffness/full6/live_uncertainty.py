@@ -83,12 +83,16 @@ class LiveMatrixUncertainty:
 
     def inputs(self) -> CalibrationInputs | str:
         """The Type B inputs of the calibrations read, or the reason they were refused."""
-        if self._inputs is None:
-            try:
-                self._inputs = six_axis_inputs(*(self.calibrations[s] for s in SENSORS))
-            except (CraneStiffnessError, ValueError) as exc:
-                self._inputs = f'the declared calibration was refused ({exc})'
-        return self._inputs
+        if self._inputs is not None:
+            return self._inputs
+        inputs: CalibrationInputs | str
+        try:
+            inputs = six_axis_inputs(self.calibrations['load_cell'], self.calibrations['pose_sensor'],
+                                     self.calibrations['lvdt_array'])
+        except (CraneStiffnessError, ValueError) as exc:
+            inputs = f'the declared calibration was refused ({exc})'
+        self._inputs = inputs
+        return inputs
 
     def of(self, stats: PairStatistics) -> LiveMatrixU:
         """U of K and K2 from the step means of ``stats`` (the live estimator's pairs)."""
