@@ -17,6 +17,7 @@ BENCHMARKS = [
     ('bench_bag_storage.py', [], None),
     ('bench_sync.py', [], 'bench_sync.json'),
     ('bench_uncertainty.py', [], 'bench_uncertainty.json'),   # the prediction's Monte Carlo, lab model
+    ('bench_live_u6.py', [], 'bench_live_u6.json'),   # the CPU of the live 6x6 U per publication
     ('bench_analyze.py', [], None),
     ('bench_campaign_analyze.py', [], 'bench_campaign_analyze.json'),   # campaign analyze, 1 and 2 workers
     # campaign run of the paper's campaign: rig hosts against a fresh rig of processes per session, idle and busy

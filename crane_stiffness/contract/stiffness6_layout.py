@@ -1,6 +1,6 @@
-"""The layout of the 6×6 topics /stiffness6/stiffness and /stiffness6/compliance (:mod:`crane_stiffness.contract.topics`
-STIFFNESS6, COMPLIANCE6), both directions: the one place that writes it (the stiffness6_estimator node) and reads it
-(the live view, the rig's six-axis summary, the tests).
+"""The layout of the 6×6 topics /stiffness6/stiffness, /stiffness6/stiffness_expanded and /stiffness6/compliance
+(:mod:`crane_stiffness.contract.topics` STIFFNESS6, STIFFNESS6_EXPANDED, COMPLIANCE6), both directions: the one place
+that writes it (the stiffness6_estimator node) and reads it (the live view, the rig's six-axis summary, the tests).
 
 A message is a std_msgs/Float64MultiArray of 3 × 6 × 6 = 108 float64 values, row-major, ``data_offset`` 0, its
 ``layout.dim`` (:data:`DIMS`, label, size, stride) ``('quantity', 3, 108), ('row', 6, 36), ('column', 6, 6)``: the
@@ -13,6 +13,9 @@ MultiArrayLayout convention of std_msgs, where ``dim[0].stride`` is the whole si
   platform centre's deflections u_x u_y u_z θ_x θ_y θ_z (:data:`crane_stiffness.full6.reference.DISPLACEMENTS`),
   both in ``crane_base`` (z down); units N/m (force by translation), N/rad (force by rotation), N·m/m (moment by
   translation), N·m/rad (moment by rotation).
+- K ∓ U (/stiffness6/stiffness_expanded): the same K (value) with its expanded uncertainty: the low and the high end
+  are value − U and value + U (GUM, 95 %, crane_stiffness.full6.live_uncertainty), where the other topics have the
+  statistical interval (the repeatability); NaN ends where no U is stated.
 - C = K⁻¹ (/stiffness6/compliance): rows the deflections, columns the loads; units m/N, m/(N·m), rad/N, rad/(N·m).
 
 Pure: numpy only. No rclpy or message package is imported at module level; :func:`to_message` imports std_msgs'

@@ -62,6 +62,11 @@ LVDT_ARRAY_POSE = '/lvdt_array/pose'
 # the
 # (3, 6, 6) array). STIFFNESS6_STATUS: diagnostic_msgs/DiagnosticArray (level, message, the numbers behind it).
 STIFFNESS6 = '/stiffness6/stiffness'
+# STIFFNESS6_EXPANDED: the same K with its expanded uncertainty U (GUM law of propagation, 95 %, from the step means
+# and the sensors' declared calibrations: crane_stiffness.full6.live_uncertainty), in the same layout: quantity
+# (value, value - U, value + U) x row x column; NaN ends where no U is stated (the status's 'uncertainty' says why).
+# Published with every STIFFNESS6 message, of the same fit.
+STIFFNESS6_EXPANDED = '/stiffness6/stiffness_expanded'
 COMPLIANCE6 = '/stiffness6/compliance'
 STIFFNESS6_STATUS = '/stiffness6/status'
 # Estimates: diagnostic_msgs/DiagnosticArray for people, std_msgs/Float64MultiArray for plots (see
@@ -109,6 +114,7 @@ RIG_TOPICS: dict[str, str] = {
     STIFFNESS: 'std_msgs/msg/Float64',
     POSE_SENSOR_POSE: 'geometry_msgs/msg/PoseStamped',
     STIFFNESS6: 'std_msgs/msg/Float64MultiArray',
+    STIFFNESS6_EXPANDED: 'std_msgs/msg/Float64MultiArray',
     COMPLIANCE6: 'std_msgs/msg/Float64MultiArray',
     STIFFNESS6_STATUS: 'diagnostic_msgs/msg/DiagnosticArray',
 }
@@ -164,6 +170,7 @@ TOPIC_QOS: dict[str, QoS] = {
     POSE_SENSOR_POSE: SENSOR_DATA,
     LVDT_ARRAY_POSE: SENSOR_DATA,
     STIFFNESS6: LATCHED,  # the latest fit is what a late reader (`ros2 topic echo --once`) wants
+    STIFFNESS6_EXPANDED: LATCHED,
     COMPLIANCE6: LATCHED,
     STIFFNESS6_STATUS: LATCHED,
     FITTED_PAIRS: RELIABLE,

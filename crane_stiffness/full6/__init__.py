@@ -12,6 +12,8 @@ compliance C and the stiffness K = C⁻¹ from (wrench, pose deflection) pairs. 
 - :mod:`.program` — a design as a load program (config/program_full6.yaml), and the held steps of a program.
 - :mod:`.statistics` — the sufficient statistics of labelled pairs, vectorised and streaming.
 - :mod:`.identify` — the fit with errors in both variables, the intervals, the status.
+- :mod:`.live_uncertainty` — the live fit's expanded uncertainty U of K and K2 (the law of propagation on its step
+  means and the sensors' declared calibrations).
 - :mod:`.precision` — the predicted interval widths of a program, and two programs side by side.
 - :mod:`.cli` — ``crane-stiffness full6 design``, the command-line layer.
 - :mod:`.errors` — the package's exceptions.

@@ -295,9 +295,15 @@ class ComplianceEstimator:
         """Forget every pair."""
         self._acc.reset()
 
-    def fit(self) -> ComplianceFit:
-        """The fit of the pairs added so far."""
-        return fit_compliance(self._acc.statistics(), wrench_noise=self._noise, confidence=self._confidence)
+    def statistics(self) -> PairStatistics:
+        """The sufficient statistics of the pairs added so far (their step means: what U is computed from live,
+        crane_stiffness.full6.live_uncertainty)."""
+        return self._acc.statistics()
+
+    def fit(self, stats: PairStatistics | None = None) -> ComplianceFit:
+        """The fit of the pairs added so far (``stats``: their :meth:`statistics`, when the caller has them)."""
+        return fit_compliance(self._acc.statistics() if stats is None else stats, wrench_noise=self._noise,
+                              confidence=self._confidence)
 
 
 __all__ = ['CONFIDENCE', 'ComplianceEstimator', 'ComplianceFit', 'LACK_OF_FIT_P', 'MAX_CONDITION', 'MIN_STEPS',

@@ -17,8 +17,8 @@ Serves, on ``host`` (127.0.0.1 by default; 0.0.0.0 opens it to the lab network):
 Reads /stiffness/fitted_pairs and /stiffness/fit_lines (the estimator's pairs and fit lines: nothing is refitted
 here), /stiffness/estimate_values (the estimate, and the prediction of the fitted axis), /stiffness/estimate (the
 statuses, the fitted axis and its unit), /crane/wire_states,
-/crane/platform_pose and /crane/applied_wrench, /stiffness6/stiffness, /stiffness6/compliance and
-/stiffness6/status (latched); the geometry from the geometry.* parameters (the crane file).
+/crane/platform_pose and /crane/applied_wrench, /stiffness6/stiffness, /stiffness6/stiffness_expanded (its U),
+/stiffness6/compliance and /stiffness6/status (latched); the geometry from the geometry.* parameters (the crane file).
 The high-rate inputs are taken serialized and only the newest is decoded, at ``rate_hz``. Port 0 takes a free port;
 the addresses are logged at start (``live view: page http://…/?token=…, Foxglove ws://…``).
 
@@ -165,6 +165,7 @@ class LiveViewNode(Node):
         self.uncertainty: dict[str, dict[str, str]] = {}  # each branch status's key/values: its U and E_n
         # the six-axis estimator's newest K and C data, and status (level, message, key-values); None: not yet
         self.k6: list[float] | None = None
+        self.k6_expanded: list[float] | None = None  # K with its U (/stiffness6/stiffness_expanded)
         self.c6: list[float] | None = None
         self.status6: tuple[int, str, dict[str, str]] | None = None
         self.tangent6: Any = None  # the model's K at rest for self.geometry, computed at the first 6x6 message
@@ -177,6 +178,7 @@ class LiveViewNode(Node):
         self.create_subscription(Float64MultiArray, topics.FIT_LINES, self._on_fit_lines, RELIABLE_QOS)
         self.create_subscription(DiagnosticArray, topics.STIFFNESS_ESTIMATE, self._on_estimate, KEPT_QOS)
         self.create_subscription(Float64MultiArray, topics.STIFFNESS6, self._on_k6, LATCHED_QOS)
+        self.create_subscription(Float64MultiArray, topics.STIFFNESS6_EXPANDED, self._on_k6_expanded, LATCHED_QOS)
         self.create_subscription(Float64MultiArray, topics.COMPLIANCE6, self._on_c6, LATCHED_QOS)
         self.create_subscription(DiagnosticArray, topics.STIFFNESS6_STATUS, self._on_status6, LATCHED_QOS)
         for topic, msg_type in ((topics.STIFFNESS_VALUES, Float64MultiArray), (topics.WIRE_STATES, JointState),
@@ -325,6 +327,10 @@ class LiveViewNode(Node):
         self.k6 = list(msg.data)
         self.dirty.update(('stiffness6', 'scene'))
 
+    def _on_k6_expanded(self, msg: Float64MultiArray) -> None:
+        self.k6_expanded = list(msg.data)
+        self.dirty.add('stiffness6')
+
     def _on_c6(self, msg: Float64MultiArray) -> None:
         self.c6 = list(msg.data)
         self.dirty.add('scene')
@@ -422,7 +428,8 @@ class LiveViewNode(Node):
             return 0
         if self.tangent6 is None:
             self.tangent6 = reference_at_rest(self.geometry).tangent
-        message = stiffness6.stiffness6_message(self.k6, self.tangent6, self.status6)
+        message = stiffness6.stiffness6_message(self.k6, self.tangent6, self.status6,
+                                                stiffness6.expanded_uncertainty(self.k6, self.k6_expanded))
         return int(fox.log_json(PREFIX + 'stiffness6', message, now))
 
     # --- services through the bridge ---

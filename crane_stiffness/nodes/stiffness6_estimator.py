@@ -10,15 +10,25 @@ the fit uses every labelled pair since the start (or the last ~/reset). A load-c
 
 Publishes, at ``publish_rate_hz`` (node clock), /stiffness6/stiffness and /stiffness6/compliance
 (Float64MultiArray: dims quantity (value, ci95_low, ci95_high) × row × column, row-major; the layout in
-crane_stiffness.contract.stiffness6_layout) and /stiffness6/status
+crane_stiffness.contract.stiffness6_layout), /stiffness6/stiffness_expanded (the same K with value ∓ U, its expanded
+uncertainty, in the same layout) and /stiffness6/status
 (DiagnosticArray: the fit's status, with the numbers behind it: pairs, steps, condition number, lack of fit, K2 and
-its interval, the diagonal of K). The status is never OK on a design that cannot determine C (crane_stiffness.full6
+its interval, K2's U, what U counts, the diagonal of K).
+The status is never OK on a design that cannot determine C (crane_stiffness.full6
 .identify: fewer than 8 steps, no pure error, condition number > 100) or on a non-linear window (lack of fit), and
 it is STALE when a stream that was flowing stopped: no pose or wrench sample stamped within ``stale_after_s`` of
 the node clock's now (checked every ``1 / publish_rate_hz``). Stale samples are never paired (the pairing's
 ``max_age_s``). While the load program runs (/load_program/state), a design that cannot determine C *yet* is
 WAITING for its steps, not ERROR. On simulated time the inputs are taken in stamp order at each watermark, so the
 same run gives the same pairs; offline, crane-stiffness analyze reproduces the fit from the bag.
+
+U (GUM law of propagation, 95 %, crane_stiffness.full6.live_uncertainty) is computed at each publication (not per
+sample) from the fit's step means and the sensors' declared calibrations: their ``calibration.*`` parameters
+(and the load cell's ``full_scale``), read over ROS from the first answering node of ``load_cell_nodes``,
+``pose_sensor_nodes`` and ``lvdt_array_nodes`` at start and again when they change
+(crane_stiffness.rosnode.estimator_references, as the one-axis estimator reads them); the status's ``uncertainty``
+names "statistical only" for every component not declared or not read. On simulated time the watermarks wait for
+those reads while such a node is in the graph (the same U in every run).
 """
 from __future__ import annotations
 
@@ -39,8 +49,10 @@ from crane_stiffness.contract import stiffness6_layout, topics
 from crane_stiffness.estimation.frames import SensorMount
 from crane_stiffness.full6.full_scale import at_limits, check_full_scale, full_scale_limits, with_full_scale
 from crane_stiffness.full6.identify import ComplianceEstimator, ComplianceFit
+from crane_stiffness.full6.live_uncertainty import LiveMatrixU, LiveMatrixUncertainty
 from crane_stiffness.full6.pairs import DEFAULT_MAX_AGE_S, DEFAULT_MAX_GAP_S, Full6Pairing
 from crane_stiffness.params.spec import ParamSpec
+from crane_stiffness.rosnode.estimator_references import EstimatorReferences
 from crane_stiffness.rosnode.parameters import Params
 from crane_stiffness.rosnode.qos import LATCHED_QOS, RELIABLE_QOS, sensor_qos, stream_qos
 from crane_stiffness.rosnode.run import run
@@ -69,6 +81,13 @@ PARAMS = (
     ParamSpec('load_cell_full_scale', [0.0] * 6, "the load cell's full scale in its own frame: a sample with any "
               'component at or beyond it is left out and the status is never OK (crane_stiffness.full6.full_scale); '
               '0 leaves an axis unchecked [N x3, N·m x3]', rule='6 numbers >= 0'),
+    ParamSpec('load_cell_nodes', ['/load_cell', '/netft'], "nodes whose declared calibration (calibration.*, "
+              "full_scale) counts in U of K: the first that answers is read, at start and when it changes; read at "
+              "start [-]"),
+    ParamSpec('pose_sensor_nodes', ['/pose_sensor'], "nodes whose declared calibration (calibration.*) counts in U "
+              "of K, as load_cell_nodes; read at start [-]"),
+    ParamSpec('lvdt_array_nodes', ['/lvdt_array'], "an LVDT array measuring the deflection: its channels' "
+              "calibrations are named in U's statement as not counted, as load_cell_nodes; read at start [-]"),
 )
 _KIND_ORDER = {'command': 0, 'wrench': 1, 'pose': 2}  # at one stamp: the command first (it is in force at t)
 
@@ -101,6 +120,8 @@ class Stiffness6EstimatorNode(Node):
         self.saturated = np.zeros(6, dtype=np.int64)  # samples left out at full scale per axis, since the reset
         self.newest = {'wrench': -math.inf, 'pose': -math.inf}  # newest stamp per sensor stream [s]
         self.fit: ComplianceFit | None = None
+        self.budget = LiveMatrixUncertainty()  # U of K from the step means and the calibrations read
+        self.uncertainty: LiveMatrixU | None = None  # the U published with the last fit
         self.sim_time = uses_sim_time(self)
         self.held: list[tuple[float, int, int, str, Any]] = []  # simulated time: (stamp, kind order, seq, kind, data)
         self._seq = 0
@@ -111,6 +132,7 @@ class Stiffness6EstimatorNode(Node):
         self.pub_c = self.create_publisher(Float64MultiArray, topics.COMPLIANCE6, LATCHED_QOS)
         self.pub_status = self.create_publisher(DiagnosticArray, topics.STIFFNESS6_STATUS, LATCHED_QOS)
         self.params = Params(self, PARAMS, _validate, self._apply)
+        self.pub_expanded = self.create_publisher(Float64MultiArray, topics.STIFFNESS6_EXPANDED, LATCHED_QOS)
         self.create_subscription(WrenchStamped, topics.WRENCH_COMMAND, self._on_command,
                                  stream_qos(RELIABLE_QOS, self.sim_time))
         self.create_subscription(WrenchStamped, topics.LOAD_CELL_WRENCH, self._on_wrench, sensor_qos(self.sim_time),
@@ -123,8 +145,12 @@ class Stiffness6EstimatorNode(Node):
         self.create_service(Trigger, '~/reset', self._srv_reset)
         self.sim = SimTimeParticipant(self, 3, self._on_watermark,
                                       inputs=[topics.WRENCH_COMMAND, topics.LOAD_CELL_WRENCH, topics.POSE_SENSOR_POSE])
-        for pub in (self.pub_k, self.pub_c, self.pub_status):  # (the recorder, a stage above, waits for them)
-            self.sim.counted(pub)
+        for pub in (self.pub_k, self.pub_expanded, self.pub_c, self.pub_status):  # (the recorder, a stage above,
+            self.sim.counted(pub)  # waits for them)
+        self.references = EstimatorReferences(
+            self, {'load_cell': self.params['load_cell_nodes'], 'pose_sensor': self.params['pose_sensor_nodes'],
+                   'lvdt_array': self.params['lvdt_array_nodes']}, lambda: None, lambda: '',
+            on_calibration=self.budget.set_calibration)
 
     def _apply(self, mount: SensorMount, values: dict[str, Any]) -> None:
         self.mount = mount
@@ -175,7 +201,10 @@ class Stiffness6EstimatorNode(Node):
             self._handle(stamp, kind, values)
 
     def _on_watermark(self, t_ns: int) -> None:
-        """Simulated time: every input stamped up to ``t_ns`` is in; handled in stamp order (the same in every run)."""
+        """Simulated time: every input stamped up to ``t_ns`` is in; handled in stamp order (the same in every run).
+        Held while the sensors' calibrations are being read (EstimatorReferences.holds): the same U in every run."""
+        if self.references.holds(t_ns, self._on_watermark):
+            return
         mark = t_ns * 1e-9
         now = sorted(h for h in self.held if h[0] <= mark)
         self.held = [h for h in self.held if h[0] > mark]
@@ -229,15 +258,21 @@ class Stiffness6EstimatorNode(Node):
                          if math.isfinite(t) and now - t > limit)
 
     def _publish(self) -> None:
-        fit = self.fit = self.estimator.fit() if self.estimator.n else None
+        stats = self.estimator.statistics() if self.estimator.n else None
+        fit = self.fit = self.estimator.fit(stats) if stats is not None else None
         self.counters['fits'] += 1
         stale = self._stale()
-        if fit is None:
+        if fit is None or stats is None:
             level, message = WAITING, f'{WAITING_PREFIX}no labelled pairs yet (a pose sensor on ' \
                                       f'{topics.POSE_SENSOR_POSE} and load steps)'
+            self.uncertainty = None
         else:
             level, message = with_full_scale(*shown_status(fit, self.program_state), self.saturated)
+            # U of this fit (the law of propagation from its step means, ~7 ms; again only when they changed)
+            u = self.uncertainty = self.budget.of(stats)
             self.pub_k.publish(stiffness6_layout.to_message(fit.stiffness, fit.stiffness_low, fit.stiffness_high))
+            self.pub_expanded.publish(stiffness6_layout.to_message(fit.stiffness, fit.stiffness - u.U,
+                                                                   fit.stiffness + u.U))
             self.pub_c.publish(stiffness6_layout.to_message(fit.compliance, fit.compliance_low, fit.compliance_high))
         if stale:
             level, message = STALE, f'stale: {stale}; the fit holds the pairs before it'
@@ -258,6 +293,12 @@ class Stiffness6EstimatorNode(Node):
                       ('lack_of_fit', f'{fit.lack_of_fit:.4g}'), ('k2', f'{fit.k2:.8g}'),
                       ('k2_ci95', f'{fit.k2_low:.8g} .. {fit.k2_high:.8g}')]
             pairs += [(f'k_{i + 1}{i + 1}', f'{fit.stiffness[i, i]:.8g}') for i in range(6)]
+        u = self.uncertainty
+        if fit is not None and u is not None:  # K2's U about the fit's K2; U of K: /stiffness6/stiffness_expanded
+            pairs += [('k2_U', f'{u.k2_U:.8g}'), ('k2_coverage_factor', f'{u.k2_k:.4g}'),
+                      ('k2_U_interval', f'{fit.k2 - u.k2_U:.8g} .. {fit.k2 + u.k2_U:.8g}'),
+                      ('statistical_only', 'true' if u.statistical_only else 'false'),
+                      ('uncertainty', u.statement), ('uncertainty_steps', str(u.steps))]
         if self.lags:
             p50, p99 = np.percentile(np.fromiter(self.lags, float), [50, 99]) * 1e3
             pairs += [('pose_lag_p50_ms', f'{p50:.3f}'), ('pose_lag_p99_ms', f'{p99:.3f}'),
@@ -282,6 +323,11 @@ class Stiffness6EstimatorNode(Node):
             self.get_logger().info(f'final 6x6 fit: {NAMES.get(level, level)} {message}; K2 = '
                                    f'{fit.k2:.6g} [{fit.k2_low:.6g}, {fit.k2_high:.6g}] N/rad, diagonal of K '
                                    f'{np.array2string(np.diag(fit.stiffness), precision=6)}')
+            u = self.uncertainty
+            if u is not None:
+                self.get_logger().info(f'U (GUM, 95 %) of K2 {u.k2_U:.4g} N/rad (k = {u.k2_k:.3g}), of the diagonal '
+                                       f'of K {np.array2string(np.diag(u.U), precision=4)}; {u.statement}')
+        self.references.close()
 
 
 #: The node a rig host loads (crane_stiffness.launcher.rig_host), built with its node arguments (``cli_args``).

@@ -1,5 +1,6 @@
-"""What the live stiffness estimator reads of the rig's other nodes to state U and E_n: the load cell's and the LVDT's
-declared calibrations (their ``calibration.*``, ``full_scale`` and ``range_m`` parameters) and the crane model's
+"""What the live stiffness estimators read of the rig's other nodes to state U and E_n: the load cell's and the LVDT's
+declared calibrations (their ``calibration.*``, ``full_scale`` and ``range_m`` parameters; the live 6×6 estimator the
+load cell's, the pose sensor's and an LVDT array's, :data:`KINDS`) and the crane model's
 geometry (its ``geometry.*``, the crane file), over ROS as the session recorder reads them
 (:class:`~crane_stiffness.rosnode.parameter_reader.NodeParameterReader`), at start and again when one of those nodes
 reports a change of them on /parameter_events. The calibrations go to the live core
@@ -33,12 +34,16 @@ from crane_stiffness.estimation.live import LiveStiffness
 from crane_stiffness.estimation.live_uncertainty import prediction_relative_uncertainty
 from crane_stiffness.rosnode.parameter_reader import NodeParameterReader
 
-#: The kinds read, and which of a node's parameters matter for each (a change of any other is ignored).
-KINDS = ('load_cell', 'lvdt', 'model')
+#: The kinds read, and which of a node's parameters matter for each (a change of any other is ignored). An
+#: estimator reads the kinds it names nodes for (the one-axis one load_cell, lvdt and model; the 6×6 one load_cell,
+#: pose_sensor and lvdt_array).
+KINDS = ('load_cell', 'lvdt', 'model', 'pose_sensor', 'lvdt_array')
 _RELEVANT: dict[str, Callable[[str], bool]] = {
     'load_cell': lambda name: name.startswith('calibration.') or name == 'full_scale',
     'lvdt': lambda name: name.startswith('calibration.') or name == 'range_m',
     'model': lambda name: name.startswith('geometry.'),
+    'pose_sensor': lambda name: name.startswith('calibration.'),
+    'lvdt_array': lambda name: name.startswith('calibration.'),
 }
 #: How often the reads are advanced while one is pending [s] (steady clock: also on simulated time).
 POLL_PERIOD_S = 0.5
@@ -48,11 +53,14 @@ WAIT_S = 60.0
 
 class EstimatorReferences:
     """Reads the nodes ``nodes[kind]`` (kinds :data:`KINDS`) for the live core ``core()`` (the node's; None before
-    its first settings), the prediction's uncertainty file from ``uncertainty_file()``."""
+    its first settings), the prediction's uncertainty file from ``uncertainty_file()``. A calibration read goes to
+    ``on_calibration(kind, values)`` when given (the 6×6 estimator's), else into the core's ``calibrations``."""
 
     def __init__(self, node: Node, nodes: dict[str, Sequence[str]], core: Callable[[], LiveStiffness | None],
-                 uncertainty_file: Callable[[], str]) -> None:
+                 uncertainty_file: Callable[[], str],
+                 on_calibration: Callable[[str, dict[str, Any]], None] | None = None) -> None:
         self._node = node
+        self._on_calibration = on_calibration
         self._nodes = {kind: ['/' + n.strip('/') for n in nodes.get(kind, ()) if n.strip('/')] for kind in KINDS}
         self._core = core
         self._uncertainty_file = uncertainty_file
@@ -102,12 +110,17 @@ class EstimatorReferences:
             self.geometry = values
             log.info(f"the model's geometry of /{node} read: the prediction's U is computed")
             self.update_prediction()
+            return
+        if self._on_calibration is not None:
+            self._on_calibration(kind, values)
         elif core is not None:
             load_cell, lvdt = core.calibrations
             core.calibrations = (values, lvdt) if kind == 'load_cell' else (load_cell, values)
-            declared = sorted({k.split('.')[1].removesuffix('_distribution').removesuffix('_k') for k in values
-                               if k.startswith('calibration.')})
-            log.info(f'U of the live k: the {kind} calibration of /{node} read ({", ".join(declared) or "none"})')
+        else:
+            return
+        declared = sorted({k.split('.')[1].removesuffix('_distribution').removesuffix('_k') for k in values
+                           if k.startswith('calibration.')})
+        log.info(f'U of the live estimate: the {kind} calibration of /{node} read ({", ".join(declared) or "none"})')
 
     def update_prediction(self) -> None:
         """The model prediction's relative U along the core's axis (GUM linear law; computed again only when the

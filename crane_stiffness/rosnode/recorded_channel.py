@@ -44,7 +44,8 @@ SIM_INPUTS = (topics.WRENCH_COMMAND, topics.APPLIED_WRENCH, topics.REJECTED_COMM
 SIM_OUTPUTS = (topics.LOAD_CELL_TARE, topics.LVDT_ZERO, topics.PROGRAM_PROGRESS, topics.PROGRAM_STATE,
                topics.PREDICTED_STIFFNESS, topics.PREDICTED_AXIS_STIFFNESS, topics.STIFFNESS_ESTIMATE,
                topics.STIFFNESS_VALUES, topics.STIFFNESS,
-               topics.FITTED_PAIRS, topics.FIT_LINES, topics.STIFFNESS6, topics.COMPLIANCE6, topics.STIFFNESS6_STATUS)
+               topics.FITTED_PAIRS, topics.FIT_LINES, topics.STIFFNESS6, topics.STIFFNESS6_EXPANDED, topics.COMPLIANCE6,
+               topics.STIFFNESS6_STATUS)
 
 
 def deep(qos: QoSProfile) -> QoSProfile:

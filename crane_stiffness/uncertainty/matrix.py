@@ -207,6 +207,17 @@ class MatrixUncertainty:
         return out
 
 
+def _coverage_factors(nu: NDArray[np.float64], coverage: float) -> NDArray[np.float64]:
+    """:func:`~.budget.coverage_factor` of every ν_eff of ``nu`` in one call of the t quantile (ν truncated, at
+    least 1; the normal quantile for ν = ∞): the same numbers, without 36 scalar quantiles per matrix (most of the
+    live 6×6 estimator's cost of U otherwise)."""
+    coverage_factor(1.0, coverage)  # (checks the coverage)
+    q = 0.5 * (1.0 + coverage)
+    infinite = np.isinf(nu)
+    dof = np.where(infinite, 1.0, np.maximum(1.0, np.floor(nu)))
+    return np.asarray(np.where(infinite, stats.norm.ppf(q), stats.t.ppf(q, dof)), dtype=np.float64)
+
+
 def _entries(value: NDArray[np.float64], cov_a: NDArray[np.float64], cov_b: NDArray[np.float64], dof: int,
              coverage: float, mc: NDArray[np.float64] | None, shape: tuple[int, ...]) -> EntryUncertainty:
     """Per entry of vec ``value`` (m,) the GUM's numbers from the diagonals of the Type A and B covariances, and
@@ -215,8 +226,10 @@ def _entries(value: NDArray[np.float64], cov_a: NDArray[np.float64], cov_b: NDAr
     u_b = np.sqrt(np.maximum(np.diag(cov_b), 0.0))
     u_c = np.hypot(u_a, u_b)
     with np.errstate(divide='ignore', invalid='ignore'):
-        nu = np.where(u_a > 0.0, u_c ** 4 / (u_a ** 4 / dof), math.inf)
-    k = np.array([coverage_factor(float(n), coverage) for n in nu])
+        # ν_eff = ν·(u_c/u_a)⁴ >= ν (the Type B has ν = ∞), written so that it is ν exactly without a Type B:
+        # u_c⁴ / (u_a⁴ / ν) may round to just below ν, and k (ν_eff truncated, GUM G.4.1) jump to t(ν − 1)
+        nu = np.where(u_a > 0.0, dof * (u_c / u_a) ** 4, math.inf)
+    k = _coverage_factors(nu, coverage)
     t = float(stats.t.ppf(0.5 * (1.0 + coverage), dof))
     if mc is not None:
         order = np.sort(mc, axis=0)

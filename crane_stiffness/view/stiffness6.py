@@ -1,7 +1,9 @@
 """The 6×6 stiffness as the live view shows it (``/live_view/stiffness6``): the latest K the six-axis estimator
 published (/stiffness6/stiffness, with its 95 % interval) entry by entry against the model's exact tangent at rest
 for the view's geometry (crane_stiffness.full6.reference), the coupling K2 measured, with its interval, and the
-tangent's, and the estimator's status (/stiffness6/status). Pure numpy, no ROS.
+tangent's, and the estimator's status (/stiffness6/status); each entry's and K2's expanded uncertainty U (GUM, 95 %)
+beside the statistical interval (the repeatability) once the estimator states it (/stiffness6/stiffness_expanded, of
+the same fit: :func:`expanded_uncertainty`; K2's U and what U counts from the status). Pure numpy, no ROS.
 
 Rows are the loads fx fy fz mx my mz, columns the displacements u_x u_y u_z θ_x θ_y θ_z (crane_stiffness.contract.axes,
 crane_stiffness.full6.reference.DISPLACEMENTS); units as there (N/m, N/rad, N·m/rad). An entry the model has at zero
@@ -27,12 +29,35 @@ def _num(value: float) -> float | None:
     return float(value) if math.isfinite(value) else None
 
 
-def _k2_interval(values: Mapping[str, str]) -> tuple[float, float]:
-    low, _, high = values.get('k2_ci95', '').partition(' .. ')
+def _k2_interval(values: Mapping[str, str], key: str = 'k2_ci95') -> tuple[float, float]:
+    low, _, high = values.get(key, '').partition(' .. ')
     try:
         return float(low), float(high)
     except ValueError:
         return math.nan, math.nan
+
+
+def _float(values: Mapping[str, str], key: str) -> float:
+    try:
+        return float(values.get(key, 'nan'))
+    except ValueError:
+        return math.nan
+
+
+def expanded_uncertainty(stiffness: Sequence[float] | None, expanded: Sequence[float] | None) -> np.ndarray | None:
+    """Each entry's U (6, 6) [its unit] of /stiffness6/stiffness_expanded data ``expanded`` (value, value − U,
+    value + U), when it is of the same fit as the /stiffness6/stiffness data ``stiffness`` (the same values: the two
+    topics are published together, but arrive one after the other); None otherwise (no U shown rather than the U of
+    another fit). ViewError on data not laid out as crane_stiffness.contract.stiffness6_layout says."""
+    if stiffness is None or expanded is None:
+        return None
+    try:
+        k, cube = stiffness6_layout.decode(stiffness)[0], stiffness6_layout.decode(expanded)
+    except stiffness6_layout.LayoutError as exc:
+        raise ViewError(str(exc)) from exc
+    if not np.array_equal(cube[0], k, equal_nan=True):
+        return None
+    return 0.5 * (cube[2] - cube[1])
 
 
 def stiffness6_message(stiffness: Sequence[float] | None, tangent: np.ndarray,
@@ -44,8 +69,10 @@ def stiffness6_message(stiffness: Sequence[float] | None, tangent: np.ndarray,
     (published level, message, key-values) of the newest /stiffness6/status (None: none yet). ``fit`` says whether a
     measured K is there; K2 measured is read from it (:func:`~crane_stiffness.full6.reference.k2_of`, what the
     estimator fits), its interval from the status. The statistical interval is the repeatability; ``uncertainty``:
-    each entry's expanded uncertainty U (6, 6) [its unit, 95 %] when the six-axis estimator states one (each cell's
-    ``U``, ``U_low``, ``U_high`` = measured ∓ U), else None: the cells' U fields are null (no U on the wire yet)."""
+    each entry's expanded uncertainty U (6, 6) [its unit, 95 %] when the six-axis estimator states one for this fit
+    (:func:`expanded_uncertainty`; each cell's ``U``, ``U_low``, ``U_high`` = measured ∓ U; K2's from the status's
+    ``k2_U``; ``uncertainty``: the status's statement of what U counts, ``statistical_only`` when it counts no
+    calibration), else None: the U fields are null and the statement empty (no U stated for this fit)."""
     tangent = np.asarray(tangent, dtype=float)
     zero = structural_zeros(tangent)
     try:
@@ -60,7 +87,10 @@ def stiffness6_message(stiffness: Sequence[float] | None, tangent: np.ndarray,
          'ci95_high': _num(high[i, j]), 'tangent': float(tangent[i, j]), 'relative_error': _num(relative[i, j]),
          'model_zero': bool(zero[i, j]), 'U': _num(big_u[i, j]), 'U_low': _num(k[i, j] - big_u[i, j]),
          'U_high': _num(k[i, j] + big_u[i, j])} for j in range(6)]} for i in range(6)]
-    k2_low, k2_high = _k2_interval(status[2]) if status is not None else (math.nan, math.nan)
+    values = status[2] if status is not None else {}
+    k2_low, k2_high = _k2_interval(values)
+    k2_u = _float(values, 'k2_U') if uncertainty is not None else math.nan  # (beside the same fit's U only)
+    statement = values.get('uncertainty', '') if uncertainty is not None else ''
     k2_measured, k2_tangent = k2_of(k), k2_of(tangent)
     if status is None:
         level, level_name, message = -1, NAMES[-1], ''
@@ -70,18 +100,22 @@ def stiffness6_message(stiffness: Sequence[float] | None, tangent: np.ndarray,
     return {'fit': stiffness is not None, 'level': level, 'level_name': level_name, 'message': message,
             'k2': {'measured': _num(k2_measured), 'ci95_low': _num(k2_low), 'ci95_high': _num(k2_high),
                    'tangent': _num(k2_tangent),
-                   'relative_error': _num(k2_measured / k2_tangent - 1.0) if k2_tangent else None},
+                   'relative_error': _num(k2_measured / k2_tangent - 1.0) if k2_tangent else None,
+                   'U': _num(k2_u), 'U_low': _num(k2_measured - k2_u), 'U_high': _num(k2_measured + k2_u)},
+            'uncertainty': statement, 'statistical_only': values.get('statistical_only') == 'true' and bool(statement),
             'rows': rows}
 
 
 #: The channel's JSON schema (every field typed: see crane_stiffness.view.jsonschema).
 SCHEMA = js.obj({
     'fit': js.BOOLEAN, 'level': js.INTEGER, 'level_name': js.STRING, 'message': js.STRING,
-    'k2': js.obj({k: js.NUMBER for k in ('measured', 'ci95_low', 'ci95_high', 'tangent', 'relative_error')}),
+    'k2': js.obj({k: js.NUMBER for k in ('measured', 'ci95_low', 'ci95_high', 'tangent', 'relative_error', 'U',
+                                         'U_low', 'U_high')}),
+    'uncertainty': js.STRING, 'statistical_only': js.BOOLEAN,
     'rows': js.array(js.obj({'load': js.STRING, 'cells': js.array(js.obj({
         'displacement': js.STRING, 'measured': js.NUMBER, 'ci95_low': js.NUMBER, 'ci95_high': js.NUMBER,
         'tangent': js.NUMBER, 'relative_error': js.NUMBER, 'model_zero': js.BOOLEAN, 'U': js.NUMBER,
         'U_low': js.NUMBER, 'U_high': js.NUMBER}))}))},
     'crane_stiffness.Stiffness6')
 
-__all__ = ['SCHEMA', 'stiffness6_message']
+__all__ = ['SCHEMA', 'expanded_uncertainty', 'stiffness6_message']

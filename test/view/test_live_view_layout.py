@@ -76,7 +76,7 @@ TEXT_BOXES_JS = r"""(() => {
     boxes.push({ text: s.value, where: 'select', left: q.left + scrollX, top: q.top + scrollY, width: q.width,
       height: q.height });
   }
-  for (const id of ['xy', 'scene']) {
+  for (const id of ['xy', 'scene', 'k6int']) {
     const c = document.getElementById(id);
     if (!c.offsetParent) continue;
     const q = c.getBoundingClientRect();

@@ -1,8 +1,10 @@
 """The live view's 6×6 stiffness with the live_view node in this process (real DDS on loopback): a test node
-publishes /stiffness6/stiffness, /stiffness6/compliance and /stiffness6/status as the six-axis estimator does
-(latched), and the wire states the scene needs. The node sends /live_view/stiffness6 only once those come, with the
-published numbers against the model's tangent for its geometry, and draws the compliance ellipsoid in the scene;
-the page (headless Chromium) shows the panel with the 36 published values."""
+publishes /stiffness6/stiffness, /stiffness6/stiffness_expanded (K ∓ U), /stiffness6/compliance and
+/stiffness6/status as the six-axis estimator does (latched), and the wire states the scene needs. The node sends
+/live_view/stiffness6 only once those come, with the published numbers against the model's tangent for its geometry
+and each entry's and K2's U, and draws the compliance ellipsoid in the scene; the page (headless Chromium) shows the
+panel with the 36 published values, the chosen row's U column filled and both intervals of each of its entries drawn
+(the repeatability and K ± U), and what U counts."""
 from __future__ import annotations
 
 import json
@@ -14,7 +16,10 @@ import pytest
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from sensor_msgs.msg import JointState
 
-from crane_stiffness.contract import stiffness6_layout
+from std_msgs.msg import Float64MultiArray
+
+from crane_stiffness.contract import stiffness6_layout, topics
+from crane_stiffness.rosnode.qos import LATCHED_QOS
 from crane_stiffness.full6.reference import k2_of, reference_at_rest
 from crane_stiffness.model.geometry import WIRE_NAMES
 from crane_stiffness.contract.status import WARN
@@ -35,21 +40,37 @@ class _Rig(ViewRig):
 
     def __init__(self, ctx: Any) -> None:
         super().__init__(ctx, 'stiffness6_test_publisher')
+        self.expanded = self.pub.create_publisher(Float64MultiArray, topics.STIFFNESS6_EXPANDED, LATCHED_QOS)
 
     def publish_wires(self) -> None:
         msg = JointState(name=list(WIRE_NAMES), position=[0.5] * 6, effort=[8.6, 8.7, 8.6, 8.7, 8.6, 8.7])
         msg.header.stamp = self.pub.get_clock().now().to_msg()
         self.wires.publish(msg)
 
-    def publish_fit(self, k: np.ndarray, k2_interval: tuple[float, float]) -> None:
+    def publish_fit(self, k: np.ndarray, k2_interval: tuple[float, float], u: np.ndarray | None = None,
+                    k2_u: float = 0.0) -> None:
+        """The estimator's K (repeatability K - 50 .. K + 75), C and status, and with ``u`` its K ∓ U and K2's U."""
         c = np.linalg.inv(k)
         self.k.publish(stiffness6_layout.to_message(k, k - 50.0, k + 75.0))
+        if u is not None:
+            self.expanded.publish(stiffness6_layout.to_message(k, k - u, k + u))
         self.c.publish(stiffness6_layout.to_message(c, c * 0.99, c * 1.01))
         status = DiagnosticStatus(name='stiffness6_estimator: 6x6', hardware_id='crane', level=bytes([WARN]),
                                   message='condition 2.1e4 above 1e4')
         status.values = [KeyValue(key='k2', value=f'{k2_of(k):.8g}'),
                          KeyValue(key='k2_ci95', value=f'{k2_interval[0]!r} .. {k2_interval[1]!r}')]
+        if u is not None:
+            status.values += [KeyValue(key='k2_U', value=repr(k2_u)), KeyValue(key='statistical_only', value='false'),
+                              KeyValue(key='uncertainty', value=STATEMENT)]
         self.status6.publish(DiagnosticArray(status=[status]))
+
+
+STATEMENT = 'calibration counted: load_cell sensitivity; statistical only for pose_sensor angle (not stated)'
+
+
+def _u(k: np.ndarray) -> np.ndarray:
+    """Each entry's U: 200 (wider than the repeatability's 125) plus 1 % of the entry."""
+    return 200.0 + 0.01 * np.abs(k)
 
 
 def _measured(tangent: np.ndarray) -> np.ndarray:
@@ -78,10 +99,18 @@ def test_the_view_sends_the_6x6_only_once_published_and_draws_the_compliance_ell
                 assert 'compliance_scale' not in {kv['key'] for kv in entity['metadata']}
 
             k = _measured(tangent)
-            rig.publish_fit(k, (17_500.25, 18_250.5))
-            assert client.poll_until(lambda: any(m['fit'] and m['level_name'] == 'WARN'
+            rig.publish_fit(k, (17_500.25, 18_250.5), _u(k), 612.5)
+            assert client.poll_until(lambda: any(m['fit'] and m['level_name'] == 'WARN' and m['k2']['U'] is not None
+                                                 and m['rows'][5]['cells'][5]['U'] is not None
                                                  for m in client.json_messages(K6)))
             msg = [m for m in client.json_messages(K6) if m['fit'] and m['level_name'] == 'WARN'][-1]
+            # each entry's U from /stiffness6/stiffness_expanded (of the same fit), K2's and the statement from the
+            # status
+            shown_u = np.array([[c['U'] for c in r['cells']] for r in msg['rows']])
+            np.testing.assert_allclose(shown_u, _u(k), rtol=1e-9)
+            assert msg['rows'][1]['cells'][3]['U_low'] == pytest.approx(k[1, 3] - _u(k)[1, 3], rel=1e-12)
+            assert msg['k2']['U'] == 612.5 and msg['k2']['U_high'] == pytest.approx(k2_of(k) + 612.5, rel=1e-12)
+            assert msg['uncertainty'] == STATEMENT and msg['statistical_only'] is False
             shown = np.array([[c['measured'] for c in r['cells']] for r in msg['rows']])
             low = np.array([[c['ci95_low'] for c in r['cells']] for r in msg['rows']])
             high = np.array([[c['ci95_high'] for c in r['cells']] for r in msg['rows']])
@@ -143,7 +172,7 @@ def test_the_page_shows_the_6x6_panel_with_the_published_values(rclpy_context, t
             assert browser.evaluate("document.getElementById('stiffness6-panel').offsetParent") is None
             assert browser.evaluate("document.getElementById('scene').dataset.ellipsoid") == ''
             k = _measured(tangent)
-            rig.publish_fit(k, (17_500.25, 18_250.5))
+            rig.publish_fit(k, (17_500.25, 18_250.5), _u(k), 612.5)
             # a 6x6 fit: the page is laid out for a six-axis run, the 6x6 panel leads
             browser.wait_for("document.body.dataset.run === 'six_axis' && "
                              "document.querySelectorAll('#stiffness6 td.k6').length === 36 && "
@@ -155,6 +184,14 @@ def test_the_page_shows_the_6x6_panel_with_the_published_values(rclpy_context, t
             heads = browser.evaluate("[...document.querySelectorAll('#stiffness6 th')].map((th) => th.textContent)")
             title = browser.evaluate("[document.getElementById('stiffness6-level').textContent, "
                                      "document.getElementById('stiffness6-k2').textContent]")
+            # the chosen row (fy): its U column filled, and both intervals of each entry drawn on its own scale
+            browser.wait_for("[...document.querySelectorAll('#k6-row-table tr')].slice(1)"
+                             ".every((tr) => tr.cells[3].dataset.value !== '') && "
+                             "document.getElementById('k6int').dataset.drawn === 'intervals'")
+            row_u = browser.evaluate("[...document.querySelectorAll('#k6-row-table tr')].slice(1).map((tr) => "
+                                     "[tr.cells[3].textContent, tr.cells[3].dataset.value])")
+            drawn = json.loads(browser.evaluate("document.getElementById('k6int').dataset.intervals"))
+            statement = browser.evaluate("document.getElementById('stiffness6-uncertainty').textContent")
             rig.publish_wires()
             browser.wait_for("document.getElementById('scene').dataset.ellipsoid === 'drawn'")
             png = browser.screenshot(tmp_path / 'stiffness6.png', full_page=True)
@@ -173,5 +210,16 @@ def test_the_page_shows_the_6x6_panel_with_the_published_values(rclpy_context, t
             assert background.startswith('rgb(')
     assert sum(c[3] == 'k6' for c in cells) == 10
     assert title[0] == 'WARN' and title[1].startswith('K2 = ') and 'tangent' in title[1]
+    assert '± 612.5 (U, 95 %)' in title[1]
+    u = _u(k)
+    for j, (text, value) in enumerate(row_u):
+        low, high = (float(v) for v in value.split(','))
+        assert (low, high) == (pytest.approx(k[1, j] - u[1, j], rel=1e-12), pytest.approx(k[1, j] + u[1, j], rel=1e-12))
+        assert text.startswith('± ') and float(text[2:]) == pytest.approx(u[1, j], rel=5e-4)
+    assert sorted(drawn) == sorted(['u_x', 'u_y', 'u_z', 'θ_x', 'θ_y', 'θ_z'])
+    for j, d in enumerate(drawn.values()):  # K ± U wider than the repeatability, in the drawing's own proportion
+        assert d['U_px'] > d['repeatability_px'] > 0
+        assert d['U_px'] / d['repeatability_px'] == pytest.approx(2 * u[1, j] / 125.0, rel=1e-6)
+    assert statement == f'U (GUM, 95 %): {STATEMENT}'
     SHOTS.mkdir(parents=True, exist_ok=True)
     shutil.copy(png, SHOTS / 'stiffness6.png')

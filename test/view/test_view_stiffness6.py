@@ -118,3 +118,28 @@ def test_the_scene_has_the_ellipsoid_at_the_platform_only_with_a_fit_and_states_
         assert p.mean(axis=0) == pytest.approx(centre, abs=1e-12)
         assert np.linalg.norm(p - centre, axis=1).max() == pytest.approx(
             1.86e-5 * float(meta['compliance_scale']), rel=1e-12)
+
+
+def test_u_is_shown_only_beside_the_fit_it_belongs_to():
+    k = _measured()
+    data = np.concatenate([k.ravel(), (k - 100.0).ravel(), (k + 250.0).ravel()]).tolist()
+    u = 300.0 + 0.02 * np.abs(k)
+    expanded = np.concatenate([k.ravel(), (k - u).ravel(), (k + u).ravel()]).tolist()
+    np.testing.assert_allclose(stiffness6.expanded_uncertainty(data, expanded), u, rtol=1e-12)
+    # the expanded K of another fit (it arrives before or after the K it goes with): no U rather than a wrong one
+    other = np.concatenate([(k * 1.001).ravel(), (k - u).ravel(), (k + u).ravel()]).tolist()
+    assert stiffness6.expanded_uncertainty(data, other) is None
+    assert stiffness6.expanded_uncertainty(None, expanded) is None
+    assert stiffness6.expanded_uncertainty(data, None) is None
+    with pytest.raises(ViewError, match='108'):
+        stiffness6.expanded_uncertainty(data, expanded[:36])
+    status = (OK, 'OK', {'k2': '17999', 'k2_ci95': '17800.5 .. 18150.25', 'k2_U': '640.25',
+                         'statistical_only': 'true', 'uncertainty': 'statistical only: no calibration declared'})
+    msg = stiffness6.stiffness6_message(data, TANGENT, status, stiffness6.expanded_uncertainty(data, expanded))
+    assert msg['rows'][2]['cells'][2]['U'] == pytest.approx(u[2, 2], rel=1e-12)
+    assert msg['k2']['U'] == 640.25 and msg['statistical_only'] is True
+    assert msg['uncertainty'] == 'statistical only: no calibration declared'
+    # without this fit's U, neither K2's nor the statement is shown (the status may be of the next fit already)
+    bare = stiffness6.stiffness6_message(data, TANGENT, status)
+    assert bare['k2']['U'] is None and bare['uncertainty'] == '' and bare['statistical_only'] is False
+    assert all(c['U'] is None for r in bare['rows'] for c in r['cells'])

@@ -8,7 +8,7 @@ const CHANNELS = ['xy', 'fit_lines', 'prediction', 'estimate', 'status', 'wires'
 const state = { messages: 0, lastCount: 0, data: {}, dirty: new Set(), drawnAt: 0, run: null, k6Row: 1 };
 // The boxes of the text drawn on each canvas, in its pixels ({text, left, top, width, height}), as the drawing code
 // placed it: what a test reads to check that no two texts of the page overlap (the DOM's text it reads itself).
-window.__textBoxes = { xy: [], scene: [], kint: [] };
+window.__textBoxes = { xy: [], scene: [], kint: [], k6int: [] };
 const WIRE_LABEL = /^wire_\d/;
 // What each channel changes on the page: only that part is drawn again (the rest keeps its pixels and DOM).
 const PART = { xy: 'plot', fit_lines: 'plot', prediction: 'plot', estimate: 'text', status: 'text', wires: 'wires',
@@ -173,47 +173,6 @@ function updateWires() {
     cells[1].dataset.value = w.tension;
     cells[1].textContent = w.slack ? 'slack' : fmt(w.tension, 5) + ' N';
     cells[2].textContent = `${fmt(w.length * 1000, 6)} mm`;
-  });
-}
-
-function updateStiffness6() {
-  // The 6×6 panel (its tables made at the start, their cells rewritten) and the chosen row of K.
-  const k6 = state.data.stiffness6;
-  if (!k6) return;
-  const table = document.getElementById('stiffness6');
-  k6.rows.forEach((row, i) => row.cells.forEach((c, j) => {
-    const td = table.rows[i + 1].cells[j + 1];
-    td.textContent = compact(c.measured);
-    td.dataset.value = c.measured === null ? '' : String(c.measured);
-    td.dataset.relative = c.relative_error === null ? '' : String(c.relative_error);
-    td.title = `${row.load}/${c.displacement}: ${c.measured === null ? '–' : c.measured} ` +
-      `[${c.ci95_low === null ? '–' : c.ci95_low}, ${c.ci95_high === null ? '–' : c.ci95_high}] (repeatability)` +
-      (c.U === null || c.U === undefined ? '' : `, ± ${c.U} (U, 95 %)`) + `, tangent ${c.tangent}`;
-    const cls = c.model_zero ? 'k6 model-zero' : 'k6';
-    if (td.className !== cls) td.className = cls;
-    td.style.background = c.model_zero || c.relative_error === null ? '' : diverging(c.relative_error);
-  }));
-  const badge = document.getElementById('stiffness6-level');
-  badge.className = `level-${k6.level}`;
-  badge.textContent = k6.level_name;
-  badge.dataset.level = k6.level;
-  const k2 = k6.k2;
-  document.getElementById('stiffness6-k2').textContent = k6.fit ? `K2 = ${compact(k2.measured)} ` +
-    `[${compact(k2.ci95_low)}, ${compact(k2.ci95_high)}] N/rad (repeatability), model tangent ${compact(k2.tangent)}` :
-    `K2: waiting for the 6×6 fit… (model tangent ${compact(k2.tangent)} N/rad)`;
-  document.getElementById('stiffness6-message').textContent = k6.message || 'waiting for the six-axis estimator…';
-  const row = k6.rows[state.k6Row], rowTable = document.getElementById('k6-row-table');
-  row.cells.forEach((c, j) => {
-    const cells = rowTable.rows[j + 1].cells;
-    cells[1].textContent = compact(c.measured);
-    cells[2].textContent = c.ci95_low === null ? '–' : `${compact(c.ci95_low)} .. ${compact(c.ci95_high)}`;
-    // U when the six-axis estimator states it (the field on the channel); until then said so, never a blank
-    const hasU = c.U !== null && c.U !== undefined;
-    cells[3].textContent = hasU ? `± ${compact(c.U)}` : (c.measured === null ? '–' : 'not stated');
-    cells[3].dataset.value = hasU ? `${c.U_low},${c.U_high}` : '';
-    cells[4].textContent = compact(c.tangent);
-    cells[5].textContent = c.model_zero ? 'model: 0' :
-      (c.relative_error === null ? '–' : `${(100 * c.relative_error).toFixed(2)} %`);
   });
 }
 
