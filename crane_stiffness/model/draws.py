@@ -53,7 +53,9 @@ def _column(name: str, value, n: int, width: int | None = None) -> np.ndarray:
     if not np.all(np.isfinite(arr)):
         first = int(np.flatnonzero(~np.isfinite(arr.reshape(len(arr), -1)).any(axis=1))[0])
         raise GeometryError(name, arr[first].tolist(), f'every draw must be finite (draw {first} is not)')
-    return np.ascontiguousarray(arr)
+    # A copy, always: a broadcast view of one draw is contiguous but read-only, and a read-only array is another
+    # type to the compiled kernels (a signature compiled at run time, outside the install-time cache).
+    return np.array(arr, dtype=float, order='C')
 
 
 def geometry_of_draw(nominal: CraneGeometry, draws: dict[str, np.ndarray], n: int) -> CraneGeometry:

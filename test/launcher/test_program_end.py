@@ -37,6 +37,7 @@ class _Observer:
     def __init__(self, procs: _Procs, step: float, end_after: int | None) -> None:
         self.procs, self.step, self.end_after = procs, step, end_after
         self.progress = 0.0
+        self.state: dict = {'state': 'running'}  # the program's latest state message: running, never holding
         self.spins = 0
 
     def spin_once(self, timeout_sec: float) -> None:
