@@ -34,6 +34,22 @@ from crane_stiffness.uncertainty.inputs import InputQuantity
 from crane_stiffness.uncertainty.montecarlo import DEFAULT_DIGITS, monte_carlo, with_monte_carlo
 
 
+def draw_fields(geometry: CraneGeometry, columns: Mapping[str, Any], n: int) -> dict[str, Any]:
+    """The arrays of :func:`~crane_stiffness.model.draws.rest_stiffness_draws` for ``n`` cranes whose inputs (names of
+    :func:`.crane_inputs.input_names`) take the values ``columns`` (each (n,) or a scalar); the inputs not given,
+    and the other offsets of a row given in part, keep ``geometry``'s values."""
+    fields: dict[str, Any] = {name: columns[name] for name in
+                              ('a', 'b', 'height', 'weight', 'wire_diameter', 'youngs_modulus', 'wire_stiffness')
+                              if name in columns}
+    if any(name in columns for name in LENGTH_OFFSETS):
+        fields['length_offsets'] = np.stack([np.broadcast_to(columns.get(name, off), (n,)) for name, off in
+                                             zip(LENGTH_OFFSETS, geometry.length_offsets)], axis=1)
+    if any(name in columns for name in COM_OFFSETS):
+        fields['com_offset'] = np.stack([np.broadcast_to(columns.get(name, off), (n,)) for name, off in
+                                         zip(COM_OFFSETS, geometry.com_offset)], axis=1)
+    return fields
+
+
 def stiffness_function(geometry: CraneGeometry, axis: str, names: Sequence[str]) -> Callable[..., np.ndarray]:
     """f(x_1, …, x_N) → the rest stiffness along ``axis`` of the cranes with those inputs, vectorised: each x_i
     is a number or an array (M,) of the input ``names[i]`` (names of :func:`.crane_inputs.input_names`); returns
@@ -51,17 +67,7 @@ def stiffness_function(geometry: CraneGeometry, axis: str, names: Sequence[str])
             raise UncertaintyError(f'the stiffness function takes {len(names)} inputs ({", ".join(names)}), '
                                    f'got {len(values)}')
         columns = {name: np.atleast_1d(np.asarray(v, dtype=float)) for name, v in zip(names, values)}
-        n = max(c.size for c in columns.values())
-        fields: dict[str, Any] = {name: columns[name] for name in
-                                  ('a', 'b', 'height', 'weight', 'wire_diameter', 'youngs_modulus',
-                                   'wire_stiffness') if name in columns}
-        if any(name in columns for name in LENGTH_OFFSETS):
-            fields['length_offsets'] = np.stack([np.broadcast_to(columns.get(name, off), (n,)) for name, off in
-                                                 zip(LENGTH_OFFSETS, geometry.length_offsets)], axis=1)
-        if any(name in columns for name in COM_OFFSETS):
-            fields['com_offset'] = np.stack([np.broadcast_to(columns.get(name, off), (n,)) for name, off in
-                                             zip(COM_OFFSETS, geometry.com_offset)], axis=1)
-        k = rest_stiffness_draws(geometry, **fields)
+        k = rest_stiffness_draws(geometry, **draw_fields(geometry, columns, max(c.size for c in columns.values())))
         compliance = np.linalg.solve(k, np.broadcast_to(direction, (k.shape[0], 6))[..., None])[..., 0]
         return 1.0 / (compliance @ direction)
 

@@ -32,11 +32,12 @@ from crane_stiffness.model.equilibrium import rest_pose
 from crane_stiffness.model.geometry import CraneGeometry
 from crane_stiffness.model.stiffness import tangent_stiffness
 from crane_stiffness.uncertainty.budget import DEFAULT_COVERAGE, DEFAULT_STEP, coverage_factor
-from crane_stiffness.uncertainty.crane_inputs import COM_OFFSETS, LENGTH_OFFSETS, crane_inputs
+from crane_stiffness.uncertainty.crane_inputs import crane_inputs
 from crane_stiffness.uncertainty.errors import UncertaintyError
 from crane_stiffness.uncertainty.inputs import InputQuantity
 from crane_stiffness.uncertainty.matrix import k2_gradient
 from crane_stiffness.uncertainty.montecarlo import draw_inputs
+from crane_stiffness.uncertainty.prediction import draw_fields
 
 #: Cranes drawn by default (~20 µs each on the compiled path).
 TRIALS = 5_000
@@ -44,17 +45,7 @@ TRIALS = 5_000
 
 def _tangents(geometry: CraneGeometry, names: Sequence[str], x: NDArray[np.float64]) -> NDArray[np.float64]:
     """K (M, 6, 6) of the cranes whose inputs ``names`` take the values x (N, M)."""
-    columns = dict(zip(names, x))
-    m = x.shape[1]
-    fields: dict[str, Any] = {n: columns[n] for n in ('a', 'b', 'height', 'weight', 'wire_diameter',
-                                                     'youngs_modulus', 'wire_stiffness') if n in columns}
-    if any(n in columns for n in LENGTH_OFFSETS):
-        fields['length_offsets'] = np.stack([np.broadcast_to(columns.get(n, off), (m,)) for n, off in
-                                             zip(LENGTH_OFFSETS, geometry.length_offsets)], axis=1)
-    if any(n in columns for n in COM_OFFSETS):
-        fields['com_offset'] = np.stack([np.broadcast_to(columns.get(n, off), (m,)) for n, off in
-                                         zip(COM_OFFSETS, geometry.com_offset)], axis=1)
-    return rest_stiffness_draws(geometry, **fields)
+    return rest_stiffness_draws(geometry, **draw_fields(geometry, dict(zip(names, x)), x.shape[1]))
 
 
 @dataclass(frozen=True)
