@@ -7,7 +7,14 @@ Reports, over the program (from its start to its end), the CPU time (user + syst
 of Chromium's process tree, each as a fraction of one core, and the rig's cost with the page against the baseline.
 Targets: the rig ≤ 1 core, the page in Chromium ≤ 15 % of a core. Exits 1 when a target is missed.
 
-Run: .venv/bin/python benchmarks/bench_cpu.py [--program full6] [--json out.json]   (needs `chromium` on PATH)
+``--estimator``: the cost of the live uncertainty instead (no page): the rig run with the estimator statistical only
+(no calibration read, no model prediction's U: what it was before it stated U and E_n), then as it ships, alternating
+``--rounds`` times; the estimator's CPU over the program and from its start to the program's end (start-up and
+the one-time prediction Monte Carlo included), the best of each (a shared machine only ever adds time), as a
+ratio. Target: within 5 %.
+
+Run: .venv/bin/python benchmarks/bench_cpu.py [--program full6] [--estimator [--rounds 3]] [--json out.json]
+     (the page's run needs `chromium` on PATH)
 """
 from __future__ import annotations
 
@@ -20,6 +27,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any, Mapping
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
@@ -28,6 +36,11 @@ sys.path.insert(0, str(HERE.parent))
 from bench_rig import REPO  # noqa: E402  (sets the DDS environment first)
 
 RIG_LIMIT = 1.0
+#: The live uncertainty's cost: the estimator's CPU with it against without, at most this ratio.
+ESTIMATOR_LIMIT = 1.05
+#: The estimator statistical only: no sensor node's calibration read (no such node), no model prediction's U.
+STATISTICAL_ONLY = {'load_cell_nodes': ['/bench_no_load_cell'], 'lvdt_nodes': ['/bench_no_lvdt'],
+                    'model_node': '/bench_no_model'}
 PAGE_LIMIT = 0.15
 TICK = os.sysconf('SC_CLK_TCK')
 
@@ -56,8 +69,9 @@ def tree_cpu_s(roots: list[int]) -> float:
     return total / TICK
 
 
-def run(env: dict, share: Path, ws: Path, page: bool, program_name: str = 'side_force') -> dict:
-    """One demo run; CPU fractions of one core over the program."""
+def run(env: dict, share: Path, ws: Path, page: bool, program_name: str = 'side_force',
+        estimator: Mapping[str, Any] | None = None) -> dict:
+    """One demo run; CPU fractions of one core over the program; ``estimator``: its parameters overridden."""
     import rclpy
 
     from crane_stiffness.launcher import rosrun
@@ -71,8 +85,11 @@ def run(env: dict, share: Path, ws: Path, page: bool, program_name: str = 'side_
         with rosrun.Processes(env, ws / 'logs') as procs:
             view = {'port': free_port(), 'http_port': free_port()}
             session = f'bench_cpu_{"page" if page else "baseline"}_{time.strftime("%Y%m%dT%H%M%S")}'
+            overrides: dict[str, Mapping[str, Any]] = {'live_view': view}
+            if estimator:
+                overrides['stiffness_estimator'] = estimator
             program = start_rig(procs, share, program_name, session,
-                                ws / 'bags', live_view=True, overrides={'live_view': view},
+                                ws / 'bags', live_view=True, overrides=overrides,
                                 arguments={'use_sim_time': 'true', 'real_time_factor': '1.0'})
             deadline = time.monotonic() + 60
             while 'live view: page http://' not in procs.log('live_view'):
@@ -98,6 +115,9 @@ def run(env: dict, share: Path, ws: Path, page: bool, program_name: str = 'side_
             rig = (tree_cpu_s(rig_pids) - rig0) / wall
             per_node = {name: round((tree_cpu_s([p.pid]) - nodes0[name]) / wall, 3) for name, p in procs.procs.items()}
             page_cpu = (tree_cpu_s([browser.pid]) - page0) / wall if browser else 0.0
+            estimator_pid = procs.procs['stiffness_estimator'].pid
+            estimator_program_s = tree_cpu_s([estimator_pid]) - nodes0['stiffness_estimator']
+            estimator_life_s = _life_cpu_s(estimator_pid)
             procs.stop()
     finally:
         if browser is not None:
@@ -107,17 +127,62 @@ def run(env: dict, share: Path, ws: Path, page: bool, program_name: str = 'side_
         observer.destroy_node()
         rclpy.shutdown()
     return {'page': page, 'wall_s': round(wall, 2), 'rig_cores': round(rig, 3), 'chromium_cores': round(page_cpu, 3),
-            'nodes': len(rig_pids), 'per_node_cores': per_node}
+            'nodes': len(rig_pids), 'per_node_cores': per_node,
+            'estimator_program_cpu_s': round(estimator_program_s, 3),
+            'estimator_life_cpu_s': round(estimator_life_s, 3)}
+
+
+def _life_cpu_s(pid: int) -> float:
+    """A process's CPU time [s] since it started, its own and its ended children's (the estimator's whole life so
+    far, start-up included)."""
+    stat = Path(f'/proc/{pid}/stat').read_text()
+    fields = stat[stat.rindex(')') + 2:].split()
+    return sum(int(f) for f in fields[11:15]) / TICK  # utime, stime, cutime, cstime
+
+
+def estimator_cost(env: dict, share: Path, ws: Path, program_name: str, rounds: int) -> dict:
+    """The estimator's CPU statistical only and as shipped, alternating ``rounds`` times; the best of each."""
+    runs: dict[str, list[dict]] = {'statistical only': [], 'with U and E_n': []}
+    for i in range(rounds):
+        for name, params in (('statistical only', STATISTICAL_ONLY), ('with U and E_n', None)):
+            r = run(env, share, ws, page=False, program_name=program_name, estimator=params)
+            runs[name].append(r)
+            print(f"  round {i + 1} {name}: estimator {r['estimator_program_cpu_s']:.2f} CPU-s over the program "
+                  f"({r['wall_s']:.1f} s), {r['estimator_life_cpu_s']:.2f} CPU-s over its life", flush=True)
+    best = {name: {key: min(r[key] for r in rs) for key in ('estimator_program_cpu_s', 'estimator_life_cpu_s')}
+            for name, rs in runs.items()}
+    ratios = {key: best['with U and E_n'][key] / best['statistical only'][key]
+              for key in ('estimator_program_cpu_s', 'estimator_life_cpu_s')}
+    return {'runs': runs, 'best': best, 'ratios': ratios,
+            'met': all(r <= ESTIMATOR_LIMIT for r in ratios.values())}
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     ap.add_argument('--json', help='write the figures here')
     ap.add_argument('--program', default='side_force', help="the program played (config/program_<name>.yaml)")
+    ap.add_argument('--estimator', action='store_true',
+                    help="the live uncertainty's cost: the estimator statistical only against as shipped")
+    ap.add_argument('--rounds', type=int, default=3, help='--estimator: alternating rounds (the best counts)')
     args = ap.parse_args(argv)
     from crane_stiffness.launcher import rosrun
     ws = REPO / 'out' / 'bench_cpu'
     env, share = rosrun.build_workspace(REPO, ws)
+    if args.estimator:
+        load = os.getloadavg()[0]
+        cost = estimator_cost(env, share, ws, args.program, args.rounds)
+        program_ratio = cost['ratios']['estimator_program_cpu_s']
+        life_ratio = cost['ratios']['estimator_life_cpu_s']
+        print(f"program {args.program}, load average {load:.2f} before, {os.getloadavg()[0]:.2f} after")
+        for name, b in cost['best'].items():
+            print(f"  {name:16s}: estimator {b['estimator_program_cpu_s']:.2f} CPU-s over the program, "
+                  f"{b['estimator_life_cpu_s']:.2f} over its life (best of {args.rounds})")
+        print(f"the live U and E_n cost the estimator {100 * (program_ratio - 1):+.1f} % over the program, "
+              f"{100 * (life_ratio - 1):+.1f} % over its life (target <= {100 * (ESTIMATOR_LIMIT - 1):+.0f} %): "
+              f"{'met' if cost['met'] else 'MISSED'}")
+        if args.json:
+            Path(args.json).write_text(json.dumps(cost, indent=1))
+        return 0 if cost['met'] else 1
     base = run(env, share, ws, page=False, program_name=args.program)
     watched = run(env, share, ws, page=True, program_name=args.program)
     print(f'program {args.program}')

@@ -185,19 +185,46 @@ def campaign_coverage(rows: Sequence[SessionRow], full: Sequence[Full6Row]) -> l
             del counts[quantity]
     for frow in full:
         analysis = json.loads((Path(frow.analysis) / 'full6.json').read_text())
-        comparison = analysis.get('comparison') or {}
-        for name, key in (('K', 'stiffness_covers'), ('C', 'compliance_covers')):
-            covers = comparison.get(key)
+        truths = true_matrices(frow, analysis)
+        if truths is None:
+            continue
+        for name, key in (('K', 'stiffness'), ('C', 'compliance')):
+            matrices = analysis.get(key) or {}
+            covers = _inside([matrices.get('low'), matrices.get('high')], truths[name])
             if covers is None:
                 continue
             for i in range(6):
                 for j in range(6):
-                    label = f'{name}[{AXES[i]},{DEFLECTIONS[j]}]' if name == 'K' else \
-                        f'{name}[{DEFLECTIONS[i]},{AXES[j]}]'
-                    _count(counts, label, covers[i][j])
-        _count(counts, 'K2', (analysis.get('k2') or {}).get('covers_tangent'))
-        _count_gum(counts, analysis)
+                    _count(counts, _entry_label(name, i, j), covers[i][j])
+        k2 = analysis.get('k2') or {}
+        _count(counts, 'K2', _covers([k2.get('low'), k2.get('high')], truths['K2']))
+        _count_gum(counts, analysis, truths)
+        _count_prediction(counts, analysis, truths)
     return [Coverage(q, c, n) for q, (c, n) in counts.items()]
+
+
+def _entry_label(name: str, i: int, j: int) -> str:
+    """K[<load>,<deflection>] or C[<deflection>,<load>]."""
+    return f'{name}[{AXES[i]},{DEFLECTIONS[j]}]' if name == 'K' else f'{name}[{DEFLECTIONS[i]},{AXES[j]}]'
+
+
+def true_matrices(row: Full6Row, analysis: dict[str, Any]) -> dict[str, Any] | None:
+    """The truth of a six-axis session: the true crane's exact tangent K at rest, C = K⁻¹ and K2 (the analysis' own
+    nominal reference when the true crane is the nominal one; None without either)."""
+    if row.true and row.true != row.nominal:
+        import numpy as np
+        from crane_stiffness.full6.reference import k2_of
+        from crane_stiffness.model.equilibrium import rest_pose
+        from crane_stiffness.model.stiffness import tangent_stiffness
+        from crane_stiffness.params.geometry import geometry_from_params
+        geometry = geometry_from_params(row.true)
+        k = tangent_stiffness(geometry, rest_pose(geometry))
+        return {'K': k.tolist(), 'C': np.linalg.inv(k).tolist(), 'K2': k2_of(k)}
+    reference = analysis.get('reference') or {}
+    if not reference:
+        return None
+    return {'K': reference.get('tangent'), 'C': reference.get('compliance'),
+            'K2': _float((analysis.get('k2') or {}).get('tangent'))}
 
 
 def _inside(interval: Any, truth: Any) -> list[list[bool]] | None:
@@ -211,51 +238,93 @@ def _inside(interval: Any, truth: Any) -> list[list[bool]] | None:
     return ((low <= t) & (t <= high)).tolist()
 
 
-def _count_gum(counts: dict[str, list[int]], analysis: dict[str, Any], kinds: tuple[str, ...] = ('U',),
-               per_entry: bool = True) -> None:
+def _count_gum(counts: dict[str, list[int]], analysis: dict[str, Any], truth: dict[str, Any],
+               kinds: tuple[str, ...] = ('U',), per_entry: bool = True) -> None:
     """The six-axis session's GUM intervals (full6.json's ``uncertainty``, crane_stiffness.analysis.full6_uncertainty)
-    against the tangent. Per entry (``per_entry``): 'U K[..]' of K (the expanded interval value ± U), 'U C[..]',
-    and 'U K2', 'stat K2' (the statistical-only interval). Pooled over the 36 entries (not ``per_entry``):
-    '<kind> K (36 pooled)', '<kind> C (36 pooled)' for each of ``kinds``: 'U', 'stat' (value ± t·u_a), 'MC' (the
-    JCGM 102 Monte Carlo's interval)."""
+    against the truth (:func:`true_matrices`). Per entry (``per_entry``): 'U K[..]' of K (the expanded interval
+    value ± U), 'U C[..]', and 'U K2', 'stat K2' (the statistical-only interval). Pooled over the 36 entries (not
+    ``per_entry``): '<kind> K (36 pooled)', '<kind> C (36 pooled)' for each of ``kinds``: 'U', 'stat' (value ± t·u_a),
+    'MC' (the JCGM 102 Monte Carlo's interval)."""
     u = analysis.get('uncertainty') or {}
-    reference = analysis.get('reference') or {}
-    if not u or not reference:
+    if not u:
         return
-    for name, key, truth in (('K', 'stiffness', reference.get('tangent')), ('C', 'compliance',
-                                                                           reference.get('compliance'))):
+    for name, key in (('K', 'stiffness'), ('C', 'compliance')):
         entries = u.get(key) or {}
         intervals = {'U': entries.get('interval'), 'stat': entries.get('statistical_interval'),
                      'MC': (entries.get('monte_carlo') or {}).get('interval')}
         for kind in kinds:
-            covers = _inside(intervals[kind], truth)
+            covers = _inside(intervals[kind], truth[name])
             if covers is None:
                 continue
             for i in range(6):
                 for j in range(6):
-                    if per_entry:
-                        label = f'{kind} {name}[{AXES[i]},{DEFLECTIONS[j]}]' if name == 'K' else \
-                            f'{kind} {name}[{DEFLECTIONS[i]},{AXES[j]}]'
-                        _count(counts, label, covers[i][j])
-                    else:
-                        _count(counts, f'{kind} {name} (36 pooled)', covers[i][j])
+                    _count(counts, f'{kind} {_entry_label(name, i, j)}' if per_entry else
+                           f'{kind} {name} (36 pooled)', covers[i][j])
     if per_entry:
         k2 = u.get('k2') or {}
         for kind, interval in (('U', k2.get('interval')), ('stat', k2.get('statistical_interval'))):
-            covers = _inside(interval, (analysis.get('k2') or {}).get('tangent'))
+            covers = _inside(interval, truth['K2'])
             if covers is not None:
                 _count(counts, f'{kind} K2', covers)
 
 
+def _prediction_intervals(analysis: dict[str, Any]) -> dict[str, Any]:
+    """The model's 6×6 prediction's intervals (full6.json's ``uncertainty.prediction``,
+    crane_stiffness.uncertainty.prediction6): 'U K' and 'U C' (value ± U per entry, as E_n uses them), 'MC K' (the
+    Monte Carlo's probabilistically symmetric 95 % interval per entry) and 'U K2'; {} without a prediction."""
+    import numpy as np
+    prediction = (analysis.get('uncertainty') or {}).get('prediction') or {}
+    if not prediction:
+        return {}
+    out: dict[str, Any] = {}
+    for name, key in (('K', 'stiffness'), ('C', 'compliance')):
+        part = prediction.get(key) or {}
+        if part.get('value') is not None and part.get('U') is not None:
+            value, big_u = np.asarray(part['value'], dtype=float), np.asarray(part['U'], dtype=float)
+            out[f'U {name}'] = [(value - big_u).tolist(), (value + big_u).tolist()]
+    interval = (prediction.get('stiffness') or {}).get('interval')
+    if interval is not None:
+        out['MC K'] = interval
+    k2 = prediction.get('k2') or {}
+    if k2.get('value') is not None and k2.get('U') is not None:
+        out['U K2'] = [_float(k2['value']) - _float(k2['U']), _float(k2['value']) + _float(k2['U'])]
+    return out
+
+
+def _count_prediction(counts: dict[str, list[int]], analysis: dict[str, Any], truth: dict[str, Any],
+                      per_entry: bool = True) -> None:
+    """The model's 6×6 prediction (of the nominal crane) against the true crane's tangent: per entry 'prediction U
+    K[..]', 'prediction MC K[..]', 'prediction U C[..]' and 'prediction U K2'; pooled (not ``per_entry``)
+    'prediction <kind> K (36 pooled)', 'prediction U C (36 pooled)'."""
+    for kind, interval in _prediction_intervals(analysis).items():
+        method, name = kind.split()
+        if name == 'K2':
+            if per_entry:
+                _count(counts, 'prediction U K2', _covers(interval, truth['K2']))
+            continue
+        covers = _inside(interval, truth[name])
+        if covers is None:
+            continue
+        for i in range(6):
+            for j in range(6):
+                _count(counts, f'prediction {method} {_entry_label(name, i, j)}' if per_entry else
+                       f'prediction {method} {name} (36 pooled)', covers[i][j])
+
+
 def pooled_gum_coverage(full: Sequence[Full6Row]) -> list[Coverage]:
     """Pooled over the 36 entries of K and of C, the sessions' expanded ('U'), statistical-only ('stat') and
-    Monte Carlo ('MC') intervals that hold the tangent (see :func:`_count_gum`). A pooled count's 36 entries of one
-    session share its calibration errors, so its binomial interval is narrower than it should be; the per-entry
-    counts of :func:`campaign_coverage` are the exact ones."""
+    Monte Carlo ('MC') intervals that hold the truth, and the model's prediction's (see :func:`_count_gum`,
+    :func:`_count_prediction`). A pooled count's 36 entries of one session share its calibration errors (and its
+    true crane), so its binomial interval is narrower than it should be; the per-entry counts of
+    :func:`campaign_coverage` are the exact ones."""
     counts: dict[str, list[int]] = {}
     for frow in full:
         analysis = json.loads((Path(frow.analysis) / 'full6.json').read_text())
-        _count_gum(counts, analysis, ('U', 'MC', 'stat'), per_entry=False)
+        truth = true_matrices(frow, analysis)
+        if truth is None:
+            continue
+        _count_gum(counts, analysis, truth, ('U', 'MC', 'stat'), per_entry=False)
+        _count_prediction(counts, analysis, truth, per_entry=False)
     return [Coverage(q, c, n) for q, (c, n) in counts.items()]
 
 

@@ -183,21 +183,23 @@ def gum_coverage_figure(rows: Sequence[tuple[str, int, int, float, float]], targ
     left.set_title(f'K: sessions whose value ± U holds the tangent ({sessions[-1]} sessions)', fontsize=9)
     fig.colorbar(image, ax=left, shrink=0.8)
     pooled = [name for name in ('U K (36 pooled)', 'MC K (36 pooled)', 'stat K (36 pooled)', 'U C (36 pooled)',
-                                'MC C (36 pooled)', 'stat C (36 pooled)', 'U K2', 'stat K2') if name in by_name]
+                                'MC C (36 pooled)', 'stat C (36 pooled)', 'U K2', 'stat K2',
+                                'prediction U K (36 pooled)', 'prediction MC K (36 pooled)',
+                                'prediction U C (36 pooled)', 'prediction U K2') if name in by_name]
     x = np.arange(len(pooled))
     frac = np.array([by_name[n][1] / by_name[n][2] for n in pooled])
     low = np.array([by_name[n][3] for n in pooled])
     high = np.array([by_name[n][4] for n in pooled])
-    colours = ['tab:blue' if n.startswith('U') else 'tab:orange' if n.startswith('MC') else 'tab:gray'
-               for n in pooled]
+    colours = ['tab:green' if n.startswith('prediction') else 'tab:blue' if n.startswith('U') else
+               'tab:orange' if n.startswith('MC') else 'tab:gray' for n in pooled]
     right.bar(x, frac, color=colours, alpha=0.8)
     right.errorbar(x, frac, yerr=[frac - low, high - frac], fmt='none', ecolor='k', capsize=3)
     right.axhline(0.95, color='k', ls='--', lw=0.8, label='nominal 0.95')
     right.set_xticks(x, pooled, rotation=30, ha='right', fontsize=8)
     right.set_ylim(max(0.0, float(np.nanmin(low)) - 0.05), 1.01)
     right.set_ylabel('fraction of intervals holding the tangent')
-    right.set_title('pooled: expanded (U), Monte Carlo (MC), statistical only (stat); Clopper–Pearson 95 %',
-                    fontsize=9)
+    right.set_title('pooled: expanded (U), Monte Carlo (MC), statistical only (stat), the model\'s prediction '
+                    '(green); Clopper–Pearson 95 %', fontsize=9)
     right.legend(loc='lower right', fontsize=8)
     files = []
     for fmt in formats:

@@ -222,6 +222,15 @@ def run_campaign(campaign: Campaign, out: str | os.PathLike, *, hardware: bool =
                    '{postfix}')
     done_before = len(run.skipped)
     fractions: dict[str, float] = {}  # sessions under way: the program's progress (0 .. 1)
+    if hardware and session.load_program.get('load_application') == 'operator':
+        def say(session_id: str, text: str) -> None:
+            # (the program holds until the measured load settles at the level, or /load_program/confirm is called)
+            line = f'  {session_id}: {text}'
+            if bar is not None:
+                bar.write(line, file=sys.stderr)
+            else:
+                print(line, file=sys.stderr, flush=True)
+        session.operator_prompt = say
 
     def show() -> None:
         if bar is None:

@@ -4,6 +4,7 @@ the rig run in its ROS domain and its ``result.json`` (written last: the session
 from __future__ import annotations
 
 import json
+from functools import partial
 import os
 import shutil
 import sys
@@ -88,6 +89,9 @@ class SessionRunner:
         self.rig = rig
         #: Parameters of load_program set on top of the program file (how the load is applied, the tare).
         self.load_program = dict(load_program or {})
+        #: Called with (session id, instruction) when load_program waits for the operator (a rig of processes: the
+        #: hardware's): the campaign shows it at the terminal beside the set-up prompt.
+        self.operator_prompt: Callable[[str, str], None] | None = None
         self.hosts: dict[int, Any] = {}
         self._hosts_lock = threading.Lock()
         self._here = here
@@ -111,8 +115,10 @@ class SessionRunner:
                       ready_timeout_s=self.ready_timeout_s, overrides=overrides, bags=self.out / 'bags',
                       arguments=self.arguments)
         if self.rig == 'processes':
+            say = self.operator_prompt
             summary, observer, startup_s, _ = run_rig(env=self.env, executables=self.executables, progress=progress,
-                                                      domain_id=domain, should_stop=should_stop, **kwargs)
+                                                      domain_id=domain, should_stop=should_stop,
+                                                      prompt=None if say is None else partial(say, plan.id), **kwargs)
             return outcome(summary, observer, startup_s)
         if self.rig == 'host-here':
             summary, observer, startup_s, _ = self._here.run(progress=progress, should_stop=should_stop, **kwargs)

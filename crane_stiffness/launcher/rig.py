@@ -69,6 +69,9 @@ class Observer(Node):
             executor.add_node(self)
         self.progress = 0.0
         self.state: dict = {}
+        #: Called with each new operator instruction of the program state (``prompt.text``), once each.
+        self.on_prompt: Callable[[str], None] | None = None
+        self._last_prompt: str | None = None
         self.values: Float64MultiArray | None = None
         self.values_count = 0
         self.predicted: float | None = None
@@ -129,6 +132,10 @@ class Observer(Node):
 
     def _on_state(self, msg: String) -> None:
         self.state = json.loads(msg.data)
+        text = (self.state.get('prompt') or {}).get('text') if self.state.get('state') == 'waiting' else None
+        if text and text != self._last_prompt and self.on_prompt is not None:
+            self.on_prompt(text)
+        self._last_prompt = text or self._last_prompt
         # (paused or done: the program did start; DDS matched this observer after it had, which on simulated time
         # flat out can be after the whole program)
         if self.running_at is None and self.state.get('state') in ('running', 'paused', 'done'):
@@ -388,14 +395,15 @@ def run_rig(share: Path, env: Mapping[str, str], out: Path, program: str, sessio
             ready_timeout_s: float = 120.0, overrides: Mapping[str, Mapping[str, Any]] | None = None,
             executables: Path | None = None, bags: Path | None = None,
             progress: Callable[[float], None] | None = None, arguments: Mapping[str, str] | None = None,
-            domain_id: int | None = None, should_stop: Callable[[], bool] | None = None
-            ) -> tuple[dict[str, Any], Observer, float, dict[str, str]]:
+            domain_id: int | None = None, should_stop: Callable[[], bool] | None = None,
+            prompt: Callable[[str], None] | None = None) -> tuple[dict[str, Any], Observer, float, dict[str, str]]:
     """Every node of the rig started at once (:func:`start_rig`) in a DDS context of its own, the program played to
     its end: (summary, observer, launch-to-program-start [s], each node's log). Logs in ``out/logs``, bags in
     ``bags`` (default ``out/bags``). ``executables``: see :class:`~crane_stiffness.launcher.rosrun.Processes`;
     ``progress`` is called with the program's progress (0 .. 1) as it is reported. ``domain_id``: the ROS domain of
     the nodes and the observer (default: ROS_DOMAIN_ID of ``env``); ``should_stop``: asked between spins, True stops
-    the nodes and raises RigInterrupted."""
+    the nodes and raises RigInterrupted; ``prompt``: called with each new instruction load_program waits on (the
+    operator's level: its state's ``prompt``)."""
     import rclpy
     bags = out / 'bags' if bags is None else bags
     # The domain claimed host-wide for the run (crane_stiffness.launcher.domains): one in use is passed over.
@@ -407,6 +415,7 @@ def run_rig(share: Path, env: Mapping[str, str], out: Path, program: str, sessio
     # (rigs side by side in one process: one observer each, named apart, as rcl's logging keys its publisher by name)
     observer = Observer(f'rig_observer_{domain_id}' if domain_id is not None else 'rig_observer', context=ctx)
     observer.should_stop = should_stop
+    observer.on_prompt = prompt
     try:
         with Processes(env, out / 'logs', executables=executables) as procs:
             launched = time.monotonic()

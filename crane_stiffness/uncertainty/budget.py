@@ -20,7 +20,9 @@ from dataclasses import dataclass, field, replace
 from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
-from scipy import stats
+# scipy.special, not scipy.stats (its ppf calls the same functions): 0.5 s less to import in every analysis, node and
+# CLI call that states U (as crane_stiffness.estimation.fit).
+from scipy import special
 
 from crane_stiffness.uncertainty.errors import InputError, UncertaintyError
 from crane_stiffness.uncertainty.inputs import InputQuantity, check_correlation
@@ -122,8 +124,8 @@ def coverage_factor(nu_eff: float, coverage: float = DEFAULT_COVERAGE) -> float:
         raise InputError('coverage', coverage, 'a coverage probability must lie in (0, 1)')
     q = 0.5 * (1.0 + coverage)
     if math.isinf(nu_eff):
-        return float(stats.norm.ppf(q))
-    return float(stats.t.ppf(q, max(1, math.floor(nu_eff))))
+        return float(special.ndtri(q))
+    return float(special.stdtrit(max(1, math.floor(nu_eff)), q))
 
 
 def correlation_matrix(inputs: Sequence[InputQuantity], correlations: Correlations | None) -> np.ndarray:

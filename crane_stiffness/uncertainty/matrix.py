@@ -45,7 +45,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy import stats
+from scipy import special  # (not scipy.stats: see crane_stiffness.uncertainty.budget)
 
 from crane_stiffness.uncertainty.budget import DEFAULT_COVERAGE, coverage_factor
 from crane_stiffness.uncertainty.calibration6 import CalibrationInputs
@@ -215,7 +215,7 @@ def _coverage_factors(nu: NDArray[np.float64], coverage: float) -> NDArray[np.fl
     q = 0.5 * (1.0 + coverage)
     infinite = np.isinf(nu)
     dof = np.where(infinite, 1.0, np.maximum(1.0, np.floor(nu)))
-    return np.asarray(np.where(infinite, stats.norm.ppf(q), stats.t.ppf(q, dof)), dtype=np.float64)
+    return np.asarray(np.where(infinite, special.ndtri(q), special.stdtrit(dof, q)), dtype=np.float64)
 
 
 def _entries(value: NDArray[np.float64], cov_a: NDArray[np.float64], cov_b: NDArray[np.float64], dof: int,
@@ -230,7 +230,7 @@ def _entries(value: NDArray[np.float64], cov_a: NDArray[np.float64], cov_b: NDAr
         # u_c⁴ / (u_a⁴ / ν) may round to just below ν, and k (ν_eff truncated, GUM G.4.1) jump to t(ν − 1)
         nu = np.where(u_a > 0.0, dof * (u_c / u_a) ** 4, math.inf)
     k = _coverage_factors(nu, coverage)
-    t = float(stats.t.ppf(0.5 * (1.0 + coverage), dof))
+    t = float(special.stdtrit(dof, 0.5 * (1.0 + coverage)))
     if mc is not None:
         order = np.sort(mc, axis=0)
         trials = order.shape[0]

@@ -84,5 +84,54 @@ def test_six_axis_coverage_counts_every_entry_of_k_and_c_and_k2(tmp_path):
     assert coverage['K2'].covered == sum(r.k2_low <= r.k2_tangent <= r.k2_high for r in result.full)
     # two sessions are no coverage study: the report leaves the table out, the CSV has it
     assert 'Coverage of the 95 % intervals' not in (out / 'campaign' / 'report.md').read_text()
-    # K's and C's 72 entries and K2; the same of the expanded (GUM) intervals and K2's statistical-only one
-    assert len((out / 'campaign' / 'coverage.csv').read_text().splitlines()) == 1 + 73 + 74
+    # K's and C's 72 entries and K2; the same of the expanded (GUM) intervals and K2's statistical-only one; the
+    # model's prediction: K's entries ± U and in its Monte Carlo interval, C's ± U, K2 ± U
+    assert len((out / 'campaign' / 'coverage.csv').read_text().splitlines()) == 1 + 73 + 74 + 3 * 36 + 1
+
+
+def test_six_axis_coverage_of_a_drawn_true_crane_is_against_its_tangent_and_counts_the_model_s_prediction(tmp_path):
+    import json
+
+    import numpy as np
+
+    from crane_stiffness.full6.reference import k2_of
+    from crane_stiffness.model.equilibrium import rest_pose
+    from crane_stiffness.model.stiffness import tangent_stiffness
+    from crane_stiffness.params.geometry import geometry_from_params
+    spec = load_campaign(campaign(tmp_path, 'series: [full]\nprograms: [design]\nrepeats: 3\nseed: 5\n'
+                                            'design.steps: 16\ndesign.hold_s: 2.0\ndesign.baseline_s: 1.0\n'
+                                            'true.crane: drawn'))
+    out = tmp_path / 'campaign'
+    write_synthetic_campaign(out, spec, seed=9)
+    result = analyze_campaign(out, workers=2)
+    coverage = {c.quantity: c for c in result.coverage}
+    assert len(result.full) == 3 and all(r.true and r.true != r.nominal for r in result.full)
+    # The truth is each session's own drawn crane (recorded as its true_geometry), not the model the analysis ran:
+    # counted here from the analyses' intervals and the true cranes' tangents.
+    expected: dict[str, int] = {'K': 0, 'U K': 0, 'prediction U K': 0, 'prediction MC K': 0, 'prediction U K2': 0}
+    moved = 0.0
+    for row in result.full:
+        analysis = json.loads((Path(row.analysis) / 'full6.json').read_text())
+        g = geometry_from_params(row.true)
+        truth = tangent_stiffness(g, rest_pose(g))
+        nominal = np.asarray(analysis['reference']['tangent'])
+        moved = max(moved, float(np.max(np.abs(truth - nominal)) / np.max(np.abs(nominal))))
+        k = analysis['stiffness']
+        expected['K'] += int(np.sum((np.asarray(k['low']) <= truth) & (truth <= np.asarray(k['high']))))
+        low, high = analysis['uncertainty']['stiffness']['interval']
+        expected['U K'] += int(np.sum((np.asarray(low) <= truth) & (truth <= np.asarray(high))))
+        p = analysis['uncertainty']['prediction']
+        value, big_u = np.asarray(p['stiffness']['value']), np.asarray(p['stiffness']['U'])
+        expected['prediction U K'] += int(np.sum(np.abs(truth - value) <= big_u))
+        low, high = (np.asarray(m) for m in p['stiffness']['interval'])
+        expected['prediction MC K'] += int(np.sum((low <= truth) & (truth <= high)))
+        expected['prediction U K2'] += int(abs(k2_of(truth) - p['k2']['value']) <= p['k2']['U'])
+    assert moved > 1e-3  # the drawn cranes are not the nominal one
+    for prefix, count in expected.items():
+        entries = [q for q in coverage if q.startswith(prefix + '[') or q == prefix]
+        assert len(entries) == (1 if prefix.endswith('K2') else 36), prefix
+        assert all(coverage[q].total == 3 for q in entries), prefix
+        assert sum(coverage[q].covered for q in entries) == count, prefix
+    lines = (out / 'campaign' / 'coverage_gum_pooled.csv').read_text().splitlines()
+    pooled = {line.split(',')[0]: line for line in lines}
+    assert pooled['prediction U K (36 pooled)'].split(',')[1:3] == [str(expected['prediction U K']), '108']

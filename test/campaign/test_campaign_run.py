@@ -176,3 +176,9 @@ def test_hardware_confirmed_by_a_service_call_from_another_node(tmp_path, rclpy_
         reader.close()
     assert entry['rig'] == 'hardware' and 'true_geometry' not in entry
     assert entry['confirmed']['how'] == 'service /campaign/continue' and entry['confirmed']['weight'] == 40.0
+    # The load applied by the operator (--hardware's default): each level the program waited on was shown at the
+    # campaign's terminal as it came, once, in order, the first among them (each wait lasts at least --settle-s).
+    shown = [(int(m[1]), int(m[2])) for m in re.finditer(r'fy_W40_l0\.5_r1: level (\d+)/(\d+): set fy = ',
+                                                         log.read_text())]
+    assert shown and shown[0][0] == 1 and len({total for _, total in shown}) == 1, log.read_text()[-3000:]
+    assert [level for level, _ in shown] == sorted({level for level, _ in shown}), shown

@@ -130,6 +130,7 @@ def test_the_first_day_runs_as_written_with_the_emulators_for_the_sensors(instal
     # Step 5: the set-up asked for, the verdict shown before the run's end, with its numbers; NOT OK named on stderr.
     assert 'hang W = 50 N, set the wires to l0 = 0.5 m' in day.stderr
     assert 'leave the platform unloaded and still' in day.stderr
+    assert f'{SESSION}: level 1/6: set fy = ' in day.stderr, day.stderr[-4000:]  # each level at the terminal too
     assert f'session {SESSION}: {verdict["status"]}' in day.stderr, day.stderr[-4000:]
     assert verdict['cut_short'] == '' and abs(verdict['relative_error']) < 0.1 and verdict['U'] > 0, verdict
     assert verdict['decision'] == ('continued' if verdict['status'] == 'OK' else
