@@ -180,7 +180,7 @@ def gum_coverage_figure(rows: Sequence[tuple[str, int, int, float, float]], targ
     left.set_xticks(range(6), ['u_x', 'u_y', 'u_z', 'θ_x', 'θ_y', 'θ_z'])
     left.set_yticks(range(6), list(AXES))
     sessions = sorted({r[2] for r in rows if r[0].startswith('U K[')})
-    left.set_title(f'K: sessions whose value ± U holds the tangent ({sessions[-1]} sessions)', fontsize=9)
+    left.set_title(f'K: sessions whose value ± U holds the true tangent ({sessions[-1]} sessions)', fontsize=9)
     fig.colorbar(image, ax=left, shrink=0.8)
     pooled = [name for name in ('U K (36 pooled)', 'MC K (36 pooled)', 'stat K (36 pooled)', 'U C (36 pooled)',
                                 'MC C (36 pooled)', 'stat C (36 pooled)', 'U K2', 'stat K2',
@@ -198,7 +198,7 @@ def gum_coverage_figure(rows: Sequence[tuple[str, int, int, float, float]], targ
     right.set_xticks(x, pooled, rotation=30, ha='right', fontsize=8)
     right.set_ylim(max(0.0, float(np.nanmin(low)) - 0.05), 1.01)
     right.set_ylabel('fraction of intervals holding the tangent')
-    right.set_title('pooled: expanded (U), Monte Carlo (MC), statistical only (stat), the model\'s prediction '
+    right.set_title('pooled: expanded (U), Monte Carlo (MC), statistical only (stat),\nthe model\'s prediction '
                     '(green); Clopper–Pearson 95 %', fontsize=9)
     right.legend(loc='lower right', fontsize=8)
     files = []
