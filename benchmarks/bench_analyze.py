@@ -18,13 +18,19 @@ The analysis runs ``--rounds`` times (default 2) each with JCGM 101's Monte Carl
 ever adds time). The cost of the Monte Carlo and the budget figure is the best run with both against the best run
 without the Monte Carlo less its budget figure's stage: what ``analyze`` took before either existed.
 
+``--before DIR``: the package of an earlier source tree (``git worktree add DIR <commit>``) analyses the same bag in
+every round too, in a fresh process with DIR first on the path (its own kernels compiled by a warm-up run first), and
+the analysis now is compared with it as well: what a change cost, imports included, against what ``analyze`` took
+before it, in the same run; the 10 % target then applies to it (the runs without the Monte Carlo still pay the
+uncertainty's imports and budgets, so they only approximate the analysis before it).
+
 Targets: analyze_session at least ``TARGET_RATIO`` (30) times faster than the mcap_ros2 decode of the same bag,
 measured in the same run (on the 2-core lab machine: the hour in ≤ 5 s); every piece of its work inside a named
 stage of its progress bar (time outside the stages ≤ ``MAX_UNSTAGED_S``); the Monte Carlo and the budget figure
 adding at most ``MAX_MONTE_CARLO_COST`` (10 %) to it. Exits 1 when a target is missed. Usage::
 
     python benchmarks/bench_analyze.py [--seconds 3600] [--rate 1000] [--baseline-messages 200000] [--rounds 2]
-                                       [--keep]
+                                       [--before DIR] [--keep]
 """
 from __future__ import annotations
 
@@ -71,6 +77,19 @@ print(json.dumps({'import_s': t1 - t0, 'analyze_s': t2 - t1, 'cpu_s': cpu, 'timi
                   'trials': {k: v['trials'] if v else 0 for k, v in mc.items()}}))
 """
 
+# An earlier version's analysis (``--before``): its own signature, no Monte Carlo switch, the stages it had.
+ANALYZE_BEFORE = """
+import json, sys, time
+t0 = time.perf_counter()
+from crane_stiffness.analysis.analyze import analyze_session
+t1 = time.perf_counter()
+a = analyze_session(sys.argv[1], sys.argv[2], formats=('png',), reports=('md', 'html'), write_json=True)
+t2 = time.perf_counter()
+print(json.dumps({'import_s': t1 - t0, 'analyze_s': t2 - t1, 'cpu_s': time.process_time(),
+                  'timings_s': a.timings_s, 'k': a.branch_fits['loading'].stiffness,
+                  'package': sys.modules['crane_stiffness'].__file__}))
+"""
+
 
 def bench_baseline(files: list[Path], limit: int) -> tuple[float, int]:
     from mcap.reader import make_reader
@@ -96,6 +115,7 @@ def main() -> int:
     parser.add_argument('--baseline-messages', type=int, default=200_000,
                         help='messages decoded by mcap_ros2 before extrapolating (default 200000)')
     parser.add_argument('--rounds', type=int, default=2, help='runs with the Monte Carlo off and on each (default 2)')
+    parser.add_argument('--before', type=Path, help='an earlier source tree whose analysis is timed beside')
     parser.add_argument('--keep', action='store_true', help='keep the generated bag and outputs')
     args = parser.parse_args()
 
@@ -117,8 +137,26 @@ def main() -> int:
               f'(zstd chunks) in {gen_s:.1f} s')
 
         env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(REPO), os.environ.get('PYTHONPATH')])))
-        runs: dict[str, list[dict]] = {'off': [], 'on': []}
+        runs: dict[str, list[dict]] = {'off': [], 'on': [], 'before': []}
+        before_env = None
+        if args.before is not None:
+            before_env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(args.before.resolve()),
+                                                                                 os.environ.get('PYTHONPATH')])))
+            warm = subprocess.run([sys.executable, '-c', ANALYZE_BEFORE, str(bag), str(tmp / 'analysis_before'),
+                                   'warm-up'], env=before_env, cwd=args.before, capture_output=True, text=True,
+                                  check=True)
+            package = json.loads(warm.stdout.strip().splitlines()[-1])['package']
+            print(f'  before: {package} (warm-up run, its kernels compiled, not counted)', flush=True)
         for i in range(args.rounds):
+            if before_env is not None:
+                run = subprocess.run([sys.executable, '-c', ANALYZE_BEFORE, str(bag), str(tmp / 'analysis_before'),
+                                      'run'], env=before_env, cwd=args.before, capture_output=True, text=True,
+                                     check=True)
+                r = json.loads(run.stdout.strip().splitlines()[-1])
+                r['total_s'] = r['import_s'] + r['analyze_s']
+                runs['before'].append(r)
+                print(f'  round {i + 1}, before: {r["total_s"]:.2f} s (importing {r["import_s"]:.2f} s), CPU '
+                      f'{r["cpu_s"]:.2f} s', flush=True)
             for switch in ('off', 'on'):
                 run = subprocess.run([sys.executable, '-c', ANALYZE, str(bag), str(tmp / f'analysis_{switch}'), switch],
                                      env=env, capture_output=True, text=True, check=True)
@@ -153,6 +191,17 @@ def main() -> int:
               f'best off {cpu_off:.2f} s: {100 * (cpu_on / cpu_off - 1.0):+.1f} % (the off run draws the budget '
               'figure too)')
 
+        change = None
+        if runs['before']:
+            prior = min(runs['before'], key=lambda r: r['total_s'])
+            change = total / prior['total_s'] - 1.0
+            cpu_before = min(r['cpu_s'] for r in runs['before'])
+            print(f'against the tree before ({args.before}): {total:.2f} s against {prior["total_s"]:.2f} s (importing '
+                  f'{a["import_s"]:.2f} against {prior["import_s"]:.2f} s): {100 * change:+.1f} % '
+                  f'[target <= {100 * MAX_MONTE_CARLO_COST:.0f} %]; CPU {cpu_on:.2f} against {cpu_before:.2f} s '
+                  f'({100 * (cpu_on / cpu_before - 1.0):+.1f} %); k {a["k"]:.2f} against {prior["k"]:.2f} N/m')
+            print('  its stages: ' + ', '.join(f'{k} {v:.2f} s' for k, v in prior['timings_s'].items()))
+
         files = sorted(bag.glob('*.mcap'))
         limit = min(args.baseline_messages, syn.message_count)
         base_s, done = bench_baseline(files, limit)
@@ -167,9 +216,11 @@ def main() -> int:
         missed = []
         if ratio < TARGET_RATIO:
             missed.append(f'{ratio:.1f}x < {TARGET_RATIO:g}x faster than the mcap_ros2 decode')
-        if cost > MAX_MONTE_CARLO_COST:
+        if change is None and cost > MAX_MONTE_CARLO_COST:  # (with --before, the tree before is the baseline)
             missed.append(f'the Monte Carlo and the budget figure add {100 * cost:.1f} % > '
                           f'{100 * MAX_MONTE_CARLO_COST:.0f} %')
+        if change is not None and change > MAX_MONTE_CARLO_COST:
+            missed.append(f'{100 * change:.1f} % slower than the tree before > {100 * MAX_MONTE_CARLO_COST:.0f} %')
         if unstaged > MAX_UNSTAGED_S:
             missed.append(f'{unstaged:.2f} s of work outside the progress stages > {MAX_UNSTAGED_S} s')
         print('TARGET MISSED: ' + '; '.join(missed) if missed else 'targets met')

@@ -16,6 +16,8 @@ import matplotlib
 matplotlib.use('Agg')  # no display on a lab PC running headless or in CI
 import matplotlib.pyplot as plt  # noqa: E402
 
+from crane_stiffness.analysis.figures import save_figure  # noqa: E402
+
 if TYPE_CHECKING:
     from crane_stiffness.analysis.results import SessionAnalysis
 
@@ -84,14 +86,7 @@ def plot_budget(path: str | Path, panels: Sequence[tuple[str, dict[str, Any], fl
     axes[-1, 0].set_xlabel(f'contribution |c_i|·u(x_i) [{unit}]')
     if title:
         fig.suptitle(title, fontsize=10)
-    path = Path(path)
-    # PNG at zlib's fastest level: encoding is a quarter of the figure's time, and the file stays ~150 kB
-    if path.suffix == '.png':
-        fig.savefig(path, pil_kwargs={'compress_level': 1})
-    else:
-        fig.savefig(path)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def write_budget_figure(analysis: SessionAnalysis, out: Path, formats: Sequence[str]) -> list[str]:

@@ -147,13 +147,27 @@ class MonteCarloResult:
 
 def summarise(y: np.ndarray, coverage: float, significant_digits: int, converged: bool,
               seed: int | None) -> MonteCarloResult:
-    """The result of a sample of the output (any order)."""
-    sorted_y = np.sort(y)
-    u = float(np.std(sorted_y, ddof=1))
+    """The result of a sample of the output (any order). Both intervals need only the tails of the sorted sample:
+    the (1 − p)·M smallest and largest values, found by one partial sort (O(M)) and sorted alone; the same order
+    statistics as a full sort, at a tenth of its cost (the hour's analysis draws ~10⁶ values per branch)."""
+    m = int(y.size)
+    q = int(coverage * m + 0.5)
+    u = float(np.std(y, ddof=1))
     delta = numerical_tolerance(u, significant_digits) if u > 0.0 else 0.0
-    return MonteCarloResult(float(np.mean(sorted_y)), u, symmetric_interval(sorted_y, coverage),
-                            shortest_interval(sorted_y, coverage), coverage, int(y.size), significant_digits,
-                            delta, converged, seed)
+    if q >= m or 2 * (m - q) >= m:  # a tiny sample: sort it all
+        sorted_y = np.sort(y)
+        return MonteCarloResult(float(np.mean(y)), u, symmetric_interval(sorted_y, coverage),
+                                shortest_interval(sorted_y, coverage), coverage, m, significant_digits, delta,
+                                converged, seed)
+    tail = m - q  # sorted positions [0, tail) and [q, m): every end either interval can have
+    part = np.partition(y, (tail - 1, q))
+    low, high = np.sort(part[:tail]), np.sort(part[q:])
+    r = max(1, int(0.5 * tail + 0.5))  # symmetric_interval's order statistics r and r + q (1-based)
+    symmetric = float(low[r - 1]), float(high[min(r + q, m) - 1 - q])
+    widths = high - low  # y_(j+q) − y_(j), j = 0 … m − q − 1 (as shortest_interval, 0-based)
+    j = int(np.argmin(widths))
+    return MonteCarloResult(float(np.mean(y)), u, symmetric, (float(low[j]), float(high[j])), coverage, m,
+                            significant_digits, delta, converged, seed)
 
 
 def monte_carlo(function: Callable[..., Any], inputs: Sequence[InputQuantity], *,

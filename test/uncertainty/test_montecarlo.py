@@ -164,3 +164,17 @@ def test_jcgm_101_9_3_mass_calibration():
     assert mc.shortest == pytest.approx((1.0834, 1.3825), abs=0.004)
     check = validate_gum(gum, mc, 2)
     assert not check.validated and check.d_low == pytest.approx(0.044, abs=0.003)
+
+
+@pytest.mark.parametrize('m', [2, 3, 19, 20, 21, 40, 1000, 12345, 200_000])
+@pytest.mark.parametrize('coverage', [0.5, 0.6, 0.9, 0.95, 0.99])
+def test_summarise_s_partial_sort_gives_the_full_sort_s_intervals(m, coverage):
+    """summarise sorts only the sample's tails: the same order statistics as sorting it all (JCGM 101 7.7)."""
+    from crane_stiffness.uncertainty.montecarlo import shortest_interval, summarise, symmetric_interval
+    y = np.random.default_rng(m).standard_t(3, m)
+    result = summarise(y, coverage, 2, True, 0)
+    ordered = np.sort(y)
+    assert result.interval == symmetric_interval(ordered, coverage)
+    assert result.shortest == shortest_interval(ordered, coverage)
+    assert result.mean == pytest.approx(float(np.mean(ordered)), rel=1e-14, abs=1e-14)
+    assert result.u == pytest.approx(float(np.std(ordered, ddof=1)), rel=1e-12)
