@@ -191,11 +191,8 @@ def campaign_coverage(rows: Sequence[SessionRow], full: Sequence[Full6Row]) -> l
         for name, key in (('K', 'stiffness'), ('C', 'compliance')):
             matrices = analysis.get(key) or {}
             covers = _inside([matrices.get('low'), matrices.get('high')], truths[name])
-            if covers is None:
-                continue
-            for i in range(6):
-                for j in range(6):
-                    _count(counts, _entry_label(name, i, j), covers[i][j])
+            if covers is not None:
+                _count_matrix(counts, '', name, covers)
         k2 = analysis.get('k2') or {}
         _count(counts, 'K2', _covers([k2.get('low'), k2.get('high')], truths['K2']))
         _count_gum(counts, analysis, truths)
@@ -206,6 +203,17 @@ def campaign_coverage(rows: Sequence[SessionRow], full: Sequence[Full6Row]) -> l
 def _entry_label(name: str, i: int, j: int) -> str:
     """K[<load>,<deflection>] or C[<deflection>,<load>]."""
     return f'{name}[{AXES[i]},{DEFLECTIONS[j]}]' if name == 'K' else f'{name}[{DEFLECTIONS[i]},{AXES[j]}]'
+
+
+def _count_matrix(counts: dict[str, list[int]], prefix: str, name: str, covers: list[list[bool]],
+                  per_entry: bool = True) -> None:
+    """A 6×6 ``covers`` of K or C (``name``) counted entry by entry under '<prefix> K[<load>,<deflection>]', or
+    pooled under '<prefix> K (36 pooled)'."""
+    lead = f'{prefix} ' if prefix else ''
+    for i in range(6):
+        for j in range(6):
+            _count(counts, f'{lead}{_entry_label(name, i, j)}' if per_entry else f'{lead}{name} (36 pooled)',
+                   covers[i][j])
 
 
 def true_matrices(row: Full6Row, analysis: dict[str, Any]) -> dict[str, Any] | None:
@@ -256,10 +264,7 @@ def _count_gum(counts: dict[str, list[int]], analysis: dict[str, Any], truth: di
             covers = _inside(intervals[kind], truth[name])
             if covers is None:
                 continue
-            for i in range(6):
-                for j in range(6):
-                    _count(counts, f'{kind} {_entry_label(name, i, j)}' if per_entry else
-                           f'{kind} {name} (36 pooled)', covers[i][j])
+            _count_matrix(counts, kind, name, covers, per_entry)
     if per_entry:
         k2 = u.get('k2') or {}
         for kind, interval in (('U', k2.get('interval')), ('stat', k2.get('statistical_interval'))):
@@ -305,10 +310,7 @@ def _count_prediction(counts: dict[str, list[int]], analysis: dict[str, Any], tr
         covers = _inside(interval, truth[name])
         if covers is None:
             continue
-        for i in range(6):
-            for j in range(6):
-                _count(counts, f'prediction {method} {_entry_label(name, i, j)}' if per_entry else
-                       f'prediction {method} {name} (36 pooled)', covers[i][j])
+        _count_matrix(counts, f'prediction {method}', name, covers, per_entry)
 
 
 def pooled_gum_coverage(full: Sequence[Full6Row]) -> list[Coverage]:
