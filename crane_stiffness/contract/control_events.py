@@ -29,6 +29,10 @@ CONTROL_EVENTS_QOS = QoS('reliable', 'transient_local', 20)
 #: An event older than this [s, wall clock] names no call: the call it announced was answered long since (the view
 #: waits at most its service_timeout_s, 5 s by default) or never arrived.
 MAX_AGE_S = 15.0
+#: session_recorder's exit status when a ~/stop call cut its last recording while the rig's program had not finished
+#: (the bag is not the whole run, bag.session_metadata.cut_short): a launch ends non-zero naming it
+#: (launcher.rig_description.exit_problem). A recording started and stopped by hand, without a program, is no cut.
+RECORDER_CUT_STATUS = 3
 #: Who called when no event names the caller.
 ROS_CALLER = 'a ROS service client (not through the live view: a std_srvs/Trigger call names no caller)'
 _FIELDS = ('service', 'by', 'via', 'stamp_ns', 'id')

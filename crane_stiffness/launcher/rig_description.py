@@ -45,6 +45,7 @@ from typing import Any, Iterable, Mapping
 from crane_stiffness import PACKAGE
 
 from crane_stiffness.contract import topics
+from crane_stiffness.contract.control_events import RECORDER_CUT_STATUS
 from crane_stiffness.errors import CraneStiffnessError
 from crane_stiffness.params.errors import ConfigError
 from crane_stiffness.params.files import ParamFile, check_sections, did_you_mean
@@ -347,10 +348,16 @@ def exit_problem(process: str, returncode: int | None, shutting_down: bool) -> s
     node's) ended with ``returncode`` ('' when it may end so): a node that ends on its own with a non-zero status
     (a bad parameter: 2; load_program giving up on the rig: 1; a crash: a negative signal number) leaves a rig that
     measures nothing, so the launch ends with it, naming it. Status 0 (load_program done with its program) and
-    whatever happens once the launch is shutting down (Ctrl-C) are no failure."""
+    whatever happens once the launch is shutting down (Ctrl-C) are no failure, but the recorder's
+    RECORDER_CUT_STATUS at any time: its recording was stopped from outside, so the session's bag is not the whole
+    run, and the launch ends non-zero saying so."""
+    name = process.rsplit('-', 1)[0] if process.rsplit('-', 1)[-1].isdigit() else process
+    if name == 'session_recorder' and returncode == RECORDER_CUT_STATUS:
+        return ('session_recorder exited with status 3: its recording was stopped from outside (a ~/stop call) before '
+                "the run's end, so the session's bag is not the whole run (its log and the bag's session end name who "
+                'stopped it)')
     if shutting_down or returncode is None or returncode == 0:
         return ''
-    name = process.rsplit('-', 1)[0] if process.rsplit('-', 1)[-1].isdigit() else process
     how = f'was killed by signal {-returncode}' if returncode < 0 else f'exited with status {returncode}'
     why = {'load_program': ': it gave up waiting for the rig (its last lines say what never came)'}.get(name, '')
     return (f'{name} {how}{why}: the rig cannot measure without it, so the launch stops (see {name}\'s output '

@@ -45,6 +45,7 @@ from std_srvs.srv import Trigger
 
 from crane_stiffness import __version__
 from crane_stiffness.contract import topics
+from crane_stiffness.contract.control_events import RECORDER_CUT_STATUS
 from crane_stiffness.bag import BagWriter, dump_qos_profiles
 from crane_stiffness.bag.errors import BagError, BagWriteFailedError
 from crane_stiffness.rosnode.diagnostics import Diagnostics
@@ -99,6 +100,7 @@ class SessionRecorder(Node):
         self.program = ProgramEnd()  # the program's state, and the session's end (this recording)
         self.stop_timer: Timer | None = None
         self.exit_requested = False
+        self.exit_status = 0  # run.run's exit status: RECORDER_CUT_STATUS once a ~/stop cut the recording
         self.node_parameters: dict[str, dict[str, Any]] = {}
         self.parameter_reader: NodeParameterReader | None = None
         self._flushed_at = 0
@@ -491,6 +493,7 @@ class SessionRecorder(Node):
             return response
         try:
             path = self.start()
+            self.exit_status = 0  # a new recording: the one cut before is not this one's
         except (BagError, OSError, ValueError) as exc:
             response.success, response.message = False, f'cannot start recording: {exc}'
             self.get_logger().error(response.message)
@@ -504,7 +507,10 @@ class SessionRecorder(Node):
             response.message = 'not recording' + (f' (last bag {self.last_bag})' if self.last_bag else '')
             return response
         who = self.callers.caller(self.callers.service_name('~/stop'))  # logged by stop()
+        program = self.program.state.get('state')  # (read before stop(): a recording's program, none by hand)
         path, count = self.stop('service', by=who)
+        if program is not None and program != 'done':  # a program's session cut: the launch ends non-zero, naming it
+            self.exit_status = RECORDER_CUT_STATUS
         response.success, response.message = True, f'closed {path}: {count} messages'
         return response
 

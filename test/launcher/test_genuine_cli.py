@@ -248,3 +248,34 @@ def test_launch_with_live_view_serves_the_page_and_ends_cleanly(install_tree, tm
         launch.kill()
     assert code == 0, launch.output[-6000:]
     assert_every_node_ended_cleanly(launch.output, nodes)
+
+
+def test_a_recording_stopped_from_outside_ends_the_launch_non_zero_naming_it(install_tree, tmp_path):
+    """`ros2 service call /session_recorder/stop` during a launched session (anyone on the domain can): the bag is
+    closed cleanly and says who stopped it; at Ctrl-C the recorder exits with status 3 and `ros2 launch` with 1,
+    naming the cut recording, while every other node still ends cleanly."""
+    install, env = install_tree
+    nodes = {n.name for n in rig_nodes(installed_config(install), {'use_sim_time': 'true'})}
+    launch = Launch(env, tmp_path, 'program:=side_force', 'use_sim_time:=true', 'session:=cut')
+    try:
+        deadline = time.monotonic() + PATIENCE_S
+        while "started 'side_force' at simulated time" not in launch.output:  # the program runs: a cut, not a start
+            assert launch.proc.poll() is None and time.monotonic() < deadline, launch.output[-6000:]
+            time.sleep(0.2)
+        stop = subprocess.run(['ros2', 'service', 'call', '/session_recorder/stop', 'std_srvs/srv/Trigger'],
+                              env=env, capture_output=True, text=True, timeout=PATIENCE_S)
+        assert stop.returncode == 0 and 'success=True' in stop.stdout, stop.stdout + stop.stderr
+    finally:
+        code = launch.ctrl_c() if launch.proc.poll() is None else launch.proc.returncode
+        launch.kill()
+    output = launch.output
+    assert code == 1, output[-6000:]
+    assert 'session_recorder exited with status 3: its recording was stopped from outside' in output, output[-6000:]
+    died = dict(DIED.findall(output))
+    assert died == {'session_recorder': '3'}, (died, output[-6000:])
+    assert set(FINISHED.findall(output)) == nodes - {'session_recorder'}, output[-6000:]
+    from crane_stiffness.bag import BagReader
+    from crane_stiffness.bag.session_metadata import cut_short, read_session_end
+    with BagReader(tmp_path / 'bags' / 'cut') as reader:
+        end = read_session_end(reader)
+    assert 'stopped from outside' in cut_short(end) and 'a ROS service client' in end['stopped_by'], end

@@ -77,6 +77,11 @@ def test_every_shipped_file_has_only_sections_of_the_rigs_nodes():
     ('load_program-7', 0, False, ''),   # its program done
     ('crane_model-1', 0, False, ''),
     ('lvdt-3', 1, True, ''),            # after Ctrl-C: the launch is ending anyway
+    # the recorder's cut recording (a ~/stop from outside) ends the launch non-zero even at Ctrl-C
+    ('session_recorder-5', 3, True, "session_recorder exited with status 3: its recording was stopped from outside"),
+    ('session_recorder-5', 3, False, "session_recorder exited with status 3: its recording was stopped from outside"),
+    ('session_recorder-5', 0, True, ''),
+    ('crane_model-1', 3, True, ''),
 ])
 def test_a_node_ending_with_a_failure_stops_the_launch_naming_it(process, code, shutting_down, expected):
     problem = exit_problem(process, code, shutting_down)
