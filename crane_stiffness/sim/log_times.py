@@ -88,7 +88,11 @@ class SimLogTimes(Generic[Item]):
 
     def release(self, watermark_ns: int) -> list[tuple[int, Item]]:
         """(log time, item) of the messages logged at or before ``watermark_ns``, in the order to write them: by log
-        time, then topic name, then the order received. Nothing later is logged at or before ``watermark_ns``."""
+        time, then topic name, then the order received. Nothing later is logged at or before ``watermark_ns``. A
+        watermark before time started (negative: the lock-step's joining reports) releases nothing: what waits is
+        logged at the first real one (a log time is never negative)."""
+        if watermark_ns < 0:
+            return []
         if watermark_ns > self.released_ns:
             self.released_ns = watermark_ns
         waiting, self._next = self._next, []
@@ -104,7 +108,8 @@ class SimLogTimes(Generic[Item]):
         """Everything held, in the order to write it (the recording stops; what waits for the next watermark is
         logged at the last one released)."""
         waiting, self._next = self._next, []
-        self._held += [(self._at(topic, self.released_ns), topic, order, item) for topic, order, item in waiting]
+        at = max(self.released_ns, 0)  # (stopped before time started: at its start)
+        self._held += [(self._at(topic, at), topic, order, item) for topic, order, item in waiting]
         ready = sorted(self._held, key=lambda h: (h[0], h[1], h[2]))
         self._held = []
         if ready:

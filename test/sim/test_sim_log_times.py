@@ -83,3 +83,16 @@ def test_a_distinct_topic_is_logged_once_per_time_at_the_time_it_says():
     assert times.hold(CLOCK, T0, 1) == T0                            # logged at the time it says
     assert not times.repeat(CLOCK, T0 + STEP) and times.repeat(CLOCK, T0)  # a later time; an earlier one again
     assert not times.repeat(WRENCH, T0) and not times.repeat(WRENCH, T0)   # other topics: never repeats
+
+
+def test_nothing_is_logged_before_time_started():
+    """The lock-step's joining reports carry a negative watermark: a latched message that arrives then (the load
+    cell's tare) waits for the first real watermark; stopped before it, it is logged at 0, never at a negative
+    time (which a bag refuses)."""
+    log = SimLogTimes(paced=['/load_cell/wrench'])
+    assert log.hold('/load_cell/tare', None, 'tare') is None
+    assert log.release(-1) == [] and log.held == 1
+    assert log.release(1_000_000) == [(1_000_000, 'tare')]
+    early = SimLogTimes(paced=['/load_cell/wrench'])
+    early.hold('/load_cell/tare', None, 'tare')
+    assert early.release(-1) == [] and early.release_all() == [(0, 'tare')]
