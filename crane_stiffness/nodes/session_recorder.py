@@ -28,8 +28,6 @@ last complete chunk, metadata.yaml from what is on disk; ~/start opens a new bag
 """
 from __future__ import annotations
 
-import os
-import socket
 import threading
 import time
 from functools import partial
@@ -58,14 +56,13 @@ from crane_stiffness.rosnode.program_end import ProgramEnd
 from crane_stiffness.rosnode.qos import SIM_STREAM_QOS
 from crane_stiffness.rosnode.recorded_channel import NO_EVENTS, SIM_INPUTS, SIM_OUTPUTS, RecordedChannel, deep
 from crane_stiffness.rosnode.sim_time import SimTimeParticipant, drain, uses_sim_time
-from crane_stiffness.rosnode.session_recorder_params import OWN_SECTIONS, PARAMS, RECORDING_KEYS, session_dir, validate
+from crane_stiffness.rosnode.session_recorder_params import PARAMS, recorder_session_record, session_dir, validate
 from crane_stiffness.rosnode.session_qos import (adapted_qos, contract_qos, offered_profiles, publisher_types)
-from crane_stiffness.params.files import params_files_from_args, read_params_files
+from crane_stiffness.params.files import params_files_from_args
 from crane_stiffness.serde import header_stamp_ns
 from crane_stiffness.bag.session_metadata import (NODE_PARAMETERS_METADATA, SESSION_END_METADATA, SESSION_METADATA,
-                                                  session_end_record, session_record)
+                                                  session_end_record)
 from crane_stiffness.sim.log_times import SimLogTimes
-from crane_stiffness.sim.program import PROGRAM_KEYS
 from crane_stiffness.contract.status import ERROR, OK
 
 
@@ -253,18 +250,9 @@ class SessionRecorder(Node):
 
     # --- session description ---
     def _session_record(self, session: str, start_ns: int) -> dict[str, str]:
-        values = {k: plain(v) for k, v in self.params.values.items()}
-        files, sections, problems = read_params_files(self.params_files)
-        for problem in problems:
-            self.get_logger().warning(f'parameter file not recorded: {problem}')
-        record, warnings = session_record(
-            session=session, start_ns=start_ns, parameters=values, geometry=self.built['geometry'],
-            program=self.built.get('program'), param_sections=sections, param_files=files,
-            campaign=self.built.get('campaign'),
-            program_keys=PROGRAM_KEYS, own_sections=OWN_SECTIONS,
-            recorder={k: values[k] for k in RECORDING_KEYS} | {'node': self.get_fully_qualified_name(),
-                                                               'time': 'simulated' if self.sim_time else 'wall'},
-            ros_distro=os.environ.get('ROS_DISTRO', 'jazzy'), host=socket.gethostname())
+        record, warnings = recorder_session_record(
+            session, start_ns, {k: plain(v) for k, v in self.params.values.items()}, self.built, self.params_files,
+            self.get_fully_qualified_name(), self.sim_time)
         for warning in warnings:
             self.get_logger().warning(warning)
         return record

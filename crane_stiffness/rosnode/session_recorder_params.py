@@ -3,15 +3,18 @@ with a session when they are given to it) and their validation."""
 from __future__ import annotations
 
 import json
+import os
+import socket
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping, Sequence
 
 from crane_stiffness.contract import topics
 from crane_stiffness.bag.writer import COMPRESSIONS
 from crane_stiffness.rosnode.parameter_reader import plain
 from crane_stiffness.rosnode.parameters import check, valid_topic_name
-from crane_stiffness.params.files import NodeSections
+from crane_stiffness.bag.session_metadata import session_record
+from crane_stiffness.params.files import NodeSections, read_params_files
 from crane_stiffness.params.geometry import GEOMETRY_PARAMS, geometry_from_params
 from crane_stiffness.params.spec import ParamSpec
 from crane_stiffness.sim.program import PROGRAM_KEYS, PROGRAM_PARAMS, LoadProgram
@@ -108,3 +111,18 @@ def session_dir(output_dir: str, session: str, recordings: int, now_ns: int) -> 
 
 __all__ = ['MAX_INTERVAL_S', 'OWN_SECTIONS', 'PARAMS', 'RECORDING_KEYS', 'session_dir', 'utc_session_name',
            'validate']
+
+
+def recorder_session_record(session: str, start_ns: int, values: Mapping[str, Any], built: Mapping[str, Any],
+                            params_files: Sequence[str], node: str, sim_time: bool) -> tuple[dict[str, str], list[str]]:
+    """The session record of a recording (crane_stiffness.bag.session_metadata.session_record) from the recorder's
+    parameter ``values`` (plain), what they built (geometry, program, campaign: :func:`validate`), its parameter
+    files, its fully qualified ``node`` name and clock; with the warnings to log (a parameter file not recorded)."""
+    files, sections, problems = read_params_files(params_files)
+    record, warnings = session_record(
+        session=session, start_ns=start_ns, parameters=dict(values), geometry=built['geometry'],
+        program=built.get('program'), param_sections=sections, param_files=files, campaign=built.get('campaign'),
+        program_keys=PROGRAM_KEYS, own_sections=OWN_SECTIONS,
+        recorder={k: values[k] for k in RECORDING_KEYS} | {'node': node, 'time': 'simulated' if sim_time else 'wall'},
+        ros_distro=os.environ.get('ROS_DISTRO', 'jazzy'), host=socket.gethostname())
+    return record, [f'parameter file not recorded: {problem}' for problem in problems] + list(warnings)
