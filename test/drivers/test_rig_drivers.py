@@ -148,7 +148,9 @@ def test_side_force_through_the_drivers_gives_the_prediction(install_tree, tmp_p
     # publishing seconds earlier, so the share paired is bounded loosely.)
     est_counters = final_counters(logs['stiffness_estimator'])
     assert 'pairing interpolate_force' in logs['stiffness_estimator'], logs['stiffness_estimator'][-2000:]
-    assert est_counters['pairs'] > 0.6 * est_counters['displacement_passed_checks'], est_counters
+    # At most one pair per LVDT reading (nearest-stamp pairing of every force sample would give ~10 times as many);
+    # how many readings find a force around their stamp depends on the machine's load.
+    assert 100 < est_counters['pairs'] <= est_counters['displacement_passed_checks'], est_counters
     assert est_counters['pairs'] < 0.2 * est_counters['force_passed_checks'], est_counters
     est = summary['estimate']['loading']
     print('through the drivers:', summary['relative_error'], est, est_counters)

@@ -156,8 +156,10 @@ def _check_plot(client: FoxgloveClient, watcher) -> None:
     if not missing:  # (a pair the watcher lost would shift the count)
         assert all(b - a == last['stride'] for a, b in zip(index, index[1:])), last['stride']
     # the fit line and its band per branch, the prediction line, and each point carries them at its x
-    lines = client.json_messages('/live_view/fit_lines')[-1]
-    load = lines['loading']
+    # (the newest message with a loading fit: one published as a new fit segment began has none yet)
+    with_fit = [m for m in client.json_messages('/live_view/fit_lines') if m['loading']['line']]
+    assert with_fit, 'no fit_lines message with a loading fit'
+    load = with_fit[-1]['loading']
     assert len(load['line']) == 21 and all(lo['y'] < mid['y'] < hi['y'] for lo, mid, hi in
                                             zip(load['lower'], load['line'], load['upper']))
     k = load['stiffness']
